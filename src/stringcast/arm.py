@@ -1,0 +1,118 @@
+"""Planar arm: forward kinematics, hand trajectories and joint-limit checks.
+
+Convention (see ``config/config.yaml``): q_1 is link 1's angle from the robot's
++x axis, q_j (j > 1) is relative to link j-1, counter-clockwise positive; the
+gripper continues the last link, so the hand angle is phi_h = sum_j q_j and the
+grasp point p_0 = sum_j l_j e(sum_{i<=j} q_i) + gripper e(phi_h).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .config import ArmSpec
+
+
+class JointLimitError(ValueError):
+    """A joint trajectory violates position, velocity or acceleration limits."""
+
+
+def forward_kinematics(arm: ArmSpec, q: np.ndarray) -> np.ndarray:
+    """Joint positions of the planar arm.
+
+    Args:
+        arm: the arm.
+        q: (..., J) joint angles, rad.
+
+    Returns:
+        (..., J + 2, 2): base, each joint after it, and the grasp point (last), m.
+    """
+    q = np.asarray(q, dtype=float)
+    if q.shape[-1] != arm.n_joints:
+        raise ValueError(f"q has {q.shape[-1]} joints, arm {arm.name} has {arm.n_joints}")
+    phi = np.cumsum(q, axis=-1)
+    lengths = np.concatenate([arm.link_lengths, [arm.gripper]])
+    phis = np.concatenate([phi, phi[..., -1:]], axis=-1)
+    steps = np.stack([np.cos(phis), np.sin(phis)], axis=-1) * lengths[:, None]
+    pts = np.cumsum(steps, axis=-2)
+    base = np.zeros(q.shape[:-1] + (1, 2))
+    return np.concatenate([base, pts], axis=-2)
+
+
+def hand_pose(arm: ArmSpec, q: np.ndarray) -> np.ndarray:
+    """Grasp point and hand angle: (..., 3) = (x_m, y_m, phi_h_rad) for q (..., J)."""
+    pts = forward_kinematics(arm, q)
+    phi = np.sum(np.asarray(q, float), axis=-1)
+    return np.concatenate([pts[..., -1, :], phi[..., None]], axis=-1)
+
+
+def joint_rates(q: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Velocity and acceleration by central differences: (K, J) each, rad/s, rad/s^2."""
+    q = np.asarray(q, float)
+    qd = np.gradient(q, dt, axis=0)
+    qdd = np.gradient(qd, dt, axis=0)
+    return qd, qdd
+
+
+@dataclass(frozen=True)
+class LimitReport:
+    """The worst use of each limit: ratios to the limit (<= 1 is allowed), per joint."""
+
+    position_low: np.ndarray
+    position_high: np.ndarray
+    velocity: np.ndarray
+    acceleration: np.ndarray
+    floor_clearance_m: float
+
+    @property
+    def ok(self) -> bool:
+        return bool(np.all(self.position_low <= 0) and np.all(self.position_high <= 0)
+                    and np.all(self.velocity <= 1 + 1e-9) and np.all(self.acceleration <= 1 + 1e-9)
+                    and self.floor_clearance_m >= 0)
+
+    def describe(self) -> str:
+        msgs = []
+        for j in range(len(self.velocity)):
+            if self.position_low[j] > 0:
+                msgs.append(f"q{j + 1} goes {np.degrees(self.position_low[j]):.1f} deg below its minimum")
+            if self.position_high[j] > 0:
+                msgs.append(f"q{j + 1} goes {np.degrees(self.position_high[j]):.1f} deg above its maximum")
+            if self.velocity[j] > 1 + 1e-9:
+                msgs.append(f"q{j + 1} speed reaches {self.velocity[j]:.2f}x its limit")
+            if self.acceleration[j] > 1 + 1e-9:
+                msgs.append(f"q{j + 1} acceleration reaches {self.acceleration[j]:.2f}x its limit")
+        if self.floor_clearance_m < 0:
+            msgs.append(f"the arm goes {-self.floor_clearance_m * 1000:.0f} mm below the floor")
+        return "; ".join(msgs) if msgs else "within all limits"
+
+
+def check_limits(arm: ArmSpec, q: np.ndarray, dt: float) -> LimitReport:
+    """Compare a sampled joint trajectory with the arm's limits.
+
+    Args:
+        q: (K, J) joint angles at a fixed period ``dt`` (s).
+
+    Returns:
+        A :class:`LimitReport`; ``report.ok`` is False if any limit is exceeded.
+        Velocity and acceleration are by finite differences of the samples.
+    """
+    q = np.asarray(q, float)
+    if q.ndim != 2 or q.shape[1] != arm.n_joints:
+        raise ValueError(f"q must be (K, {arm.n_joints}), got {q.shape}")
+    qd, qdd = joint_rates(q, dt) if len(q) > 2 else (np.zeros_like(q), np.zeros_like(q))
+    pts = forward_kinematics(arm, q)
+    return LimitReport(
+        position_low=np.max(arm.q_min - q, axis=0),
+        position_high=np.max(q - arm.q_max, axis=0),
+        velocity=np.max(np.abs(qd), axis=0) / arm.qd_max,
+        acceleration=np.max(np.abs(qdd), axis=0) / arm.qdd_max,
+        floor_clearance_m=float(np.min(pts[:, 1:, 1]) - arm.floor_y),
+    )
+
+
+def assert_within_limits(arm: ArmSpec, q: np.ndarray, dt: float, source: str = "motion") -> None:
+    """Raise :class:`JointLimitError` naming ``source`` if ``q`` breaks any limit."""
+    rep = check_limits(arm, q, dt)
+    if not rep.ok:
+        raise JointLimitError(f"{source}: refused, outside the limits of arm {arm.name}: {rep.describe()}")
