@@ -116,3 +116,30 @@ def assert_within_limits(arm: ArmSpec, q: np.ndarray, dt: float, source: str = "
     rep = check_limits(arm, q, dt)
     if not rep.ok:
         raise JointLimitError(f"{source}: refused, outside the limits of arm {arm.name}: {rep.describe()}")
+
+
+def motion_start(t: np.ndarray, q: np.ndarray, speed_threshold: float = 0.05) -> float:
+    """Controller time at which a joint log starts to move.
+
+    Args:
+        t: (K,) s; q: (K, J) rad (a measured log: noise is smoothed over ~10 samples).
+        speed_threshold: rad/s; the first sample where any joint's smoothed speed
+            exceeds it marks the start.
+
+    Returns:
+        The start time in s (t[0] if the log moves from its first sample).
+
+    Raises:
+        ValueError: if the log never moves.
+    """
+    t = np.asarray(t, float)
+    q = np.asarray(q, float)
+    w = min(10, max(1, len(t) // 10))
+    kernel = np.ones(w) / w
+    qs = np.stack([np.convolve(q[:, j], kernel, mode="same") for j in range(q.shape[1])], axis=1)
+    speed = np.max(np.abs(np.gradient(qs, t, axis=0)), axis=1)
+    speed[: w] = speed[w]  # edge effects of the smoothing
+    moving = np.nonzero(speed > speed_threshold)[0]
+    if len(moving) == 0:
+        raise ValueError("the joint log never moves (no joint exceeds %.3g rad/s)" % speed_threshold)
+    return float(t[max(0, moving[0] - w // 2)])

@@ -1,0 +1,30 @@
+# stringcast workflow: raw trial files under data/ -> results/ (DESIGN.md).
+# One campaign = one string and target; each trial_<k> is one execution.
+#   snakemake -n                                        # what would run
+#   snakemake --cores 2 results/demo/trial_1/tracks.parquet   # one stage of one trial
+# The rules are thin: each calls one `stringcast` subcommand; the logic lives in
+# src/stringcast/ and is tested without Snakemake.
+from snakemake.utils import min_version, validate
+
+min_version("8.0")
+
+
+configfile: "config/config.yaml"
+
+
+validate(config, "workflow/schemas/config.schema.json")
+
+
+include: "workflow/rules/common.smk"
+include: "workflow/rules/plan.smk"
+include: "workflow/rules/calibrate.smk"
+include: "workflow/rules/sync.smk"
+include: "workflow/rules/track.smk"
+include: "workflow/rules/estimate.smk"
+include: "workflow/rules/report.smk"
+
+
+rule all:
+    input:
+        all_targets(),
+    default_target: True

@@ -1,0 +1,125 @@
+"""The casting loop on the virtual lab (the paper's Fig. 2), end to end.
+
+``run_campaign`` plays the role of the person at the arm: it creates
+``data/<name>/`` (campaign.yaml and a ChArUco clip for intrinsics), asks the
+Snakemake workflow for the first motion, plays it with the executor on the
+virtual lab, asks the workflow to process the trial (calibrate, sync, track,
+estimate, plan, report), plays the next motion, and so on until the lab says the
+tip hit the target or ``max_executions`` is reached.
+
+Only this loop, standing where the experimenter stands, reads the lab's verdict
+(``ground_truth.json``: did the real tip hit?) to decide when to stop; the
+workflow's stages never read it.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from .config import ConfigError, load_config, load_yaml, resolve_campaign
+from .files import write_yaml
+
+
+def _snakemake(root: Path, targets: list[str], cores: int, config_path: str | None) -> float:
+    """Run the workflow for ``targets``; returns wall seconds. Raises RuntimeError on failure."""
+    cmd = [sys.executable, "-m", "snakemake", "--cores", str(cores), "--snakefile",
+           str(root / "Snakefile"), "--directory", str(root), "--quiet", "rules",
+           "--rerun-incomplete"]
+    if config_path:
+        cmd += ["--configfile", str(config_path)]
+    cmd += targets
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, cwd=root)
+    if proc.returncode != 0:
+        raise RuntimeError(f"snakemake failed for {' '.join(targets)} (exit {proc.returncode}); "
+                           f"see the logs under {root / 'results'}/<campaign>/logs/")
+    return time.perf_counter() - t0
+
+
+def run_campaign(name: str, string: str, target: str, config_path: str | None = None,
+                 max_executions: int = 5, cores: int = 2, seed: int = 0,
+                 root: Path = Path(".")) -> dict:
+    """Run (or resume) a campaign on the virtual lab.
+
+    Args:
+        name: campaign name: data/<name>/ and results/<name>/.
+        string, target: ids from the config.
+        max_executions: stop after this many executions without a hit.
+
+    Returns:
+        dict with per-trial rows (lab hit, closest approach mm) and the report path.
+
+    Raises:
+        ConfigError: bad ids, or an existing campaign.yaml for another string/target.
+        RuntimeError: a workflow step failed (its log path is named).
+    """
+    from .executor import execute
+    from .lab import write_calibration_clip
+
+    root = Path(root).resolve()
+    config = load_config(config_path)
+    data = root / "data" / name
+    camp_yaml = data / "campaign.yaml"
+    doc = {"string": _id(string), "target": _id(target), "setup": "default", "seed": int(seed)}
+    if camp_yaml.exists():
+        old = load_yaml(camp_yaml)
+        if str(old.get("string")) != str(doc["string"]) or str(old.get("target")) != str(doc["target"]):
+            raise ConfigError(f"{camp_yaml}: exists for string {old.get('string')} target "
+                              f"{old.get('target')}; choose another campaign name")
+    else:
+        resolve_campaign(doc, config, name, camp_yaml)  # validate before writing anything
+        write_yaml(camp_yaml, doc)
+    campaign = resolve_campaign(load_yaml(camp_yaml), config, name, camp_yaml)
+    timings: dict[str, float] = {}
+
+    if not (data / "calib").is_dir():
+        t0 = time.perf_counter()
+        tmp = data / ".calib.partial"
+        shutil.rmtree(tmp, ignore_errors=True)
+        write_calibration_clip(campaign, config, tmp, seed)
+        os.replace(tmp, data / "calib")
+        timings["lab_calibration_clip_s"] = time.perf_counter() - t0
+
+    timings["plan_first_s"] = _snakemake(root, [f"results/{name}/first_motion/motion.csv"], cores, config_path)
+    motion = root / "results" / name / "first_motion" / "motion.csv"
+    rows = []
+    for k in range(1, max_executions + 1):
+        trial = data / f"trial_{k}"
+        if not (trial / "joints.csv").exists():
+            t0 = time.perf_counter()
+            tmp = data / f".trial_{k}.partial"
+            shutil.rmtree(tmp, ignore_errors=True)
+            execute(motion, "virtual", tmp, camp_yaml, config, seed=seed * 1000 + k)
+            os.replace(tmp, trial)
+            timings[f"execute_{k}_s"] = time.perf_counter() - t0
+        truth = json.loads((trial / "ground_truth.json").read_text())
+        rows.append({"trial": k, "hit": bool(truth["hit"]),
+                     "closest_approach_mm": float(truth["closest_approach_mm"])})
+        print(f"[campaign {name}] execution {k}: lab tip closest approach "
+              f"{truth['closest_approach_mm']:.1f} mm -> {'HIT' if truth['hit'] else 'miss'}", flush=True)
+        timings[f"process_{k}_s"] = _snakemake(
+            root, [f"results/{name}/trial_{k}/report.html", f"results/{name}/trial_{k}/motion.csv"],
+            cores, config_path)
+        if truth["hit"]:
+            break
+        motion = root / "results" / name / f"trial_{k}" / "motion.csv"
+    timings["campaign_report_s"] = _snakemake(root, [f"results/{name}/report.html"], cores, config_path)
+    report = root / "results" / name / "report.html"
+    summary = {"campaign": name, "string": campaign.string_id, "target": campaign.target.name,
+               "executions": len(rows), "hit": any(r["hit"] for r in rows), "trials": rows,
+               "timings_s": timings, "report": str(report)}
+    (root / "results" / name / "campaign_summary.json").write_text(json.dumps(summary, indent=2))
+    verdict = f"hit after {len(rows)} execution(s)" if summary["hit"] else f"no hit in {len(rows)} execution(s)"
+    print(f"[campaign {name}] {verdict}")
+    print(f"report: {report}")
+    return summary
+
+
+def _id(x):
+    s = str(x)
+    return int(s) if s.isdigit() else s

@@ -1,0 +1,219 @@
+"""The ``stringcast`` command line: one subcommand per stage (the Snakemake rules
+call these) plus ``execute`` (play a motion file on an arm) and ``campaign`` (the
+whole loop on the virtual lab).
+
+Errors in the input (:class:`~stringcast.files.DataError`,
+:class:`~stringcast.config.ConfigError`, :class:`~stringcast.arm.JointLimitError`)
+print one line naming the file and the problem and exit with status 2.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+
+def _campaign(args):
+    from .config import load_campaign
+
+    return load_campaign(args.campaign, _config(args))
+
+
+_CONFIG_CACHE: dict = {}
+
+
+def _config(args):
+    from .config import load_config
+
+    key = str(args.config)
+    if key not in _CONFIG_CACHE:
+        _CONFIG_CACHE[key] = load_config(args.config)
+    return _CONFIG_CACHE[key]
+
+
+def cmd_calibrate(args):
+    from .calibration import run_calibration
+
+    calib_dir = Path(args.calib_dir) if args.calib_dir and Path(args.calib_dir).is_dir() else None
+    cal = run_calibration(Path(args.trial_dir), calib_dir, _campaign(args), Path(args.out))
+    print(f"calibration: reprojection error {cal.reprojection_error_px:.3f} px -> {args.out}")
+
+
+def cmd_sync(args):
+    from .sync import run_sync
+
+    doc = run_sync(Path(args.trial_dir) / "video.yaml", Path(args.out))
+    print(f"sync: offset {doc['offset_s']:.6f} s ({doc['method']}) -> {args.out}")
+
+
+def cmd_track(args):
+    from .tracking import run_tracking
+
+    df = run_tracking(Path(args.trial_dir), Path(args.calibration), Path(args.sync), _campaign(args),
+                      _config(args), Path(args.out), Path(args.overlay) if args.overlay else None)
+    print(f"tracking: {df['frame'].nunique()} frames, valid share {df['valid'].mean():.3f} -> {args.out}")
+
+
+def cmd_estimate(args):
+    from .estimation import run_estimation
+
+    est = run_estimation(Path(args.tracks), Path(args.joints), _campaign(args), _config(args),
+                         Path(args.prev) if args.prev else None, int(args.trial),
+                         Path(args.out_params), Path(args.out_fit))
+    print(f"estimation: E = {est.E_m * 1000:.2f} mm after {est.n_evaluations} evaluations -> {args.out_params}")
+
+
+def cmd_plan_first(args):
+    from .motion import run_first_plan
+
+    out = Path(args.out_dir)
+    run_first_plan(_campaign(args), _config(args), out / "motion.csv", out / "motion.json", int(args.seed))
+    print(f"first motion -> {out / 'motion.csv'}")
+
+
+def cmd_plan(args):
+    from .motion import run_plan
+
+    out = Path(args.out_dir)
+    run_plan(Path(args.params), Path(args.played_motion), _campaign(args), _config(args),
+             out / "motion.csv", out / "motion.json", int(args.seed))
+    print(f"next motion -> {out / 'motion.csv'}")
+
+
+def cmd_report_trial(args):
+    from .report import write_trial_report
+
+    write_trial_report(Path(args.data_dir), Path(args.results_dir), _campaign(args), _config(args), Path(args.out))
+    print(f"trial report -> {args.out}")
+
+
+def cmd_report_campaign(args):
+    from .report import write_campaign_report
+
+    write_campaign_report(Path(args.data_dir), Path(args.results_dir), _campaign(args), _config(args), Path(args.out))
+    print(f"campaign report -> {args.out}")
+
+
+def cmd_execute(args):
+    from .executor import execute
+
+    execute(Path(args.motion), args.backend, Path(args.out), Path(args.campaign), _config(args),
+            seed=int(args.seed), dry_run=bool(args.dry_run))
+
+
+def cmd_calib_clip(args):
+    from .lab import write_calibration_clip
+
+    path = write_calibration_clip(_campaign(args), _config(args), Path(args.out), int(args.seed))
+    print(f"calibration clip -> {path}")
+
+
+def cmd_campaign(args):
+    from .campaign import run_campaign
+
+    run_campaign(args.name, args.string, args.target, config_path=args.config,
+                 max_executions=int(args.max_executions), cores=int(args.cores), seed=int(args.seed),
+                 root=Path(args.root))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="stringcast", description=__doc__.split("\n\n")[0])
+    p.add_argument("--config", default=None, help="config YAML (default: config/config.yaml)")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    def add(name, func, help_):
+        sp = sub.add_parser(name, help=help_)
+        sp.set_defaults(func=func)
+        return sp
+
+    sp = add("calibrate", cmd_calibrate, "ChArUco calibration of one trial -> calibration.json")
+    sp.add_argument("--trial-dir", required=True)
+    sp.add_argument("--calib-dir")
+    sp.add_argument("--campaign", required=True, help="data/<campaign>/campaign.yaml")
+    sp.add_argument("--out", required=True)
+
+    sp = add("sync", cmd_sync, "video-to-controller clock offset -> sync.json")
+    sp.add_argument("--trial-dir", required=True)
+    sp.add_argument("--out", required=True)
+
+    sp = add("track", cmd_track, "markerless tracking -> tracks.parquet")
+    sp.add_argument("--trial-dir", required=True)
+    sp.add_argument("--calibration", required=True)
+    sp.add_argument("--sync", required=True)
+    sp.add_argument("--campaign", required=True)
+    sp.add_argument("--out", required=True)
+    sp.add_argument("--overlay")
+
+    sp = add("estimate", cmd_estimate, "fit the model's parameters -> params.json, fit.parquet")
+    sp.add_argument("--tracks", required=True)
+    sp.add_argument("--joints", required=True)
+    sp.add_argument("--campaign", required=True)
+    sp.add_argument("--prev", help="previous trial's params.json (chi_best of eq. 3)")
+    sp.add_argument("--trial", required=True, help="trial index k = executions so far (M of eq. 3)")
+    sp.add_argument("--out-params", required=True)
+    sp.add_argument("--out-fit", required=True)
+
+    sp = add("plan-first", cmd_plan_first, "first motion with Table 2's minimum parameters")
+    sp.add_argument("--campaign", required=True)
+    sp.add_argument("--out-dir", required=True)
+    sp.add_argument("--seed", default=0)
+
+    sp = add("plan", cmd_plan, "next motion from estimated parameters")
+    sp.add_argument("--params", required=True)
+    sp.add_argument("--played-motion", required=True, help="motion.json of the motion just played")
+    sp.add_argument("--campaign", required=True)
+    sp.add_argument("--out-dir", required=True)
+    sp.add_argument("--seed", default=0)
+
+    sp = add("report-trial", cmd_report_trial, "self-contained HTML page for one trial")
+    sp.add_argument("--data-dir", required=True, help="data/<campaign>/trial_<k>")
+    sp.add_argument("--results-dir", required=True, help="results/<campaign>/trial_<k>")
+    sp.add_argument("--campaign", required=True)
+    sp.add_argument("--out", required=True)
+
+    sp = add("report-campaign", cmd_report_campaign, "campaign page: one row per execution")
+    sp.add_argument("--data-dir", required=True, help="data/<campaign>")
+    sp.add_argument("--results-dir", required=True, help="results/<campaign>")
+    sp.add_argument("--campaign", required=True)
+    sp.add_argument("--out", required=True)
+
+    sp = add("execute", cmd_execute, "play a motion file on an arm and record the next trial's raw files")
+    sp.add_argument("motion", help="motion.csv (its motion.json beside it is copied along)")
+    sp.add_argument("--backend", choices=["virtual", "ur-rtde"], default="virtual")
+    sp.add_argument("--out", required=True, help="data/<campaign>/trial_<k> to create")
+    sp.add_argument("--campaign", required=True, help="data/<campaign>/campaign.yaml")
+    sp.add_argument("--seed", default=0)
+    sp.add_argument("--dry-run", action="store_true", help="check and print the plan, move nothing")
+
+    sp = add("calib-clip", cmd_calib_clip, "virtual lab: film the ChArUco board for intrinsics -> calib/")
+    sp.add_argument("--campaign", required=True)
+    sp.add_argument("--out", required=True)
+    sp.add_argument("--seed", default=0)
+
+    sp = add("campaign", cmd_campaign, "the whole loop on the virtual lab until the tip hits")
+    sp.add_argument("name")
+    sp.add_argument("--string", default="1", help="string type id from the config")
+    sp.add_argument("--target", default="1", help="target id from the config")
+    sp.add_argument("--max-executions", default=5)
+    sp.add_argument("--cores", default=2)
+    sp.add_argument("--seed", default=0)
+    sp.add_argument("--root", default=".", help="project folder holding Snakefile, data/ and results/")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    from .arm import JointLimitError
+    from .config import ConfigError
+    from .files import DataError
+
+    args = build_parser().parse_args(argv)
+    try:
+        args.func(args)
+    except (DataError, ConfigError, JointLimitError) as exc:
+        print(f"stringcast {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

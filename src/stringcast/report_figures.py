@@ -1,0 +1,158 @@
+"""Figures for the reports (matplotlib, Agg), returned as inline PNG data URIs.
+
+Each function takes plain arrays in SI units and draws in mm for people. The
+figure numbers refer to the paper (Tabata et al.): Fig. 8a tip paths, Fig. 8b
+arm tip paths, Fig. 11 parameters on log axes, Table 4 masses.
+"""
+from __future__ import annotations
+
+import base64
+import io
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def to_data_uri(fig) -> str:
+    """Render a matplotlib figure to a ``data:image/png;base64,...`` URI and close it."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
+    plt.close(fig)
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def png_file_uri(path) -> str:
+    with open(path, "rb") as f:
+        return "data:image/png;base64," + base64.b64encode(f.read()).decode("ascii")
+
+
+def _target(ax, target_xy, radius):
+    ax.add_patch(plt.Circle(np.asarray(target_xy) * 1000, radius * 1000, color="tab:red", alpha=0.35))
+    ax.plot(*(np.asarray(target_xy) * 1000), "x", color="tab:red", label="target")
+
+
+def tip_paths(t_tr, tip_tr, t_sim, tip_sim, target_xy, radius, title="Tip paths (Fig. 8a)"):
+    """Tracked vs simulated tip: (F,), (F,2) m each; plane view and distance over time."""
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.2))
+    a.plot(tip_tr[:, 0] * 1000, tip_tr[:, 1] * 1000, ".", ms=2, label="tracked tip")
+    a.plot(tip_sim[:, 0] * 1000, tip_sim[:, 1] * 1000, "-", lw=1, label="simulated tip (estimate)")
+    _target(a, target_xy, radius)
+    a.set_aspect("equal")
+    a.set_xlabel("x [mm]")
+    a.set_ylabel("y [mm]")
+    a.set_title(title)
+    a.legend(fontsize=8)
+    for arr, lab, st in ((tip_tr, "tracked", "."), (tip_sim, "simulated", "-")):
+        t = t_tr if lab == "tracked" else t_sim
+        d = np.hypot(arr[:, 0] - target_xy[0], arr[:, 1] - target_xy[1]) * 1000
+        b.plot(t, d, st, ms=2, lw=1, label=lab)
+    b.axhline(radius * 1000, color="tab:red", lw=0.8, ls="--", label="target radius")
+    b.set_xlabel("t [s] (controller clock)")
+    b.set_ylabel("tip to target [mm]")
+    b.set_yscale("log")
+    b.legend(fontsize=8)
+    return to_data_uri(fig)
+
+
+def arm_paths(paths: dict, target_xy, radius, title="Arm tip (grasp) paths (Fig. 8b)"):
+    """paths: label -> (K,2) m grasp-point paths."""
+    fig, ax = plt.subplots(figsize=(5.5, 4.5))
+    for label, p in paths.items():
+        ax.plot(p[:, 0] * 1000, p[:, 1] * 1000, lw=1.2, label=label)
+        ax.plot(p[0, 0] * 1000, p[0, 1] * 1000, "o", ms=4, color=ax.lines[-1].get_color())
+    ax.plot(0, 0, "ks", label="arm base")
+    _target(ax, target_xy, radius)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [mm]")
+    ax.set_ylabel("y [mm]")
+    ax.set_title(title)
+    ax.legend(fontsize=8)
+    return to_data_uri(fig)
+
+
+def parameters(names, values, lo, hi, title="Estimated parameters against Table 2 (Fig. 11)"):
+    """names (P,), values/lo/hi (P,): log-axis bars of each range with the estimate."""
+    fig, ax = plt.subplots(figsize=(7, 0.35 * len(names) + 1.2))
+    y = np.arange(len(names))[::-1]
+    for yi, v, a, b in zip(y, values, lo, hi):
+        ax.plot([a, b], [yi, yi], color="0.8", lw=6, solid_capstyle="butt")
+        ax.plot(v, yi, "o", color="tab:blue")
+    ax.set_yticks(y)
+    ax.set_yticklabels(names)
+    ax.set_xscale("log")
+    ax.set_title(title)
+    ax.grid(axis="x", alpha=0.3)
+    return to_data_uri(fig)
+
+
+def masses(mu, special_points, title="Estimated relative masses per point (Table 4)"):
+    """mu (n,): bar per mass point 1..n; special points (weights, pipes) highlighted."""
+    n = len(mu)
+    fig, ax = plt.subplots(figsize=(7, 2.8))
+    colors = ["tab:orange" if i + 1 in set(special_points) else "tab:blue" for i in range(n)]
+    ax.bar(np.arange(1, n + 1), mu, color=colors)
+    ax.set_yscale("log")
+    ax.set_xlabel("mass point i (orange: weight or stiff section)")
+    ax.set_ylabel("m_i (relative)")
+    ax.set_xticks(np.arange(1, n + 1))
+    ax.set_title(title)
+    return to_data_uri(fig)
+
+
+def search_history(evals, best_E_m, title="E over the search"):
+    fig, ax = plt.subplots(figsize=(6, 3))
+    ax.plot(evals, np.asarray(best_E_m) * 1000, "-")
+    ax.set_xlabel("evaluations")
+    ax.set_ylabel("best E [mm]")
+    ax.set_yscale("log")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    return to_data_uri(fig)
+
+
+def joint_curves(t, q, qd=None, title="Next motion: joint angles and velocities"):
+    """t (K,), q (K,J) rad; velocities by finite differences when not given."""
+    if qd is None:
+        qd = np.gradient(q, t, axis=0)
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 3.2))
+    for j in range(q.shape[1]):
+        a.plot(t, np.degrees(q[:, j]), label=f"q{j + 1}")
+        b.plot(t, np.degrees(qd[:, j]), label=f"q{j + 1}")
+    a.set_ylabel("angle [deg]")
+    b.set_ylabel("velocity [deg/s]")
+    for ax in (a, b):
+        ax.set_xlabel("t [s]")
+        ax.legend(fontsize=8)
+        ax.grid(alpha=0.3)
+    a.set_title(title)
+    return to_data_uri(fig)
+
+
+def per_point_error(points, median_mm, p95_mm, title="Tracking error against the lab's ground truth"):
+    fig, ax = plt.subplots(figsize=(6, 3))
+    ax.plot(points, median_mm, "o-", label="median")
+    ax.plot(points, p95_mm, "s--", label="95th percentile")
+    ax.set_xlabel("point (0 = grasp)")
+    ax.set_ylabel("error [mm]")
+    ax.set_title(title)
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    return to_data_uri(fig)
+
+
+def campaign_tips(paths: dict, target_xy, radius, title="Tracked tip path per execution (Fig. 7)"):
+    """paths: label -> (F,2) m tracked tip positions (NaN where not valid)."""
+    fig, ax = plt.subplots(figsize=(6, 5))
+    for label, p in paths.items():
+        ax.plot(p[:, 0] * 1000, p[:, 1] * 1000, ".", ms=2, label=label)
+    _target(ax, target_xy, radius)
+    ax.plot(0, 0, "ks", label="arm base")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [mm]")
+    ax.set_ylabel("y [mm]")
+    ax.set_title(title)
+    ax.legend(fontsize=8, markerscale=4)
+    return to_data_uri(fig)

@@ -1,0 +1,19 @@
+"""Shared fixtures: the project's config and a resolved demo campaign."""
+from pathlib import Path
+
+import pytest
+
+from stringcast.config import load_config, resolve_campaign
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED_REAL = ROOT.parent / "shared" / "real"
+
+
+@pytest.fixture(scope="session")
+def config():
+    return load_config(ROOT / "config" / "config.yaml")
+
+
+@pytest.fixture(scope="session")
+def campaign(config):
+    return resolve_campaign({"string": 1, "target": 1}, config, "test")

@@ -1,0 +1,22 @@
+# Calibration: intrinsics from data/<campaign>/calib/ (if present) and the
+# pixel-to-plane homography from the ChArUco board in the trial's video.
+
+
+rule calibrate:
+    input:
+        video=trial_video,
+        meta="data/{campaign}/trial_{trial}/video.yaml",
+        campaign="data/{campaign}/campaign.yaml",
+        calib=calib_input,
+    output:
+        "results/{campaign}/trial_{trial}/calibration.json",
+    params:
+        calib=calib_arg,
+        setups=config["setups"],
+    benchmark:
+        "results/{campaign}/benchmarks/calibrate_{trial}.tsv",
+    log:
+        "results/{campaign}/logs/calibrate_{trial}.log",
+    shell:
+        '{CLI} calibrate --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
+        '{params.calib} --campaign "{input.campaign}" --out "{output}" > "{log}" 2>&1'

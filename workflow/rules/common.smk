@@ -1,0 +1,79 @@
+# Helpers shared by the rules: paths, input functions, the CLI command.
+# No lambdas in rules: every input function is a named def here.
+import sys
+from pathlib import Path
+
+
+wildcard_constraints:
+    campaign=r"[A-Za-z0-9_\-]+",
+    trial=r"[0-9]+",
+
+
+# The package's CLI, run with the same interpreter as Snakemake (the project's venv).
+STRINGCAST = f'"{sys.executable}" -m stringcast.cli'
+CONFIG_FILE = workflow.configfiles[-1] if workflow.configfiles else "config/config.yaml"
+CLI = f'{STRINGCAST} --config "{CONFIG_FILE}"'
+VIDEO_NAMES = ("video.mkv", "video.avi", "video.mp4", "video.cihx", "video")
+
+
+def campaigns():
+    """Campaign names: folders data/<campaign>/ holding a campaign.yaml."""
+    return sorted(p.parent.name for p in Path("data").glob("*/campaign.yaml"))
+
+
+def trials(campaign):
+    """Trial indices present under data/<campaign>/ (those with a joints.csv)."""
+    ks = []
+    for p in Path("data", campaign).glob("trial_*/joints.csv"):
+        suffix = p.parent.name.split("_", 1)[1]
+        if suffix.isdigit():
+            ks.append(int(suffix))
+    return sorted(ks)
+
+
+def trial_video(wildcards):
+    """The trial's video: a container file, a frame folder, or a Photron .cihx."""
+    d = Path("data", wildcards.campaign, f"trial_{wildcards.trial}")
+    for name in VIDEO_NAMES:
+        if (d / name).exists():
+            return str(d / name)
+    return str(d / "video.mkv")
+
+
+def calib_input(wildcards):
+    """data/<campaign>/calib/ if the campaign has a board clip for intrinsics."""
+    d = Path("data", wildcards.campaign, "calib")
+    return [str(d)] if d.is_dir() else []
+
+
+def calib_arg(wildcards, input):
+    return f'--calib-dir "{input.calib[0]}"' if input.calib else ""
+
+
+def previous_params(wildcards):
+    """Eq. (3) starts from the previous trial's estimate (chi_best)."""
+    k = int(wildcards.trial)
+    if k <= 1:
+        return []
+    return [f"results/{wildcards.campaign}/trial_{k - 1}/params.json"]
+
+
+def prev_arg(wildcards, input):
+    return f'--prev "{input.prev[0]}"' if input.prev else ""
+
+
+def trial_reports(wildcards):
+    return [f"results/{wildcards.campaign}/trial_{k}/report.html" for k in trials(wildcards.campaign)]
+
+
+def all_targets():
+    out = []
+    for c in campaigns():
+        out.append(f"results/{c}/first_motion/motion.csv")
+        ks = trials(c)
+        for k in ks:
+            out.append(f"results/{c}/trial_{k}/report.html")
+            out.append(f"results/{c}/trial_{k}/motion.csv")
+        if ks:
+            out.append(f"results/{c}/report.html")
+    return out

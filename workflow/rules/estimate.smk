@@ -1,0 +1,27 @@
+# Parameter estimation: the model driven by the measured joints, fitted to the
+# tracked points (E of eqs. 4-6; search of eqs. 2-3).
+
+
+rule estimate:
+    input:
+        tracks="results/{campaign}/trial_{trial}/tracks.parquet",
+        joints="data/{campaign}/trial_{trial}/joints.csv",
+        campaign="data/{campaign}/campaign.yaml",
+        prev=previous_params,
+    output:
+        params="results/{campaign}/trial_{trial}/params.json",
+        fit="results/{campaign}/trial_{trial}/fit.parquet",
+    params:
+        prev=prev_arg,
+        cfg=config["estimation"],
+        model=config["model"],
+    threads: workflow.cores
+    benchmark:
+        "results/{campaign}/benchmarks/estimate_{trial}.tsv",
+    log:
+        "results/{campaign}/logs/estimate_{trial}.log",
+    shell:
+        'NUMBA_NUM_THREADS={threads} {CLI} estimate --tracks "{input.tracks}" '
+        '--joints "{input.joints}" --campaign "{input.campaign}" {params.prev} '
+        '--trial {wildcards.trial} --out-params "{output.params}" --out-fit "{output.fit}" '
+        '> "{log}" 2>&1'

@@ -1,0 +1,40 @@
+# Motion generation (paper Section V): the first motion with Table 2's minimum
+# parameters, then the next motion from each trial's estimate.
+
+
+rule plan_first:
+    input:
+        campaign="data/{campaign}/campaign.yaml",
+    output:
+        csv="results/{campaign}/first_motion/motion.csv",
+        json="results/{campaign}/first_motion/motion.json",
+    params:
+        cfg=config["motion"],
+        model=config["model"],
+    benchmark:
+        "results/{campaign}/benchmarks/plan_first.tsv",
+    log:
+        "results/{campaign}/logs/plan_first.log",
+    shell:
+        '{CLI} plan-first --campaign "{input.campaign}" '
+        '--out-dir "results/{wildcards.campaign}/first_motion" > "{log}" 2>&1'
+
+
+rule plan:
+    input:
+        params="results/{campaign}/trial_{trial}/params.json",
+        played="data/{campaign}/trial_{trial}/motion.json",
+        campaign="data/{campaign}/campaign.yaml",
+    output:
+        csv="results/{campaign}/trial_{trial}/motion.csv",
+        json="results/{campaign}/trial_{trial}/motion.json",
+    params:
+        cfg=config["motion"],
+    benchmark:
+        "results/{campaign}/benchmarks/plan_{trial}.tsv",
+    log:
+        "results/{campaign}/logs/plan_{trial}.log",
+    shell:
+        '{CLI} plan --params "{input.params}" --played-motion "{input.played}" '
+        '--campaign "{input.campaign}" --seed {wildcards.trial} '
+        '--out-dir "results/{wildcards.campaign}/trial_{wildcards.trial}" > "{log}" 2>&1'

@@ -1,0 +1,48 @@
+# Reports: a self-contained HTML page per trial and one per campaign.
+
+
+rule report_trial:
+    input:
+        calibration="results/{campaign}/trial_{trial}/calibration.json",
+        sync="results/{campaign}/trial_{trial}/sync.json",
+        tracks="results/{campaign}/trial_{trial}/tracks.parquet",
+        overlay="results/{campaign}/trial_{trial}/tracking_overlay.png",
+        params="results/{campaign}/trial_{trial}/params.json",
+        fit="results/{campaign}/trial_{trial}/fit.parquet",
+        motion="results/{campaign}/trial_{trial}/motion.json",
+        joints="data/{campaign}/trial_{trial}/joints.csv",
+        campaign="data/{campaign}/campaign.yaml",
+    output:
+        report(
+            "results/{campaign}/trial_{trial}/report.html",
+            caption="../report/trial.rst",
+            category="Trials",
+        ),
+    benchmark:
+        "results/{campaign}/benchmarks/report_{trial}.tsv",
+    log:
+        "results/{campaign}/logs/report_{trial}.log",
+    shell:
+        '{CLI} report-trial --data-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
+        '--results-dir "results/{wildcards.campaign}/trial_{wildcards.trial}" '
+        '--campaign "{input.campaign}" --out "{output}" > "{log}" 2>&1'
+
+
+rule report_campaign:
+    input:
+        trial_reports,
+        campaign="data/{campaign}/campaign.yaml",
+    output:
+        report(
+            "results/{campaign}/report.html",
+            caption="../report/campaign.rst",
+            category="Campaigns",
+        ),
+    benchmark:
+        "results/{campaign}/benchmarks/report_campaign.tsv",
+    log:
+        "results/{campaign}/logs/report_campaign.log",
+    shell:
+        '{CLI} report-campaign --data-dir "data/{wildcards.campaign}" '
+        '--results-dir "results/{wildcards.campaign}" --campaign "{input.campaign}" '
+        '--out "{output}" > "{log}" 2>&1'

@@ -1,0 +1,25 @@
+# Markerless tracking: background, segmentation, skeleton, ordered from the grasp,
+# resampled by arc length to the model's points, in the robot frame.
+
+
+rule track:
+    input:
+        video=trial_video,
+        joints="data/{campaign}/trial_{trial}/joints.csv",
+        calibration="results/{campaign}/trial_{trial}/calibration.json",
+        sync="results/{campaign}/trial_{trial}/sync.json",
+        campaign="data/{campaign}/campaign.yaml",
+    output:
+        tracks="results/{campaign}/trial_{trial}/tracks.parquet",
+        overlay="results/{campaign}/trial_{trial}/tracking_overlay.png",
+    params:
+        cfg=config["tracking"],
+    benchmark:
+        "results/{campaign}/benchmarks/track_{trial}.tsv",
+    log:
+        "results/{campaign}/logs/track_{trial}.log",
+    shell:
+        '{CLI} track --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
+        '--calibration "{input.calibration}" --sync "{input.sync}" '
+        '--campaign "{input.campaign}" --out "{output.tracks}" --overlay "{output.overlay}" '
+        '> "{log}" 2>&1'
