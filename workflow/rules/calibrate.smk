@@ -11,6 +11,7 @@ rule calibrate:
     output:
         "results/{campaign}/trial_{trial}/calibration.json",
     params:
+        cli=CLI,
         calib=calib_arg,
         setups=config["setups"],
     benchmark:
@@ -18,5 +19,5 @@ rule calibrate:
     log:
         "results/{campaign}/logs/calibrate_{trial}.log",
     shell:
-        '{CLI} calibrate --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
+        '{params.cli} calibrate --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '{params.calib} --campaign "{input.campaign}" --out "{output}" > "{log}" 2>&1'

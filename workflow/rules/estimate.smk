@@ -12,6 +12,7 @@ rule estimate:
         params="results/{campaign}/trial_{trial}/params.json",
         fit="results/{campaign}/trial_{trial}/fit.parquet",
     params:
+        cli=CLI,
         prev=prev_arg,
         cfg=config["estimation"],
         model=config["model"],
@@ -21,7 +22,7 @@ rule estimate:
     log:
         "results/{campaign}/logs/estimate_{trial}.log",
     shell:
-        'NUMBA_NUM_THREADS={threads} {CLI} estimate --tracks "{input.tracks}" '
+        'NUMBA_NUM_THREADS={threads} {params.cli} estimate --tracks "{input.tracks}" '
         '--joints "{input.joints}" --campaign "{input.campaign}" {params.prev} '
         '--trial {wildcards.trial} --out-params "{output.params}" --out-fit "{output.fit}" '
         '> "{log}" 2>&1'

@@ -9,6 +9,7 @@ rule plan_first:
         csv="results/{campaign}/first_motion/motion.csv",
         json="results/{campaign}/first_motion/motion.json",
     params:
+        cli=CLI,
         cfg=config["motion"],
         model=config["model"],
     benchmark:
@@ -16,7 +17,7 @@ rule plan_first:
     log:
         "results/{campaign}/logs/plan_first.log",
     shell:
-        '{CLI} plan-first --campaign "{input.campaign}" '
+        '{params.cli} plan-first --campaign "{input.campaign}" '
         '--out-dir "results/{wildcards.campaign}/first_motion" > "{log}" 2>&1'
 
 
@@ -29,12 +30,13 @@ rule plan:
         csv="results/{campaign}/trial_{trial}/motion.csv",
         json="results/{campaign}/trial_{trial}/motion.json",
     params:
+        cli=CLI,
         cfg=config["motion"],
     benchmark:
         "results/{campaign}/benchmarks/plan_{trial}.tsv",
     log:
         "results/{campaign}/logs/plan_{trial}.log",
     shell:
-        '{CLI} plan --params "{input.params}" --played-motion "{input.played}" '
+        '{params.cli} plan --params "{input.params}" --played-motion "{input.played}" '
         '--campaign "{input.campaign}" --seed {wildcards.trial} '
         '--out-dir "results/{wildcards.campaign}/trial_{wildcards.trial}" > "{log}" 2>&1'

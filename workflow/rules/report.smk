@@ -18,12 +18,14 @@ rule report_trial:
             caption="../report/trial.rst",
             category="Trials",
         ),
+    params:
+        cli=CLI,
     benchmark:
         "results/{campaign}/benchmarks/report_{trial}.tsv",
     log:
         "results/{campaign}/logs/report_{trial}.log",
     shell:
-        '{CLI} report-trial --data-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
+        '{params.cli} report-trial --data-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '--results-dir "results/{wildcards.campaign}/trial_{wildcards.trial}" '
         '--campaign "{input.campaign}" --out "{output}" > "{log}" 2>&1'
 
@@ -38,11 +40,13 @@ rule report_campaign:
             caption="../report/campaign.rst",
             category="Campaigns",
         ),
+    params:
+        cli=CLI,
     benchmark:
         "results/{campaign}/benchmarks/report_campaign.tsv",
     log:
         "results/{campaign}/logs/report_campaign.log",
     shell:
-        '{CLI} report-campaign --data-dir "data/{wildcards.campaign}" '
+        '{params.cli} report-campaign --data-dir "data/{wildcards.campaign}" '
         '--results-dir "results/{wildcards.campaign}" --campaign "{input.campaign}" '
         '--out "{output}" > "{log}" 2>&1'

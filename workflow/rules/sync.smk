@@ -7,10 +7,12 @@ rule sync:
         joints="data/{campaign}/trial_{trial}/joints.csv",
     output:
         "results/{campaign}/trial_{trial}/sync.json",
+    params:
+        cli=CLI,
     benchmark:
         "results/{campaign}/benchmarks/sync_{trial}.tsv",
     log:
         "results/{campaign}/logs/sync_{trial}.log",
     shell:
-        '{CLI} sync --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
+        '{params.cli} sync --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '--out "{output}" > "{log}" 2>&1'

@@ -13,13 +13,14 @@ rule track:
         tracks="results/{campaign}/trial_{trial}/tracks.parquet",
         overlay="results/{campaign}/trial_{trial}/tracking_overlay.png",
     params:
+        cli=CLI,
         cfg=config["tracking"],
     benchmark:
         "results/{campaign}/benchmarks/track_{trial}.tsv",
     log:
         "results/{campaign}/logs/track_{trial}.log",
     shell:
-        '{CLI} track --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
+        '{params.cli} track --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '--calibration "{input.calibration}" --sync "{input.sync}" '
         '--campaign "{input.campaign}" --out "{output.tracks}" --overlay "{output.overlay}" '
         '> "{log}" 2>&1'
