@@ -1,0 +1,168 @@
+"""Benchmark ``model_speed``: string-model throughput (DESIGN.md, "Benchmarks").
+
+Figures, measured in this run:
+* point_steps_per_s_per_core: mass-point steps per second of ``model.simulate_batch``
+  on one thread (``numba.set_num_threads(1)``), n = 15 points, dt = 1e-4 s.
+* candidates_per_s: candidates per second of a batch on all cores (1 s of motion,
+  frames sampled at 500 fps), and the same for ``closest_approach_batch``.
+* reference: MuJoCo stepping a planar chain of hinge-jointed capsules with the same
+  number of links (Euler integrator, same dt), one thread, stepped in C by
+  ``mujoco.rollout``.
+
+Run: ``python -m benchmarks.model_speed [--quick]`` -> results/bench/model_speed.json.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+N_POINTS, L0, DT = 15, 0.034, 1e-4
+
+
+def _cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:
+        return os.cpu_count() or 1
+
+
+def _git_commit() -> str | None:
+    try:
+        return subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True,
+                              check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return None
+
+
+def _case(duration: float):
+    """Mid-range Table 2 coefficients, a 2 Hz swinging hand, the hanging start."""
+    from stringcast.config import load_config, model_ranges
+    from stringcast.model import hanging_equilibrium
+
+    lo, hi, _ = model_ranges(load_config())
+    coeffs = np.sqrt(lo * hi)
+    hand_t = np.arange(0.0, duration + 1e-9, 0.002)
+    w = 2 * np.pi * 2.0
+    hand = np.stack([0.8 + 0.1 * np.sin(w * hand_t), 0.3 + 0.05 * np.cos(1.5 * w * hand_t),
+                     -1.2 + 0.6 * np.sin(w * hand_t)], axis=1)
+    mu = np.ones(N_POINTS)
+    p0 = hanging_equilibrium(coeffs, mu, hand[0], L0, 0.0, N_POINTS)
+    return coeffs, mu, hand_t, hand, p0
+
+
+def _best_of(fn, repeats: int) -> float:
+    best = np.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def model_rates(duration: float, batch: int, repeats: int) -> dict:
+    import numba
+
+    from stringcast.model import closest_approach_batch, simulate_batch
+
+    coeffs, mu, hand_t, hand, p0 = _case(duration)
+    sample_t = np.arange(0.0, duration, 0.002)
+    steps = int(np.ceil(duration / DT))
+
+    def sim(b):
+        C = np.tile(coeffs, (b, 1))
+        M = np.tile(mu, (b, 1))
+        idx = np.zeros(b, np.int64)
+        return lambda: simulate_batch(C, M, hand_t, hand[None], idx, p0[None], L0, 0.0, DT, sample_t)
+
+    def closest(b):
+        idx = np.zeros(b, np.int64)
+        return lambda: closest_approach_batch(coeffs, mu, hand_t, hand[None], idx, p0[None], L0, 0.0, DT,
+                                              0.0, duration, np.array([1.3, 0.45]))
+
+    all_threads = numba.get_num_threads()
+    sim(1)()
+    closest(1)()                                         # compile (or load the cache)
+    numba.set_num_threads(1)
+    try:
+        b1 = 8
+        t_single = _best_of(sim(b1), repeats)
+        t_single_closest = _best_of(closest(b1), repeats)
+    finally:
+        numba.set_num_threads(all_threads)
+    t_batch = _best_of(sim(batch), repeats)
+    t_batch_closest = _best_of(closest(batch), repeats)
+    return {
+        "point_steps_per_s_per_core": b1 * N_POINTS * steps / t_single,
+        "point_steps_per_s_per_core_closest_approach": b1 * N_POINTS * steps / t_single_closest,
+        "candidates_per_s": batch / t_batch,
+        "candidates_per_s_closest_approach": batch / t_batch_closest,
+        "threads": all_threads, "batch": batch, "simulated_s": duration,
+    }
+
+
+def mujoco_chain_rate(duration: float, repeats: int) -> dict:
+    """MuJoCo: a planar chain of N_POINTS hinged capsules hanging from a fixed base."""
+    import mujoco
+    from mujoco import rollout
+
+    def body(i: int) -> str:
+        inner = body(i + 1) if i + 1 < N_POINTS else ""
+        pos = "0 0 0" if i == 0 else f"0 {-L0} 0"
+        return (f'<body pos="{pos}"><joint type="hinge" axis="0 0 1" stiffness="1e-3" damping="1e-3"/>'
+                f'<geom type="capsule" fromto="0 0 0 0 {-L0} 0" size="0.0015" mass="0.001"/>{inner}</body>')
+
+    xml = (f'<mujoco><option timestep="{DT}" integrator="Euler" gravity="0 -9.81 0"/>'
+           f'<worldbody>{body(0)}</worldbody></mujoco>')
+    model = mujoco.MjModel.from_xml_string(xml)
+    data = mujoco.MjData(model)
+    data.qpos[:] = 0.3
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    state0 = np.empty(mujoco.mj_stateSize(model, spec))
+    mujoco.mj_getState(model, data, state0, spec)
+    steps = int(np.ceil(duration / DT))
+
+    def run():  # stepped in C by mujoco.rollout, one MjData: one thread
+        rollout.rollout(model, data, state0[None], nstep=steps)
+
+    t = _best_of(run, repeats)
+    return {"name": "mujoco_chain", "links": N_POINTS, "integrator": "Euler", "stepping": "mujoco.rollout",
+            "point_steps_per_s_per_core": N_POINTS * steps / t, "mujoco_version": mujoco.__version__}
+
+
+def run(quick: bool = False) -> dict:
+    """Measure, write results/bench/model_speed.json and return its content."""
+    from stringcast.files import write_json
+
+    duration = 0.25 if quick else 1.0
+    repeats = 2 if quick else 3
+    rates = model_rates(duration, batch=16 if quick else 64, repeats=repeats)
+    ref = mujoco_chain_rate(0.1 if quick else 0.5, repeats)
+    doc = {
+        "benchmark": "model_speed", "cores": _cores(), "created": datetime.now(timezone.utc).isoformat(),
+        "git_commit": _git_commit(), "quick": quick, "n_points": N_POINTS, "dt_s": DT, **rates,
+        "reference": ref,
+        "ratio_to_reference": rates["point_steps_per_s_per_core"] / ref["point_steps_per_s_per_core"],
+    }
+    write_json(ROOT / "results" / "bench" / "model_speed.json", doc)
+    return doc
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="short runs")
+    doc = run(ap.parse_args().quick)
+    print(f"model: {doc['point_steps_per_s_per_core'] / 1e6:.1f} M point-steps/s/core, "
+          f"{doc['candidates_per_s']:.1f} candidates/s ({doc['threads']} threads, {doc['simulated_s']} s each); "
+          f"MuJoCo chain {doc['reference']['point_steps_per_s_per_core'] / 1e6:.2f} M "
+          f"(ratio {doc['ratio_to_reference']:.1f})")
+
+
+if __name__ == "__main__":
+    main()
