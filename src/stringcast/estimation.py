@@ -1,0 +1,532 @@
+"""Parameter estimation (paper Section VI, eqs. 2-3).
+
+The string model (:mod:`stringcast.model`) is driven by the *measured* joint log
+(forward kinematics -> grasp point and hand angle) from the tracked rest state,
+and its 10 coefficients plus relative masses are searched so that the simulated
+mass points match the tracked ones (evaluation value E, eqs. 4-6,
+:func:`stringcast.evaluation.evaluation_value`).
+
+Search space (eq. 2): x = chi in [0, 1]^(10 + 1 + G): the ten coefficients in
+``config.PARAM_NAMES`` order, then mu_others (shared by the plain points), then
+one mu per special point (``StringSpec.mass_groups``); P = P_min (P_max/P_min)^chi.
+
+Optimizers (``config.estimation.optimizer``), all evaluating candidates in numba
+batches of ``config.estimation.batch``:
+
+* ``random_search`` (the paper's eq. 3): chi_m = chi_best + (chi0 / M) beta^m
+  RAND(-1, 1), clipped to [0, 1], M = executions so far (the trial index), m the
+  candidate index; chi_best starts at the previous trial's estimate and is moved
+  to the best candidate after every batch. The first candidate is chi_best itself.
+  With no previous estimate (trial 1) chi_best is the set the first motion was
+  planned with (:func:`stringcast.motion.first_parameters`): chi = 0 for the
+  coefficients (Table 2 minima) except k_s, lifted so the model carries its own
+  weight, and chi of ``model.first_mu`` for the masses.
+* ``cmaes``: CMA-ES (``cma``) from chi_best, sigma0 = 0.3 chi0 / M, bounds [0, 1].
+* ``de``: SciPy differential evolution (vectorized), x0 = chi_best.
+
+Choices where the paper is silent: the rest state p_init is the median of the
+valid tracked positions over the last ``tracking.rest_frames`` frames before the
+motion starts (:func:`stringcast.arm.motion_start`); a point never valid there
+falls back to hanging straight down from the point above (reported in
+``Estimate.message``). The simulation starts at the first of those frames and is
+compared at every later frame up to the end of the joint log.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Mapping
+
+import numpy as np
+import pandas as pd
+
+from .arm import hand_pose, motion_start
+from .config import PARAM_NAMES, Campaign, ConfigError, model_ranges
+from .files import DataError, read_joint_table, read_json, read_parquet, write_json, write_parquet
+
+TRACK_COLUMNS = ["frame", "t_s", "point", "x_m", "y_m", "valid"]
+MIN_REST_FRAMES = 3
+
+
+@dataclass(frozen=True)
+class EstimationProblem:
+    """Everything the search needs, from the pipeline's files (never ground truth).
+
+    Attributes:
+        hand_t: (K,) s, controller clock; hand_t[0] == frame_t[0].
+        hand: (K, 3) grasp point x, y (m) and hand angle phi_h (rad) from FK.
+        p_init: (n, 2) m, the rest state at frame_t[0].
+        frame_t: (F,) s, frame times compared (frame_t[0] = simulation start).
+        frames: (F,) int, the frame numbers of ``frame_t``.
+        tracked: (F, n, 2) m, tracked points 1..n (0 where not valid).
+        valid: (F, n) bool.
+        l0: rest segment length, m. psi0: rest direction in the hand frame, rad.
+        dt: integration step, s. mass_groups: (n,) int (0 = mu_others).
+        w: tip weighting of eq. (6).
+        fallback_points: points (1..n) never valid at rest (straight-down p_init).
+        t_motion_start: s, when the joint log starts to move.
+    """
+
+    hand_t: np.ndarray
+    hand: np.ndarray
+    p_init: np.ndarray
+    frame_t: np.ndarray
+    frames: np.ndarray
+    tracked: np.ndarray
+    valid: np.ndarray
+    l0: float
+    psi0: float
+    dt: float
+    mass_groups: np.ndarray
+    w: float
+    fallback_points: tuple = ()
+    t_motion_start: float = 0.0
+
+    def __post_init__(self):
+        k, f, n = len(self.hand_t), len(self.frame_t), len(self.p_init)
+        shapes = {"hand_t": (k,), "hand": (k, 3), "p_init": (n, 2), "frame_t": (f,), "frames": (f,),
+                  "tracked": (f, n, 2), "valid": (f, n), "mass_groups": (n,)}
+        for name, shape in shapes.items():
+            if np.shape(getattr(self, name)) != shape:
+                raise ValueError(f"EstimationProblem.{name}: expected shape {shape}, got {np.shape(getattr(self, name))}")
+        if k < 2 or f < 2:
+            raise ValueError("EstimationProblem: needs at least two joint samples and two frames")
+        if not np.all(np.isfinite(self.p_init)) or not np.all(np.isfinite(self.hand)):
+            raise ValueError("EstimationProblem: p_init and hand must be finite")
+
+    @property
+    def n_points(self) -> int:
+        return len(self.p_init)
+
+    @property
+    def n_groups(self) -> int:
+        return int(self.mass_groups.max()) + 1
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """The estimated parameter set and how the search went.
+
+    Attributes:
+        coeffs: (10,) in ``PARAM_NAMES`` order. mu: (n,) relative mass per point.
+        chi: (10 + G + 1,) the exponents of eq. (2) (coefficients, mu_others, specials).
+        E_m: evaluation value (m; inf if every candidate blew up). E_i: (n,) per point, m.
+        history: {"evaluations": [...], "best_E_m": [...]} after each batch.
+        top_chi: (<=10, D) best candidates, top_E: (<=10,) their E (m).
+        message: empty, or what went wrong (all candidates invalid, rest fallback).
+    """
+
+    coeffs: np.ndarray
+    mu: np.ndarray
+    chi: np.ndarray
+    E_m: float
+    E_i: np.ndarray
+    history: dict
+    optimizer: str
+    seed: int
+    n_evaluations: int
+    n_blown_up: int
+    seconds: float
+    top_chi: np.ndarray
+    top_E: np.ndarray
+    message: str = ""
+
+    def __post_init__(self):
+        n = len(self.mu)
+        if np.shape(self.coeffs) != (len(PARAM_NAMES),):
+            raise ValueError(f"Estimate.coeffs: expected ({len(PARAM_NAMES)},), got {np.shape(self.coeffs)}")
+        if np.shape(self.E_i) != (n,):
+            raise ValueError(f"Estimate.E_i: expected ({n},), got {np.shape(self.E_i)}")
+        if np.ndim(self.top_chi) != 2 or np.shape(self.top_chi)[:1] != np.shape(self.top_E):
+            raise ValueError("Estimate.top_chi/top_E: shapes (k, D) and (k,) expected")
+
+
+# ---------------------------------------------------------------------------
+# Problem from the pipeline's files
+# ---------------------------------------------------------------------------
+def tracks_arrays(tracks: pd.DataFrame, n: int, source="tracks") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Long ``tracks.parquet`` table -> frames (F,), t (F,) s, xy (F, n+1, 2) m (NaN if absent), valid (F, n+1)."""
+    missing = [c for c in TRACK_COLUMNS if c not in tracks.columns]
+    if missing:
+        raise DataError(f"{source}: missing columns {missing}")
+    if len(tracks) == 0:
+        raise DataError(f"{source}: no rows")
+    pts = tracks["point"].to_numpy(dtype=np.int64)
+    if pts.min() < 0 or pts.max() > n:
+        raise DataError(f"{source}: point ids must be 0..{n} for this string (n = {n}), got {pts.min()}..{pts.max()}")
+    frames, fi = np.unique(tracks["frame"].to_numpy(dtype=np.int64), return_inverse=True)
+    t = np.full(len(frames), np.nan)
+    t[fi] = tracks["t_s"].to_numpy(dtype=float)
+    xy = np.full((len(frames), n + 1, 2), np.nan)
+    xy[fi, pts, 0] = tracks["x_m"].to_numpy(dtype=float)
+    xy[fi, pts, 1] = tracks["y_m"].to_numpy(dtype=float)
+    valid = np.zeros((len(frames), n + 1), bool)
+    valid[fi, pts] = tracks["valid"].to_numpy(dtype=bool)
+    valid &= np.all(np.isfinite(xy), axis=-1)
+    if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
+        raise DataError(f"{source}: frame times t_s must be finite and increase with the frame number")
+    return frames, t, xy, valid
+
+
+def build_problem(tracks_df: pd.DataFrame, t_joints: np.ndarray, q_joints: np.ndarray,
+                  campaign: Campaign, config: Mapping, source: str = "tracks.parquet") -> EstimationProblem:
+    """Assemble the estimation problem from tracked points and the measured joint log.
+
+    Args:
+        tracks_df: long table ``frame, t_s, point, x_m, y_m, valid`` (t_s on the controller clock).
+        t_joints: (K,) s; q_joints: (K, J) rad, the measured joint log.
+
+    Raises:
+        DataError: missing columns, a log that never moves, fewer than 3 frames at
+            rest before the motion, fewer than 2 frames overlapping the joint log, or
+            no valid tracked point to compare.
+    """
+    s, arm = campaign.string, campaign.arm
+    n = s.n_points
+    frames, t, xy, valid = tracks_arrays(tracks_df, n, source)
+    t_joints = np.asarray(t_joints, float)
+    q_joints = np.asarray(q_joints, float)
+    try:
+        t_move = motion_start(t_joints, q_joints)
+    except ValueError as exc:
+        raise DataError(f"joints.csv: {exc}") from exc
+    rest = np.nonzero((t >= t_joints[0]) & (t < t_move))[0]
+    n_rest = int(config.get("tracking", {}).get("rest_frames", 40))
+    rest = rest[-max(n_rest, MIN_REST_FRAMES):]
+    if len(rest) < MIN_REST_FRAMES:
+        raise DataError(f"{source}: only {len(rest)} frames before the motion starts at t = {t_move:.3f} s "
+                        f"(need {MIN_REST_FRAMES}) within the joint log")
+    use = np.arange(rest[0], len(t))
+    use = use[t[use] <= t_joints[-1]]
+    if len(use) < 2:
+        raise DataError(f"{source}: fewer than two frames overlap the joint log")
+    t0 = t[use[0]]
+    q0 = np.array([np.interp(t0, t_joints, q_joints[:, j]) for j in range(q_joints.shape[1])])
+    after = t_joints > t0
+    hand_t = np.concatenate([[t0], t_joints[after]])
+    hand = hand_pose(arm, np.vstack([q0, q_joints[after]]))
+
+    p_init = np.zeros((n, 2))
+    fallback = []
+    above = hand[0, :2]
+    for i in range(1, n + 1):
+        ok = valid[rest, i]
+        if ok.any():
+            p_init[i - 1] = np.median(xy[rest[ok], i], axis=0)
+        else:
+            p_init[i - 1] = above + (0.0, -s.l0)
+            fallback.append(i)
+        above = p_init[i - 1]
+    if not valid[use, 1:].any():
+        raise DataError(f"{source}: no valid tracked point 1..{n} in the frames to compare")
+    tracked = np.where(valid[use, 1:, None], xy[use, 1:], 0.0)
+    return EstimationProblem(
+        hand_t=hand_t, hand=hand, p_init=p_init, frame_t=t[use], frames=frames[use], tracked=tracked,
+        valid=valid[use, 1:], l0=s.l0, psi0=np.radians(float(config["model"].get("psi0_deg", 0.0))),
+        dt=float(config["model"]["dt_s"]), mass_groups=s.mass_groups(),
+        w=float(config.get("evaluation", {}).get("w", 0.1)), fallback_points=tuple(fallback),
+        t_motion_start=t_move)
+
+
+# ---------------------------------------------------------------------------
+# Parameter vector (eq. 2)
+# ---------------------------------------------------------------------------
+def decode(chi: np.ndarray, config: Mapping, mass_groups: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. (2): chi (..., 10 + G) -> coefficients (..., 10) and per-point mu (..., n)."""
+    lo, hi, (mlo, mhi) = model_ranges(config)
+    chi = np.clip(np.asarray(chi, float), 0.0, 1.0)
+    coeffs = lo * (hi / lo) ** chi[..., :len(lo)]
+    mu_groups = mlo * (mhi / mlo) ** chi[..., len(lo):]
+    return coeffs, mu_groups[..., np.asarray(mass_groups)]
+
+
+def encode(coeffs: np.ndarray, mu_groups: np.ndarray, config: Mapping) -> np.ndarray:
+    """Inverse of eq. (2): coefficients (10,) and group masses (G,) -> chi (10 + G,), clipped to [0, 1]."""
+    lo, hi, (mlo, mhi) = model_ranges(config)
+    c = np.log(np.asarray(coeffs, float) / lo) / np.log(hi / lo)
+    m = np.log(np.asarray(mu_groups, float) / mlo) / np.log(mhi / mlo)
+    return np.clip(np.concatenate([c, m]), 0.0, 1.0)
+
+
+def start_chi(prev_params: Mapping | None, string, config: Mapping, source="params.json") -> np.ndarray:
+    """chi_best at m = 0: the previous estimate's chi, else that of the first plan's set
+    (:func:`stringcast.motion.first_parameters`: Table 2 minima with k_s lifted, masses ``model.first_mu``)."""
+    n_groups = int(string.mass_groups().max()) + 1
+    if prev_params is None:
+        from .motion import first_parameters
+
+        coeffs, _ = first_parameters(config, string)
+        return encode(coeffs, np.full(n_groups, float(config["model"].get("first_mu", 1.0))), config)
+    chi = prev_params.get("chi")
+    if chi is not None and len(chi) == len(PARAM_NAMES) + n_groups:
+        return np.clip(np.asarray(chi, float), 0.0, 1.0)
+    try:
+        coeffs = [prev_params["coefficients"][k] for k in PARAM_NAMES]
+        mu_groups = prev_params["mu_groups"]
+    except (KeyError, TypeError) as exc:
+        raise DataError(f"{source}: needs 'chi' of length {len(PARAM_NAMES) + n_groups} or "
+                        f"'coefficients' and 'mu_groups' ({exc})") from exc
+    if len(mu_groups) != n_groups:
+        raise DataError(f"{source}: mu_groups has {len(mu_groups)} entries, this string has {n_groups}")
+    return encode(coeffs, mu_groups, config)
+
+
+# ---------------------------------------------------------------------------
+# Objective and optimizers
+# ---------------------------------------------------------------------------
+def make_objective(problem: EstimationProblem, config: Mapping) -> Callable[[np.ndarray], np.ndarray]:
+    """E (eqs. 4-6) of a batch: chi (B, D) -> E (B,) in m, +inf where the simulation blew up."""
+    from .evaluation import evaluation_value
+    from .model import simulate_batch
+
+    hand = problem.hand[None]
+    p_init = problem.p_init[None]
+
+    def objective(chi: np.ndarray) -> np.ndarray:
+        coeffs, mu = decode(chi, config, problem.mass_groups)
+        b = len(chi)
+        pos, ok = simulate_batch(np.ascontiguousarray(coeffs), np.ascontiguousarray(mu), problem.hand_t, hand,
+                                 np.zeros(b, np.int64), p_init, problem.l0, problem.psi0, problem.dt,
+                                 problem.frame_t)
+        E = np.asarray(evaluation_value(problem.tracked, problem.valid, pos, problem.w), float).reshape(b)
+        return np.where(np.asarray(ok, bool) & np.isfinite(E), E, np.inf)
+
+    return objective
+
+
+class _Recorder:
+    """Wraps the objective: counts the budget, records every candidate, the history, a progress bar."""
+
+    def __init__(self, objective, budget: int, desc: str):
+        from tqdm.auto import tqdm
+
+        self.objective, self.budget = objective, int(budget)
+        self.chi: list[np.ndarray] = []
+        self.E: list[np.ndarray] = []
+        self.history = {"evaluations": [], "best_E_m": []}
+        self.best = np.inf
+        self.bar = tqdm(total=self.budget, desc=desc, unit="cand", disable=None)
+
+    @property
+    def remaining(self) -> int:
+        return self.budget - sum(len(e) for e in self.E)
+
+    def __call__(self, chi: np.ndarray) -> np.ndarray:
+        chi = np.clip(np.atleast_2d(np.asarray(chi, float)), 0.0, 1.0)
+        E = self.objective(chi)
+        self.chi.append(chi)
+        self.E.append(E)
+        self.best = min(self.best, float(np.min(E)))
+        self.history["evaluations"].append(self.budget - self.remaining)
+        self.history["best_E_m"].append(self.best)
+        self.bar.update(len(E))
+        return E
+
+
+def random_search(rec: _Recorder, chi_best: np.ndarray, batch: int, M: int, rng: np.random.Generator,
+                  settings: Mapping) -> None:
+    """The paper's eq. (3) (see module doc); chi_best moves to the best candidate after each batch."""
+    chi0, beta = float(settings.get("chi0", 1.0)), float(settings.get("beta", 0.998))
+    chi_best = np.asarray(chi_best, float)
+    best_E, m = np.inf, 0
+    while rec.remaining > 0:
+        b = min(batch, rec.remaining)
+        ms = np.arange(m, m + b)
+        step = (chi0 / M) * beta ** ms[:, None] * rng.uniform(-1.0, 1.0, (b, len(chi_best)))
+        if m == 0:
+            step[0] = 0.0  # candidate 0 is chi_best itself
+        cand = np.clip(chi_best + step, 0.0, 1.0)
+        E = rec(cand)
+        i = int(np.argmin(E))
+        if E[i] < best_E:
+            best_E, chi_best = float(E[i]), cand[i]
+        m += b
+
+
+def cmaes_search(rec: _Recorder, chi_best: np.ndarray, batch: int, M: int, rng: np.random.Generator,
+                 settings: Mapping) -> None:
+    """CMA-ES (``cma.CMAEvolutionStrategy``, ask/tell) in [0, 1]^D, population = batch."""
+    import cma
+
+    sigma0 = 0.3 * float(settings.get("chi0", 1.0)) / M
+    es = cma.CMAEvolutionStrategy(np.asarray(chi_best, float), sigma0, {
+        "bounds": [0.0, 1.0], "popsize": max(4, batch), "seed": int(rng.integers(1, 2**31 - 1)),
+        "verbose": -9, "maxfevals": rec.budget, "tolfun": 0.0, "tolx": 1e-9})
+    while rec.remaining > 0 and not es.stop():
+        xs = es.ask()
+        xs = xs[:rec.remaining] if len(xs) > rec.remaining else xs
+        E = rec(np.asarray(xs))
+        if len(xs) < es.popsize:
+            break
+        finite = E[np.isfinite(E)]
+        worst = (2.0 * finite.max() + 1.0) if finite.size else 1e6
+        es.tell(xs, np.where(np.isfinite(E), E, worst).tolist())
+
+
+def de_search(rec: _Recorder, chi_best: np.ndarray, batch: int, M: int, rng: np.random.Generator,
+              settings: Mapping) -> None:
+    """SciPy ``differential_evolution`` (vectorized, no polish), x0 = chi_best; candidates in chunks of ``batch``."""
+    from scipy.optimize import differential_evolution
+
+    d = len(chi_best)
+    popsize = int(settings.get("de_popsize", 8))
+
+    def f(x):  # x (D, S) -> (S,)
+        x = np.asarray(x).T
+        out = np.full(len(x), 1e6)
+        for a in range(0, len(x), batch):
+            k = min(batch, rec.remaining)
+            if k <= 0:
+                break
+            E = rec(x[a:a + k])
+            out[a:a + k] = np.where(np.isfinite(E), E, 1e6)
+        return out
+
+    maxiter = max(0, rec.budget // (popsize * d) - 1)
+    differential_evolution(f, [(0.0, 1.0)] * d, maxiter=maxiter, popsize=popsize, polish=False, tol=0.0,
+                           x0=np.asarray(chi_best, float), vectorized=True, updating="deferred",
+                           rng=np.random.default_rng(rng.integers(2**31)))
+
+
+OPTIMIZERS = {"random_search": random_search, "cmaes": cmaes_search, "de": de_search}
+
+
+def estimate(problem: EstimationProblem, config: Mapping, chi_start: np.ndarray, M: int, seed: int,
+             objective: Callable | None = None) -> Estimate:
+    """Run the configured optimizer on ``problem``.
+
+    Args:
+        chi_start: (10 + G,) chi_best at m = 0. M: executions so far (>= 1, eq. 3).
+        objective: batch objective chi (B, D) -> E (B,); default :func:`make_objective`
+            (with a custom objective ``E_i`` is NaN).
+
+    Returns:
+        The :class:`Estimate` (never raises on blown-up candidates: E = inf and a message).
+
+    Raises:
+        ConfigError: unknown optimizer name or a bad budget.
+    """
+    est_cfg = config.get("estimation", {})
+    name = str(est_cfg.get("optimizer", "random_search"))
+    if name not in OPTIMIZERS:
+        raise ConfigError(f"estimation.optimizer: unknown {name!r} (known: {', '.join(OPTIMIZERS)})")
+    budget, batch = int(est_cfg.get("iterations", 3000)), int(est_cfg.get("batch", 64))
+    if budget < 1 or batch < 1:
+        raise ConfigError("estimation.iterations and estimation.batch must be >= 1")
+    d = len(PARAM_NAMES) + problem.n_groups
+    chi_start = np.asarray(chi_start, float)
+    if chi_start.shape != (d,):
+        raise ValueError(f"chi_start: expected ({d},), got {chi_start.shape}")
+    custom = objective is not None
+    objective = objective if custom else make_objective(problem, config)
+    rng = np.random.default_rng(seed)
+    t0 = time.perf_counter()
+    rec = _Recorder(objective, budget, f"estimate ({name})")
+    try:
+        OPTIMIZERS[name](rec, chi_start, batch, max(1, int(M)), rng, est_cfg)
+    finally:
+        rec.bar.close()
+    all_chi, all_E = np.concatenate(rec.chi), np.concatenate(rec.E)
+    order = np.argsort(all_E, kind="stable")[:10]
+    best_chi = all_chi[order[0]]
+    coeffs, mu = decode(best_chi, config, problem.mass_groups)
+    if custom:  # E_i needs the model; a custom objective defines no points
+        E_i = np.full(problem.n_points, np.nan)
+    elif np.isfinite(all_E[order[0]]):
+        E_i = point_errors(problem, config, best_chi)
+    else:
+        E_i = np.full(problem.n_points, np.inf)
+    msgs = []
+    if not np.isfinite(all_E[order[0]]):
+        msgs.append(f"every one of {len(all_E)} candidates blew up or was invalid; the parameters are the best "
+                    "it had (E = inf)")
+    if problem.fallback_points:
+        msgs.append(f"points {list(problem.fallback_points)} were never tracked at rest: their initial state "
+                    "hangs straight down")
+    return Estimate(coeffs=coeffs, mu=mu, chi=best_chi, E_m=float(all_E[order[0]]), E_i=E_i,
+                    history=rec.history, optimizer=name, seed=int(seed), n_evaluations=len(all_E),
+                    n_blown_up=int(np.sum(~np.isfinite(all_E))), seconds=time.perf_counter() - t0,
+                    top_chi=all_chi[order], top_E=all_E[order], message="; ".join(msgs))
+
+
+def simulate_fit(problem: EstimationProblem, config: Mapping, chi: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Simulated points (F, n, 2) at ``problem.frame_t`` for one chi, and whether the run stayed valid."""
+    from .model import simulate_batch
+
+    coeffs, mu = decode(np.atleast_2d(chi), config, problem.mass_groups)
+    pos, ok = simulate_batch(coeffs, mu, problem.hand_t, problem.hand[None], np.zeros(1, np.int64),
+                             problem.p_init[None], problem.l0, problem.psi0, problem.dt, problem.frame_t)
+    return np.asarray(pos)[0], bool(np.asarray(ok)[0])
+
+
+def point_errors(problem: EstimationProblem, config: Mapping, chi: np.ndarray) -> np.ndarray:
+    """E_i of eq. (5) for one chi: (n,) m (:func:`stringcast.evaluation.per_point_errors`)."""
+    from .evaluation import per_point_errors
+
+    pos, _ = simulate_fit(problem, config, chi)
+    return np.asarray(per_point_errors(problem.tracked, problem.valid, pos), float)
+
+
+# ---------------------------------------------------------------------------
+# Stage entry point
+# ---------------------------------------------------------------------------
+def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign, config: Mapping,
+                   prev_params_json: Path | None, trial_index: int, out_params_json: Path,
+                   out_fit_parquet: Path) -> Estimate:
+    """Estimate the parameters of one trial and write ``params.json`` and ``fit.parquet``.
+
+    Args:
+        tracks_parquet, joints_csv: the trial's tracked points and measured joint log.
+        prev_params_json: the previous trial's ``params.json`` (chi_best of eq. 3) or None.
+        trial_index: k >= 1, the number of executions so far (M of eq. 3); seed = estimation.seed + k.
+
+    Raises:
+        DataError: unreadable or inconsistent inputs (named). ConfigError: bad optimizer settings.
+    """
+    tracks = read_parquet(tracks_parquet, TRACK_COLUMNS)
+    t_j, q_j, _ = read_joint_table(joints_csv)
+    problem = build_problem(tracks, t_j, q_j, campaign, config, source=str(tracks_parquet))
+    prev = read_json(prev_params_json) if prev_params_json else None
+    chi0 = start_chi(prev, campaign.string, config, str(prev_params_json))
+    k = max(1, int(trial_index))
+    seed = int(config.get("estimation", {}).get("seed", 0)) + k
+    est = estimate(problem, config, chi0, k, seed)
+
+    _, mu_groups_all = decode(est.top_chi, config, np.arange(problem.n_groups))
+    top = [{"E_mm": e * 1000, "coefficients": dict(zip(PARAM_NAMES, c)), "mu_groups": m}
+           for e, c, m in zip(est.top_E, decode(est.top_chi, config, problem.mass_groups)[0], mu_groups_all)]
+    write_json(out_params_json, {
+        "coefficients": dict(zip(PARAM_NAMES, est.coeffs)), "mu": est.mu, "mu_groups": mu_groups_all[0],
+        "mass_groups": problem.mass_groups, "special_points": campaign.string.special_points(),
+        "E_mm": est.E_m * 1000, "E_i_mm": est.E_i * 1000,
+        "history": {"evaluations": est.history["evaluations"],
+                    "best_E_mm": [e * 1000 for e in est.history["best_E_m"]]},
+        "optimizer": est.optimizer, "seed": est.seed, "evaluations": est.n_evaluations,
+        "blown_up": est.n_blown_up, "seconds": est.seconds, "M": k, "chi": est.chi,
+        "chi_start": chi0, "chi_names": list(PARAM_NAMES) + ["mu_others"] +
+        [f"mu_{i}" for i in campaign.string.special_points()],
+        "top": top, "message": est.message, "t_motion_start_s": problem.t_motion_start,
+        "t_sim_start_s": problem.frame_t[0], "frames_compared": len(problem.frame_t),
+        "rest_fallback_points": list(problem.fallback_points), "dt_s": problem.dt})
+    write_parquet(out_fit_parquet, fit_table(tracks, problem, config, est.chi, campaign.string.n_points))
+    return est
+
+
+def fit_table(tracks: pd.DataFrame, problem: EstimationProblem, config: Mapping, chi: np.ndarray,
+              n: int) -> pd.DataFrame:
+    """``fit.parquet``: ``frame, t_s, point, x_tracked_m, y_tracked_m, valid, x_sim_m, y_sim_m``.
+
+    Every tracked frame and point 1..n; simulated values NaN outside the compared frames
+    (or everywhere if the simulation blew up).
+    """
+    frames, t, xy, valid = tracks_arrays(tracks, n)
+    sim = np.full_like(xy[:, 1:], np.nan)
+    pos, ok = simulate_fit(problem, config, chi)
+    idx = np.searchsorted(frames, problem.frames)
+    sim[idx] = pos if ok else np.nan
+    f, nn = len(frames), n
+    return pd.DataFrame({
+        "frame": np.repeat(frames, nn), "t_s": np.repeat(t, nn), "point": np.tile(np.arange(1, n + 1), f),
+        "x_tracked_m": xy[:, 1:, 0].ravel(), "y_tracked_m": xy[:, 1:, 1].ravel(),
+        "valid": valid[:, 1:].ravel(), "x_sim_m": sim[..., 0].ravel(), "y_sim_m": sim[..., 1].ravel()})

@@ -1,0 +1,219 @@
+"""Parameter estimation (eqs. 2-3): problem building, the paper's random search, other optimizers, files."""
+import copy
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from stringcast import estimation as es
+from stringcast.arm import hand_pose, motion_start
+from stringcast.config import PARAM_NAMES, ConfigError, model_ranges
+from stringcast.files import DataError, read_json, read_parquet, write_joint_table, write_json, write_parquet
+from stringcast.model import hanging_equilibrium, simulate
+from stringcast.motion import first_parameters, joint_paths
+
+CHI_TRUE = np.array([0.6, 0.3, 0.3, 0.4, 0.4, 0.3, 0.2, 0.2, 0.5, 0.5, 0.35, 0.3])
+
+
+def make_trial(campaign, coeffs, mu, out, fps=500.0, offset=0.0013, drop=(), t0=10.0):
+    """A synthetic trial made by the model itself: joints.csv and tracks.parquet (frames offset from the log)."""
+    arm, rate, n = campaign.arm, campaign.arm.controller_rate, campaign.string.n_points
+    q0 = np.array([1.0, -0.8, -0.5])
+    cp = np.zeros((3, 6))
+    cp[0, :5], cp[1, :5], cp[2, :5] = [2, 2.5, 1, -1, -0.5], [-1, 1, 2, 1, 0], [1, -1, 1, 0, 0]
+    dq, _ = joint_paths(cp, 0.5, rate)
+    q = np.vstack([np.repeat(q0[None], int(0.3 * rate), 0), q0 + dq, np.repeat((q0 + dq[-1])[None], int(0.3 * rate), 0)])
+    t = t0 + np.arange(len(q)) / rate
+    write_joint_table(out / "joints.csv", t, q)
+    hand = hand_pose(arm, q)
+    p0 = hanging_equilibrium(coeffs, mu, hand[0], campaign.string.l0, 0.0, n)
+    ft = np.arange(t[0] + offset, t[-1] + 0.05, 1 / fps)  # the video runs a little past the log
+    pos, ok = simulate(coeffs, mu, t, hand, p0, campaign.string.l0, 0.0, 1e-4, ft)
+    assert ok
+    grasp = np.stack([np.interp(ft, t, hand[:, 0]), np.interp(ft, t, hand[:, 1])], -1)
+    xy = np.concatenate([grasp[:, None], pos], 1)
+    f = len(ft)
+    valid = np.ones((f, n + 1), bool)
+    valid[:, list(drop)] = False
+    df = pd.DataFrame({"frame": np.repeat(np.arange(f), n + 1), "t_s": np.repeat(ft, n + 1),
+                       "point": np.tile(np.arange(n + 1), f), "x_m": xy[..., 0].ravel(),
+                       "y_m": xy[..., 1].ravel(), "valid": valid.ravel()})
+    df.loc[~df["valid"], ["x_m", "y_m"]] = np.nan
+    write_parquet(out / "tracks.parquet", df)
+    return df, t, q, p0
+
+
+@pytest.fixture
+def chi_true(campaign):
+    return CHI_TRUE[:len(PARAM_NAMES) + campaign.string.mass_groups().max() + 1]
+
+
+def test_eq2_decode_encode(config, campaign):
+    lo, hi, (mlo, mhi) = model_ranges(config)
+    groups = campaign.string.mass_groups()
+    d = len(PARAM_NAMES) + groups.max() + 1
+    c0, m0 = es.decode(np.zeros(d), config, groups)
+    c1, m1 = es.decode(np.ones(d), config, groups)
+    np.testing.assert_allclose(c0, lo)
+    np.testing.assert_allclose(c1, hi)
+    assert np.allclose(m0, mlo) and np.allclose(m1, mhi) and m0.shape == (campaign.string.n_points,)
+    chi = np.random.default_rng(0).uniform(size=d)
+    c, m = es.decode(chi, config, groups)
+    np.testing.assert_allclose(c, lo * (hi / lo) ** chi[:10])  # eq. (2)
+    tip = campaign.string.special_points()[0] - 1
+    assert m[tip] == pytest.approx(mlo * (mhi / mlo) ** chi[11])
+    mu_groups = np.array([m[groups == g][0] for g in range(groups.max() + 1)])
+    np.testing.assert_allclose(es.encode(c, mu_groups, config), chi, atol=1e-12)
+
+
+def test_start_chi(config, campaign, chi_true):
+    c_first, _ = first_parameters(config, campaign.string)
+    chi = es.start_chi(None, campaign.string, config)
+    assert chi[0] > 0 and np.all(chi[1:10] == 0)  # Table 2 minima, k_s lifted
+    np.testing.assert_allclose(es.decode(chi, config, campaign.string.mass_groups())[0], c_first)
+    assert chi[10] == pytest.approx(np.log(1.0 / 0.1) / np.log(1000))  # first_mu = 1
+    np.testing.assert_allclose(es.start_chi({"chi": chi_true.tolist()}, campaign.string, config), chi_true)
+    c, mu = es.decode(chi_true, config, np.arange(2))
+    prev = {"coefficients": dict(zip(PARAM_NAMES, c)), "mu_groups": mu.tolist()}
+    np.testing.assert_allclose(es.start_chi(prev, campaign.string, config), chi_true, atol=1e-12)
+    with pytest.raises(DataError, match="mu_groups"):
+        es.start_chi({"coefficients": prev["coefficients"]}, campaign.string, config)
+
+
+def _cfg(config, **kw):
+    cfg = copy.deepcopy(config)
+    cfg["estimation"].update(kw)
+    return cfg
+
+
+class Recording:
+    def __init__(self, f):
+        self.f, self.calls = f, []
+
+    def __call__(self, chi):
+        self.calls.append(np.array(chi))
+        return self.f(chi)
+
+
+def _problem_stub(n=10, groups=2):
+    mg = np.zeros(n, np.int64)
+    mg[-1] = groups - 1
+    f = 3
+    return es.EstimationProblem(hand_t=np.arange(2.0), hand=np.zeros((2, 3)), p_init=np.zeros((n, 2)),
+                                frame_t=np.arange(f) / 500, frames=np.arange(f), tracked=np.zeros((f, n, 2)),
+                                valid=np.ones((f, n), bool), l0=0.03, psi0=0.0, dt=1e-4, mass_groups=mg, w=0.1)
+
+
+def test_random_search_eq3_steps_shrink(config):
+    """Constant E keeps chi_best at the start, so every candidate lies within chi0/M beta^m of it."""
+    start = np.full(12, 0.5)
+    for M in (1, 4):
+        cfg = _cfg(config, iterations=640, batch=64, chi0=1.0, beta=0.995)
+        rec = Recording(lambda c: np.ones(len(c)))
+        est = es.estimate(_problem_stub(), cfg, start, M, seed=3, objective=rec)
+        cand = np.concatenate(rec.calls)
+        assert cand.shape == (640, 12) and np.all((cand >= 0) & (cand <= 1))
+        np.testing.assert_array_equal(cand[0], start)  # m = 0 is chi_best itself
+        bound = (1.0 / M) * 0.995 ** np.arange(640)
+        assert np.all(np.abs(cand - start).max(axis=1) <= bound + 1e-12)
+        assert np.abs(cand[1:64] - start).max() > 0.6 * bound[63]  # the whole range is used
+        assert est.n_evaluations == 640 and est.history["evaluations"][-1] == 640
+
+
+def test_random_search_finds_minimum_reproducibly(config):
+    target = np.linspace(0.2, 0.8, 12)
+
+    def f(c):
+        return np.sum((c - target) ** 2, axis=1)
+
+    cfg = _cfg(config, iterations=1500, batch=50, chi0=1.0, beta=0.997)
+    a = es.estimate(_problem_stub(), cfg, np.full(12, 0.5), 1, seed=1, objective=f)
+    b = es.estimate(_problem_stub(), cfg, np.full(12, 0.5), 1, seed=1, objective=f)
+    c = es.estimate(_problem_stub(), cfg, np.full(12, 0.5), 1, seed=2, objective=f)
+    assert a.E_m < 0.02 * f(np.full((1, 12), 0.5))[0]
+    np.testing.assert_array_equal(a.chi, b.chi)
+    assert not np.array_equal(a.chi, c.chi)
+    assert np.all(np.diff(a.history["best_E_m"]) <= 0)
+    assert a.top_E[0] == a.E_m and np.all(np.diff(a.top_E) >= 0) and a.top_chi.shape == (10, 12)
+
+
+@pytest.mark.parametrize("name", ["cmaes", "de"])
+def test_other_optimizers_improve(config, name):
+    target = np.linspace(0.2, 0.8, 12)
+
+    def f(c):
+        return np.sum((c - target) ** 2, axis=1)
+
+    cfg = _cfg(config, optimizer=name, iterations=2000, batch=32)
+    est = es.estimate(_problem_stub(), cfg, np.full(12, 0.5), 1, seed=0, objective=f)
+    assert est.optimizer == name and est.n_evaluations <= 2000
+    assert est.E_m < 0.1 * f(np.full((1, 12), 0.5))[0]
+
+
+def test_unknown_optimizer(config):
+    with pytest.raises(ConfigError, match="optimizer"):
+        es.estimate(_problem_stub(), _cfg(config, optimizer="magic"), np.full(12, 0.5), 1, 0,
+                    objective=lambda c: np.ones(len(c)))
+
+
+def test_all_candidates_blown_up_does_not_crash(config):
+    cfg = _cfg(config, iterations=100, batch=30)
+    est = es.estimate(_problem_stub(), cfg, np.full(12, 0.5), 1, 0, objective=lambda c: np.full(len(c), np.inf))
+    assert est.E_m == np.inf and est.n_blown_up == 100 and "blew up" in est.message
+    assert est.coeffs.shape == (10,)
+
+
+def test_build_problem(config, campaign, chi_true, tmp_path):
+    c, mu = es.decode(chi_true, config, campaign.string.mass_groups())
+    df, t, q, p0 = make_trial(campaign, c, mu, tmp_path, drop=(4,))
+    prob = es.build_problem(df, t, q, campaign, config)
+    n_rest = config["tracking"]["rest_frames"]
+    t_move = motion_start(t, q)
+    ft = np.unique(df["t_s"])
+    before = ft[(ft < t_move) & (ft >= t[0])]
+    assert prob.frame_t[0] == pytest.approx(before[-n_rest])
+    assert prob.frame_t[-1] <= t[-1] and prob.frame_t[-1] > t[-1] - 0.003
+    assert prob.hand_t[0] == prob.frame_t[0] and np.all(np.diff(prob.hand_t) > 0)
+    np.testing.assert_allclose(prob.hand[0], hand_pose(campaign.arm, q[0]), atol=1e-12)  # at rest
+    np.testing.assert_allclose(np.delete(prob.p_init, 3, axis=0), np.delete(p0, 3, axis=0), atol=5e-5)  # settled to 1e-4 m/s
+    assert prob.fallback_points == (4,)
+    np.testing.assert_allclose(prob.p_init[3], prob.p_init[2] + [0, -campaign.string.l0])
+    assert not prob.valid[:, 3].any() and prob.valid[:, 0].all()
+    late = df[df["t_s"] > t[0] + 0.02]
+    with pytest.raises(DataError, match="before the motion starts"):
+        es.build_problem(late[late["t_s"] < t[0] + 0.02 + 0.003], t, q, campaign, config)
+    with pytest.raises(DataError, match="missing columns"):
+        es.build_problem(df.drop(columns="valid"), t, q, campaign, config)
+
+
+def test_run_estimation_end_to_end(config, campaign, chi_true, tmp_path):
+    c, mu = es.decode(chi_true, config, campaign.string.mass_groups())
+    make_trial(campaign, c, mu, tmp_path)
+    cfg = _cfg(config, iterations=64, batch=32)
+    # started from the truth (candidate 0), E is the model's own sampling error: the timing chain is right
+    write_json(tmp_path / "prev.json", {"chi": chi_true})
+    est = es.run_estimation(tmp_path / "tracks.parquet", tmp_path / "joints.csv", campaign, cfg,
+                            tmp_path / "prev.json", 3, tmp_path / "params.json", tmp_path / "fit.parquet")
+    assert est.E_m < 1e-4 and est.seed == config["estimation"]["seed"] + 3
+    doc = read_json(tmp_path / "params.json")
+    assert doc["M"] == 3 and doc["evaluations"] == 64 and doc["optimizer"] == "random_search"
+    assert set(doc["coefficients"]) == set(PARAM_NAMES) and len(doc["mu"]) == campaign.string.n_points
+    assert doc["special_points"] == campaign.string.special_points()
+    w, n = config["evaluation"]["w"], campaign.string.n_points
+    e_i = np.array(doc["E_i_mm"])
+    assert doc["E_mm"] == pytest.approx(np.sum(e_i * (1 + w * np.arange(n))) / n, rel=1e-6)
+    fit = read_parquet(tmp_path / "fit.parquet")
+    assert list(fit.columns) == ["frame", "t_s", "point", "x_tracked_m", "y_tracked_m", "valid", "x_sim_m", "y_sim_m"]
+    assert set(fit["point"]) == set(range(1, n + 1))
+    sim = fit.dropna(subset=["x_sim_m"])
+    assert fit["t_s"].min() < doc["t_sim_start_s"] == pytest.approx(sim["t_s"].min())
+    err = np.hypot(sim["x_sim_m"] - sim["x_tracked_m"], sim["y_sim_m"] - sim["y_tracked_m"])
+    assert err.groupby(sim["point"]).mean().to_numpy() == pytest.approx(e_i / 1000, abs=1e-9)
+
+    # from the first plan's set (trial 1) the search improves on its start
+    est1 = es.run_estimation(tmp_path / "tracks.parquet", tmp_path / "joints.csv", campaign,
+                             _cfg(config, iterations=192, batch=64), None, 1,
+                             tmp_path / "p1.json", tmp_path / "f1.parquet")
+    assert est1.history["best_E_m"][-1] < 0.5 * est1.history["best_E_m"][0]
+    assert read_json(tmp_path / "p1.json")["chi_start"] == pytest.approx(
+        es.start_chi(None, campaign.string, config).tolist())
