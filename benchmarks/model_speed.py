@@ -14,31 +14,13 @@ Run: ``python -m benchmarks.model_speed [--quick]`` -> results/bench/model_speed
 from __future__ import annotations
 
 import argparse
-import os
-import subprocess
 import time
-from datetime import datetime, timezone
-from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+from benchmarks.common import header, write
+
 N_POINTS, L0, DT = 15, 0.034, 1e-4
-
-
-def _cores() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:
-        return os.cpu_count() or 1
-
-
-def _git_commit() -> str | None:
-    try:
-        return subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True,
-                              check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return None
 
 
 def _case(duration: float):
@@ -138,19 +120,16 @@ def mujoco_chain_rate(duration: float, repeats: int) -> dict:
 
 def run(quick: bool = False) -> dict:
     """Measure, write results/bench/model_speed.json and return its content."""
-    from stringcast.files import write_json
-
     duration = 0.25 if quick else 1.0
     repeats = 2 if quick else 3
     rates = model_rates(duration, batch=16 if quick else 64, repeats=repeats)
     ref = mujoco_chain_rate(0.1 if quick else 0.5, repeats)
     doc = {
-        "benchmark": "model_speed", "cores": _cores(), "created": datetime.now(timezone.utc).isoformat(),
-        "git_commit": _git_commit(), "quick": quick, "n_points": N_POINTS, "dt_s": DT, **rates,
+        **header("model_speed", quick), "n_points": N_POINTS, "dt_s": DT, **rates,
         "reference": ref,
         "ratio_to_reference": rates["point_steps_per_s_per_core"] / ref["point_steps_per_s_per_core"],
     }
-    write_json(ROOT / "results" / "bench" / "model_speed.json", doc)
+    write("model_speed", doc)
     return doc
 
 

@@ -10,7 +10,8 @@ from stringcast.arm import hand_pose, motion_start
 from stringcast.config import PARAM_NAMES, ConfigError, model_ranges
 from stringcast.files import DataError, read_json, read_parquet, write_joint_table, write_json, write_parquet
 from stringcast.model import hanging_equilibrium, simulate
-from stringcast.motion import first_parameters, joint_paths
+from stringcast.motion import joint_paths
+from stringcast.planning import first_parameters
 
 CHI_TRUE = np.array([0.6, 0.3, 0.3, 0.4, 0.4, 0.3, 0.2, 0.2, 0.5, 0.5, 0.35, 0.3])
 

@@ -1,23 +1,10 @@
-"""Motion generation (paper Section V): Bezier velocity curves, limits, postures, hit search, files."""
-import copy
-
+"""Joint motions (paper Section V): Bezier velocity curves (eq. 1), joint paths, postures."""
 import numpy as np
 import pytest
 from scipy.interpolate import BPoly
 
 from stringcast import motion as mo
-from stringcast.arm import check_limits
-from stringcast.config import PARAM_NAMES, ConfigError, resolve_campaign
-from stringcast.executor import execute
-from stringcast.files import DataError, read_joint_table, read_json, write_json
-from stringcast.model import closest_approach_batch
-
-
-@pytest.fixture
-def small(config):
-    cfg = copy.deepcopy(config)
-    cfg["motion"].update(max_candidates=512, extra_after_hit=64, batch=64, posture_pool=8)
-    return cfg
+from stringcast.config import ConfigError, resolve_campaign
 
 
 def test_eq1_control_points():
@@ -65,107 +52,3 @@ def test_no_posture_for_too_long_string(config):
     camp = resolve_campaign({"string": {"length_mm": 4000, "n_points": 10}, "target": 1}, config, "long")
     with pytest.raises(ConfigError, match="floor"):
         mo.sample_postures(camp, np.random.default_rng(0), 4, 0.05)
-
-
-def test_first_parameters_carry_their_weight(config, campaign):
-    coeffs, mu = mo.first_parameters(config, campaign.string)
-    lo = np.array([config["model"]["ranges"][k][0] for k in PARAM_NAMES])
-    np.testing.assert_array_equal(coeffs[1:], lo[1:])
-    assert coeffs[0] > lo[0]
-    top_stretch = 9.81 * mu.sum() / coeffs[0]
-    assert top_stretch == pytest.approx(config["motion"].get("first_max_strain", 0.05) * campaign.string.l0)
-
-
-def test_first_plan_hits_and_is_consistent(tmp_path, campaign, small):
-    res = mo.run_first_plan(campaign, small, tmp_path / "motion.csv", tmp_path / "motion.json", seed=0)
-    m = res.motion
-    rate = campaign.arm.controller_rate
-    assert check_limits(campaign.arm, m.q, 1 / rate).ok
-    assert mo.posture_ok(campaign, m.q0, 0.0)
-    np.testing.assert_allclose(m.q[0], m.q0)
-    qd = np.gradient(m.q, 1 / rate, axis=0)
-    assert np.abs(qd[-1]).max() < 0.05  # the arm stops at T
-    assert res.hit, res.message
-    assert res.d_min <= campaign.target.radius and res.min_y >= campaign.arm.floor_y
-    # the written file holds the motion, and an independent re-run of the model on it gives the same
-    # closest approach (in-memory values: the model string is chaotic, 1e-9 rad moves the tip by mm)
-    t, q, _ = read_joint_table(tmp_path / "motion.csv")
-    np.testing.assert_allclose(q, m.q, atol=1e-8)
-    np.testing.assert_allclose(t, m.t, atol=1e-12)
-    doc = read_json(tmp_path / "motion.json")
-    pl = mo._Planner(campaign, small, np.array([doc["params"][k] for k in PARAM_NAMES]), np.array(doc["mu"]))
-    hand_t, hand = pl.hand_trajectory(m.q)
-    d, tm, my, ok = closest_approach_batch(pl.coeffs, pl.mu, hand_t, hand[None], np.zeros(1, np.int64),
-                                           pl.equilibrium(m.q0)[None], pl.l0, pl.psi0, pl.dt, 0.0,
-                                           doc["T_s"] + doc["flight_window_s"], campaign.target.xy)
-    assert ok[0] and d[0] == pytest.approx(res.d_min, abs=1e-9)
-    assert doc["hit_predicted"] and doc["closest_approach_mm"] == pytest.approx(res.d_min * 1000)
-    tip = np.array(doc["predicted_tip_path"])
-    assert tip.shape[1] == 3 and np.min(np.hypot(*(tip[:, 1:] - campaign.target.xy).T)) < 0.03
-    # the executor accepts the planned file
-    info = execute(tmp_path / "motion.csv", "virtual", tmp_path / "trial", campaign, small, dry_run=True)
-    assert info["dry_run"]
-
-
-def test_next_plan_keeps_posture_and_T(tmp_path, campaign, small):
-    rng = np.random.default_rng(5)
-    coeffs, mu = mo.first_parameters(small, campaign.string)
-    first = mo.search(campaign, small, coeffs, mu, rng)
-    mo.write_motion(first, campaign, small, coeffs, mu, 0, tmp_path / "m1.csv", tmp_path / "m1.json", "first")
-    write_json(tmp_path / "params.json", {"coefficients": dict(zip(PARAM_NAMES, coeffs * 2)), "mu": mu * 3})
-    nxt = mo.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, small,
-                      tmp_path / "m2.csv", tmp_path / "m2.json", seed=1)
-    a, b = first.motion, nxt.motion
-    assert b.T == a.T and np.allclose(b.q0, a.q0)
-    diff = b.control_points - a.control_points
-    assert np.all(np.abs(diff) <= small["motion"]["perturb_rad_s"] + 1e-9) and np.abs(diff).max() > 0
-    assert np.all(b.control_points[:, -1] == 0)
-    assert check_limits(campaign.arm, b.q, 1 / campaign.arm.controller_rate).ok
-    assert read_json(tmp_path / "m2.json")["params"]["k_s"] == pytest.approx(coeffs[0] * 2)
-
-
-def test_unreachable_target_returns_closest(config, small):
-    camp = resolve_campaign({"string": 1, "target": {"x_mm": 3000, "y_mm": 300, "radius_mm": 20}}, config, "far")
-    cfg = copy.deepcopy(small)
-    cfg["motion"]["max_candidates"] = 128
-    coeffs, mu = mo.first_parameters(cfg, camp.string)
-    res = mo.search(camp, cfg, coeffs, mu, np.random.default_rng(0))
-    assert not res.hit and res.candidates == 128
-    assert "no candidate hit" in res.message
-    assert 1.0 < res.d_min < 2.5  # the closest approach, not a made-up number
-
-
-def test_search_keeps_looking_after_first_hit(monkeypatch, campaign, small):
-    """First hit at candidate 70, a closer one at 150, an even closer one beyond the extra window."""
-    special = {70: 0.015, 150: 0.004, 300: 0.001}
-    state = {"k": 0}
-
-    def fake_evaluate(self, q, T, p_init):
-        b = len(q)
-        ids = np.arange(state["k"], state["k"] + b)
-        state["k"] += b
-        d = np.array([special.get(int(i), 1.0) for i in ids])
-        return d, np.zeros(b), np.zeros(b), np.ones(b, bool)
-
-    monkeypatch.setattr(mo._Planner, "evaluate", fake_evaluate)
-    monkeypatch.setattr(mo._Planner, "tip_path", lambda self, m, p: np.zeros((0, 3)))
-    cfg = copy.deepcopy(small)
-    cfg["motion"].update(max_candidates=1000, extra_after_hit=100, batch=50)
-    coeffs, mu = mo.first_parameters(cfg, campaign.string)
-    res = mo.search(campaign, cfg, coeffs, mu, np.random.default_rng(0))
-    assert res.hit and res.d_min == pytest.approx(0.004)
-    assert res.candidates == 200  # first hit in the batch ending at 100, then 100 more
-
-
-def test_played_motion_without_control_points_is_refused(tmp_path, campaign, small):
-    write_json(tmp_path / "played.json", {"q0_rad": [0.5, 0.0, 0.0], "T_s": 0.5, "control_points_rad_s": [[], [], []]})
-    coeffs, mu = mo.first_parameters(small, campaign.string)
-    write_json(tmp_path / "params.json", {"coefficients": dict(zip(PARAM_NAMES, coeffs)), "mu": mu})
-    with pytest.raises(DataError, match="played.json"):
-        mo.run_plan(tmp_path / "params.json", tmp_path / "played.json", campaign, small,
-                    tmp_path / "m.csv", tmp_path / "m.json")
-    write_json(tmp_path / "bad_params.json", {"coefficients": {"k_s": 1.0}, "mu": mu})
-    with pytest.raises(DataError, match="bad_params.json"):
-        mo.run_plan(tmp_path / "bad_params.json", tmp_path / "played.json", campaign, small,
-                    tmp_path / "m.csv", tmp_path / "m.json")
-    assert not (tmp_path / "m.csv").exists()

@@ -64,7 +64,7 @@ def cmd_estimate(args):
 
 
 def cmd_plan_first(args):
-    from .motion import run_first_plan
+    from .planning import run_first_plan
 
     out = Path(args.out_dir)
     run_first_plan(_campaign(args), _config(args), out / "motion.csv", out / "motion.json", int(args.seed))
@@ -72,7 +72,7 @@ def cmd_plan_first(args):
 
 
 def cmd_plan(args):
-    from .motion import run_plan
+    from .planning import run_plan
 
     out = Path(args.out_dir)
     run_plan(Path(args.params), Path(args.played_motion), _campaign(args), _config(args),

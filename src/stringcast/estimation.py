@@ -10,19 +10,13 @@ Search space (eq. 2): x = chi in [0, 1]^(10 + 1 + G): the ten coefficients in
 ``config.PARAM_NAMES`` order, then mu_others (shared by the plain points), then
 one mu per special point (``StringSpec.mass_groups``); P = P_min (P_max/P_min)^chi.
 
-Optimizers (``config.estimation.optimizer``), all evaluating candidates in numba
-batches of ``config.estimation.batch``:
-
-* ``random_search`` (the paper's eq. 3): chi_m = chi_best + (chi0 / M) beta^m
-  RAND(-1, 1), clipped to [0, 1], M = executions so far (the trial index), m the
-  candidate index; chi_best starts at the previous trial's estimate and is moved
-  to the best candidate after every batch. The first candidate is chi_best itself.
-  With no previous estimate (trial 1) chi_best is the set the first motion was
-  planned with (:func:`stringcast.motion.first_parameters`): chi = 0 for the
-  coefficients (Table 2 minima) except k_s, lifted so the model carries its own
-  weight, and chi of ``model.first_mu`` for the masses.
-* ``cmaes``: CMA-ES (``cma``) from chi_best, sigma0 = 0.3 chi0 / M, bounds [0, 1].
-* ``de``: SciPy differential evolution (vectorized), x0 = chi_best.
+Optimizers (``config.estimation.optimizer``; :mod:`stringcast.optimizers`: the
+paper's eq. 3 ``random_search``, ``cmaes``, ``de``), all evaluating candidates in
+numba batches of ``config.estimation.batch``, start from chi_best = the previous
+trial's estimate. With no previous estimate (trial 1) chi_best is the set the
+first motion was planned with (:func:`stringcast.planning.first_parameters`):
+chi = 0 for the coefficients (Table 2 minima) except k_s, lifted so the model
+carries its own weight, and chi of ``model.first_mu`` for the masses.
 
 Choices where the paper is silent: the rest state p_init is the median of the
 valid tracked positions over the last ``tracking.rest_frames`` frames before the
@@ -44,6 +38,7 @@ import pandas as pd
 from .arm import hand_pose, motion_start
 from .config import PARAM_NAMES, Campaign, ConfigError, model_ranges
 from .files import DataError, read_joint_table, read_json, read_parquet, write_json, write_parquet
+from .optimizers import OPTIMIZERS, Recorder
 
 TRACK_COLUMNS = ["frame", "t_s", "point", "x_m", "y_m", "valid"]
 MIN_REST_FRAMES = 3
@@ -251,10 +246,10 @@ def encode(coeffs: np.ndarray, mu_groups: np.ndarray, config: Mapping) -> np.nda
 
 def start_chi(prev_params: Mapping | None, string, config: Mapping, source="params.json") -> np.ndarray:
     """chi_best at m = 0: the previous estimate's chi, else that of the first plan's set
-    (:func:`stringcast.motion.first_parameters`: Table 2 minima with k_s lifted, masses ``model.first_mu``)."""
+    (:func:`stringcast.planning.first_parameters`: Table 2 minima with k_s lifted, masses ``model.first_mu``)."""
     n_groups = int(string.mass_groups().max()) + 1
     if prev_params is None:
-        from .motion import first_parameters
+        from .planning import first_parameters
 
         coeffs, _ = first_parameters(config, string)
         return encode(coeffs, np.full(n_groups, float(config["model"].get("first_mu", 1.0))), config)
@@ -273,7 +268,7 @@ def start_chi(prev_params: Mapping | None, string, config: Mapping, source="para
 
 
 # ---------------------------------------------------------------------------
-# Objective and optimizers
+# Objective and search
 # ---------------------------------------------------------------------------
 def make_objective(problem: EstimationProblem, config: Mapping) -> Callable[[np.ndarray], np.ndarray]:
     """E (eqs. 4-6) of a batch: chi (B, D) -> E (B,) in m, +inf where the simulation blew up."""
@@ -293,103 +288,6 @@ def make_objective(problem: EstimationProblem, config: Mapping) -> Callable[[np.
         return np.where(np.asarray(ok, bool) & np.isfinite(E), E, np.inf)
 
     return objective
-
-
-class _Recorder:
-    """Wraps the objective: counts the budget, records every candidate, the history, a progress bar."""
-
-    def __init__(self, objective, budget: int, desc: str):
-        from tqdm.auto import tqdm
-
-        self.objective, self.budget = objective, int(budget)
-        self.chi: list[np.ndarray] = []
-        self.E: list[np.ndarray] = []
-        self.history = {"evaluations": [], "best_E_m": []}
-        self.best = np.inf
-        self.bar = tqdm(total=self.budget, desc=desc, unit="cand", disable=None)
-
-    @property
-    def remaining(self) -> int:
-        return self.budget - sum(len(e) for e in self.E)
-
-    def __call__(self, chi: np.ndarray) -> np.ndarray:
-        chi = np.clip(np.atleast_2d(np.asarray(chi, float)), 0.0, 1.0)
-        E = self.objective(chi)
-        self.chi.append(chi)
-        self.E.append(E)
-        self.best = min(self.best, float(np.min(E)))
-        self.history["evaluations"].append(self.budget - self.remaining)
-        self.history["best_E_m"].append(self.best)
-        self.bar.update(len(E))
-        return E
-
-
-def random_search(rec: _Recorder, chi_best: np.ndarray, batch: int, M: int, rng: np.random.Generator,
-                  settings: Mapping) -> None:
-    """The paper's eq. (3) (see module doc); chi_best moves to the best candidate after each batch."""
-    chi0, beta = float(settings.get("chi0", 1.0)), float(settings.get("beta", 0.998))
-    chi_best = np.asarray(chi_best, float)
-    best_E, m = np.inf, 0
-    while rec.remaining > 0:
-        b = min(batch, rec.remaining)
-        ms = np.arange(m, m + b)
-        step = (chi0 / M) * beta ** ms[:, None] * rng.uniform(-1.0, 1.0, (b, len(chi_best)))
-        if m == 0:
-            step[0] = 0.0  # candidate 0 is chi_best itself
-        cand = np.clip(chi_best + step, 0.0, 1.0)
-        E = rec(cand)
-        i = int(np.argmin(E))
-        if E[i] < best_E:
-            best_E, chi_best = float(E[i]), cand[i]
-        m += b
-
-
-def cmaes_search(rec: _Recorder, chi_best: np.ndarray, batch: int, M: int, rng: np.random.Generator,
-                 settings: Mapping) -> None:
-    """CMA-ES (``cma.CMAEvolutionStrategy``, ask/tell) in [0, 1]^D, population = batch."""
-    import cma
-
-    sigma0 = 0.3 * float(settings.get("chi0", 1.0)) / M
-    es = cma.CMAEvolutionStrategy(np.asarray(chi_best, float), sigma0, {
-        "bounds": [0.0, 1.0], "popsize": max(4, batch), "seed": int(rng.integers(1, 2**31 - 1)),
-        "verbose": -9, "maxfevals": rec.budget, "tolfun": 0.0, "tolx": 1e-9})
-    while rec.remaining > 0 and not es.stop():
-        xs = es.ask()
-        xs = xs[:rec.remaining] if len(xs) > rec.remaining else xs
-        E = rec(np.asarray(xs))
-        if len(xs) < es.popsize:
-            break
-        finite = E[np.isfinite(E)]
-        worst = (2.0 * finite.max() + 1.0) if finite.size else 1e6
-        es.tell(xs, np.where(np.isfinite(E), E, worst).tolist())
-
-
-def de_search(rec: _Recorder, chi_best: np.ndarray, batch: int, M: int, rng: np.random.Generator,
-              settings: Mapping) -> None:
-    """SciPy ``differential_evolution`` (vectorized, no polish), x0 = chi_best; candidates in chunks of ``batch``."""
-    from scipy.optimize import differential_evolution
-
-    d = len(chi_best)
-    popsize = int(settings.get("de_popsize", 8))
-
-    def f(x):  # x (D, S) -> (S,)
-        x = np.asarray(x).T
-        out = np.full(len(x), 1e6)
-        for a in range(0, len(x), batch):
-            k = min(batch, rec.remaining)
-            if k <= 0:
-                break
-            E = rec(x[a:a + k])
-            out[a:a + k] = np.where(np.isfinite(E), E, 1e6)
-        return out
-
-    maxiter = max(0, rec.budget // (popsize * d) - 1)
-    differential_evolution(f, [(0.0, 1.0)] * d, maxiter=maxiter, popsize=popsize, polish=False, tol=0.0,
-                           x0=np.asarray(chi_best, float), vectorized=True, updating="deferred",
-                           rng=np.random.default_rng(rng.integers(2**31)))
-
-
-OPTIMIZERS = {"random_search": random_search, "cmaes": cmaes_search, "de": de_search}
 
 
 def estimate(problem: EstimationProblem, config: Mapping, chi_start: np.ndarray, M: int, seed: int,
@@ -422,7 +320,7 @@ def estimate(problem: EstimationProblem, config: Mapping, chi_start: np.ndarray,
     objective = objective if custom else make_objective(problem, config)
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
-    rec = _Recorder(objective, budget, f"estimate ({name})")
+    rec = Recorder(objective, budget, f"estimate ({name})")
     try:
         OPTIMIZERS[name](rec, chi_start, batch, max(1, int(M)), rng, est_cfg)
     finally:

@@ -131,7 +131,7 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
     hist = params.get("history", {})
     if hist.get("evaluations"):
         figures.append({"id": "fig-search", "caption": f"Best E over the search ({params.get('optimizer')}).",
-                        "src": figs.search_history(hist["evaluations"], np.asarray(hist["best_E_mm"]) / 1000)})
+                        "src": figs.search_history(hist["evaluations"], np.asarray(hist["best_E_mm"], dtype=float) / 1000)})
     overlay = results_dir / "tracking_overlay.png"
     if overlay.exists():
         figures.append({"id": "fig-overlay", "caption": "Frames with the tracked points overlaid.",

@@ -1,0 +1,29 @@
+"""Run every benchmark: ``python -m benchmarks.run [--quick] [names...]`` (``make bench``).
+
+Each benchmark module has ``run(quick: bool) -> dict`` and writes
+results/bench/<name>.json itself; this runner prints one line per benchmark.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import time
+
+BENCHMARKS = ("model_speed", "tracking")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="a short version of each")
+    ap.add_argument("names", nargs="*", default=list(BENCHMARKS), choices=list(BENCHMARKS) + [[]])
+    args = ap.parse_args()
+    for name in args.names:
+        t0 = time.perf_counter()
+        doc = importlib.import_module(f"benchmarks.{name}").run(args.quick)
+        keys = {k: v for k, v in doc.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
+        print(f"{name} ({time.perf_counter() - t0:.0f} s): {json.dumps(keys)}")
+
+
+if __name__ == "__main__":
+    main()
