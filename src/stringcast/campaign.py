@@ -27,12 +27,11 @@ from .files import write_yaml
 
 def _snakemake(root: Path, targets: list[str], cores: int, config_path: str | None) -> float:
     """Run the workflow for ``targets``; returns wall seconds. Raises RuntimeError on failure."""
-    cmd = [sys.executable, "-m", "snakemake", "--cores", str(cores), "--snakefile",
-           str(root / "Snakefile"), "--directory", str(root), "--quiet", "rules",
-           "--rerun-incomplete"]
+    cmd = [sys.executable, "-m", "snakemake", *targets, "--cores", str(cores), "--snakefile",
+           str(root / "Snakefile"), "--directory", str(root), "--rerun-incomplete",
+           "--quiet", "rules"]
     if config_path:
         cmd += ["--configfile", str(config_path)]
-    cmd += targets
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, cwd=root)
     if proc.returncode != 0:

@@ -1,0 +1,344 @@
+"""One execution in the virtual lab, written exactly as DESIGN.md's data contract.
+
+:func:`run_trial` plays a commanded joint trajectory on the simulated arm and
+string (:mod:`.physics`), films it with the simulated high-speed camera
+(:mod:`.camera`, :mod:`.scene`) and writes ``video.mkv`` (FFV1, 8-bit mono),
+``video.yaml``, ``joints.csv`` and the ground truth that only tests and
+benchmarks read (``ground_truth.parquet`` / ``.json``).
+:func:`write_calibration_clip` films the ChArUco board in varied 3D poses with the
+same camera, for intrinsics.
+
+Clocks: the joint log's controller clock is the master. The camera is triggered
+at a random 20-80 ms after t = 0; frame k's exposure is centred on
+t_trigger + k / fps; ``video.yaml`` states the trigger time off by
+U(+-lab.trigger_error_s), as a real trigger line is. Recording stops at the end
+of the log (the last whole exposure).
+"""
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+from typing import Mapping
+
+import cv2
+import numpy as np
+import pandas as pd
+
+from ..arm import forward_kinematics
+from ..config import Campaign, ConfigError
+from ..files import DataError, atomic_path, write_json, write_joint_table, write_parquet, write_yaml
+from .camera import CameraModel, IdealCanvas, Sensor, camera_settings
+from .physics import StringPhysics, simulate
+from .scene import (FrameRenderer, StringLook, gain_map, render_background, supersample_homography,
+                    warp_board)
+
+TRIGGER_DELAY_S = (0.02, 0.08)
+
+
+def _lab(config: Mapping) -> dict:
+    return dict(config.get("lab", {}) or {})
+
+
+def _fps(campaign: Campaign) -> float:
+    cam = campaign.setup.camera
+    if "fps" not in cam:
+        raise ConfigError(f"setup {campaign.setup.name}: camera has no fps")
+    return float(cam["fps"])
+
+
+def _scene(campaign: Campaign, config: Mapping, scene_seed: int, with_target: bool = True,
+           with_board: bool = True):
+    """Camera settings, model, ideal canvas, sensor, gain map and static background reflectance."""
+    settings = camera_settings(config)
+    cam = CameraModel.from_config(campaign.setup.camera, config)
+    canvas = IdealCanvas.for_camera(cam)
+    sensor = Sensor(cam, settings)
+    gain = gain_map(cam, sensor, scene_seed)
+    bg = render_background(cam, canvas, campaign, scene_seed, board=with_board, target=with_target)
+    return settings, cam, canvas, sensor, gain, bg
+
+
+class FFV1Writer:
+    """``cv2.VideoWriter`` (FFV1, 8-bit mono) fed from a background thread.
+
+    FFV1 encoding costs about as much as rendering a frame; OpenCV releases the
+    GIL while encoding, so a second thread overlaps the two. Use as a context
+    manager; :meth:`close` waits for the queue and re-raises a writer error.
+
+    Raises:
+        DataError: OpenCV cannot open an FFV1 writer for ``path``.
+    """
+
+    def __init__(self, path: Path, fps: float, width: int, height: int, queue_size: int = 8):
+        import queue
+        import threading
+
+        self.path = Path(path)
+        self._w = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*"FFV1"), fps, (width, height),
+                                  isColor=False)
+        if not self._w.isOpened():
+            raise DataError(f"{path}: OpenCV cannot open an FFV1 writer")
+        self._q: "queue.Queue" = queue.Queue(queue_size)
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+        self.frames = 0
+
+    def _run(self) -> None:
+        while True:
+            frame = self._q.get()
+            if frame is None:
+                break
+            if self._error is None:
+                try:
+                    self._w.write(frame)
+                except BaseException as exc:  # keep draining; reported in close()
+                    self._error = exc
+
+    def write(self, frame: np.ndarray) -> None:
+        """Queue one (H, W) uint8 frame."""
+        if self._error is not None:
+            raise DataError(f"{self.path}: writing a frame failed: {self._error}")
+        self._q.put(frame)
+        self.frames += 1
+
+    def close(self) -> None:
+        if self._thread.is_alive():
+            self._q.put(None)
+            self._thread.join()
+        self._w.release()
+        if self._error is not None:
+            raise DataError(f"{self.path}: writing a frame failed: {self._error}")
+
+    def __enter__(self) -> "FFV1Writer":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def build_renderer(campaign: Campaign, config: Mapping, phys: StringPhysics | None = None) -> FrameRenderer:
+    """The trial camera's :class:`FrameRenderer` (same scene, light and camera as :func:`run_trial`)."""
+    phys = phys or StringPhysics.from_campaign(campaign, config)
+    _, cam, canvas, sensor, gain, bg = _scene(campaign, config, int(_lab(config).get("scene_seed", 11)))
+    return FrameRenderer(cam, canvas, sensor, bg, gain, campaign.arm, StringLook.from_physics(phys))
+
+
+def motion_end(t_cmd: np.ndarray, q_cmd: np.ndarray) -> float:
+    """Controller time at which the commanded motion reaches its final hold, s."""
+    moving = np.nonzero(np.any(np.abs(q_cmd - q_cmd[-1]) > 1e-12, axis=1))[0]
+    return float(t_cmd[min(len(t_cmd) - 1, moving[-1] + 1)]) if len(moving) else float(t_cmd[0])
+
+
+def run_trial(t_cmd: np.ndarray, q_cmd: np.ndarray, campaign: Campaign, config: Mapping,
+              out_dir: str | Path, seed: int, motion_start_s: float) -> dict:
+    """Play a commanded joint trajectory in the lab and record the trial's raw files.
+
+    Args:
+        t_cmd: (K,) controller times from 0 at ``arm.controller_rate``, s.
+        q_cmd: (K, J) commanded joint angles, rad (pre- and post-roll holds included).
+        campaign: string, target, arm and set-up; config: the loaded config (``lab`` section).
+        out_dir: the trial folder (created). seed: all randomness of this trial.
+        motion_start_s: when the motion leaves the pre-roll hold (start of the hit window).
+
+    Writes into ``out_dir``: ``video.mkv``, ``video.yaml``, ``joints.csv``
+    (``t_s, q1_rad.. measured, q1_cmd_rad.. commanded``), ``ground_truth.parquet``
+    (``frame, t_s, point, x_m, y_m``: the n + 1 points at arc i L / n at each
+    exposure centre, true times) and ``ground_truth.json``.
+
+    Returns:
+        The ground_truth.json dict (hit, closest_approach_mm, ...).
+
+    Raises:
+        ValueError: bad shapes or times; DataError: the video cannot be written;
+        FloatingPointError: the physics diverged.
+    """
+    wall0 = time.perf_counter()
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    t_cmd = np.asarray(t_cmd, float)
+    q_cmd = np.asarray(q_cmd, float)
+    arm = campaign.arm
+    if t_cmd.ndim != 1 or len(t_cmd) < 2 or np.any(np.diff(t_cmd) <= 0):
+        raise ValueError("run_trial: t_cmd must be (K,) strictly increasing, K >= 2")
+    if q_cmd.shape != (len(t_cmd), arm.n_joints):
+        raise ValueError(f"run_trial: q_cmd must be ({len(t_cmd)}, {arm.n_joints}), got {q_cmd.shape}")
+    lab = _lab(config)
+    ss = np.random.SeedSequence(int(seed))
+    rng_trig, rng_joint, rng_noise = (np.random.default_rng(s) for s in ss.spawn(3))
+    Sensor.seed(int(rng_noise.integers(2 ** 31)))
+
+    # -- physics ---------------------------------------------------------------
+    phys = StringPhysics.from_campaign(campaign, config)
+    lpp = int(lab.get("links_per_point", 3))
+    rec = simulate(phys, arm, t_cmd, q_cmd, float(lab.get("timestep_s", 5e-5)),
+                   float(lab.get("servo_lag_s", 0.008)), float(lab.get("settle_s", 0.3)), progress=True)
+    wall_physics = time.perf_counter() - wall0
+
+    # -- joint log ----------------------------------------------------------------
+    q_true = rec.arm_at(t_cmd)
+    q_meas = q_true + rng_joint.normal(0, float(lab.get("joint_noise_rad", 2e-4)), q_true.shape)
+    write_joint_table(out_dir / "joints.csv", t_cmd, q_meas,
+                      {f"q{j + 1}_cmd_rad": q_cmd[:, j] for j in range(arm.n_joints)})
+
+    # -- camera ------------------------------------------------------------------
+    wall1 = time.perf_counter()
+    settings = camera_settings(config)
+    renderer = build_renderer(campaign, config, phys)
+    cam = renderer.cam
+    fps = _fps(campaign)
+    exposure = float(settings["exposure_s"])
+    if not 0 < exposure < 1 / fps:
+        raise ConfigError(f"lab.camera.exposure_s = {exposure} must be within (0, 1/fps = {1 / fps:.6g})")
+    t_trigger = float(rng_trig.uniform(*TRIGGER_DELAY_S))
+    t_end = float(rec.t[-1])
+    n_frames = int(math.floor((t_end - exposure / 2 - t_trigger) * fps + 1e-9)) + 1
+    if n_frames < 1:
+        raise ValueError(f"run_trial: the log ({t_end:.3f} s) is shorter than the camera's trigger delay")
+    trigger_error = float(lab.get("trigger_error_s", 0.002))
+    t_trigger_written = t_trigger + float(rng_trig.uniform(-trigger_error, trigger_error))
+    t_frames = t_trigger + np.arange(n_frames) / fps
+
+    gt_rows = []
+    n = campaign.string.n_points
+    from tqdm import tqdm
+
+    with atomic_path(out_dir / "video.mkv") as tmp, FFV1Writer(tmp, fps, cam.width, cam.height) as writer:
+        for k, tc in enumerate(tqdm(t_frames, desc="lab frames", unit="frame", disable=None, leave=False)):
+            m = renderer.n_sub(rec.at(np.array([tc - exposure / 2, tc + exposure / 2])))
+            sub_t = tc + exposure * ((np.arange(m) + 0.5) / m - 0.5)
+            writer.write(renderer.render(rec.at(sub_t), rec.arm_at(sub_t)))
+            pts = rec.at(np.array([tc]))[0][::lpp][: n + 1]
+            gt_rows.append((np.full(n + 1, k), np.full(n + 1, tc), np.arange(n + 1), pts[:, 0], pts[:, 1]))
+        writer.close()
+        size_mb = tmp.stat().st_size / 1e6
+    wall_render = time.perf_counter() - wall1
+
+    write_yaml(out_dir / "video.yaml", {
+        "file": "video.mkv", "fps": fps, "frames": n_frames, "trigger_time_s": round(t_trigger_written, 9),
+        "width_px": cam.width, "height_px": cam.height, "bit_depth": 8})
+    cols = [np.concatenate(c) for c in zip(*gt_rows)]
+    gt = pd.DataFrame({"frame": cols[0].astype(np.int64), "t_s": cols[1], "point": cols[2].astype(np.int64),
+                       "x_m": cols[3], "y_m": cols[4]})
+    write_parquet(out_dir / "ground_truth.parquet", gt)
+
+    # -- verdict -------------------------------------------------------------------
+    t_motion_end = motion_end(t_cmd, q_cmd)
+    flight = float((config.get("motion", {}) or {}).get("flight_window_s", 0.5))
+    w0, w1 = float(motion_start_s), min(t_motion_end + flight, t_end)
+    sel = (rec.t >= w0 - 1e-12) & (rec.t <= w1 + 1e-12)
+    if not sel.any():
+        sel = rec.t >= rec.t[-1]
+    tip = rec.points[sel, -1]
+    d = np.linalg.norm(tip - campaign.target.xy, axis=1)
+    i_best = int(np.argmin(d))
+    arm_pts = forward_kinematics(arm, rec.q_arm[sel][::20])
+    min_y = float(min(rec.points[sel, :, 1].min(), arm_pts[:, 1:, 1].min()))
+    clearance = min_y - arm.floor_y
+    closest = float(d[i_best])
+    hit = bool(closest <= campaign.target.radius and clearance >= 0)
+    length = np.linalg.norm(np.diff(rec.points[:, :, :], axis=1), axis=2).sum(axis=1)
+
+    truth = {
+        "hit": hit,
+        "closest_approach_mm": closest * 1000,
+        "closest_approach_t_s": float(rec.t[sel][i_best]),
+        "target_mm": [campaign.target.x * 1000, campaign.target.y * 1000, campaign.target.radius * 1000],
+        "hit_window_s": [w0, w1],
+        "motion_start_s": float(motion_start_s),
+        "motion_end_s": t_motion_end,
+        "floor_clearance_mm": clearance * 1000,
+        "trigger_time_s": t_trigger,
+        "trigger_time_written_s": t_trigger_written,
+        "exposure_s": exposure,
+        "fps": fps,
+        "frames": n_frames,
+        "n_points": n,
+        "camera": cam.truth(),
+        "string_physics": {
+            "length_m": phys.length, "n_links": phys.n_links, "mass_kg": phys.mass,
+            "density_kg_m": phys.density, "diameter_m": phys.diameter, "bending_EI": phys.bending_EI,
+            "bending_damping": phys.bending_damping, "grasp_stiffness": phys.grasp_stiffness,
+            "grasp_damping": phys.grasp_damping, "weights": phys.weights, "pipes": phys.pipes},
+        "length_error_max": float(np.max(np.abs(length - phys.length)) / phys.length),
+        "settle_speed_m_s": rec.settle_speed,
+        "mujoco_steps_per_s": rec.steps_per_s,
+        "video_mb": size_mb,
+        "video_mb_per_frame": size_mb / n_frames,
+        "wall_s": {"physics": wall_physics, "render": wall_render, "total": time.perf_counter() - wall0},
+        "seed": int(seed),
+    }
+    write_json(out_dir / "ground_truth.json", truth)
+    return truth
+
+
+def _board_pose(rng: np.random.Generator, cam: CameraModel, board_size: np.ndarray, uv: np.ndarray,
+                z: float, max_tilt_deg: float) -> tuple[np.ndarray, np.ndarray]:
+    """A board pose (R, t: board frame -> camera frame) centred on pixel ``uv`` at depth ``z``."""
+    axis = rng.normal(size=2)
+    axis = np.array([*(axis / np.linalg.norm(axis)), 0.0]) * math.radians(rng.uniform(10, max_tilt_deg))
+    R_tilt = cv2.Rodrigues(axis)[0]
+    R_roll = cv2.Rodrigues(np.array([0, 0, math.radians(rng.uniform(-25, 25))]))[0]
+    R = R_tilt @ R_roll
+    ray = np.linalg.inv(cam.K) @ np.array([uv[0], uv[1], 1.0])
+    P = ray / ray[2] * z
+    t = P - R @ np.array([board_size[0] / 2, board_size[1] / 2, 0.0])
+    return R, t
+
+
+def write_calibration_clip(campaign: Campaign, config: Mapping, out_dir: str | Path, seed: int,
+                           n_frames: int = 30) -> Path:
+    """Film the set-up's ChArUco board in varied 3D poses with the lab camera, for intrinsics.
+
+    Poses: board centre on a 3x3 grid of image positions (then random ones), at
+    a depth where the board's long side spans 45-85 % of the image, tilted 10-40 deg
+    about a random in-plane axis and rolled +-25 deg; every board corner stays
+    inside the image. Same intrinsics, distortion, light and sensor as the trials.
+
+    Writes ``out_dir/board_XX.png`` (8-bit mono) and ``out_dir/ground_truth.json``
+    (camera truth, each view's rvec/tvec). Returns ``out_dir``.
+    """
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(int(seed) + 7919)
+    Sensor.seed(int(seed) + 7919)
+    lab = _lab(config)
+    scene_seed = int(lab.get("scene_seed", 11))
+    settings, cam, canvas, sensor, gain, bg = _scene(campaign, config, scene_seed, with_target=False,
+                                                     with_board=False)
+    board = campaign.setup.board
+    size = np.array([board.squares_x, board.squares_y]) * board.square
+    corners = np.array([[0, 0, 0], [size[0], 0, 0], [size[0], size[1], 0], [0, size[1], 0]], float)
+    bg2 = cv2.resize(bg, (canvas.width * 2, canvas.height * 2), interpolation=cv2.INTER_LINEAR)
+    views = []
+    for i in range(n_frames):
+        for _ in range(500):
+            if i < 9:
+                cell = np.array([i % 3, i // 3]) + rng.uniform(0.15, 0.85, 2)
+                uv = cell / 3 * [cam.width, cam.height]
+            else:
+                uv = rng.uniform(0.1, 0.9, 2) * [cam.width, cam.height]
+            z = cam.K[0, 0] * size.max() / (rng.uniform(0.45, 0.85) * min(cam.width, cam.height))
+            R, t = _board_pose(rng, cam, size, uv, z, 40.0)
+            img_c, _ = cv2.projectPoints(corners, cv2.Rodrigues(R)[0], t, cam.K, cam.dist)
+            img_c = img_c.reshape(-1, 2)
+            if (img_c.min() >= 8 and np.all(img_c.max(axis=0) <= [cam.width - 9, cam.height - 9])
+                    and np.all((R @ corners.T + t[:, None])[2] > 0.1)):
+                break
+        else:
+            raise RuntimeError("write_calibration_clip: no board pose fits the image; check lab.camera")
+        H = supersample_homography(canvas.K @ np.column_stack([R[:, 0], R[:, 1], t]), 2)
+        ss_img = bg2.copy()
+        warp_board(ss_img, board, H)
+        ideal = cv2.resize(ss_img, (canvas.width, canvas.height), interpolation=cv2.INTER_AREA)
+        dn = canvas.distort(sensor.blur(ideal)) * gain
+        frame = sensor.expose(dn)
+        ok, buf = cv2.imencode(".png", frame)
+        if not ok:
+            raise DataError(f"{out_dir}: PNG encoding failed")
+        with atomic_path(out_dir / f"board_{i:02d}.png") as tmp:
+            tmp.write_bytes(buf.tobytes())
+        views.append({"file": f"board_{i:02d}.png", "rvec": cv2.Rodrigues(R)[0].ravel(), "tvec": t})
+    write_json(out_dir / "ground_truth.json", {"camera": cam.truth(), "views": views, "seed": int(seed)})
+    return out_dir
