@@ -16,7 +16,7 @@ from stringcast.model import closest_approach_batch
 @pytest.fixture
 def small(config):
     cfg = copy.deepcopy(config)
-    cfg["motion"].update(max_candidates=512, extra_after_hit=64, batch=64, posture_pool=8)
+    cfg["motion"].update(max_candidates=2048, extra_after_hit=64, batch=64, posture_pool=8)
     return cfg
 
 

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Mapping
 
 import numpy as np
 from scipy.integrate import cumulative_trapezoid
@@ -101,16 +102,30 @@ def joint_paths(control_points: np.ndarray, T: float, rate: float) -> tuple[np.n
 # ---------------------------------------------------------------------------
 # Postures
 # ---------------------------------------------------------------------------
-def postures_ok(campaign: Campaign, q0: np.ndarray, margin: float) -> np.ndarray:
-    """For postures q0 (..., J): within limits, arm above the floor, and the hanging string
-    (L straight down from the grasp) above floor + margin. Returns bool (...)."""
+def postures_ok(campaign: Campaign, q0: np.ndarray, margin: float, box: np.ndarray | None = None) -> np.ndarray:
+    """For postures q0 (..., J): within limits, arm above the floor, the hanging string
+    (L straight down from the grasp) above floor + margin, and, if ``box`` ((2, 2) m:
+    [[x_min, x_max], [y_min, y_max]]) is given, the grasp inside it. Returns bool (...).
+
+    The box keeps the start posture where the camera sees the hanging string: the
+    estimation starts from the tracked rest state (config ``motion.start_grasp_box_mm``)."""
     arm = campaign.arm
     q0 = np.asarray(q0, float)
     pts = forward_kinematics(arm, q0)
     inside = np.all((q0 >= arm.q_min) & (q0 <= arm.q_max), axis=-1)
     arm_up = np.min(pts[..., 1:, 1], axis=-1) >= arm.floor_y + margin
     string_up = pts[..., -1, 1] - campaign.string.length >= arm.floor_y + margin
-    return inside & arm_up & string_up
+    ok = inside & arm_up & string_up
+    if box is not None:
+        g = pts[..., -1, :]
+        ok &= (g[..., 0] >= box[0][0]) & (g[..., 0] <= box[0][1]) & (g[..., 1] >= box[1][0]) & (g[..., 1] <= box[1][1])
+    return ok
+
+
+def start_box(config: Mapping) -> np.ndarray | None:
+    """config ``motion.start_grasp_box_mm`` as (2, 2) m, or None when not set."""
+    box = config.get("motion", {}).get("start_grasp_box_mm")
+    return None if box is None else np.asarray(box, float) / 1000
 
 
 def posture_ok(campaign: Campaign, q0: np.ndarray, margin: float) -> bool:
@@ -119,7 +134,7 @@ def posture_ok(campaign: Campaign, q0: np.ndarray, margin: float) -> bool:
 
 
 def sample_postures(campaign: Campaign, rng: np.random.Generator, count: int, margin: float,
-                    max_tries: int = 100000) -> np.ndarray:
+                    max_tries: int = 100000, box: np.ndarray | None = None) -> np.ndarray:
     """(count, J) random initial postures, uniform within the joint limits, passing :func:`postures_ok`.
 
     Raises:
@@ -129,11 +144,12 @@ def sample_postures(campaign: Campaign, rng: np.random.Generator, count: int, ma
     found = np.zeros((0, arm.n_joints))
     for _ in range(0, max_tries, 5000):
         q0 = rng.uniform(arm.q_min, arm.q_max, (5000, arm.n_joints))
-        found = np.vstack([found, q0[postures_ok(campaign, q0, margin)]])
+        found = np.vstack([found, q0[postures_ok(campaign, q0, margin, box)]])
         if len(found) >= count:
             return found[:count]
     raise ConfigError(f"arm {arm.name}: no initial posture keeps a {campaign.string.length * 1000:.0f} mm string "
-                      f"above the floor (floor_y {arm.floor_y * 1000:.0f} mm + margin {margin * 1000:.0f} mm)")
+                      f"above the floor (floor_y {arm.floor_y * 1000:.0f} mm + margin {margin * 1000:.0f} mm)"
+                      + ("" if box is None else f" with the grasp inside start_grasp_box_mm {np.round(box * 1000).tolist()}"))
 
 
 # ---------------------------------------------------------------------------

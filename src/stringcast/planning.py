@@ -35,7 +35,8 @@ import numpy as np
 from .arm import check_limits, hand_pose
 from .config import PARAM_NAMES, Campaign, ConfigError, model_ranges
 from .files import DataError, read_json, write_joint_table, write_json
-from .motion import Motion, joint_paths, read_motion_json, sample_control_points, sample_postures, time_grid
+from .motion import (Motion, joint_paths, read_motion_json, sample_control_points, sample_postures, start_box,
+                     time_grid)
 
 
 LIMIT_MARGIN = 1e-3
@@ -208,7 +209,7 @@ def search(campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarr
         fixed_T = previous.T
     else:
         margin = float(mcfg.get("floor_margin_m", 0.05))
-        postures = sample_postures(campaign, rng, int(mcfg.get("posture_pool", 32)), margin)
+        postures = sample_postures(campaign, rng, int(mcfg.get("posture_pool", 32)), margin, box=start_box(config))
     equilibria: dict[int, np.ndarray] = {}
     best, best_key, tried, first_hit, fails = None, None, 0, None, 0
     bar = tqdm(total=max_cand, desc="plan", unit="cand", disable=None)
