@@ -37,10 +37,10 @@ import pandas as pd
 
 from .arm import hand_pose, motion_start
 from .config import PARAM_NAMES, Campaign, ConfigError, model_ranges
-from .files import DataError, read_joint_table, read_json, read_parquet, write_json, write_parquet
+from .files import (TRACK_COLUMNS, DataError, read_joint_table, read_json, read_parquet, tracks_arrays, write_json,
+                    write_parquet)
 from .optimizers import OPTIMIZERS, Recorder
 
-TRACK_COLUMNS = ["frame", "t_s", "point", "x_m", "y_m", "valid"]
 MIN_REST_FRAMES = 3
 
 
@@ -140,30 +140,6 @@ class Estimate:
 # ---------------------------------------------------------------------------
 # Problem from the pipeline's files
 # ---------------------------------------------------------------------------
-def tracks_arrays(tracks: pd.DataFrame, n: int, source="tracks") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Long ``tracks.parquet`` table -> frames (F,), t (F,) s, xy (F, n+1, 2) m (NaN if absent), valid (F, n+1)."""
-    missing = [c for c in TRACK_COLUMNS if c not in tracks.columns]
-    if missing:
-        raise DataError(f"{source}: missing columns {missing}")
-    if len(tracks) == 0:
-        raise DataError(f"{source}: no rows")
-    pts = tracks["point"].to_numpy(dtype=np.int64)
-    if pts.min() < 0 or pts.max() > n:
-        raise DataError(f"{source}: point ids must be 0..{n} for this string (n = {n}), got {pts.min()}..{pts.max()}")
-    frames, fi = np.unique(tracks["frame"].to_numpy(dtype=np.int64), return_inverse=True)
-    t = np.full(len(frames), np.nan)
-    t[fi] = tracks["t_s"].to_numpy(dtype=float)
-    xy = np.full((len(frames), n + 1, 2), np.nan)
-    xy[fi, pts, 0] = tracks["x_m"].to_numpy(dtype=float)
-    xy[fi, pts, 1] = tracks["y_m"].to_numpy(dtype=float)
-    valid = np.zeros((len(frames), n + 1), bool)
-    valid[fi, pts] = tracks["valid"].to_numpy(dtype=bool)
-    valid &= np.all(np.isfinite(xy), axis=-1)
-    if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
-        raise DataError(f"{source}: frame times t_s must be finite and increase with the frame number")
-    return frames, t, xy, valid
-
-
 def build_problem(tracks_df: pd.DataFrame, t_joints: np.ndarray, q_joints: np.ndarray,
                   campaign: Campaign, config: Mapping, source: str = "tracks.parquet") -> EstimationProblem:
     """Assemble the estimation problem from tracked points and the measured joint log.

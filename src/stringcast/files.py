@@ -18,6 +18,10 @@ import pandas as pd
 import yaml
 
 
+TRACK_COLUMNS = ["frame", "t_s", "point", "x_m", "y_m", "valid"]
+"""Columns of ``tracks.parquet`` (point 0 = grasp, 1..n the model's points)."""
+
+
 class DataError(ValueError):
     """An input file is missing or malformed; the message names the file."""
 
@@ -192,3 +196,27 @@ def find_video(trial_dir: str | Path) -> Path:
     if not cands:
         raise DataError(f"{trial_dir}: no video (expected video.mkv/.avi/.mp4, a video/ folder of frames, or video.cihx)")
     return cands[0]
+
+
+def tracks_arrays(tracks: pd.DataFrame, n: int, source="tracks") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Long ``tracks.parquet`` table -> frames (F,), t (F,) s, xy (F, n+1, 2) m (NaN if absent), valid (F, n+1)."""
+    missing = [c for c in TRACK_COLUMNS if c not in tracks.columns]
+    if missing:
+        raise DataError(f"{source}: missing columns {missing}")
+    if len(tracks) == 0:
+        raise DataError(f"{source}: no rows")
+    pts = tracks["point"].to_numpy(dtype=np.int64)
+    if pts.min() < 0 or pts.max() > n:
+        raise DataError(f"{source}: point ids must be 0..{n} for this string (n = {n}), got {pts.min()}..{pts.max()}")
+    frames, fi = np.unique(tracks["frame"].to_numpy(dtype=np.int64), return_inverse=True)
+    t = np.full(len(frames), np.nan)
+    t[fi] = tracks["t_s"].to_numpy(dtype=float)
+    xy = np.full((len(frames), n + 1, 2), np.nan)
+    xy[fi, pts, 0] = tracks["x_m"].to_numpy(dtype=float)
+    xy[fi, pts, 1] = tracks["y_m"].to_numpy(dtype=float)
+    valid = np.zeros((len(frames), n + 1), bool)
+    valid[fi, pts] = tracks["valid"].to_numpy(dtype=bool)
+    valid &= np.all(np.isfinite(xy), axis=-1)
+    if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
+        raise DataError(f"{source}: frame times t_s must be finite and increase with the frame number")
+    return frames, t, xy, valid

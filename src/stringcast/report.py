@@ -22,7 +22,7 @@ from . import __version__
 from . import report_figures as figs
 from .arm import hand_pose, motion_start
 from .config import PARAM_NAMES, Campaign, model_ranges
-from .files import read_joint_table, read_json, read_parquet, write_text
+from .files import TRACK_COLUMNS, read_joint_table, read_json, read_parquet, tracks_arrays, write_text
 
 
 def _env() -> jinja2.Environment:
@@ -39,21 +39,10 @@ def _common(campaign: Campaign, title: str) -> dict:
             "radius_mm": f"{campaign.target.radius * 1000:.0f}"}
 
 
-def tracks_to_arrays(tracks: pd.DataFrame, n_points: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Long tracks table -> t (F,), xy (F, n+1, 2) m with NaN where invalid, valid (F, n+1)."""
-    tracks = tracks.sort_values(["frame", "point"])
-    frames = np.unique(tracks["frame"].to_numpy())
-    F, P = len(frames), n_points + 1
-    idx = np.searchsorted(frames, tracks["frame"].to_numpy())
-    pt = tracks["point"].to_numpy().astype(int)
-    xy = np.full((F, P, 2), np.nan)
-    valid = np.zeros((F, P), bool)
-    t = np.full(F, np.nan)
-    t[idx] = tracks["t_s"].to_numpy()
-    ok = tracks["valid"].to_numpy().astype(bool) & (pt <= n_points)
-    xy[idx[ok], pt[ok], 0] = tracks["x_m"].to_numpy()[ok]
-    xy[idx[ok], pt[ok], 1] = tracks["y_m"].to_numpy()[ok]
-    valid[idx[ok], pt[ok]] = True
+def _tracked(tracks: pd.DataFrame, n_points: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """t (F,), xy (F, n+1, 2) m with NaN where not valid, valid (F, n+1)."""
+    _, t, xy, valid = tracks_arrays(tracks, n_points)
+    xy[~valid] = np.nan
     return t, xy, valid
 
 
@@ -99,12 +88,12 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
     calib = read_json(results_dir / "calibration.json")
     sync = read_json(results_dir / "sync.json")
     nxt = read_json(results_dir / "motion.json")
-    tracks = read_parquet(results_dir / "tracks.parquet", ["frame", "t_s", "point", "x_m", "y_m", "valid"])
+    tracks = read_parquet(results_dir / "tracks.parquet", TRACK_COLUMNS)
     fit = read_parquet(results_dir / "fit.parquet")
     t_j, q_j, _ = read_joint_table(data_dir / "joints.csv")
     t0, t1, played = _motion_window(data_dir, config)
     tgt = campaign.target.xy
-    t_tr, xy_tr, valid = tracks_to_arrays(tracks, n)
+    t_tr, xy_tr, valid = _tracked(tracks, n)
     d_meas, _ = closest_approach(t_tr, xy_tr[:, n], tgt, t0, t1)
 
     tip_fit = fit[fit["point"] == n].sort_values("frame")
@@ -209,7 +198,7 @@ def write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign,
         params = read_json(rd / "params.json")
         tracks = read_parquet(rd / "tracks.parquet")
         t0, t1, played = _motion_window(dd, config)
-        t, xy, _ = tracks_to_arrays(tracks, n)
+        t, xy, _ = _tracked(tracks, n)
         d, _ = closest_approach(t, xy[:, n], campaign.target.xy, t0, t1)
         tips[f"execution {k}"] = xy[(t >= t0) & (t <= t1), n]
         row = {"trial": k, "E_mm": _fmt(params.get("E_mm")), "measured_mm": _fmt(d * 1000, ".1f"),
