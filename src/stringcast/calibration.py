@@ -1,0 +1,347 @@
+"""Camera calibration: ChArUco intrinsics and the pixel -> swing-plane homography.
+
+* Intrinsics (optional, from a ``calib/`` clip or image folder of the board in varied 3D
+  poses): ``cv2.aruco.CharucoDetector.detectBoard`` -> ``board.matchImagePoints`` ->
+  ``cv2.calibrateCameraExtended`` (OpenCV >= 4.7 API; ``calibrateCameraCharuco`` is gone),
+  then views whose own reprojection RMS exceeds ``max(3 x median, 0.5 px)`` (motion blur,
+  a false corner) are dropped and the calibration is repeated (at most 3 times).
+* Plane homography (every trial): the board lies in the swing plane. Its ChArUco corners,
+  detected in the median of the first few trial frames and undistorted with
+  ``cv2.undistortPoints(P=K)`` when intrinsics exist, give the board-plane -> pixel
+  homography (``cv2.findHomography``, RANSAC 3 px, then least squares on the inliers);
+  composed with the configured ``board_to_robot`` transform it maps undistorted pixels to
+  robot-frame (x, y) in m. Without intrinsics, the lens distortion is not corrected and the
+  reprojection error shows it.
+
+Boards printed inverted (white markers on black) are found by trying the inverted image
+when the plain one gives no corners.
+
+Errors: :class:`~stringcast.files.DataError` naming the file (no board, too few corners,
+too few views, image size mismatch).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterable
+
+import cv2
+import numpy as np
+
+from .files import DataError, find_video, read_json, write_json
+from .video import FRAME_SUFFIXES, open_video
+
+MIN_VIEW_CORNERS = 6
+"""ChArUco corners a calibration view needs to be used."""
+MIN_PLANE_CORNERS = 8
+"""ChArUco corners the plane homography needs."""
+_UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
+
+
+def detect_charuco(image: np.ndarray, board, invert: bool | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """ChArUco chessboard corners in a grey image.
+
+    Args:
+        image: (H, W) uint8 or uint16 (scaled to 8 bit) grey image.
+        board: ``cv2.aruco.CharucoBoard``.
+        invert: True/False forces the polarity; None tries the plain image, then the
+            inverted one if the plain one gives fewer than :data:`MIN_VIEW_CORNERS`.
+
+    Returns:
+        corners (N, 2) float64 px (sub-pixel, distorted image), ids (N,) int; N may be 0.
+    """
+    img = image if image.dtype == np.uint8 else cv2.convertScaleAbs(image, alpha=255.0 / max(1, int(image.max())))
+    det = cv2.aruco.CharucoDetector(board)
+    best = (np.zeros((0, 2)), np.zeros(0, int))
+    for inv in ((False, True) if invert is None else (invert,)):
+        cc, ci, _, _ = det.detectBoard(255 - img if inv else img)
+        if ci is not None and len(ci) > len(best[1]):
+            best = (cc.reshape(-1, 2).astype(float), ci.ravel().astype(int))
+        if len(best[1]) >= MIN_VIEW_CORNERS:
+            break
+    return best
+
+
+@dataclass(frozen=True)
+class Intrinsics:
+    """Pinhole intrinsics with OpenCV's 5-term distortion (k1, k2, p1, p2, k3).
+
+    Attributes:
+        K: (3, 3) camera matrix, px. dist: (5,). rms_px: reprojection RMS of the views used.
+        n_views: views used. image_size: (width, height) px. views_rejected: dropped views.
+    """
+
+    K: np.ndarray
+    dist: np.ndarray
+    rms_px: float
+    n_views: int
+    image_size: tuple[int, int]
+    views_rejected: int = 0
+
+    def __post_init__(self):
+        if np.shape(self.K) != (3, 3) or np.shape(self.dist) != (5,):
+            raise ValueError(f"Intrinsics: K must be (3, 3) and dist (5,), got {np.shape(self.K)}, {np.shape(self.dist)}")
+
+
+def calibrate_intrinsics(frames: Iterable[np.ndarray], board, source: str = "calibration frames",
+                         invert: bool | None = None, min_views: int = 3) -> Intrinsics:
+    """Camera matrix and distortion from views of a ChArUco board (``cv2.calibrateCameraExtended``).
+
+    Args:
+        frames: iterable of (H, W) grey images (all the same size).
+        board: ``cv2.aruco.CharucoBoard`` (square sizes in m).
+        source: name used in error messages (the folder or file).
+        invert: board polarity (see :func:`detect_charuco`).
+        min_views: views with >= :data:`MIN_VIEW_CORNERS` corners needed.
+
+    Raises:
+        DataError: fewer than ``min_views`` usable views, or frames of different sizes.
+    """
+    obj, img, size = [], [], None
+    for k, frame in enumerate(frames):
+        if size is None:
+            size = (frame.shape[1], frame.shape[0])
+        elif (frame.shape[1], frame.shape[0]) != size:
+            raise DataError(f"{source}: frame {k} is {frame.shape[1]}x{frame.shape[0]}, the first was {size[0]}x{size[1]}")
+        corners, ids = detect_charuco(frame, board, invert)
+        if len(ids) < MIN_VIEW_CORNERS:
+            continue
+        o, i = board.matchImagePoints(corners.astype(np.float32).reshape(-1, 1, 2), ids.reshape(-1, 1))
+        if o is None or len(o) < MIN_VIEW_CORNERS or board.checkCharucoCornersCollinear(ids.reshape(-1, 1)):
+            continue
+        obj.append(o.astype(np.float32))
+        img.append(i.astype(np.float32))
+    if len(obj) < min_views:
+        raise DataError(f"{source}: the ChArUco board was found in {len(obj)} views with >= {MIN_VIEW_CORNERS} "
+                        f"corners; camera calibration needs at least {min_views}")
+    keep = np.arange(len(obj))
+    for _ in range(4):
+        rms, K, dist, _, _, _, _, per_view = cv2.calibrateCameraExtended(
+            [obj[k] for k in keep], [img[k] for k in keep], size, None, None)
+        per_view = per_view.ravel()
+        bad = per_view > max(3.0 * float(np.median(per_view)), 0.5)
+        if not bad.any() or len(keep) - bad.sum() < min_views:
+            break
+        keep = keep[~bad]
+    return Intrinsics(np.asarray(K, float), np.asarray(dist, float).ravel()[:5], float(rms), len(keep),
+                      (int(size[0]), int(size[1])), len(obj) - len(keep))
+
+
+def _f(a):
+    return None if a is None else np.asarray(a, float).tolist()
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """Pixel <-> robot-frame mapping of the swing plane for one trial.
+
+    Attributes:
+        H_pixel_to_robot: (3, 3) homography from undistorted pixels to robot (x, y), m.
+        image_size: (width, height) px.
+        K: (3, 3) camera matrix or None; dist: (5,) or None (homography only).
+        reprojection_error_px: RMS of the board corners, robot -> pixel vs detected.
+        n_corners: board corners used. board_to_robot: (3, 3) board-frame -> robot (m).
+        intrinsics_rms_px, intrinsics_views: from :func:`calibrate_intrinsics`, if any.
+        warnings: human-readable problems worth reporting.
+    """
+
+    H_pixel_to_robot: np.ndarray
+    image_size: tuple[int, int]
+    K: np.ndarray | None = None
+    dist: np.ndarray | None = None
+    reprojection_error_px: float = math.nan
+    n_corners: int = 0
+    board_to_robot: np.ndarray | None = None
+    intrinsics_rms_px: float | None = None
+    intrinsics_views: int | None = None
+    warnings: tuple[str, ...] = ()
+    corner_ids: tuple[int, ...] = field(default=(), repr=False)
+
+    def __post_init__(self):
+        H = np.asarray(self.H_pixel_to_robot, float)
+        if H.shape != (3, 3) or not np.all(np.isfinite(H)) or abs(np.linalg.det(H)) < 1e-300:
+            raise ValueError(f"Calibration: H_pixel_to_robot must be a finite invertible (3, 3), got {H.shape}")
+        if (self.K is None) != (self.dist is None):
+            raise ValueError("Calibration: K and dist go together (both or neither)")
+        if self.K is not None and (np.shape(self.K) != (3, 3) or np.shape(self.dist) != (5,)):
+            raise ValueError("Calibration: K must be (3, 3) and dist (5,)")
+        if self.board_to_robot is not None and np.shape(self.board_to_robot) != (3, 3):
+            raise ValueError("Calibration: board_to_robot must be (3, 3)")
+        object.__setattr__(self, "H_pixel_to_robot", H)
+        object.__setattr__(self, "_H_inv", np.linalg.inv(H))
+
+    def undistort(self, uv: np.ndarray) -> np.ndarray:
+        """(N, 2) distorted px -> (N, 2) undistorted px (``cv2.undistortPoints`` with P = K)."""
+        uv = np.asarray(uv, float).reshape(-1, 2)
+        if self.K is None or len(uv) == 0:
+            return uv.copy()
+        return cv2.undistortPoints(uv.reshape(-1, 1, 2), self.K, self.dist, P=self.K,
+                                   criteria=_UNDISTORT_CRITERIA).reshape(-1, 2)
+
+    def distort(self, uv: np.ndarray) -> np.ndarray:
+        """(N, 2) undistorted px -> (N, 2) distorted px (``cv2.projectPoints`` of the normalised rays)."""
+        uv = np.asarray(uv, float).reshape(-1, 2)
+        if self.K is None or len(uv) == 0:
+            return uv.copy()
+        xn = (uv - self.K[:2, 2]) / np.diag(self.K)[:2]
+        rays = np.column_stack([xn, np.ones(len(xn))])
+        out, _ = cv2.projectPoints(rays, np.zeros(3), np.zeros(3), self.K, self.dist)
+        return out.reshape(-1, 2)
+
+    def pixel_to_robot(self, uv: np.ndarray) -> np.ndarray:
+        """(N, 2) image px (distorted, as recorded) -> (N, 2) robot-frame (x, y), m."""
+        u = self.undistort(uv)
+        return _apply_h(self.H_pixel_to_robot, u)
+
+    def robot_to_pixel(self, xy: np.ndarray) -> np.ndarray:
+        """(N, 2) robot-frame (x, y) m in the swing plane -> (N, 2) image px (distorted)."""
+        return self.distort(_apply_h(self._H_inv, np.asarray(xy, float).reshape(-1, 2)))
+
+    def m_per_px(self, uv: np.ndarray) -> np.ndarray:
+        """(N,) local image scale at pixels uv (N, 2): metres per pixel (mean of the two axes)."""
+        uv = np.asarray(uv, float).reshape(-1, 2)
+        p = self.pixel_to_robot(np.concatenate([uv, uv + [1, 0], uv + [0, 1]]))
+        n = len(uv)
+        return 0.5 * (np.linalg.norm(p[n:2 * n] - p[:n], axis=1) + np.linalg.norm(p[2 * n:] - p[:n], axis=1))
+
+    def to_dict(self) -> dict:
+        return {
+            "image_size": list(self.image_size),
+            "K": _f(self.K), "dist": _f(self.dist),
+            "H_pixel_to_robot": _f(self.H_pixel_to_robot),
+            "board_to_robot": _f(self.board_to_robot),
+            "reprojection_error_px": self.reprojection_error_px,
+            "n_corners": self.n_corners, "corner_ids": list(self.corner_ids),
+            "intrinsics_rms_px": self.intrinsics_rms_px, "intrinsics_views": self.intrinsics_views,
+            "warnings": list(self.warnings),
+        }
+
+    def to_json(self, path: str | Path) -> None:
+        """Write ``calibration.json`` atomically."""
+        write_json(path, self.to_dict())
+
+    @classmethod
+    def from_json(cls, path: str | Path) -> "Calibration":
+        """Read ``calibration.json``. Raises DataError naming the file if keys are missing or wrong."""
+        d = read_json(path)
+        try:
+            arr = (lambda k: None if d.get(k) is None else np.asarray(d[k], float))
+            return cls(H_pixel_to_robot=np.asarray(d["H_pixel_to_robot"], float),
+                       image_size=tuple(int(v) for v in d["image_size"]), K=arr("K"), dist=arr("dist"),
+                       reprojection_error_px=float(d.get("reprojection_error_px") or math.nan),
+                       n_corners=int(d.get("n_corners", 0)), board_to_robot=arr("board_to_robot"),
+                       intrinsics_rms_px=d.get("intrinsics_rms_px"), intrinsics_views=d.get("intrinsics_views"),
+                       warnings=tuple(d.get("warnings", [])), corner_ids=tuple(d.get("corner_ids", [])))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise DataError(f"{path}: not a valid calibration file: {exc!r}") from exc
+
+
+def _apply_h(H: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    if len(pts) == 0:
+        return pts.reshape(0, 2)
+    return cv2.perspectiveTransform(pts.reshape(-1, 1, 2).astype(float), H).reshape(-1, 2)
+
+
+def plane_homography(image: np.ndarray, board, board_to_robot: np.ndarray, intrinsics: Intrinsics | None = None,
+                     source: str = "image", invert: bool | None = None) -> Calibration:
+    """Fit the pixel -> robot-frame homography of the swing plane from the board in one image.
+
+    Args:
+        image: (H, W) grey frame with the ChArUco board lying in the swing plane.
+        board: ``cv2.aruco.CharucoBoard`` (sizes in m). board_to_robot: (3, 3) board -> robot.
+        intrinsics: undistort the corners first (``cv2.undistortPoints``, P = K) if given.
+        source: named in errors.
+
+    Returns:
+        :class:`Calibration` with the reprojection error (robot -> pixel of the corners vs detected).
+
+    Raises:
+        DataError: fewer than :data:`MIN_PLANE_CORNERS` corners, or a degenerate fit.
+    """
+    size = (image.shape[1], image.shape[0])
+    if intrinsics is not None and tuple(intrinsics.image_size) != size:
+        raise DataError(f"{source}: image is {size[0]}x{size[1]} but the intrinsics are for "
+                        f"{intrinsics.image_size[0]}x{intrinsics.image_size[1]}")
+    corners, ids = detect_charuco(image, board, invert)
+    if len(ids) < MIN_PLANE_CORNERS:
+        raise DataError(f"{source}: {'no ChArUco board found' if len(ids) == 0 else f'only {len(ids)} board corners found'}"
+                        f" (the plane homography needs >= {MIN_PLANE_CORNERS})")
+    board_xy = np.asarray(board.getChessboardCorners(), float)[ids, :2]
+    K = None if intrinsics is None else intrinsics.K
+    dist = None if intrinsics is None else intrinsics.dist
+    probe = Calibration(np.eye(3), size, K, dist)
+    und = probe.undistort(corners)
+    H_b2p, inl = cv2.findHomography(board_xy, und, cv2.RANSAC, 3.0)
+    if H_b2p is None:
+        raise DataError(f"{source}: the board corners give no homography (degenerate detection)")
+    inl = inl.ravel().astype(bool)
+    H_b2p, _ = cv2.findHomography(board_xy[inl], und[inl], 0)
+    if H_b2p is None:
+        raise DataError(f"{source}: the board corners give no homography (degenerate detection)")
+    B = np.asarray(board_to_robot, float)
+    H = B @ np.linalg.inv(H_b2p)
+    H = H / H[2, 2]
+    cal = Calibration(H, size, K, dist, n_corners=int(inl.sum()), board_to_robot=B,
+                      corner_ids=tuple(int(i) for i in ids[inl]))
+    robot_xy = _apply_h(B, board_xy[inl])
+    err = float(np.sqrt(np.mean(np.sum((cal.robot_to_pixel(robot_xy) - corners[inl]) ** 2, axis=1))))
+    object.__setattr__(cal, "reprojection_error_px", err)
+    return cal
+
+
+def _calib_reader(calib_dir: Path):
+    """The calibration views: the folder's images, or the one video inside it."""
+    if any(p.suffix.lower() in FRAME_SUFFIXES for p in calib_dir.iterdir()):
+        return open_video(calib_dir)
+    vids = sorted(p for p in calib_dir.iterdir() if p.is_file() and p.suffix.lower() in (".mkv", ".avi", ".mp4", ".mov"))
+    if not vids:
+        raise DataError(f"{calib_dir}: no PNG/TIFF images or video of the calibration board")
+    return open_video(vids[0])
+
+
+def median_frame(video, n: int = 5) -> np.ndarray:
+    """Pixel-wise median of the first ``n`` frames of a :class:`~stringcast.video.VideoReader`."""
+    frames = [f for _, (_, f) in zip(range(min(n, video.n_frames)), video)]
+    return np.median(np.stack(frames), axis=0).astype(video.dtype)
+
+
+def run_calibration(trial_dir: str | Path, calib_dir: str | Path | None, campaign, out_json: str | Path,
+                    n_median: int = 5) -> Calibration:
+    """Calibrate one trial and write ``calibration.json``.
+
+    Intrinsics from ``calib_dir`` (if given), then the plane homography from the median of
+    the first ``n_median`` trial frames (the arm and string hang still before the motion).
+
+    Raises:
+        DataError: no board / too few corners in the trial frames or the calibration views,
+            or mismatched image sizes (the file is named).
+    """
+    trial_dir = Path(trial_dir)
+    setup = campaign.setup
+    board = setup.board.make()
+    warnings: list[str] = []
+    intr = None
+    if calib_dir is not None:
+        calib_dir = Path(calib_dir)
+        reader = _calib_reader(calib_dir)
+        intr = calibrate_intrinsics((f for _, f in reader), board, str(reader.path))
+        if intr.views_rejected:
+            warnings.append(f"intrinsics: {intr.views_rejected} calibration views rejected (reprojection outliers)")
+    else:
+        warnings.append("no calib/ views: homography only, lens distortion is not corrected")
+    vpath = find_video(trial_dir)
+    with open_video(vpath) as video:
+        img = median_frame(video, n_median)
+    cal = plane_homography(img, board, setup.board_to_robot, intr, f"{vpath} (median of the first {n_median} frames)")
+    n_all = (setup.board.squares_x - 1) * (setup.board.squares_y - 1)
+    if cal.reprojection_error_px > setup.reprojection_warn_px:
+        warnings.append(f"board reprojection error {cal.reprojection_error_px:.2f} px exceeds "
+                        f"{setup.reprojection_warn_px:.2f} px")
+    if cal.n_corners < 0.5 * n_all:
+        warnings.append(f"only {cal.n_corners} of {n_all} board corners used: the board is partly hidden")
+    cal = Calibration(cal.H_pixel_to_robot, cal.image_size, cal.K, cal.dist, cal.reprojection_error_px,
+                      cal.n_corners, cal.board_to_robot, None if intr is None else intr.rms_px,
+                      None if intr is None else intr.n_views, tuple(warnings), cal.corner_ids)
+    cal.to_json(out_json)
+    return cal

@@ -1,0 +1,204 @@
+"""Centreline geometry of one frame's string: skeleton walk, sub-pixel refinement, arc resampling.
+
+Plain functions on arrays used by :mod:`stringcast.tracking` (steps 4-5 of its pipeline);
+:func:`trace_path` is compiled with numba, the rest is NumPy/SciPy.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+from scipy.ndimage import gaussian_filter1d, map_coordinates
+
+
+def trace_path(skel: np.ndarray, start: tuple[int, int], max_gap: float, direction=None):
+    """Walk a skeleton from ``start`` (row, col), straight at junctions, bridging small gaps.
+
+    At each step the unvisited 8-neighbour best aligned with the current direction (over the
+    last 5 steps) is taken and all the current pixel's neighbours are marked visited; with
+    no neighbour left, the nearest unvisited skeleton pixel within ``max_gap`` px and 35 deg
+    of the direction is jumped to (a bridged gap). Compiled with numba.
+
+    Args:
+        skel: (H, W) bool skeleton. direction: (drow, dcol) initial direction or None.
+
+    Returns:
+        pts (M, 2) float (row, col) and bridged (M,) bool (True: reached by a gap jump).
+    """
+    d = np.array([np.nan, np.nan]) if direction is None else np.asarray(direction, float)
+    pts, bridged = _walk(np.ascontiguousarray(skel, dtype=np.bool_), int(start[0]), int(start[1]),
+                         float(max_gap), d[0], d[1])
+    return pts.astype(float), bridged
+
+
+@njit(cache=True)
+def _walk(skel, r0, c0, max_gap, d0r, d0c):  # pragma: no cover - compiled
+    H, W = skel.shape
+    visited = np.zeros((H, W), np.bool_)
+    cap = 4 * (H + W)
+    pts = np.empty((cap, 2), np.int64)
+    bridged = np.zeros(cap, np.bool_)
+    pts[0, 0], pts[0, 1] = r0, c0
+    visited[r0, c0] = True
+    m = 1
+    have_d = not (np.isnan(d0r) or np.isnan(d0c))
+    dn = np.hypot(d0r, d0c) if have_d else 1.0
+    dr, dc = (d0r / dn, d0c / dn) if have_d else (0.0, 0.0)
+    g = int(np.ceil(max_gap))
+    cos_max = np.cos(np.radians(35.0))
+    r, c = r0, c0
+    while m < cap:
+        br, bc, bscore, found = -1, -1, -1e9, False
+        for a in range(-1, 2):
+            for b in range(-1, 2):
+                rr, cc = r + a, c + b
+                if (a == 0 and b == 0) or rr < 0 or rr >= H or cc < 0 or cc >= W:
+                    continue
+                if skel[rr, cc] and not visited[rr, cc]:
+                    score = (a * dr + b * dc) / np.hypot(a, b) if have_d else 0.0
+                    if not found or score > bscore:
+                        br, bc, bscore, found = rr, cc, score, True
+        jump = False
+        if found:
+            for a in range(-1, 2):
+                for b in range(-1, 2):
+                    rr, cc = r + a, c + b
+                    if 0 <= rr < H and 0 <= cc < W and skel[rr, cc]:
+                        visited[rr, cc] = True
+        elif have_d:
+            best = 1e9
+            for a in range(-g, g + 1):
+                for b in range(-g, g + 1):
+                    dist = np.hypot(a, b)
+                    rr, cc = r + a, c + b
+                    if dist <= 1.5 or dist > max_gap or rr < 0 or rr >= H or cc < 0 or cc >= W:
+                        continue
+                    if not skel[rr, cc] or visited[rr, cc]:
+                        continue
+                    cosang = (a * dr + b * dc) / dist
+                    if cosang > cos_max and dist * (2.0 - cosang) < best:
+                        best, br, bc, found = dist * (2.0 - cosang), rr, cc, True
+            jump = found
+        if not found:
+            break
+        visited[br, bc] = True
+        pts[m, 0], pts[m, 1] = br, bc
+        bridged[m] = jump
+        m += 1
+        r, c = br, bc
+        k = max(0, m - 6)
+        vr, vc = r - pts[k, 0], c - pts[k, 1]
+        nv = np.hypot(vr, vc)
+        if nv > 0:
+            dr, dc, have_d = vr / nv, vc / nv, True
+    return pts[:m].copy(), bridged[:m].copy()
+
+
+def odd_smooth(p: np.ndarray, sigma: float) -> np.ndarray:
+    """Gaussian smoothing along a path with odd (point-reflected) ends, so ends do not shrink."""
+    k = int(min(len(p) - 1, math.ceil(3 * sigma)))
+    if k < 1 or sigma <= 0:
+        return p
+    pad = np.concatenate([2 * p[0] - p[k:0:-1], p, 2 * p[-1] - p[-2:-k - 2:-1]])
+    return gaussian_filter1d(pad, sigma, axis=0, mode="nearest")[k:k + len(p)]
+
+
+def refine_centreline(absdiff: np.ndarray, pts: np.ndarray, half_width: float = 3.0) -> np.ndarray:
+    """Move path points (M, 2) (row, col) to the weighted centroid of ``absdiff`` across the path."""
+    if len(pts) < 3:
+        return pts
+    sm = odd_smooth(pts, 2.0)
+    tan = np.gradient(sm, axis=0)
+    tan /= np.linalg.norm(tan, axis=1, keepdims=True) + 1e-12
+    nrm = np.column_stack([-tan[:, 1], tan[:, 0]])
+    offs = np.arange(-half_width, half_width + 1e-9, 0.5)
+    samp = pts[:, None, :] + offs[None, :, None] * nrm[:, None, :]
+    prof = map_coordinates(absdiff, [samp[..., 0].ravel(), samp[..., 1].ravel()], order=1, mode="nearest")
+    prof = prof.reshape(len(pts), len(offs))
+    w = np.clip(prof - np.min(prof, axis=1, keepdims=True), 0, None)
+    shift = (w @ offs) / np.maximum(w.sum(axis=1), 1e-12)
+    return pts + np.clip(shift, -half_width, half_width)[:, None] * nrm
+
+
+def hidden_arc(g: np.ndarray, pts: np.ndarray, n: int = 8) -> np.ndarray:
+    """Vertices (n, 2) from the grasp g up to (not including) pts[0] along a circular arc.
+
+    The string's first part is hidden under the gripper's mask; the arc through g that
+    arrives at the first visible vertex along the path's tangent there is its
+    constant-curvature estimate (length chord * a / sin a, a = angle between chord and
+    tangent, capped at 100 deg): a straight chord would be short where the string bends
+    around the fingertips.
+    """
+    c = pts[0] - g
+    chord = float(np.hypot(*c))
+    if len(pts) < 3 or chord < 1e-6:
+        return g[None].astype(float)
+    t = pts[1] - pts[0]
+    a = math.atan2(c[0] * t[1] - c[1] * t[0], c @ t)
+    a = float(np.clip(a, -math.radians(100), math.radians(100)))
+    if abs(a) < 1e-3:
+        return g + np.outer(np.arange(n) / n, c)
+    length = chord * a / math.sin(a)
+    z0 = complex(c[0], c[1]) / chord * complex(math.cos(-a), math.sin(-a))  # start direction
+    k = 2 * a / length
+    s = np.arange(n) / n * length
+    z = z0 * (np.exp(1j * k * s) - 1) / (1j * k)
+    return g + np.column_stack([z.real, z.imag])
+
+
+def decimate_path(pts: np.ndarray, observed: np.ndarray, step: float):
+    """Vertices every ``step`` px of arc along a dense path (first and last kept).
+
+    Arc length summed over ~1 px steps grows with the centreline's lateral noise (by about
+    the mean of (dx / ds)^2 / 2); chords ``step`` px long are insensitive to it and still
+    follow bends (a 4 px chord on a 30 px radius is 0.07 % short).
+
+    Args:
+        pts: (M, 2) dense path. observed: (M - 1,) bool per segment. step: px.
+
+    Returns:
+        (K, 2) vertices and (K - 1,) observed (a decimated segment is observed only if
+        every dense segment it spans is).
+    """
+    if len(pts) < 3 or step <= 0:
+        return pts, observed
+    cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
+    n = max(1, int(round(cum[-1] / step)))
+    s = np.linspace(0.0, cum[-1], n + 1)
+    out = np.column_stack([np.interp(s, cum, pts[:, 0]), np.interp(s, cum, pts[:, 1])])
+    bad = np.concatenate([[0], np.cumsum(~np.asarray(observed, bool))])  # unobserved segments before vertex j
+    ja = np.clip(np.searchsorted(cum, s[:-1], side="right") - 1, 0, len(pts) - 2)
+    jb = np.clip(np.searchsorted(cum, s[1:], side="left"), 1, len(pts) - 1)
+    return out, bad[jb] - bad[ja] == 0
+
+
+def resample_by_arc(xy: np.ndarray, observed_seg: np.ndarray, s_targets: np.ndarray, end_tol: float = 0.0):
+    """Points at increasing arc lengths ``s_targets`` (K,) m along a polyline xy (M, 2) m.
+
+    Args:
+        observed_seg: (M - 1,) bool, False for bridged (unobserved) segments.
+        end_tol: the last target (the tip) may lie up to this far past the polyline's end
+            and then takes the end point (a skeleton stops about half a width short of a
+            free end); every other target must lie on the polyline.
+
+    Returns:
+        (K, 2) positions (NaN where invalid) and (K,) valid.
+    """
+    seg = np.linalg.norm(np.diff(xy, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    out = np.full((len(s_targets), 2), np.nan)
+    valid = np.zeros(len(s_targets), bool)
+    if len(xy) < 2:
+        return out, valid
+    for i, st in enumerate(s_targets):
+        if st > s[-1] + (end_tol if i == len(s_targets) - 1 else 0.0):
+            continue
+        st = min(st, s[-1])
+        j = int(np.clip(np.searchsorted(s, st, side="right") - 1, 0, len(seg) - 1))
+        if not observed_seg[j]:
+            continue
+        a = (st - s[j]) / max(seg[j], 1e-12)
+        out[i] = xy[j] + a * (xy[j + 1] - xy[j])
+        valid[i] = True
+    return out, valid
