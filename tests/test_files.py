@@ -1,5 +1,4 @@
 import numpy as np
-import pandas as pd
 import pytest
 
 from stringcast.files import (DataError, atomic_path, read_joint_table, read_video_meta, write_joint_table,
