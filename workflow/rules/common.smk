@@ -9,10 +9,12 @@ wildcard_constraints:
     trial=r"[0-9]+",
 
 
-# The package's CLI, run with the same interpreter as Snakemake (the project's venv).
-STRINGCAST = f'"{sys.executable}" -m stringcast.cli'
+# Jobs run the package's `stringcast` command from the environment Snakemake runs in
+# (the project's venv), found by PATH so that the command line (a param, tracked for
+# provenance) does not depend on which interpreter path started Snakemake.
+shell.prefix(f'set -euo pipefail; export PATH="{Path(sys.executable).parent}:$PATH"; ')
 CONFIG_FILE = workflow.configfiles[-1] if workflow.configfiles else "config/config.yaml"
-CLI = f'{STRINGCAST} --config "{CONFIG_FILE}"'
+CLI = f'stringcast --config "{CONFIG_FILE}"'
 VIDEO_NAMES = ("video.mkv", "video.avi", "video.mp4", "video.cihx", "video")
 
 
@@ -67,13 +69,15 @@ def trial_reports(wildcards):
 
 
 def all_targets():
+    """Every stage's product of every trial, so a deleted one is made again and what
+    depends on it reruns (Snakemake does not remake a missing file that no requested
+    output needs)."""
     out = []
+    stages = ("calibration.json", "sync.json", "tracks.parquet", "params.json", "motion.csv", "report.html")
     for c in campaigns():
         out.append(f"results/{c}/first_motion/motion.csv")
         ks = trials(c)
-        for k in ks:
-            out.append(f"results/{c}/trial_{k}/report.html")
-            out.append(f"results/{c}/trial_{k}/motion.csv")
+        out += [f"results/{c}/trial_{k}/{name}" for k in ks for name in stages]
         if ks:
             out.append(f"results/{c}/report.html")
     return out

@@ -1,0 +1,80 @@
+"""The whole loop end to end on a small virtual lab, through Snakemake (slow: run once in CI).
+
+A tmp project root links the repo's Snakefile and workflow/ and holds its own
+config: a 512 x 512 camera at 250 fps with a larger ChArUco board, and small
+search budgets, so that two executions finish in a few minutes on 2 cores.
+"""
+import copy
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pandas as pd
+import pytest
+import yaml
+
+from stringcast.campaign import run_campaign
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def small_config(config: dict) -> dict:
+    cfg = copy.deepcopy({k: v for k, v in config.items() if k != "_path"})
+    cfg["cameras"]["small"] = {"width_px": 512, "height_px": 512, "fps": 250.0, "bit_depth": 8, "mono": True}
+    cfg["setups"]["default"].update(camera="small", board_origin_mm=[700.0, -250.0], board={
+        "squares_x": 6, "squares_y": 4, "square_mm": 100.0, "marker_mm": 75.0, "dictionary": "DICT_4X4_50"})
+    cfg["lab"]["camera"]["focal_px"] = 695.0
+    cfg["estimation"].update(iterations=256, batch=64)
+    cfg["motion"].update(max_candidates=4096, extra_after_hit=64)
+    return cfg
+
+
+def snakemake(root: Path, *args: str) -> str:
+    proc = subprocess.run([sys.executable, "-m", "snakemake", *args, "--cores", "2", "--directory", str(root)],
+                          cwd=root, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return proc.stdout + proc.stderr
+
+
+def planned_rules(dry_run_output: str) -> set[str]:
+    return set(re.findall(r"^rule (\w+):", dry_run_output, flags=re.M))
+
+
+@pytest.mark.slow
+def test_campaign_end_to_end(tmp_path, config):
+    root = tmp_path / "project"
+    (root / "config").mkdir(parents=True)
+    (root / "Snakefile").symlink_to(ROOT / "Snakefile")
+    (root / "workflow").symlink_to(ROOT / "workflow")
+    (root / "config" / "config.yaml").write_text(yaml.safe_dump(small_config(config)))
+
+    summary = run_campaign("e2e", "1", "1", config_path=str(root / "config" / "config.yaml"),
+                           max_executions=2, cores=2, seed=3, root=root)
+    k = summary["executions"]
+    assert 1 <= k <= 2
+    res = root / "results" / "e2e"
+    for name in ("calibration.json", "sync.json", "tracks.parquet", "params.json", "fit.parquet",
+                 "motion.csv", "motion.json", "report.html"):
+        assert (res / "trial_1" / name).stat().st_size > 0, name
+    tracks = pd.read_parquet(res / "trial_1" / "tracks.parquet")
+    assert list(tracks.columns) == ["frame", "t_s", "point", "x_m", "y_m", "valid"]
+    assert tracks["valid"].mean() > 0.5
+    params = json.loads((res / "trial_1" / "params.json").read_text())
+    assert params["E_mm"] is not None and params["E_mm"] > 0
+    html = (res / "report.html").read_text()
+    assert "trial_1/report.html" in html and "<table" in html
+    trial_html = (res / "trial_1" / "report.html").read_text()
+    assert "tracking error vs lab ground truth" in trial_html
+    # the raw data are untouched by the workflow: only the lab/executor wrote there
+    assert not list((root / "data" / "e2e").rglob("*.parquet.*"))
+
+    # a finished campaign: nothing to do
+    out = snakemake(root, "-n")
+    assert "Nothing to be done" in out or not planned_rules(out), out
+    # deleting one trial's tracks reruns what depends on it, not calibration or sync
+    (res / "trial_1" / "tracks.parquet").unlink()
+    rules = planned_rules(snakemake(root, "-n"))
+    assert {"track", "estimate", "plan", "report_trial", "report_campaign"} <= rules
+    assert not rules & {"calibrate", "sync", "plan_first"}
