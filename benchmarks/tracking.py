@@ -1,0 +1,134 @@
+"""Benchmark ``tracking``: point error against the lab's ground truth, and speed (DESIGN.md, "Benchmarks").
+
+For each string type (quick: types 1 and 5) the lab films the campaign's first planned
+motion (``planning.run_first_plan``, played through ``executor.execute``) with the
+default camera; the workflow's own stages then calibrate (intrinsics from one board clip
+shared by all types), sync (``video.yaml``) and track it. Figures, measured in this run:
+
+* median_mm, p95_mm: distance of every *valid* tracked point 1..n to the lab's ground
+  truth of the same frame (point 0, the grasp, is forward kinematics and left out);
+  valid_share: the share of points 1..n marked valid.
+* fps: frames per second of ``tracking.run_tracking`` (whole call, incl. background);
+  reference: plain decoding of the same video with ``video.open_video`` in the same run.
+
+Run: ``python -m benchmarks.tracking [--quick]`` -> results/bench/tracking.json and
+results/bench/tracking_errors.png (error distribution per string type).
+"""
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from benchmarks.common import BENCH_DIR, header, write
+
+
+def _errors(tracks: pd.DataFrame, truth: pd.DataFrame) -> tuple[np.ndarray, float]:
+    m = tracks.merge(truth, on=["frame", "point"], suffixes=("", "_true"))
+    pts = m[m["point"] > 0]
+    ok = pts["valid"].to_numpy()
+    e = np.hypot(pts["x_m"] - pts["x_m_true"], pts["y_m"] - pts["y_m_true"]).to_numpy()[ok] * 1000
+    return e, float(ok.mean())
+
+
+def _decode_fps(video: Path) -> float:
+    from stringcast.video import open_video
+
+    t0 = time.perf_counter()
+    n = sum(1 for _ in open_video(video))
+    return n / (time.perf_counter() - t0)
+
+
+def track_string(string_type: int, config: dict, calib_dir: Path, work: Path, seed: int) -> dict:
+    """Film, calibrate, sync and track one string type's first motion; errors and timings."""
+    from stringcast.calibration import run_calibration
+    from stringcast.config import resolve_campaign
+    from stringcast.executor import execute
+    from stringcast.planning import run_first_plan
+    from stringcast.sync import run_sync
+    from stringcast.tracking import run_tracking
+
+    campaign = resolve_campaign({"string": string_type, "target": 1}, config, f"bench_{string_type}")
+    d = work / f"string_{string_type}"
+    run_first_plan(campaign, config, d / "motion.csv", d / "motion.json", seed=seed)
+    trial = d / "trial_1"
+    execute(d / "motion.csv", "virtual", trial, campaign, config, seed=seed)
+    run_calibration(trial, calib_dir, campaign, d / "calibration.json")
+    run_sync(trial / "video.yaml", d / "sync.json")
+    decode = _decode_fps(trial / "video.mkv")
+    t0 = time.perf_counter()
+    tracks = run_tracking(trial, d / "calibration.json", d / "sync.json", campaign, config, d / "tracks.parquet")
+    seconds = time.perf_counter() - t0
+    frames = int(tracks["frame"].nunique())
+    e, valid = _errors(tracks, pd.read_parquet(trial / "ground_truth.parquet"))
+    return {"errors_mm": e, "valid_share": valid, "frames": frames, "track_s": seconds,
+            "fps": frames / seconds, "decode_fps": decode}
+
+
+def _figure(per: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    keys = sorted(per, key=int)
+    ax.boxplot([per[k]["errors_mm"] for k in keys], showfliers=False)
+    ax.set_xticks(range(1, len(keys) + 1), [f"type {k}" for k in keys])
+    ax.axhline(1.0, color="C2", ls="--", lw=1, label="1 mm (median goal)")
+    ax.axhline(3.0, color="C3", ls=":", lw=1, label="3 mm (p95 goal)")
+    ax.set_ylabel("point error vs ground truth (mm)")
+    ax.set_title("tracking: valid points 1..n, whiskers 5-95 %")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def run(quick: bool = False) -> dict:
+    from stringcast.config import load_config, resolve_campaign
+    from stringcast.lab import write_calibration_clip
+
+    config = load_config()
+    types = [1, 5] if quick else sorted(int(k) for k in config["strings"])
+    per = {}
+    with tempfile.TemporaryDirectory(prefix="bench_tracking_") as tmp:
+        work = Path(tmp)
+        calib = write_calibration_clip(resolve_campaign({"string": 1, "target": 1}, config, "bench"), config,
+                                       work / "calib", seed=11)
+        for k in types:
+            t0 = time.perf_counter()
+            per[str(k)] = track_string(k, config, calib, work, seed=k)
+            r = per[str(k)]
+            print(f"  string {k}: median {np.median(r['errors_mm']):.2f} mm, p95 "
+                  f"{np.percentile(r['errors_mm'], 95):.2f} mm, valid {r['valid_share']:.3f}, "
+                  f"{r['fps']:.1f} fps (decode {r['decode_fps']:.1f}), {time.perf_counter() - t0:.0f} s", flush=True)
+    e_all = np.concatenate([r["errors_mm"] for r in per.values()])
+    frames = sum(r["frames"] for r in per.values())
+    fps = frames / sum(r["track_s"] for r in per.values())
+    decode = frames / sum(r["frames"] / r["decode_fps"] for r in per.values())
+    figure = BENCH_DIR / "tracking_errors.png"
+    _figure(per, figure)
+    doc = header("tracking", quick) | {
+        "median_mm": float(np.median(e_all)), "p95_mm": float(np.percentile(e_all, 95)),
+        "valid_share": float(np.mean([r["valid_share"] for r in per.values()])),
+        "fps": fps, "reference": {"name": "decode_only", "fps": decode}, "ratio_to_reference": fps / decode,
+        "frames": frames, "camera": config["setups"]["default"]["camera"], "figure": str(figure.name),
+        "per_string": {k: {"median_mm": float(np.median(r["errors_mm"])),
+                           "p95_mm": float(np.percentile(r["errors_mm"], 95)), "valid_share": r["valid_share"],
+                           "fps": r["fps"], "decode_fps": r["decode_fps"], "frames": r["frames"]}
+                       for k, r in per.items()},
+    }
+    write("tracking", doc)
+    return doc
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="string types 1 and 5 only")
+    run(ap.parse_args().quick)
