@@ -77,7 +77,7 @@ def _figure(per: dict, path: Path) -> None:
 
     fig, ax = plt.subplots(figsize=(7, 3.5))
     keys = sorted(per, key=int)
-    ax.boxplot([per[k]["errors_mm"] for k in keys], showfliers=False)
+    ax.boxplot([per[k]["errors_mm"] for k in keys], whis=(5, 95), showfliers=False)
     ax.set_xticks(range(1, len(keys) + 1), [f"type {k}" for k in keys])
     ax.axhline(1.0, color="C2", ls="--", lw=1, label="1 mm (median goal)")
     ax.axhline(3.0, color="C3", ls=":", lw=1, label="3 mm (p95 goal)")
