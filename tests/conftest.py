@@ -1,4 +1,5 @@
 """Shared fixtures: the project's config and a resolved demo campaign."""
+import os
 from pathlib import Path
 
 import pytest
@@ -6,7 +7,8 @@ import pytest
 from stringcast.config import load_config, resolve_campaign
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED_REAL = ROOT.parent / "shared" / "real"
+# the real camera data: $STRINGCAST_REAL_DATA, else ../shared/real beside the clone
+SHARED_REAL = Path(os.environ.get("STRINGCAST_REAL_DATA", ROOT.parent / "shared" / "real"))
 
 
 @pytest.fixture(scope="session")

@@ -18,7 +18,7 @@ CLIP = SHARED_REAL / "charuco_clip"
 
 def _needs(path: Path):
     if not path.exists():
-        pytest.skip(f"real data absent: {path} (expected at ../shared/real relative to the repo root)")
+        pytest.skip(f"real data absent: {path} (set STRINGCAST_REAL_DATA or put it at ../shared/real beside the repo)")
 
 
 def _rel(a, b):
