@@ -162,6 +162,33 @@ def read_joint_table(path: str | Path, kind: str = "joints.csv") -> tuple[np.nda
     return t, data[:, 1:], df
 
 
+def check_joint_coverage(t_joints: np.ndarray, t_frames: np.ndarray, joints_path: str | Path,
+                         tol_s: float | None = None) -> None:
+    """Check that the joint log covers every video frame's time.
+
+    Args:
+        t_joints: (K,) joint-log times, s, controller clock (increasing).
+        t_frames: (F,) frame times, s, on the same clock (after sync).
+        joints_path: the joint log, named in the error.
+        tol_s: slack at each end, s; default one median joint-log period.
+
+    Raises:
+        DataError: the frames start before or end after the log (both spans in the message).
+    """
+    t_joints = np.asarray(t_joints, float)
+    t_frames = np.asarray(t_frames, float)
+    if t_joints.size < 2 or t_frames.size < 1:
+        raise DataError(f"{joints_path}: cannot check coverage of {t_frames.size} frames by {t_joints.size} joint samples")
+    tol = float(np.median(np.diff(t_joints))) if tol_s is None else float(tol_s)
+    j0, j1, f0, f1 = t_joints[0], t_joints[-1], float(np.min(t_frames)), float(np.max(t_frames))
+    before, after = j0 - f0, f1 - j1
+    if before > tol or after > tol:
+        gaps = [f"{before:.4f} s before it" if before > tol else "", f"{after:.4f} s after it" if after > tol else ""]
+        raise DataError(f"{joints_path}: the joint log spans {j0:.4f} .. {j1:.4f} s but the video frames span "
+                        f"{f0:.4f} .. {f1:.4f} s (controller clock); frames "
+                        f"{' and '.join(g for g in gaps if g)} have no joint data")
+
+
 def write_joint_table(path: str | Path, t: np.ndarray, q: np.ndarray,
                       extra: dict[str, np.ndarray] | None = None) -> None:
     """Write ``joints.csv``/``motion.csv``: ``t_s, q1_rad..qJ_rad`` (+ extra columns)."""

@@ -1,4 +1,4 @@
-"""Video readers: one streaming, mono interface over containers and frame folders.
+"""Video readers: one streaming, mono interface over containers, frame folders and Photron files.
 
 :func:`open_video` opens
 
@@ -8,15 +8,17 @@
   depth is kept; a colour stream is decoded to BGR and converted to grey with
   ``cv2.cvtColor(..., COLOR_BGR2GRAY)`` (ITU-R BT.601 luma, full range);
 * a folder of PNG/TIFF frames (natural sort of the file names, so ``f2`` comes before
-  ``f10``), read with ``cv2.imread(IMREAD_UNCHANGED)``; colour frames become grey, and
-  8/16-bit depth is kept.
+  ``f10``): PNG through ``cv2.imread(IMREAD_UNCHANGED)``, TIFF through ``tifffile`` (so
+  12-bit packed and 16-bit, mono and RGB, all read); colour frames become grey, and the
+  8/12/16-bit depth is kept (12-bit in ``uint16``);
+* a multi-page TIFF file (one page per frame) through ``tifffile.TiffFile``;
+* a Photron ``.cihx``/``.cih`` + ``.mraw`` pair (:mod:`stringcast.video_photron`).
 
 Every reader yields ``(index, frame)`` once when iterated, holds one frame at a time, and
-reads single frames with :meth:`VideoReader.read`. Errors are :class:`~stringcast.files.DataError`
-naming the file: unreadable, empty, frames of changing size, or a container that ends
-before its announced frame count (truncated).
-
-A Photron ``.cihx`` + ``.mraw`` pair is named in DESIGN.md but not read yet.
+reads single frames with :meth:`VideoReader.read`. It reports ``fps`` and per-frame
+``timestamps_s`` where the file has them, and the native ``bit_depth``. Errors are
+:class:`~stringcast.files.DataError` naming the file: unreadable, empty, frames of changing
+size, or a file that ends before its announced frame count (truncated).
 """
 from __future__ import annotations
 
@@ -30,20 +32,28 @@ import numpy as np
 from .files import DataError
 
 FRAME_SUFFIXES = (".png", ".tif", ".tiff")
+TIFF_SUFFIXES = (".tif", ".tiff")
+PHOTRON_SUFFIXES = (".cihx", ".cih", ".mraw")
 _SEEK_GAP = 40  # a seek costs about as much as decoding 10-30 frames: grab forward over shorter gaps
 _INTRA_CODECS = {"FFV1", "MJPG", "PNG ", "MPNG", "RAW ", "Y800", "GREY", "Y16 ", "HFYU", "FFVH", "ULRG", "ULY0"}
+_MS_CLOCK_SUFFIXES = (".mkv", ".webm", ".mka", ".mk3d")  # Matroska stores times in ms by default
 
 
-def to_grey(frame: np.ndarray) -> np.ndarray:
-    """(H, W[, 3|4]) uint8/uint16 -> (H, W) grey of the same dtype (cv2.cvtColor, BT.601)."""
+def to_grey(frame: np.ndarray, order: str = "BGR") -> np.ndarray:
+    """(H, W[, 1|3|4]) uint8/uint16 -> (H, W) grey of the same dtype (cv2.cvtColor, BT.601).
+
+    ``order`` is the channel order of a colour frame: ``"BGR"`` (OpenCV) or ``"RGB"``
+    (tifffile, Photron). Raises ValueError for other shapes.
+    """
     if frame.ndim == 2:
         return frame
     if frame.ndim == 3 and frame.shape[2] == 1:
         return frame[:, :, 0]
+    rgb = order.upper() == "RGB"
     if frame.ndim == 3 and frame.shape[2] == 3:
-        return cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
+        return cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY if rgb else cv2.COLOR_BGR2GRAY)
     if frame.ndim == 3 and frame.shape[2] == 4:
-        return cv2.cvtColor(frame, cv2.COLOR_BGRA2GRAY)
+        return cv2.cvtColor(frame, cv2.COLOR_RGBA2GRAY if rgb else cv2.COLOR_BGRA2GRAY)
     raise ValueError(f"cannot convert an image of shape {frame.shape} to grey")
 
 
@@ -56,6 +66,11 @@ class VideoReader:
         fps: frames per second, or None if the source does not say (frame folders).
         width, height: frame size in px.
         dtype: ``np.uint8`` or ``np.uint16``.
+        bit_depth: significant bits per pixel in the file (8, 10, 12, 16): pixel values are
+            below ``2**bit_depth``; 12-bit data come in ``uint16``.
+        timestamps_s: (n_frames,) per-frame times in s from the file (container
+            presentation times), or None where the file has none or they cannot resolve
+            the frame period; see :func:`dropped_frames`.
 
     Iterating yields ``(index, frame)`` with frame (height, width) of ``dtype``, each
     frame once, in order. Use as a context manager or call :meth:`close`.
@@ -67,6 +82,11 @@ class VideoReader:
     width: int
     height: int
     dtype: np.dtype
+    bit_depth: int
+
+    @property
+    def timestamps_s(self) -> np.ndarray | None:
+        return None
 
     def __len__(self) -> int:
         return self.n_frames
@@ -85,7 +105,8 @@ class VideoReader:
         raise NotImplementedError
 
     def __iter__(self) -> Iterator[tuple[int, np.ndarray]]:
-        raise NotImplementedError
+        for i in range(self.n_frames):
+            yield i, self.read(i)
 
     def _check_index(self, index: int) -> int:
         index = int(index)
@@ -93,15 +114,15 @@ class VideoReader:
             raise IndexError(f"{self.path}: frame {index} out of range 0..{self.n_frames - 1}")
         return index
 
-    def _check_frame(self, frame: np.ndarray, index: int) -> np.ndarray:
+    def _check_frame(self, frame: np.ndarray, index: int, source: Path | None = None) -> np.ndarray:
         if frame.shape != (self.height, self.width) or frame.dtype != self.dtype:
-            raise DataError(f"{self.path}: frame {index} is {frame.shape} {frame.dtype}, the first was "
+            raise DataError(f"{source or self.path}: frame {index} is {frame.shape} {frame.dtype}, the first was "
                             f"{(self.height, self.width)} {np.dtype(self.dtype)}")
         return frame
 
     def __repr__(self) -> str:
         return (f"{type(self).__name__}({str(self.path)!r}, {self.n_frames} frames, {self.width}x{self.height}, "
-                f"{np.dtype(self.dtype).name}, fps={self.fps})")
+                f"{self.bit_depth}-bit, fps={self.fps})")
 
 
 class ContainerReader(VideoReader):
@@ -112,6 +133,12 @@ class ContainerReader(VideoReader):
     ``CAP_PROP_POS_FRAMES`` over long gaps for intra-only codecs (FFV1, MJPEG, PNG, raw),
     where it is exact; for inter-frame codecs (H.264, ...) it decodes forward from the
     start (or the current position), which is exact but slow.
+
+    Matroska keeps times in ms, so above 1000 fps its announced frame count (duration x
+    fps) and frame seeks are ambiguous: the count is then found by decoding the file once
+    at opening, and :meth:`read` never seeks. ``timestamps_s`` are the frames'
+    presentation times (``CAP_PROP_POS_MSEC``), recorded while iterating or, if asked
+    for before a full pass, by one decoding pass; None if they do not increase strictly.
     """
 
     def __init__(self, path: str | Path):
@@ -137,9 +164,16 @@ class ContainerReader(VideoReader):
         first = raw if self._raw else to_grey(bgr)
         self.height, self.width = first.shape
         self.dtype = first.dtype
+        self.bit_depth = 8 * first.dtype.itemsize
         self.fps = fps if np.isfinite(fps) and fps > 0 else None
+        self._pts_ms: list[float] | None = None
+        self._can_seek = self.fourcc in _INTRA_CODECS
+        if self.path.suffix.lower() in _MS_CLOCK_SUFFIXES and self.fps is not None and self.fps > 1000.0:
+            self._can_seek = False
+            count = -1  # duration (ms) x fps is not exact: count by decoding
         if count <= 0:
-            count = self._count_by_decoding()
+            self._pts_ms = self._decode_pass()
+            count = len(self._pts_ms)
         self.n_frames = count
         self._cap: cv2.VideoCapture | None = None
         self._pos = 0  # index of the frame the next _cap.read() returns
@@ -152,13 +186,27 @@ class ContainerReader(VideoReader):
             cap.set(cv2.CAP_PROP_CONVERT_RGB, 0)
         return cap
 
-    def _count_by_decoding(self) -> int:
+    def _decode_pass(self) -> list[float]:
+        """Grab every frame once; their presentation times in ms."""
         cap = self._open(raw=True)
-        n = 0
+        pts = []
         while cap.grab():
-            n += 1
+            pts.append(float(cap.get(cv2.CAP_PROP_POS_MSEC)))
         cap.release()
-        return n
+        return pts
+
+    @property
+    def timestamps_s(self) -> np.ndarray | None:
+        if self._pts_ms is None:
+            pts = self._decode_pass()
+            if len(pts) < self.n_frames:
+                raise DataError(f"{self.path}: truncated or corrupt: {len(pts)} of {self.n_frames} announced "
+                                "frames could be decoded")
+            self._pts_ms = pts[: self.n_frames]
+        t = np.asarray(self._pts_ms, float) * 1e-3
+        if len(t) != self.n_frames or not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
+            return None
+        return t
 
     def _decode(self, cap: cv2.VideoCapture, index: int) -> np.ndarray:
         ok, frame = cap.read()
@@ -176,7 +224,7 @@ class ContainerReader(VideoReader):
             self._cap = self._open(self._raw)
             self._pos = 0
         if index != self._pos:
-            if self.fourcc in _INTRA_CODECS and index - self._pos > _SEEK_GAP:
+            if self._can_seek and index - self._pos > _SEEK_GAP:
                 self._cap.set(cv2.CAP_PROP_POS_FRAMES, index)
             else:
                 while self._pos < index:
@@ -191,9 +239,14 @@ class ContainerReader(VideoReader):
 
     def __iter__(self) -> Iterator[tuple[int, np.ndarray]]:
         cap = self._open(self._raw)
+        pts = []
         try:
             for i in range(self.n_frames):
-                yield i, self._decode(cap, i)
+                frame = self._decode(cap, i)
+                pts.append(float(cap.get(cv2.CAP_PROP_POS_MSEC)))
+                yield i, frame
+            if self._pts_ms is None:
+                self._pts_ms = pts
         finally:
             cap.release()
 
@@ -207,8 +260,30 @@ def _natural_key(p: Path) -> list:
     return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", p.name)]
 
 
+def _tiff_page(page, source: Path) -> tuple[np.ndarray, int]:
+    """One ``tifffile`` page -> (grey frame, bits per sample). Raises DataError."""
+    try:
+        img = page.asarray()
+    except Exception as exc:  # tifffile raises several types for damaged files
+        raise DataError(f"{source}: TIFF page {page.index} is unreadable or truncated: {exc}") from exc
+    if img.dtype not in (np.uint8, np.uint16):
+        raise DataError(f"{source}: pixel type {img.dtype} (expected 8- to 16-bit unsigned integers)")
+    if img.ndim == 3 and img.shape[0] in (3, 4) and img.shape[2] not in (3, 4):  # planar RGB
+        img = np.moveaxis(img, 0, -1)
+    try:
+        grey = to_grey(np.ascontiguousarray(img), "RGB")
+    except ValueError as exc:
+        raise DataError(f"{source}: {exc}") from exc
+    bps = page.bitspersample
+    return grey, int(bps if isinstance(bps, int) else max(bps))
+
+
 class FrameFolderReader(VideoReader):
-    """A folder of PNG/TIFF frames, one file per frame, in natural name order."""
+    """A folder of PNG/TIFF frames, one file per frame, in natural name order.
+
+    PNG is read with ``cv2.imread(IMREAD_UNCHANGED)``, TIFF with ``tifffile`` (first page
+    of each file). ``bit_depth`` is the first TIFF's BitsPerSample, or the PNG's dtype width.
+    """
 
     def __init__(self, path: str | Path, fps: float | None = None):
         self.path = Path(path)
@@ -218,53 +293,147 @@ class FrameFolderReader(VideoReader):
                              and not p.name.startswith(".")), key=_natural_key)
         if not self.files:
             raise DataError(f"{self.path}: no PNG/TIFF frames in the folder")
-        first = self._load(self.files[0])
+        first, self.bit_depth = self._load(self.files[0])
         self.height, self.width = first.shape
         self.dtype = first.dtype
         self.n_frames = len(self.files)
         self.fps = fps
 
-    def _load(self, f: Path) -> np.ndarray:
+    def _load(self, f: Path) -> tuple[np.ndarray, int]:
+        if f.suffix.lower() in TIFF_SUFFIXES:
+            import tifffile
+
+            try:
+                with tifffile.TiffFile(f) as tif:
+                    return _tiff_page(tif.pages[0], f)
+            except DataError:
+                raise
+            except Exception as exc:
+                raise DataError(f"{f}: not a readable TIFF image: {exc}") from exc
         img = cv2.imread(str(f), cv2.IMREAD_UNCHANGED)
         if img is None or img.size == 0:
             raise DataError(f"{f}: not a readable image")
         if img.dtype not in (np.uint8, np.uint16):
             raise DataError(f"{f}: pixel type {img.dtype} (expected 8- or 16-bit)")
         try:
-            return to_grey(img)
+            return to_grey(img), 8 * img.dtype.itemsize
         except ValueError as exc:
             raise DataError(f"{f}: {exc}") from exc
 
     def read(self, index: int) -> np.ndarray:
         index = self._check_index(index)
-        frame = self._load(self.files[index])
-        if frame.shape != (self.height, self.width) or frame.dtype != self.dtype:
-            raise DataError(f"{self.files[index]}: {frame.shape} {frame.dtype}, the first frame was "
-                            f"{(self.height, self.width)} {np.dtype(self.dtype)}")
-        return frame
+        return self._check_frame(self._load(self.files[index])[0], index, self.files[index])
 
-    def __iter__(self) -> Iterator[tuple[int, np.ndarray]]:
-        for i in range(self.n_frames):
-            yield i, self.read(i)
+
+def _tiff_announced_frames(tif) -> int | None:
+    """Frame count a stack's ImageJ or tifffile ("shaped") metadata announces, if any."""
+    ij = tif.imagej_metadata or {}
+    if ij.get("images"):
+        return int(ij["images"])
+    shaped = tif.shaped_metadata or ()
+    shape = shaped[0].get("shape") if shaped else None
+    if shape and len(shape) >= 3 and tif.pages[0].shape == tuple(shape[1:]):
+        return int(shape[0])  # (frames, H, W[, samples])
+    return None
+
+
+class TiffStackReader(VideoReader):
+    """A multi-page TIFF file, one page per frame, read page by page with ``tifffile``."""
+
+    def __init__(self, path: str | Path, fps: float | None = None):
+        import tifffile
+
+        self.path = Path(path)
+        try:
+            self._tif = tifffile.TiffFile(self.path)
+            self.n_frames = len(self._tif.pages)
+            announced = _tiff_announced_frames(self._tif)
+        except Exception as exc:
+            raise DataError(f"{self.path}: not a readable TIFF file: {exc}") from exc
+        if announced is not None and announced > self.n_frames:
+            self._tif.close()
+            raise DataError(f"{self.path}: truncated: {self.n_frames} of the {announced} pages its metadata "
+                            "announces could be found")
+        if self.n_frames < 2:
+            self._tif.close()
+            raise DataError(f"{self.path}: a single image, not a video (put frames in a folder)")
+        first, self.bit_depth = _tiff_page(self._tif.pages[0], self.path)
+        self.height, self.width = first.shape
+        self.dtype = first.dtype
+        self.fps = fps
+
+    def read(self, index: int) -> np.ndarray:
+        index = self._check_index(index)
+        try:
+            page = self._tif.pages[index]
+        except Exception as exc:
+            raise DataError(f"{self.path}: truncated or corrupt: page {index} of {self.n_frames}: {exc}") from exc
+        return self._check_frame(_tiff_page(page, self.path)[0], index)
+
+    def close(self) -> None:
+        self._tif.close()
+
+
+def dropped_frames(timestamps_s: np.ndarray, fps: float) -> list[tuple[int, int]]:
+    """Gaps in per-frame timestamps: ``[(index, n_missing), ...]``.
+
+    ``index`` is the frame after which ``n_missing = round(dt * fps) - 1 >= 1`` frames are
+    missing, ``dt`` the gap to the next frame (s). Empty list: no frame dropped.
+    """
+    dt = np.diff(np.asarray(timestamps_s, float))
+    missing = np.rint(dt * float(fps)).astype(int) - 1
+    return [(int(i), int(missing[i])) for i in np.flatnonzero(missing >= 1)]
+
+
+def check_frame_count(reader: VideoReader, meta: dict, video_yaml_path: str | Path) -> list[str]:
+    """Check a video against its ``video.yaml`` (read by :func:`files.read_video_meta`).
+
+    Raises:
+        DataError: ``frames`` (or ``width_px``/``height_px`` where given) disagree with
+            the video; the message names both files.
+
+    Returns:
+        warnings: fps or ``bit_depth`` that disagree (the yaml is used for time).
+    """
+    src = f"{video_yaml_path}"
+    if int(meta["frames"]) != reader.n_frames:
+        raise DataError(f"{src}: frames: {meta['frames']}, but the video {reader.path} has {reader.n_frames} "
+                        f"frames ({reader.n_frames - int(meta['frames']):+d})")
+    for key, got in (("width_px", reader.width), ("height_px", reader.height)):
+        if meta.get(key) is not None and int(meta[key]) != got:
+            raise DataError(f"{src}: {key}: {meta[key]}, but the video {reader.path} is "
+                            f"{reader.width}x{reader.height} px")
+    warnings = []
+    if reader.fps is not None and abs(reader.fps - float(meta["fps"])) > 1e-3 * float(meta["fps"]):
+        warnings.append(f"{src}: fps {meta['fps']} but {reader.path} says {reader.fps:g}; using {meta['fps']}")
+    if meta.get("bit_depth") is not None and int(meta["bit_depth"]) > reader.bit_depth:
+        warnings.append(f"{src}: bit_depth {meta['bit_depth']} but {reader.path} holds {reader.bit_depth}-bit frames")
+    return warnings
 
 
 def open_video(path: str | Path, fps: float | None = None) -> VideoReader:
     """Open a video file or a folder of frames as a mono :class:`VideoReader`.
 
     Args:
-        path: a container OpenCV reads (mkv/avi/mp4/...) or a folder of PNG/TIFF frames.
-        fps: frame rate to report for a frame folder (containers report their own).
+        path: a container OpenCV reads (mkv/avi/mp4/...), a folder of PNG/TIFF frames, a
+            multi-page TIFF, or a Photron ``.cihx``/``.cih`` (or its ``.mraw``).
+        fps: frame rate to report for a frame folder or TIFF stack (the others report their own).
 
     Raises:
-        DataError: missing, empty or unreadable source; a Photron ``.cihx`` (not read yet).
+        DataError: missing, empty, unreadable or truncated source; a single image.
     """
     path = Path(path)
     if path.is_dir():
         return FrameFolderReader(path, fps)
     if not path.exists():
         raise DataError(f"{path}: file not found")
-    if path.suffix.lower() in (".cihx", ".cih", ".mraw"):
-        raise DataError(f"{path}: Photron .cihx/.mraw is not read yet; convert it to a PNG/TIFF folder")
-    if path.suffix.lower() in FRAME_SUFFIXES:
+    suffix = path.suffix.lower()
+    if suffix in PHOTRON_SUFFIXES:
+        from .video_photron import PhotronReader
+
+        return PhotronReader(path)
+    if suffix in TIFF_SUFFIXES:
+        return TiffStackReader(path, fps)
+    if suffix in FRAME_SUFFIXES:
         raise DataError(f"{path}: a single image, not a video (put frames in a folder)")
     return ContainerReader(path)
