@@ -354,3 +354,46 @@ def test_lab_shares_no_code_with_the_model():
             for mod in mods:
                 parts = set(mod.replace("stringcast.", "").split("."))
                 assert not (parts & banned), f"{f.name} imports {mod}"
+
+
+# ---------------------------------------------------------------------------- harder footage
+def test_apply_preset(config):
+    from stringcast.lab import PRESETS, apply_preset
+
+    before = copy.deepcopy(config)
+    cfg = apply_preset(config, "dim+fast")
+    assert config == before                                # a copy: the input is untouched
+    assert cfg["lab"]["camera"]["light_level"] == PRESETS["fast"]["camera"]["light_level"]  # later one wins
+    assert cfg["lab"]["camera"]["noise_sigma"] == PRESETS["dim"]["camera"]["noise_sigma"]
+    assert all(c["fps"] == 2000.0 for c in cfg["cameras"].values())
+    own = copy.deepcopy(config)
+    own["lab"]["presets"] = {"dim": {"camera": {"light_level": 0.5}}, "hot": {"cameras": {"fps": 1000.0}}}
+    assert apply_preset(own, "dim")["lab"]["camera"]["light_level"] == 0.5
+    assert apply_preset(own, "hot")["cameras"]["highspeed_1024"]["fps"] == 1000.0
+    with pytest.raises(ConfigError, match="unknown.*known"):
+        apply_preset(config, "foggy")
+    own["lab"]["presets"]["bad"] = {"camera": {"lite_level": 0.5}}
+    with pytest.raises(ConfigError, match="lite_level"):
+        apply_preset(own, "bad")
+
+
+def test_oblique_camera_pose(tiny):
+    """tilt_deg (pitch, yaw) turns the optical axis off the plane's normal, roll_deg turns the
+    image about it; the axis still meets the plane at center_mm; too much tilt is refused."""
+    campaign, cfg = tiny
+    obl = copy.deepcopy(cfg)
+    obl["lab"]["camera"].update(tilt_deg=[15.0, -30.0], roll_deg=4.0)
+    cam = CameraModel.from_config(campaign.setup.camera, obl)
+    axis = cam.R.T @ np.array([0, 0, 1.0])
+    assert np.degrees(np.arccos(-axis[2])) == pytest.approx(np.degrees(np.arccos(np.cos(np.radians(15))
+                                                                                    * np.cos(np.radians(30)))))
+    hit = cam.center + axis * (-cam.center[2] / axis[2])
+    assert hit[:2] == pytest.approx(np.asarray(obl["lab"]["camera"]["center_mm"]) / 1000, abs=1e-9)
+    # the plane's x axis is no longer the image's: the roll and the yaw show
+    d = cam.project(np.array([hit[:2] + [0.05, 0], hit[:2]]))
+    assert abs(np.degrees(np.arctan2(*(d[0] - d[1])[::-1]))) > 2.0
+    r = build_renderer(campaign, obl)                      # the scene renders through the oblique view
+    assert r.bg_dn.shape == (240, 320) and np.ptp(r.bg_dn) > 100
+    obl["lab"]["camera"]["tilt_deg"] = [88.0, 0.0]       # the image top sees past the horizon
+    with pytest.raises(ConfigError, match="horizon"):
+        CameraModel.from_config(campaign.setup.camera, obl)

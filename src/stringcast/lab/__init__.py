@@ -6,14 +6,15 @@ servo lag (:mod:`.servo`), filmed by a simulated pinhole camera with OpenCV lens
 distortion, motion blur and sensor noise (:mod:`.camera`, :mod:`.scene`).
 :func:`run_trial` writes a trial's raw files exactly as DESIGN.md's data
 contract says (plus ground truth for tests and benchmarks);
-:func:`write_calibration_clip` films the ChArUco board for intrinsics.
+:func:`write_calibration_clip` films the ChArUco board for intrinsics;
+:func:`apply_preset` makes the footage harder (dim, blur, oblique, fast, lowres, flicker).
 """
-from .camera import CameraModel, IdealCanvas, Sensor, camera_settings
+from .camera import PRESETS, CameraModel, IdealCanvas, Sensor, apply_preset, camera_settings
 from .physics import ChainSim, Recording, StringPhysics, simulate
 from .servo import servo_lag
 from .trial import build_renderer, motion_end, run_trial, write_calibration_clip
 
 __all__ = [
-    "CameraModel", "IdealCanvas", "Sensor", "camera_settings", "ChainSim", "Recording", "StringPhysics",
-    "servo_lag", "simulate", "build_renderer", "motion_end", "run_trial", "write_calibration_clip",
+    "PRESETS", "apply_preset", "CameraModel", "IdealCanvas", "Sensor", "camera_settings", "ChainSim",
+    "Recording", "StringPhysics", "servo_lag", "simulate", "build_renderer", "motion_end", "run_trial", "write_calibration_clip",
 ]

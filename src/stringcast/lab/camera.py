@@ -10,15 +10,22 @@ and a calibration with ``cv2.calibrateCamera`` can recover it.
 World frame = robot base frame (x towards the target, y up, swing plane z = 0).
 The camera looks at the swing plane from +z: its optical axis meets the plane at
 ``lab.camera.center_mm``, from ``distance_mm`` away, turned by ``tilt_deg`` about
-the camera's x and y axes.
+the camera's x and y axes (pitch, yaw: an oblique view of the swing plane) and
+rolled by ``roll_deg`` about its optical axis.
 
 Sensor: image = 255 * gain * radiance (radiance in [0, 1] from the scene's
 reflectance times illumination and vignetting), plus Gaussian read noise
 (``noise_sigma`` DN) and shot noise (variance ``shot_gain`` * DN), rounded and
-clipped to 8 bit.
+clipped to 8 bit. ``light_level`` scales the illumination (dim light: a lower
+signal at the same read noise); ``light_drift_per_s`` and ``flicker`` (at
+``flicker_hz``, averaged over the exposure) make it vary from frame to frame.
+
+Harder footage: named presets (:data:`PRESETS`, overridable and extendable in
+``lab.presets``) merged into the config by :func:`apply_preset`.
 """
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass
 from typing import Mapping
@@ -40,7 +47,29 @@ CAMERA_DEFAULTS = {
     "shot_gain": 0.003,
     "blur_sigma_px": 0.5,
     "vignetting": 0.25,
+    "roll_deg": 0.0,
+    "light_level": 1.0,
+    "light_drift_per_s": 0.0,
+    "flicker": 0.0,
+    "flicker_hz": 100.0,
 }
+
+PRESETS = {
+    # a quarter of the light at the same read noise (and a little more: gain turned up)
+    "dim": {"camera": {"light_level": 0.25, "noise_sigma": 1.6}},
+    # the shutter open for 95 % of a 500 fps frame period, and slightly out of focus
+    "blur": {"camera": {"exposure_s": 0.0019, "blur_sigma_px": 1.0}},
+    # the camera 30 deg to the side of the plane's normal and 15 deg above it, rolled 4 deg
+    "oblique": {"camera": {"tilt_deg": [15.0, -30.0], "roll_deg": 4.0}},
+    # 2000 fps with a matching short exposure and less light per frame
+    "fast": {"cameras": {"fps": 2000.0}, "camera": {"exposure_s": 0.0004, "light_level": 0.6}},
+    # a 640 x 640 sensor seeing the same field (about 2.9 mm per pixel at the default camera)
+    "lowres": {"cameras": {"width_px": 640, "height_px": 640}, "camera": {"focal_px": 869.0}},
+    # light drifting by -30 %/s with 100 Hz mains flicker of +-6 %
+    "flicker": {"camera": {"light_drift_per_s": -0.3, "flicker": 0.06}},
+}
+"""Named lab settings for harder footage: ``camera`` entries go into ``lab.camera``,
+``cameras`` entries into every camera of ``cameras:`` (fps, width_px, height_px)."""
 
 
 def camera_settings(config: Mapping) -> dict:
@@ -50,6 +79,48 @@ def camera_settings(config: Mapping) -> dict:
     if unknown:
         raise ConfigError(f"lab.camera: unknown keys {sorted(unknown)}")
     return {**CAMERA_DEFAULTS, **lab}
+
+
+def presets(config: Mapping) -> dict:
+    """:data:`PRESETS` updated with ``lab.presets`` (a preset there replaces the built-in one)."""
+    extra = (config.get("lab", {}) or {}).get("presets", {}) or {}
+    if not isinstance(extra, Mapping):
+        raise ConfigError("lab.presets: expected a mapping of preset name -> settings")
+    return {**PRESETS, **extra}
+
+
+def apply_preset(config: Mapping, name: str) -> dict:
+    """A deep copy of ``config`` with the lab preset(s) ``name`` applied.
+
+    Args:
+        config: the loaded config. name: a preset name, or several joined by ``+``
+            (``"dim+blur"``; later ones win where they set the same key).
+
+    Returns:
+        The new config: each preset's ``camera`` mapping merged into ``lab.camera``,
+        its ``cameras`` mapping merged into every entry of ``cameras:``.
+
+    Raises:
+        ConfigError: an unknown preset, a preset with keys other than ``camera`` and
+            ``cameras``, or ``camera`` keys unknown to ``lab.camera``.
+    """
+    out = copy.deepcopy(dict(config))
+    table = presets(config)
+    for part in str(name).split("+"):
+        part = part.strip()
+        if part not in table:
+            raise ConfigError(f"lab preset '{part}' unknown; known: {sorted(table)}")
+        p = table[part] or {}
+        bad = set(p) - {"camera", "cameras"}
+        if bad:
+            raise ConfigError(f"lab.presets.{part}: unknown keys {sorted(bad)} (expected camera, cameras)")
+        lab = out.setdefault("lab", {}) or {}
+        out["lab"] = lab
+        lab["camera"] = {**(lab.get("camera", {}) or {}), **(p.get("camera", {}) or {})}
+        camera_settings(out)                       # unknown lab.camera keys are an error
+        for cam in (out.get("cameras", {}) or {}).values():
+            cam.update(p.get("cameras", {}) or {})
+    return out
 
 
 @dataclass(frozen=True)
@@ -94,9 +165,16 @@ class CameraModel:
         if dist.shape != (5,):
             raise ConfigError("lab.camera.dist_coeffs: expected 5 values (k1, k2, p1, p2, k3)")
         ax, ay = np.radians(np.asarray(c["tilt_deg"], float))
+        az = math.radians(float(c["roll_deg"]))
         rx = np.array([[1, 0, 0], [0, math.cos(ax), -math.sin(ax)], [0, math.sin(ax), math.cos(ax)]])
         ry = np.array([[math.cos(ay), 0, math.sin(ay)], [0, 1, 0], [-math.sin(ay), 0, math.cos(ay)]])
-        R = rx @ ry @ np.diag([1.0, -1.0, -1.0])       # camera looks along world -z
+        rz = np.array([[math.cos(az), -math.sin(az), 0], [math.sin(az), math.cos(az), 0], [0, 0, 1]])
+        R = rz @ rx @ ry @ np.diag([1.0, -1.0, -1.0])  # camera looks along world -z
+        corners = np.array([[0, 0, 1], [w, 0, 1], [w, h, 1], [0, h, 1]], float)
+        rays = (R.T @ np.linalg.solve(K, corners.T)).T  # world directions of the image corners
+        if np.any(rays[:, 2] > -0.05 * np.linalg.norm(rays, axis=1)):
+            raise ConfigError(f"lab.camera: tilt_deg {list(c['tilt_deg'])} turns the {w}x{h} image past the "
+                              "swing plane's horizon (an image corner's ray misses the plane)")
         forward = R.T @ np.array([0, 0, 1.0])
         P = np.array([*np.asarray(c["center_mm"], float) / 1000, 0.0])
         C = P - float(c["distance_mm"]) / 1000 * forward
@@ -243,6 +321,14 @@ class Sensor:
         self.sigma = float(settings["noise_sigma"])
         self.shot_gain = float(settings["shot_gain"])
         self.blur_sigma = float(settings["blur_sigma_px"])
+        self.light_level = float(settings["light_level"])
+        self.light_drift = float(settings["light_drift_per_s"])
+        self.flicker = float(settings["flicker"])
+        self.flicker_hz = float(settings["flicker_hz"])
+        if not 0 < self.light_level <= 4:
+            raise ConfigError(f"lab.camera.light_level = {self.light_level}: expected (0, 4]")
+        if abs(self.flicker) >= 1 or self.flicker_hz <= 0:
+            raise ConfigError("lab.camera: flicker must be in (-1, 1) and flicker_hz > 0")
         u, v = np.meshgrid(np.arange(cam.width), np.arange(cam.height))
         r2 = ((u - cam.K[0, 2]) ** 2 + (v - cam.K[1, 2]) ** 2) / cam.K[0, 0] ** 2
         # cos^4-like fall-off, scaled so the image corners lose about ``vignetting``.
@@ -250,6 +336,19 @@ class Sensor:
         a = float(settings["vignetting"])
         k = (1 / max(1e-6, 1 - a)) ** 0.5 - 1
         self.vignette = (1.0 / (1 + k * r2 / max(corner, 1e-9)) ** 2).astype(np.float32)
+
+    def light(self, t: float, exposure: float) -> float:
+        """Relative illumination of a frame exposed over t +- exposure / 2 (s): drift x flicker.
+
+        1 + light_drift_per_s t (at least 0.05), times 1 + flicker sin(2 pi f t) averaged over
+        the exposure (the sinusoid's mean over the window: a sinc factor).
+        """
+        drift = max(0.05, 1.0 + self.light_drift * t)
+        if self.flicker == 0:
+            return drift
+        w = math.pi * self.flicker_hz * exposure
+        avg = math.sin(w) / w if w > 1e-9 else 1.0
+        return drift * (1.0 + self.flicker * avg * math.sin(2 * math.pi * self.flicker_hz * t))
 
     def blur(self, img: np.ndarray) -> np.ndarray:
         """Optics point-spread: a Gaussian of ``blur_sigma_px`` (on the ideal canvas)."""

@@ -33,6 +33,7 @@ SHIFT = 4                      # sub-pixel bits for cv2 drawing
 ONE = 1 << SHIFT
 BG_SS = 2                      # background supersampling
 STRING_SS = 4                  # string supersampling
+MAX_SUB = 48                   # most sub-exposure renders per frame (long exposures, fast strings)
 
 REFLECTANCE = {
     "wall": 0.62, "table": 0.38, "table_edge": 0.85, "pedestal": 0.28, "paper": 0.92, "ink": 0.06,
@@ -126,14 +127,16 @@ def warp_board(dst: np.ndarray, board: BoardSpec, H_board_to_dst: np.ndarray) ->
 
 
 def gain_map(cam: CameraModel, sensor: Sensor, seed: int) -> np.ndarray:
-    """(H, W) float32 DN per unit reflectance: uneven light (gradient + a soft hot spot) x vignetting."""
+    """(H, W) float32 DN per unit reflectance: uneven light (gradient + a soft hot spot) x vignetting,
+    scaled by the sensor's ``light_level``."""
     rng = np.random.default_rng(seed)
     u, v = np.meshgrid(np.linspace(-1, 1, cam.width, dtype=np.float32),
                        np.linspace(-1, 1, cam.height, dtype=np.float32))
     gx, gy = rng.uniform(-0.08, 0.08, 2)
     cx, cy = rng.uniform(-0.6, 0.6, 2)
     light = 0.86 + gx * u + gy * v + 0.1 * np.exp(-((u - cx) ** 2 + (v - cy) ** 2) / 0.5)
-    return (255 * LEVEL * light / light.max() * sensor.vignette).astype(np.float32)
+    level = 255 * LEVEL * sensor.light_level          # lab.camera.light_level: dim light
+    return (level * light / light.max() * sensor.vignette).astype(np.float32)
 
 
 def render_background(cam: CameraModel, canvas: IdealCanvas, campaign: Campaign, seed: int,
@@ -271,14 +274,18 @@ class FrameRenderer:
         if len(sites) < 2:
             return 1
         d = np.linalg.norm(sites[-1] - sites[0], axis=-1).max() * self.px_per_m
-        return int(np.clip(math.ceil(d / 0.7), 1, 24))
+        return int(np.clip(math.ceil(d / 0.7), 1, MAX_SUB))
 
-    def render(self, sites: np.ndarray, q_arm: np.ndarray) -> np.ndarray:
+    def render(self, sites: np.ndarray, q_arm: np.ndarray, light: float = 1.0) -> np.ndarray:
         """One frame: sites (m, S, 2) world m and q_arm (m, J) rad at m sub-exposure times -> (H, W) uint8.
 
-        Noise from :meth:`Sensor.expose` (seed it with :meth:`Sensor.seed`).
+        ``light``: the frame's relative illumination (:meth:`Sensor.light`). Noise from
+        :meth:`Sensor.expose` (seed it with :meth:`Sensor.seed`).
         """
-        return self.sensor.expose(self.dynamic_dn(sites, q_arm))
+        dn = self.dynamic_dn(sites, q_arm)
+        if light != 1.0:
+            dn *= np.float32(light)
+        return self.sensor.expose(dn)
 
     def dynamic_dn(self, sites: np.ndarray, q_arm: np.ndarray) -> np.ndarray:
         """Noise-free DN image (H, W) float32 of one frame (see :meth:`render`)."""

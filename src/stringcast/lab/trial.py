@@ -208,7 +208,7 @@ def run_trial(t_cmd: np.ndarray, q_cmd: np.ndarray, campaign: Campaign, config: 
         for k, tc in enumerate(tqdm(t_frames, desc="lab frames", unit="frame", disable=None, leave=False)):
             m = renderer.n_sub(rec.at(np.array([tc - exposure / 2, tc + exposure / 2])))
             sub_t = tc + exposure * ((np.arange(m) + 0.5) / m - 0.5)
-            writer.write(renderer.render(rec.at(sub_t), rec.arm_at(sub_t)))
+            writer.write(renderer.render(rec.at(sub_t), rec.arm_at(sub_t), renderer.sensor.light(tc, exposure)))
             pts = rec.at(np.array([tc]))[0][::lpp][: n + 1]
             gt_rows.append((np.full(n + 1, k), np.full(n + 1, tc), np.arange(n + 1), pts[:, 0], pts[:, 1]))
         writer.close()
