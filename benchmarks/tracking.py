@@ -58,7 +58,7 @@ def track_string(string_type: int, config: dict, calib_dir: Path, work: Path, se
     trial = d / "trial_1"
     execute(d / "motion.csv", "virtual", trial, campaign, config, seed=seed)
     run_calibration(trial, calib_dir, campaign, d / "calibration.json")
-    run_sync(trial / "video.yaml", d / "sync.json")
+    run_sync(trial, d / "calibration.json", campaign, config, d / "sync.json")
     decode = _decode_fps(trial / "video.mkv")
     t0 = time.perf_counter()
     tracks = run_tracking(trial, d / "calibration.json", d / "sync.json", campaign, config, d / "tracks.parquet")

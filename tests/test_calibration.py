@@ -121,6 +121,14 @@ def test_distortion_round_trip_is_exact():
     assert np.max(np.abs(cal.distort(cal.undistort(uv)) - uv)) < 1e-6
 
 
+def test_distort_matches_opencv_projectpoints():
+    cal = Calibration(np.eye(3), SIZE, K_TRUE, DIST_TRUE)
+    uv = np.random.default_rng(1).uniform([-50, -50], np.add(SIZE, 50), (500, 2))
+    rays = np.column_stack([(uv - K_TRUE[:2, 2]) / np.diag(K_TRUE)[:2], np.ones(len(uv))])
+    ref, _ = cv2.projectPoints(rays, np.zeros(3), np.zeros(3), K_TRUE, DIST_TRUE)
+    assert np.max(np.abs(cal.distort(uv) - ref.reshape(-1, 2))) < 1e-6
+
+
 def test_no_board_raises_naming_source():
     img = np.full((200, 300), 128, np.uint8)
     cv2.circle(img, (150, 100), 40, 30, -1)

@@ -9,7 +9,7 @@ from scipy.spatial import cKDTree
 
 from stringcast.arm import forward_kinematics
 from stringcast.calibration import Calibration
-from stringcast.files import write_joint_table, write_json
+from stringcast.files import read_json, write_joint_table, write_json
 from stringcast.centreline import resample_by_arc, trace_path
 from stringcast.tracking import draw_arm_mask, run_tracking
 
@@ -177,6 +177,7 @@ def test_tracking_on_a_tiny_lab_render(tmp_path, config):
     g = hand_pose(campaign0.arm, q0)[:2] * 1000
     cfg["cameras"]["tiny"] = {"width_px": 320, "height_px": 240, "fps": 250.0, "bit_depth": 8, "mono": True}
     cfg["lab"] = dict(cfg.get("lab", {}), links_per_point=2, settle_s=0.1, trigger_error_s=0.0)
+    cfg["sync"] = {"method": "trigger"}  # the close-up shows only the gripper: no whole arm segment for video sync
     cfg["lab"]["camera"] = dict(cfg["lab"].get("camera", {}), focal_px=1900.0, center_mm=[g[0] + 60, g[1] - 90])
     doc = {"string": {"length_mm": 150.0, "n_points": 5, "weights": [], "stiff_sections": []},
            "target": {"x_mm": g[0] + 150, "y_mm": g[1] + 10, "radius_mm": 20.0}, "allow_reachable": True,
@@ -195,7 +196,9 @@ def test_tracking_on_a_tiny_lab_render(tmp_path, config):
     res = tmp_path / "res"
     cal = run_calibration(trial, None, campaign, res / "calibration.json")
     assert cal.reprojection_error_px < 0.5
-    run_sync(trial / "video.yaml", res / "sync.json")
+    sync = run_sync(trial, res / "calibration.json", campaign, cfg, res / "sync.json")
+    truth_trigger = read_json(trial / "ground_truth.json")["trigger_time_s"]
+    assert abs(sync["offset_s"] - truth_trigger) < 1e-3, (sync["offset_s"], truth_trigger)
     df = run_tracking(trial, res / "calibration.json", res / "sync.json", campaign, cfg, res / "tracks.parquet",
                       res / "overlay.png")
     truth = pd.read_parquet(trial / "ground_truth.parquet")

@@ -17,7 +17,7 @@ import pandas as pd
 import pytest
 
 from stringcast.arm import hand_pose
-from stringcast.config import ConfigError, resolve_campaign
+from stringcast.config import resolve_campaign
 from stringcast.files import read_joint_table, read_video_meta, write_json
 from stringcast.lab import apply_preset, build_renderer, run_trial
 from stringcast.lab.scene import arm_shapes

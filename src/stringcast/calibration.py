@@ -180,14 +180,23 @@ class Calibration:
                                    criteria=_UNDISTORT_CRITERIA).reshape(-1, 2)
 
     def distort(self, uv: np.ndarray) -> np.ndarray:
-        """(N, 2) undistorted px -> (N, 2) distorted px (``cv2.projectPoints`` of the normalised rays)."""
+        """(N, 2) undistorted px -> (N, 2) distorted px.
+
+        OpenCV's 5-coefficient model (k1, k2, p1, p2, k3; as ``cv2.projectPoints`` of the
+        normalised rays, to which tests compare it), in NumPy: it runs on every sample of
+        the sync stage's search, where ``projectPoints`` cost 0.3 us a point.
+        """
         uv = np.asarray(uv, float).reshape(-1, 2)
         if self.K is None or len(uv) == 0:
             return uv.copy()
-        xn = (uv - self.K[:2, 2]) / np.diag(self.K)[:2]
-        rays = np.column_stack([xn, np.ones(len(xn))])
-        out, _ = cv2.projectPoints(rays, np.zeros(3), np.zeros(3), self.K, self.dist)
-        return out.reshape(-1, 2)
+        k1, k2, p1, p2, k3 = np.asarray(self.dist, float).ravel()[:5]
+        f, c = np.diag(self.K)[:2], self.K[:2, 2]
+        x, y = ((uv - c) / f).T
+        r2 = x * x + y * y
+        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+        yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+        return np.column_stack([xd, yd]) * f + c
 
     def pixel_to_robot(self, uv: np.ndarray) -> np.ndarray:
         """(N, 2) image px (distorted, as recorded) -> (N, 2) robot-frame (x, y), m."""

@@ -42,8 +42,10 @@ def cmd_calibrate(args):
 def cmd_sync(args):
     from .sync import run_sync
 
-    doc = run_sync(Path(args.trial_dir) / "video.yaml", Path(args.out))
-    print(f"sync: offset {doc['offset_s']:.6f} s ({doc['method']}) -> {args.out}")
+    doc = run_sync(Path(args.trial_dir), Path(args.calibration), _campaign(args), _config(args), Path(args.out))
+    extra = "" if doc.get("time_residual_ms") is None else \
+        f", time residual {doc['time_residual_ms']:.2f} ms, arm vs forward kinematics {doc['residual_mm'] or float('nan'):.1f} mm"
+    print(f"sync: offset {doc['offset_s']:.6f} s ({doc['method']}{extra}) -> {args.out}")
 
 
 def cmd_track(args):
@@ -134,6 +136,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     sp = add("sync", cmd_sync, "video-to-controller clock offset -> sync.json")
     sp.add_argument("--trial-dir", required=True)
+    sp.add_argument("--calibration", required=True, help="the trial's calibration.json")
+    sp.add_argument("--campaign", required=True, help="data/<campaign>/campaign.yaml")
     sp.add_argument("--out", required=True)
 
     sp = add("track", cmd_track, "markerless tracking -> tracks.parquet")
