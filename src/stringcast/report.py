@@ -158,7 +158,12 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
                 ("board corners used", str(calib.get("n_corners"))),
                 ("sync offset (controller time of frame 0)", _fmt(sync.get("offset_s"), ".5f", " s")),
                 ("sync method", str(sync.get("method"))),
-                ("sync residual", _fmt(sync.get("residual_mm"), ".2f", " mm"))]
+                ("sync time residual (spread of the frames' own best offsets)",
+                 _fmt(sync.get("time_residual_ms"), ".2f", " ms")),
+                ("trigger time minus estimate", _fmt(sync.get("trigger_minus_estimate_ms"), ".2f", " ms")),
+                ("still arm vs forward kinematics (board check, rough)", _fmt(sync.get("residual_mm"), ".1f", " mm"))]
+    for w in sync.get("warnings") or []:
+        cal_rows.append(("sync warning", w))
     if sync.get("note"):
         cal_rows.append(("sync note", sync["note"]))
     ctx = _common(campaign, f"Campaign {campaign.name}, trial {results_dir.name.split('_')[-1]}")
