@@ -52,6 +52,7 @@ def run(quick: bool = False) -> dict:
     from stringcast.config import load_config
 
     config = load_config()
+    config["sync"] = dict(config.get("sync", {}), method="video")
     types = [1, 5] if quick else [1, 3, 5, 7]
     cases = {}
     with tempfile.TemporaryDirectory(prefix="bench_sync_") as tmp:

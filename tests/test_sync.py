@@ -25,6 +25,7 @@ def lab_trial(tmp_path_factory, config):
     cfg["setups"]["default"].update(camera="sync_small", board_origin_mm=[700.0, -250.0], board={
         "squares_x": 6, "squares_y": 4, "square_mm": 100.0, "marker_mm": 75.0, "dictionary": "DICT_4X4_50"})
     cfg["lab"] = dict(cfg["lab"], links_per_point=2, settle_s=0.1)
+    cfg["sync"] = dict(cfg.get("sync", {}), method="video")
     cfg["lab"]["camera"] = dict(cfg["lab"]["camera"], focal_px=1390.0 * 768 / 1024)
     campaign = resolve_campaign({"string": 1, "target": 1}, cfg, "sync")
     rate = campaign.arm.controller_rate
@@ -84,7 +85,7 @@ def test_board_check_sees_a_misplaced_board(lab_trial):
     H[:2] += np.outer([0.015, 0.0], H[2])  # robot x + 15 mm
     Calibration(H, cal.image_size, cal.K, cal.dist).to_json(root / "calibration_off.json")
     good = run_sync(trial, root / "calibration.json", campaign, cfg)
-    off = run_sync(trial, root / "calibration_off.json", campaign, dict(cfg, sync={"board_check_warn_mm": 5.0}))
+    off = run_sync(trial, root / "calibration_off.json", campaign, dict(cfg, sync=dict(cfg["sync"], board_check_warn_mm=5.0)))
     assert any("board pose" in w for w in off["warnings"])
     print(f"arm vs FK: {good['residual_mm']:.1f} mm (true board), {off['residual_mm']:.1f} mm (15 mm off)")
     assert good["residual_mm"] < 5.0 and not good["warnings"]
@@ -93,7 +94,7 @@ def test_board_check_sees_a_misplaced_board(lab_trial):
 
 def test_trigger_method_and_frame_times(lab_trial, tmp_path):
     root, trial, campaign, cfg, truth = lab_trial
-    cfg = dict(cfg, sync={"method": "trigger"})
+    cfg = dict(cfg, sync=dict(cfg["sync"], method="trigger"))
     doc = run_sync(trial, None, campaign, cfg, tmp_path / "out" / "sync.json")
     assert doc["offset_s"] == pytest.approx(truth["trigger_time_written_s"], abs=1e-9)
     assert doc["method"] == "video.yaml trigger_time_s" and "not estimated" in doc["note"]

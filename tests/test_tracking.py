@@ -177,7 +177,7 @@ def test_tracking_on_a_tiny_lab_render(tmp_path, config):
     g = hand_pose(campaign0.arm, q0)[:2] * 1000
     cfg["cameras"]["tiny"] = {"width_px": 320, "height_px": 240, "fps": 250.0, "bit_depth": 8, "mono": True}
     cfg["lab"] = dict(cfg.get("lab", {}), links_per_point=2, settle_s=0.1, trigger_error_s=0.0)
-    cfg["sync"] = {"method": "trigger"}  # the close-up shows only the gripper: no whole arm segment for video sync
+    cfg["sync"] = dict(cfg.get("sync", {}), method="trigger")  # a close-up of the gripper: no whole arm segment
     cfg["lab"]["camera"] = dict(cfg["lab"].get("camera", {}), focal_px=1900.0, center_mm=[g[0] + 60, g[1] - 90])
     doc = {"string": {"length_mm": 150.0, "n_points": 5, "weights": [], "stiff_sections": []},
            "target": {"x_mm": g[0] + 150, "y_mm": g[1] + 10, "radius_mm": 20.0}, "allow_reachable": True,

@@ -1,11 +1,12 @@
 """Video-to-controller clock synchronisation: ``sync.json`` (the offset of frame 0 on the controller clock).
 
 Frame k is at ``t_k = offset_s + k / fps`` on the controller clock of ``joints.csv``.
-:func:`run_sync` estimates the offset from the video (``config['sync']['method']:
-video``, the default): the arm seen in the frames is matched with the forward
+:func:`run_sync` with ``config["sync"]["method"]: video`` estimates the offset from the
+video: the arm seen in the frames is matched with the forward
 kinematics of the joint log (:mod:`stringcast.sync_arm`), sub-frame, with or without
 the recording's ``trigger_time_s`` (used only as a starting guess, and compared).
-``method: trigger`` takes the offset from ``video.yaml`` as it is.
+``method: trigger`` (the default until the video method is reliable: see
+``benchmarks/sync.py``) takes the offset from ``video.yaml`` as it is.
 
 ``sync.json`` holds: offset_s, fps, frames, method, residual_mm (where the still arm is
 seen vs where the forward kinematics and the board-to-robot transform put it: the
@@ -160,7 +161,7 @@ def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaig
     meta = read_video_meta(video_yaml)
     st = sync_arm.settings(config)
     doc = {"fps": float(meta["fps"]), "frames": int(meta["frames"]), "trigger_time_s": meta.get("trigger_time_s")}
-    if st.get("method", "video") == "trigger":
+    if st["method"] == "trigger":
         doc.update(_trigger_doc(meta, video_yaml))
     else:
         if calibration_json is None:

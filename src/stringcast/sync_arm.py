@@ -41,7 +41,7 @@ from scipy.ndimage import map_coordinates
 
 from .arm import forward_kinematics
 
-DEFAULTS = {"search_ms": 10.0, "step_ms": 0.25, "coarse_step_ms": 0.5, "strip_samples": 8,
+DEFAULTS = {"method": "trigger", "search_ms": 10.0, "step_ms": 0.25, "coarse_step_ms": 0.5, "strip_samples": 8,
             "strip_width_samples": 41, "strip_margin_mm": 25.0, "rest_frames": 5, "smooth_px": 1.0,
             "board_check_warn_mm": 20.0, "min_frame_contrast": 0.02}
 
