@@ -39,3 +39,20 @@ def write(name: str, doc: dict) -> Path:
     path = BENCH_DIR / f"{name}.json"
     write_json(path, doc)
     return path
+
+
+def film_first_motion(string_type: int, config: dict, work: Path, seed: int, calib_dir: Path | None = None):
+    """Plan a campaign's first motion for ``string_type`` (target 1), play it on the lab and
+    calibrate the trial: returns (campaign, d, trial) with ``d/calibration.json`` written."""
+    from stringcast.calibration import run_calibration
+    from stringcast.config import resolve_campaign
+    from stringcast.executor import execute
+    from stringcast.planning import run_first_plan
+
+    campaign = resolve_campaign({"string": string_type, "target": 1}, config, f"bench_{string_type}")
+    d = work / f"string_{string_type}"
+    run_first_plan(campaign, config, d / "motion.csv", d / "motion.json", seed=seed)
+    trial = d / "trial_1"
+    execute(d / "motion.csv", "virtual", trial, campaign, config, seed=seed)
+    run_calibration(trial, calib_dir, campaign, d / "calibration.json")
+    return campaign, d, trial

@@ -19,23 +19,14 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from benchmarks.common import header, write
+from benchmarks.common import film_first_motion, header, write
 
 
 def one_case(string_type: int, config: dict, work: Path, seed: int) -> dict:
-    from stringcast.calibration import run_calibration
-    from stringcast.config import resolve_campaign
-    from stringcast.executor import execute
     from stringcast.files import read_json
-    from stringcast.planning import run_first_plan
     from stringcast.sync import run_sync
 
-    campaign = resolve_campaign({"string": string_type, "target": 1}, config, f"bench_{string_type}")
-    d = work / f"string_{string_type}"
-    run_first_plan(campaign, config, d / "motion.csv", d / "motion.json", seed=seed)
-    trial = d / "trial_1"
-    execute(d / "motion.csv", "virtual", trial, campaign, config, seed=seed)
-    run_calibration(trial, None, campaign, d / "calibration.json")
+    campaign, d, trial = film_first_motion(string_type, config, work, seed)
     truth = read_json(trial / "ground_truth.json")
     meta = yaml.safe_load((trial / "video.yaml").read_text())
     meta.pop("trigger_time_s")

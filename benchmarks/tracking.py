@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from benchmarks.common import BENCH_DIR, header, write
+from benchmarks.common import BENCH_DIR, film_first_motion, header, write
 
 
 def _errors(tracks: pd.DataFrame, truth: pd.DataFrame) -> tuple[np.ndarray, float]:
@@ -45,19 +45,10 @@ def _decode_fps(video: Path) -> float:
 
 def track_string(string_type: int, config: dict, calib_dir: Path, work: Path, seed: int) -> dict:
     """Film, calibrate, sync and track one string type's first motion; errors and timings."""
-    from stringcast.calibration import run_calibration
-    from stringcast.config import resolve_campaign
-    from stringcast.executor import execute
-    from stringcast.planning import run_first_plan
     from stringcast.sync import run_sync
     from stringcast.tracking import run_tracking
 
-    campaign = resolve_campaign({"string": string_type, "target": 1}, config, f"bench_{string_type}")
-    d = work / f"string_{string_type}"
-    run_first_plan(campaign, config, d / "motion.csv", d / "motion.json", seed=seed)
-    trial = d / "trial_1"
-    execute(d / "motion.csv", "virtual", trial, campaign, config, seed=seed)
-    run_calibration(trial, calib_dir, campaign, d / "calibration.json")
+    campaign, d, trial = film_first_motion(string_type, config, work, seed, calib_dir)
     run_sync(trial, d / "calibration.json", campaign, config, d / "sync.json")
     decode = _decode_fps(trial / "video.mkv")
     t0 = time.perf_counter()
