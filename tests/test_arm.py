@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from stringcast.arm import (JointLimitError, assert_within_limits, check_limits, forward_kinematics,
-                            hand_pose, motion_start)
+                            hand_pose, motion_start, motion_window)
 
 
 def test_fk_straight_arm_reaches_along_x(campaign):
@@ -50,3 +50,15 @@ def test_motion_start_finds_onset():
     assert motion_start(t, q) == pytest.approx(0.3, abs=0.02)
     with pytest.raises(ValueError, match="never moves"):
         motion_start(t, np.zeros((len(t), 3)))
+
+
+def test_motion_window_finds_start_and_stop():
+    t = np.arange(0, 1, 0.002)
+    s = np.clip((t - 0.3) / 0.4, 0, 1)
+    q = np.zeros((len(t), 3))
+    q[:, 1] = 0.8 * (1 - np.cos(np.pi * s)) / 2  # moves over 0.3 .. 0.7 s
+    q += np.random.default_rng(2).normal(0, 2e-4, q.shape)
+    t0, t1 = motion_window(t, q)
+    assert t0 == pytest.approx(0.3, abs=0.03) and t1 == pytest.approx(0.7, abs=0.03)
+    with pytest.raises(ValueError, match="never moves"):
+        motion_window(t, np.zeros((len(t), 3)))

@@ -143,3 +143,15 @@ def motion_start(t: np.ndarray, q: np.ndarray, speed_threshold: float = 0.05) ->
     if len(moving) == 0:
         raise ValueError("the joint log never moves (no joint exceeds %.3g rad/s)" % speed_threshold)
     return float(t[max(0, moving[0] - w // 2)])
+
+
+def motion_window(t: np.ndarray, q: np.ndarray, speed_threshold: float = 0.05) -> tuple[float, float]:
+    """Controller times (s) a joint log starts and stops moving: :func:`motion_start` run
+    forwards and on the time-reversed log. t: (K,) s; q: (K, J) rad.
+
+    Raises:
+        ValueError: if the log never moves.
+    """
+    t = np.asarray(t, float)
+    q = np.asarray(q, float)
+    return motion_start(t, q, speed_threshold), -motion_start(-t[::-1], q[::-1], speed_threshold)

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from . import sync_arm
-from .arm import motion_start
+from .arm import motion_window
 from .files import DataError, check_joint_coverage, find_video, read_joint_table, read_video_meta, write_json
 
 METHOD_TRIGGER = "video.yaml trigger_time_s"
@@ -38,13 +38,6 @@ def _trigger_doc(meta: dict, video_yaml: Path) -> dict:
                         "controller-clock time of frame 0, or use sync.method: video")
     return {"offset_s": float(trig), "method": METHOD_TRIGGER, "residual_mm": None,
             "note": "offset taken from the recording's trigger time, not estimated from the video"}
-
-
-def _motion_window(t_j: np.ndarray, q_j: np.ndarray) -> tuple[float, float]:
-    """Controller times the arm starts and stops moving (joint speed above 0.05 rad/s)."""
-    t0 = motion_start(t_j, q_j)
-    t1 = t_j[::-1][0] - motion_start(t_j[-1] - t_j[::-1], q_j[::-1])
-    return t0, max(t1, t0)
 
 
 def estimate_offset(video, calibration, arm, t_j: np.ndarray, q_j: np.ndarray, tracking_st: dict, st: dict,
@@ -85,7 +78,10 @@ def estimate_offset(video, calibration, arm, t_j: np.ndarray, q_j: np.ndarray, t
     rest_s = sync_arm.smooth(rest, sig)
     template = sync_arm.sample(rest_s, calibration, rest_pts)
     board = sync_arm.board_check(rest_s, calibration, arm, q_j[0], hw, segments)
-    t_on, t_off = _motion_window(t_j, q_j)
+    try:
+        t_on, t_off = motion_window(t_j, q_j)
+    except ValueError as exc:
+        raise DataError(f"{video.path}: sync from the video needs the arm to move: {exc}") from exc
     search, step = st["search_ms"] / 1000, st["step_ms"] / 1000
 
     def coarse() -> float:

@@ -53,7 +53,7 @@ import numpy as np
 import pandas as pd
 from skimage.morphology import skeletonize
 
-from .arm import forward_kinematics, motion_start
+from .arm import forward_kinematics, motion_window
 from .calibration import Calibration
 from .centreline import odd_smooth, decimate_path, hidden_arc, refine_centreline, resample_by_arc, trace_path
 from .files import DataError, atomic_path, find_video, read_joint_table, read_json, write_parquet
@@ -370,7 +370,7 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, config, out_p
     jpx = np.stack([_joint_px(cal, arm, _interp_joints(t + dt, t_j, q_j)) for dt in (-half, 0.0, half)], axis=1)
     scale = float(np.median(cal.m_per_px(jpx[:, 1, -1])))
     try:
-        t_start, t_end = motion_start(t_j, q_j), -motion_start(-t_j[::-1], q_j[::-1])
+        t_start, t_end = motion_window(t_j, q_j)
     except ValueError:  # the arm never moves
         t_start, t_end = t_j[0], t_j[-1]
     win = np.nonzero((t >= t_start) & (t <= t_end + 0.1) & in_log)[0]
