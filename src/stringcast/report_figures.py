@@ -29,9 +29,15 @@ def png_file_uri(path) -> str:
         return "data:image/png;base64," + base64.b64encode(f.read()).decode("ascii")
 
 
-def _target(ax, target_xy, radius):
+def _plane(ax, target_xy, radius, title, **legend):
+    """The swing-plane view shared by the path figures: the target (m) drawn, equal mm axes, legend."""
     ax.add_patch(plt.Circle(np.asarray(target_xy) * 1000, radius * 1000, color="tab:red", alpha=0.35))
     ax.plot(*(np.asarray(target_xy) * 1000), "x", color="tab:red", label="target")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [mm]")
+    ax.set_ylabel("y [mm]")
+    ax.set_title(title)
+    ax.legend(fontsize=8, **legend)
 
 
 def tip_paths(t_tr, tip_tr, t_sim, tip_sim, target_xy, radius, title="Tip paths (Fig. 8a)"):
@@ -39,12 +45,7 @@ def tip_paths(t_tr, tip_tr, t_sim, tip_sim, target_xy, radius, title="Tip paths 
     fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.2))
     a.plot(tip_tr[:, 0] * 1000, tip_tr[:, 1] * 1000, ".", ms=2, label="tracked tip")
     a.plot(tip_sim[:, 0] * 1000, tip_sim[:, 1] * 1000, "-", lw=1, label="simulated tip (estimate)")
-    _target(a, target_xy, radius)
-    a.set_aspect("equal")
-    a.set_xlabel("x [mm]")
-    a.set_ylabel("y [mm]")
-    a.set_title(title)
-    a.legend(fontsize=8)
+    _plane(a, target_xy, radius, title)
     for arr, lab, st in ((tip_tr, "tracked", "."), (tip_sim, "simulated", "-")):
         t = t_tr if lab == "tracked" else t_sim
         d = np.hypot(arr[:, 0] - target_xy[0], arr[:, 1] - target_xy[1]) * 1000
@@ -64,12 +65,7 @@ def arm_paths(paths: dict, target_xy, radius, title="Arm tip (grasp) paths (Fig.
         ax.plot(p[:, 0] * 1000, p[:, 1] * 1000, lw=1.2, label=label)
         ax.plot(p[0, 0] * 1000, p[0, 1] * 1000, "o", ms=4, color=ax.lines[-1].get_color())
     ax.plot(0, 0, "ks", label="arm base")
-    _target(ax, target_xy, radius)
-    ax.set_aspect("equal")
-    ax.set_xlabel("x [mm]")
-    ax.set_ylabel("y [mm]")
-    ax.set_title(title)
-    ax.legend(fontsize=8)
+    _plane(ax, target_xy, radius, title)
     return to_data_uri(fig)
 
 
@@ -148,11 +144,6 @@ def campaign_tips(paths: dict, target_xy, radius, title="Tracked tip path per ex
     fig, ax = plt.subplots(figsize=(6, 5))
     for label, p in paths.items():
         ax.plot(p[:, 0] * 1000, p[:, 1] * 1000, ".", ms=2, label=label)
-    _target(ax, target_xy, radius)
     ax.plot(0, 0, "ks", label="arm base")
-    ax.set_aspect("equal")
-    ax.set_xlabel("x [mm]")
-    ax.set_ylabel("y [mm]")
-    ax.set_title(title)
-    ax.legend(fontsize=8, markerscale=4)
+    _plane(ax, target_xy, radius, title, markerscale=4)
     return to_data_uri(fig)
