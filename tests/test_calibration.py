@@ -7,6 +7,7 @@ import pytest
 
 from stringcast.calibration import (Calibration, calibrate_intrinsics, detect_charuco, plane_homography,
                                     run_calibration)
+from stringcast.charuco import select_views
 from stringcast.files import DataError, read_json
 from stringcast.video import open_video
 
@@ -50,6 +51,30 @@ def test_intrinsics_real_clip_inverted_board():
         assert _rel(got, want) < 0.03, (got, want)
     assert intr.rms_px < 0.25 and intr.n_views >= 30  # reference 0.19 px
     assert intr.dist[0] < -0.25  # strong barrel distortion (reference k1 = -0.338)
+
+
+def test_view_selection_for_pose_diversity_on_real_clip():
+    """Ten views chosen for pose diversity calibrate the real lens; the first ten (one pose) cannot."""
+    _needs(CLIP)
+    board = cv2.aruco.CharucoBoard((4, 5), 0.054, 0.054 * 0.75, cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50))
+    frames = [f for _, f in open_video(CLIP / "cam_0.mp4")]
+    diverse = calibrate_intrinsics(frames, board, "clip", max_views=10)
+    first = calibrate_intrinsics(frames[:10], board, "clip", max_views=10)
+    assert diverse.views_found >= 40 and diverse.n_views <= 10
+    assert _rel(diverse.K[0, 0], 894.5) < 0.03 and _rel(diverse.K[1, 1], 896.9) < 0.03  # reference_cam_0.toml
+    assert _rel(first.K[0, 0], 894.5) > 0.2  # consecutive frames: nearly one pose, fx badly determined
+
+
+def test_select_views_spreads_over_pose_space():
+    rng = np.random.default_rng(3)
+    cluster = rng.normal(0, 0.01, (50, 5))               # 50 near-identical views
+    distinct = np.eye(5)                                 # 5 clearly different poses
+    desc = np.vstack([cluster, distinct, np.full((1, 5), np.nan)])
+    corners = np.r_[np.full(50, 20), np.full(5, 10), 30]
+    pick = select_views(desc, corners, 6)
+    assert len(pick) == 6 and set(range(50, 55)) <= set(pick.tolist())   # every distinct pose kept
+    assert 55 not in pick                                # the NaN descriptor never
+    assert np.array_equal(select_views(desc, corners, 100), np.arange(55))
 
 
 # ---------------------------------------------------------------- synthetic board renders

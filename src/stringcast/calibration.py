@@ -1,10 +1,9 @@
 """Camera calibration: ChArUco intrinsics and the pixel -> swing-plane homography.
 
 * Intrinsics (optional, from a ``calib/`` clip or image folder of the board in varied 3D
-  poses): ``cv2.aruco.CharucoDetector.detectBoard`` -> ``board.matchImagePoints`` ->
-  ``cv2.calibrateCameraExtended`` (OpenCV >= 4.7 API; ``calibrateCameraCharuco`` is gone),
-  then views whose own reprojection RMS exceeds ``max(3 x median, 0.5 px)`` (motion blur,
-  a false corner) are dropped and the calibration is repeated (at most 3 times).
+  poses): :mod:`stringcast.charuco` (``CharucoDetector.detectBoard``,
+  ``board.matchImagePoints``, views chosen for pose diversity, ``cv2.calibrateCameraExtended``).
+  A long clip is sampled to at most ``calibration.max_candidate_frames`` frames first.
 * Plane homography (every trial): the board lies in the swing plane. Its ChArUco corners,
   detected in the median of the first few trial frames and undistorted with
   ``cv2.undistortPoints(P=K)`` when intrinsics exist, give the board-plane -> pixel
@@ -24,108 +23,19 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable
 
 import cv2
 import numpy as np
 
+from .charuco import Intrinsics, calibrate_intrinsics, detect_charuco
 from .files import DataError, find_video, read_json, write_json
 from .video import FRAME_SUFFIXES, open_video
 
-MIN_VIEW_CORNERS = 6
-"""ChArUco corners a calibration view needs to be used."""
+MAX_CANDIDATE_FRAMES = 240
+"""A calibration clip is sampled evenly to at most this many frames for board detection."""
 MIN_PLANE_CORNERS = 8
 """ChArUco corners the plane homography needs."""
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
-
-
-def detect_charuco(image: np.ndarray, board, invert: bool | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """ChArUco chessboard corners in a grey image.
-
-    Args:
-        image: (H, W) uint8 or uint16 (scaled to 8 bit) grey image.
-        board: ``cv2.aruco.CharucoBoard``.
-        invert: True/False forces the polarity; None tries the plain image, then the
-            inverted one if the plain one gives fewer than :data:`MIN_VIEW_CORNERS`.
-
-    Returns:
-        corners (N, 2) float64 px (sub-pixel, distorted image), ids (N,) int; N may be 0.
-    """
-    img = image if image.dtype == np.uint8 else cv2.convertScaleAbs(image, alpha=255.0 / max(1, int(image.max())))
-    det = cv2.aruco.CharucoDetector(board)
-    best = (np.zeros((0, 2)), np.zeros(0, int))
-    for inv in ((False, True) if invert is None else (invert,)):
-        cc, ci, _, _ = det.detectBoard(255 - img if inv else img)
-        if ci is not None and len(ci) > len(best[1]):
-            best = (cc.reshape(-1, 2).astype(float), ci.ravel().astype(int))
-        if len(best[1]) >= MIN_VIEW_CORNERS:
-            break
-    return best
-
-
-@dataclass(frozen=True)
-class Intrinsics:
-    """Pinhole intrinsics with OpenCV's 5-term distortion (k1, k2, p1, p2, k3).
-
-    Attributes:
-        K: (3, 3) camera matrix, px. dist: (5,). rms_px: reprojection RMS of the views used.
-        n_views: views used. image_size: (width, height) px. views_rejected: dropped views.
-    """
-
-    K: np.ndarray
-    dist: np.ndarray
-    rms_px: float
-    n_views: int
-    image_size: tuple[int, int]
-    views_rejected: int = 0
-
-    def __post_init__(self):
-        if np.shape(self.K) != (3, 3) or np.shape(self.dist) != (5,):
-            raise ValueError(f"Intrinsics: K must be (3, 3) and dist (5,), got {np.shape(self.K)}, {np.shape(self.dist)}")
-
-
-def calibrate_intrinsics(frames: Iterable[np.ndarray], board, source: str = "calibration frames",
-                         invert: bool | None = None, min_views: int = 3) -> Intrinsics:
-    """Camera matrix and distortion from views of a ChArUco board (``cv2.calibrateCameraExtended``).
-
-    Args:
-        frames: iterable of (H, W) grey images (all the same size).
-        board: ``cv2.aruco.CharucoBoard`` (square sizes in m).
-        source: name used in error messages (the folder or file).
-        invert: board polarity (see :func:`detect_charuco`).
-        min_views: views with >= :data:`MIN_VIEW_CORNERS` corners needed.
-
-    Raises:
-        DataError: fewer than ``min_views`` usable views, or frames of different sizes.
-    """
-    obj, img, size = [], [], None
-    for k, frame in enumerate(frames):
-        if size is None:
-            size = (frame.shape[1], frame.shape[0])
-        elif (frame.shape[1], frame.shape[0]) != size:
-            raise DataError(f"{source}: frame {k} is {frame.shape[1]}x{frame.shape[0]}, the first was {size[0]}x{size[1]}")
-        corners, ids = detect_charuco(frame, board, invert)
-        if len(ids) < MIN_VIEW_CORNERS:
-            continue
-        o, i = board.matchImagePoints(corners.astype(np.float32).reshape(-1, 1, 2), ids.reshape(-1, 1))
-        if o is None or len(o) < MIN_VIEW_CORNERS or board.checkCharucoCornersCollinear(ids.reshape(-1, 1)):
-            continue
-        obj.append(o.astype(np.float32))
-        img.append(i.astype(np.float32))
-    if len(obj) < min_views:
-        raise DataError(f"{source}: the ChArUco board was found in {len(obj)} views with >= {MIN_VIEW_CORNERS} "
-                        f"corners; camera calibration needs at least {min_views}")
-    keep = np.arange(len(obj))
-    for _ in range(4):
-        rms, K, dist, _, _, _, _, per_view = cv2.calibrateCameraExtended(
-            [obj[k] for k in keep], [img[k] for k in keep], size, None, None)
-        per_view = per_view.ravel()
-        bad = per_view > max(3.0 * float(np.median(per_view)), 0.5)
-        if not bad.any() or len(keep) - bad.sum() < min_views:
-            break
-        keep = keep[~bad]
-    return Intrinsics(np.asarray(K, float), np.asarray(dist, float).ravel()[:5], float(rms), len(keep),
-                      (int(size[0]), int(size[1])), len(obj) - len(keep))
 
 
 def _f(a):
@@ -142,8 +52,11 @@ class Calibration:
         K: (3, 3) camera matrix or None; dist: (5,) or None (homography only).
         reprojection_error_px: RMS of the board corners, robot -> pixel vs detected.
         n_corners: board corners used. board_to_robot: (3, 3) board-frame -> robot (m).
-        intrinsics_rms_px, intrinsics_views: from :func:`calibrate_intrinsics`, if any.
+        intrinsics_rms_px, intrinsics_views, intrinsics_views_found: from
+            :func:`~stringcast.charuco.calibrate_intrinsics`, if any (views used / with the board).
         warnings: human-readable problems worth reporting.
+        board_check: the board-to-robot transform checked against the arm at rest
+            (``residual_mm``, ``dx_mm``, ``dy_mm``, ...), or None when not checked.
     """
 
     H_pixel_to_robot: np.ndarray
@@ -157,6 +70,8 @@ class Calibration:
     intrinsics_views: int | None = None
     warnings: tuple[str, ...] = ()
     corner_ids: tuple[int, ...] = field(default=(), repr=False)
+    intrinsics_views_found: int | None = None
+    board_check: dict | None = None
 
     def __post_init__(self):
         H = np.asarray(self.H_pixel_to_robot, float)
@@ -223,6 +138,7 @@ class Calibration:
             "reprojection_error_px": self.reprojection_error_px,
             "n_corners": self.n_corners, "corner_ids": list(self.corner_ids),
             "intrinsics_rms_px": self.intrinsics_rms_px, "intrinsics_views": self.intrinsics_views,
+            "intrinsics_views_found": self.intrinsics_views_found, "board_check": self.board_check,
             "warnings": list(self.warnings),
         }
 
@@ -241,7 +157,8 @@ class Calibration:
                        reprojection_error_px=float(d.get("reprojection_error_px") or math.nan),
                        n_corners=int(d.get("n_corners", 0)), board_to_robot=arr("board_to_robot"),
                        intrinsics_rms_px=d.get("intrinsics_rms_px"), intrinsics_views=d.get("intrinsics_views"),
-                       warnings=tuple(d.get("warnings", [])), corner_ids=tuple(d.get("corner_ids", [])))
+                       warnings=tuple(d.get("warnings", [])), corner_ids=tuple(d.get("corner_ids", [])),
+                       intrinsics_views_found=d.get("intrinsics_views_found"), board_check=d.get("board_check"))
         except (KeyError, TypeError, ValueError) as exc:
             raise DataError(f"{path}: not a valid calibration file: {exc!r}") from exc
 
@@ -334,7 +251,8 @@ def run_calibration(trial_dir: str | Path, calib_dir: str | Path | None, campaig
     if calib_dir is not None:
         calib_dir = Path(calib_dir)
         reader = _calib_reader(calib_dir)
-        intr = calibrate_intrinsics((f for _, f in reader), board, str(reader.path))
+        stride = max(1, math.ceil(reader.n_frames / MAX_CANDIDATE_FRAMES))
+        intr = calibrate_intrinsics((f for i, f in reader if i % stride == 0), board, str(reader.path))
         if intr.views_rejected:
             warnings.append(f"intrinsics: {intr.views_rejected} calibration views rejected (reprojection outliers)")
     else:
@@ -351,6 +269,7 @@ def run_calibration(trial_dir: str | Path, calib_dir: str | Path | None, campaig
         warnings.append(f"only {cal.n_corners} of {n_all} board corners used: the board is partly hidden")
     cal = Calibration(cal.H_pixel_to_robot, cal.image_size, cal.K, cal.dist, cal.reprojection_error_px,
                       cal.n_corners, cal.board_to_robot, None if intr is None else intr.rms_px,
-                      None if intr is None else intr.n_views, tuple(warnings), cal.corner_ids)
+                      None if intr is None else intr.n_views, tuple(warnings), cal.corner_ids,
+                      None if intr is None else intr.views_found)
     cal.to_json(out_json)
     return cal

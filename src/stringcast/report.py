@@ -155,6 +155,8 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
     cal_rows = [("reprojection error (board, homography)", _fmt(calib.get("reprojection_error_px"), ".3f", " px")),
                 ("intrinsics", "from calib/ clip" if calib.get("K") else "none (homography only)"),
                 ("intrinsics rms", _fmt(calib.get("intrinsics_rms_px"), ".3f", " px")),
+                ("intrinsics views (used / board found; chosen for pose diversity)",
+                 f"{calib.get('intrinsics_views')} / {calib.get('intrinsics_views_found')}" if calib.get("K") else "-"),
                 ("board corners used", str(calib.get("n_corners"))),
                 ("sync offset (controller time of frame 0)", _fmt(sync.get("offset_s"), ".5f", " s")),
                 ("sync method", str(sync.get("method"))),
