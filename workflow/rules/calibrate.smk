@@ -10,14 +10,16 @@ rule calibrate:
         calib=calib_input,
     output:
         "results/{campaign}/trial_{trial}/calibration.json",
+    log:
+        "results/{campaign}/logs/calibrate_{trial}.log",
+    benchmark:
+        "results/{campaign}/benchmarks/calibrate_{trial}.tsv"
+    conda:
+        "../envs/stringcast.yaml"
     params:
         cli=CLI,
         calib=calib_arg,
         setups=config["setups"],
-    benchmark:
-        "results/{campaign}/benchmarks/calibrate_{trial}.tsv",
-    log:
-        "results/{campaign}/logs/calibrate_{trial}.log",
     shell:
         '{params.cli} calibrate --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '{params.calib} --campaign "{input.campaign}" --out "{output}" > "{log}" 2>&1'

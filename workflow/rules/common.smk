@@ -65,7 +65,10 @@ def prev_arg(wildcards, input):
 
 
 def trial_reports(wildcards):
-    return [f"results/{wildcards.campaign}/trial_{k}/report.html" for k in trials(wildcards.campaign)]
+    return [
+        f"results/{wildcards.campaign}/trial_{k}/report.html"
+        for k in trials(wildcards.campaign)
+    ]
 
 
 def all_targets():
@@ -73,7 +76,14 @@ def all_targets():
     depends on it reruns (Snakemake does not remake a missing file that no requested
     output needs)."""
     out = []
-    stages = ("calibration.json", "sync.json", "tracks.parquet", "params.json", "motion.csv", "report.html")
+    stages = (
+        "calibration.json",
+        "sync.json",
+        "tracks.parquet",
+        "params.json",
+        "motion.csv",
+        "report.html",
+    )
     for c in campaigns():
         out.append(f"results/{c}/first_motion/motion.csv")
         ks = trials(c)

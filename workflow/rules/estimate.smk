@@ -11,16 +11,18 @@ rule estimate:
     output:
         params="results/{campaign}/trial_{trial}/params.json",
         fit="results/{campaign}/trial_{trial}/fit.parquet",
+    log:
+        "results/{campaign}/logs/estimate_{trial}.log",
+    benchmark:
+        "results/{campaign}/benchmarks/estimate_{trial}.tsv"
+    conda:
+        "../envs/stringcast.yaml"
+    threads: workflow.cores
     params:
         cli=CLI,
         prev=prev_arg,
         cfg=config["estimation"],
         model=config["model"],
-    threads: workflow.cores
-    benchmark:
-        "results/{campaign}/benchmarks/estimate_{trial}.tsv",
-    log:
-        "results/{campaign}/logs/estimate_{trial}.log",
     shell:
         'NUMBA_NUM_THREADS={threads} {params.cli} estimate --tracks "{input.tracks}" '
         '--joints "{input.joints}" --campaign "{input.campaign}" {params.prev} '

@@ -8,16 +8,19 @@ rule plan_first:
     output:
         csv="results/{campaign}/first_motion/motion.csv",
         json="results/{campaign}/first_motion/motion.json",
+    log:
+        "results/{campaign}/logs/plan_first.log",
+    benchmark:
+        "results/{campaign}/benchmarks/plan_first.tsv"
+    conda:
+        "../envs/stringcast.yaml"
+    threads: workflow.cores
     params:
         cli=CLI,
         cfg=config["motion"],
         model=config["model"],
-    benchmark:
-        "results/{campaign}/benchmarks/plan_first.tsv",
-    log:
-        "results/{campaign}/logs/plan_first.log",
     shell:
-        '{params.cli} plan-first --campaign "{input.campaign}" '
+        'NUMBA_NUM_THREADS={threads} {params.cli} plan-first --campaign "{input.campaign}" '
         '--out-dir "results/{wildcards.campaign}/first_motion" > "{log}" 2>&1'
 
 
@@ -29,14 +32,17 @@ rule plan:
     output:
         csv="results/{campaign}/trial_{trial}/motion.csv",
         json="results/{campaign}/trial_{trial}/motion.json",
+    log:
+        "results/{campaign}/logs/plan_{trial}.log",
+    benchmark:
+        "results/{campaign}/benchmarks/plan_{trial}.tsv"
+    conda:
+        "../envs/stringcast.yaml"
+    threads: workflow.cores
     params:
         cli=CLI,
         cfg=config["motion"],
-    benchmark:
-        "results/{campaign}/benchmarks/plan_{trial}.tsv",
-    log:
-        "results/{campaign}/logs/plan_{trial}.log",
     shell:
-        '{params.cli} plan --params "{input.params}" --played-motion "{input.played}" '
+        'NUMBA_NUM_THREADS={threads} {params.cli} plan --params "{input.params}" --played-motion "{input.played}" '
         '--campaign "{input.campaign}" --seed {wildcards.trial} '
         '--out-dir "results/{wildcards.campaign}/trial_{wildcards.trial}" > "{log}" 2>&1'

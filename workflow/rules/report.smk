@@ -18,12 +18,14 @@ rule report_trial:
             caption="../report/trial.rst",
             category="Trials",
         ),
-    params:
-        cli=CLI,
-    benchmark:
-        "results/{campaign}/benchmarks/report_{trial}.tsv",
     log:
         "results/{campaign}/logs/report_{trial}.log",
+    benchmark:
+        "results/{campaign}/benchmarks/report_{trial}.tsv"
+    conda:
+        "../envs/stringcast.yaml"
+    params:
+        cli=CLI,
     shell:
         '{params.cli} report-trial --data-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '--results-dir "results/{wildcards.campaign}/trial_{wildcards.trial}" '
@@ -40,12 +42,14 @@ rule report_campaign:
             caption="../report/campaign.rst",
             category="Campaigns",
         ),
-    params:
-        cli=CLI,
-    benchmark:
-        "results/{campaign}/benchmarks/report_campaign.tsv",
     log:
         "results/{campaign}/logs/report_campaign.log",
+    benchmark:
+        "results/{campaign}/benchmarks/report_campaign.tsv"
+    conda:
+        "../envs/stringcast.yaml"
+    params:
+        cli=CLI,
     shell:
         '{params.cli} report-campaign --data-dir "data/{wildcards.campaign}" '
         '--results-dir "results/{wildcards.campaign}" --campaign "{input.campaign}" '

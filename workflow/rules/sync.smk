@@ -11,13 +11,15 @@ rule sync:
         campaign="data/{campaign}/campaign.yaml",
     output:
         "results/{campaign}/trial_{trial}/sync.json",
+    log:
+        "results/{campaign}/logs/sync_{trial}.log",
+    benchmark:
+        "results/{campaign}/benchmarks/sync_{trial}.tsv"
+    conda:
+        "../envs/stringcast.yaml"
     params:
         cli=CLI,
         cfg=config.get("sync", {}),
-    benchmark:
-        "results/{campaign}/benchmarks/sync_{trial}.tsv",
-    log:
-        "results/{campaign}/logs/sync_{trial}.log",
     shell:
         '{params.cli} sync --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '--calibration "{input.calibration}" --campaign "{input.campaign}" '

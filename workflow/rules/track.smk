@@ -12,13 +12,15 @@ rule track:
     output:
         tracks="results/{campaign}/trial_{trial}/tracks.parquet",
         overlay="results/{campaign}/trial_{trial}/tracking_overlay.png",
+    log:
+        "results/{campaign}/logs/track_{trial}.log",
+    benchmark:
+        "results/{campaign}/benchmarks/track_{trial}.tsv"
+    conda:
+        "../envs/stringcast.yaml"
     params:
         cli=CLI,
         cfg=config["tracking"],
-    benchmark:
-        "results/{campaign}/benchmarks/track_{trial}.tsv",
-    log:
-        "results/{campaign}/logs/track_{trial}.log",
     shell:
         '{params.cli} track --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '--calibration "{input.calibration}" --sync "{input.sync}" '
