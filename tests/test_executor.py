@@ -116,7 +116,7 @@ def test_refuses_to_overwrite_recorded_trial(tmp_path, campaign, config, fake_la
 def test_ur_rtde_and_unknown_backend(tmp_path, campaign, config, fake_lab):
     t, q = _smooth_motion(campaign)
     motion = _write_motion(tmp_path / "motion.csv", t, q)
-    with pytest.raises(ConfigError, match="later issue"):
+    with pytest.raises(ConfigError, match="--robot-ip"):
         execute(motion, "ur-rtde", tmp_path / "x", campaign, config)
     with pytest.raises(ConfigError, match="unknown backend"):
         execute(motion, "robot9000", tmp_path / "x", campaign, config)

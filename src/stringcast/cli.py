@@ -100,7 +100,8 @@ def cmd_execute(args):
     from .executor import execute
 
     execute(Path(args.motion), args.backend, Path(args.out), Path(args.campaign), _config(args),
-            seed=int(args.seed), dry_run=bool(args.dry_run))
+            seed=int(args.seed), dry_run=bool(args.dry_run), robot_ip=args.robot_ip,
+            move_to_start=bool(args.move_to_start))
 
 
 def cmd_calib_clip(args):
@@ -188,6 +189,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--campaign", required=True, help="data/<campaign>/campaign.yaml")
     sp.add_argument("--seed", default=0)
     sp.add_argument("--dry-run", action="store_true", help="check and print the plan, move nothing")
+    sp.add_argument("--robot-ip", help="ur-rtde: the UR controller's address")
+    sp.add_argument("--move-to-start", action="store_true",
+                    help="ur-rtde: moveJ slowly to the start posture if the arm is not there (else refuse)")
 
     sp = add("calib-clip", cmd_calib_clip, "virtual lab: film the ChArUco board for intrinsics -> calib/")
     sp.add_argument("--campaign", required=True)

@@ -13,8 +13,10 @@ Backends:
 
 * ``virtual``: :func:`stringcast.lab.run_trial` (MuJoCo string, simulated arm and
   camera) writes video.mkv, video.yaml, joints.csv and the ground truth.
-* ``ur-rtde``: a Universal Robots arm through ``ur_rtde`` servoJ. Not available
-  yet: it raises a ConfigError saying so (it is not faked).
+* ``ur-rtde``: a Universal Robots arm through ``ur_rtde`` servoJ
+  (:func:`stringcast.executor_ur.play_ur`): checks the arm's current posture
+  against the start, writes joints.csv and executor.json (a stopped trial:
+  joints.partial.csv, ``partial: true``). The video comes from the lab's camera.
 """
 from __future__ import annotations
 
@@ -63,7 +65,8 @@ def build_command(q: np.ndarray, rate: float, pre_roll_s: float, post_roll_s: fl
 
 
 def execute(motion_csv: Path, backend: str, out_dir: Path, campaign_yaml: Path | Campaign, config: Mapping,
-            seed: int = 0, dry_run: bool = False) -> dict:
+            seed: int = 0, dry_run: bool = False, robot_ip: str | None = None, move_to_start: bool = False,
+            interfaces=None) -> dict:
     """Check a motion file, play it on ``backend`` and record the trial into ``out_dir``.
 
     Args:
@@ -73,14 +76,17 @@ def execute(motion_csv: Path, backend: str, out_dir: Path, campaign_yaml: Path |
         out_dir: the trial folder to create (``data/<campaign>/trial_<k>``).
         campaign_yaml: ``campaign.yaml`` (or an already resolved :class:`Campaign`).
         dry_run: check and describe the command, move nothing, write nothing.
+        robot_ip, move_to_start, interfaces: ``ur-rtde`` only (see
+            :func:`stringcast.executor_ur.play_ur`; ``interfaces`` replaces ur_rtde in tests).
 
     Returns:
         dict: backend, samples, duration_s, motion_start_s, dry_run, plus what the backend returned.
 
     Raises:
-        JointLimitError: the motion breaks a limit (before anything moves).
+        JointLimitError: the motion breaks a limit (before anything moves); for ``ur-rtde``
+            also :class:`~stringcast.executor_ur.StartPostureError` (arm not at the start).
         DataError: unreadable motion file, bad timing, or ``out_dir`` already holds a joints.csv.
-        ConfigError: unknown backend, or ``ur-rtde`` (not available yet).
+        ConfigError: unknown backend; ``ur-rtde`` without robot_ip, without ur_rtde, or bad ``executor.ur``.
     """
     motion_csv, out_dir = Path(motion_csv), Path(out_dir)
     if backend not in BACKENDS:
@@ -97,19 +103,31 @@ def execute(motion_csv: Path, backend: str, out_dir: Path, campaign_yaml: Path |
     ecfg = config.get("executor", {})
     t_cmd, q_cmd, t_move = build_command(q, arm.controller_rate, float(ecfg.get("pre_roll_s", 0.3)),
                                          float(ecfg.get("post_roll_s", 0.6)))
+    where = ""
+    if backend == "ur-rtde":
+        from .executor_ur import UR_JOINTS, URSettings
+
+        m = URSettings.from_config(config, arm).mapping  # bad settings fail before anything connects
+        if not robot_ip and not dry_run:
+            raise ConfigError("executor: the ur-rtde backend needs the arm's address (--robot-ip)")
+        q0 = m.to_ur(q[0], np.zeros(6))
+        where = f" at {robot_ip or '(no --robot-ip)'}, start " + ", ".join(
+            f"{UR_JOINTS[i]} {np.degrees(q0[i]):.1f} deg" for i in m.joint_map) + " (others held)"
     info = {"backend": backend, "motion": str(motion_csv), "samples": len(t_cmd), "duration_s": float(t_cmd[-1]),
             "motion_start_s": t_move, "dry_run": bool(dry_run)}
     if dry_run:
         print(f"executor (dry run): {motion_csv} is within the limits of arm {arm.name}; would play "
-              f"{len(t_cmd)} samples ({t_cmd[-1]:.3f} s, motion from {t_move:.3f} s) on {backend} into {out_dir}")
+              f"{len(t_cmd)} samples ({t_cmd[-1]:.3f} s, motion from {t_move:.3f} s) on {backend}{where} into {out_dir}")
         return info
     if backend == "ur-rtde":
-        raise ConfigError("executor: the ur-rtde backend (UR arm through ur_rtde servoJ) comes in a later "
-                          "issue; use --backend virtual")
-    from .lab import run_trial
+        from .executor_ur import play_ur
 
-    out_dir.mkdir(parents=True, exist_ok=True)
-    result = run_trial(t_cmd, q_cmd, campaign, config, out_dir, seed, t_move)
+        result = play_ur(t_cmd, q_cmd, arm, config, out_dir, robot_ip, move_to_start, interfaces)
+    else:
+        from .lab import run_trial
+
+        out_dir.mkdir(parents=True, exist_ok=True)
+        result = run_trial(t_cmd, q_cmd, campaign, config, out_dir, seed, t_move)
     _copy(motion_csv, out_dir / "motion.csv")
     sidecar = motion_csv.with_suffix(".json")
     if sidecar.exists():
