@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-fast bench bench-quick lint clean venv
+.PHONY: demo test test-fast bench bench-quick lint clean venv browser
 
 venv: $(STAMP)
 
@@ -33,6 +33,13 @@ bench-quick: $(STAMP)
 lint: $(STAMP)
 	$(VENV)/bin/snakemake --lint
 	$(VENV)/bin/snakefmt --check Snakefile workflow/
+
+# Headless Chromium for the report tests (Debian's package; needs root, else install it yourself).
+browser:
+	@command -v chromium-headless-shell >/dev/null || command -v chromium >/dev/null || \
+	  { if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
+	      apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium-headless-shell >/dev/null; \
+	    else echo "make browser: install Debian's chromium-headless-shell (or chromium) as root"; exit 1; fi; }
 
 clean:
 	rm -rf results .snakemake

@@ -15,6 +15,9 @@ configfile: "config/config.yaml"
 validate(config, "workflow/schemas/config.schema.json")
 
 
+report: "workflow/report/workflow.rst"
+
+
 include: "workflow/rules/common.smk"
 include: "workflow/rules/plan.smk"
 include: "workflow/rules/calibrate.smk"

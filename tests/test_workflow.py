@@ -18,10 +18,13 @@ import sys
 import time
 from pathlib import Path
 
+import cv2
+import numpy as np
 import pandas as pd
 import pytest
 import yaml
 
+import browser
 from stringcast.campaign import run_campaign
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -80,8 +83,22 @@ def test_campaign_end_to_end(tmp_path, config):
     assert "trial_1/report.html" in html and "<table" in html
     trial_html = (res / "trial_1" / "report.html").read_text()
     assert "tracking error vs lab ground truth" in trial_html
+    # the pages as a person sees them: every figure decodes in Chromium, and the page is drawn
+    if browser.chromium():
+        for page in (res / "trial_1" / "report.html", res / "report.html"):
+            loaded, n_img = browser.figures_loaded(page, tmp_path)
+            assert n_img == page.read_text().count("<img") and loaded == n_img, (page, loaded, n_img)
+        assert n_img >= 1 and browser.figures_loaded(res / "trial_1" / "report.html", tmp_path)[1] >= 8
+        shot = cv2.imread(str(browser.screenshot(res / "trial_1" / "report.html", tmp_path / "trial.png")))
+        assert shot is not None and shot.shape[1] == 1280 and len(np.unique(shot.reshape(-1, 3), axis=0)) > 50
+    elif os.environ.get("CI"):
+        pytest.fail("CI must have headless Chromium (make browser) to check the reports")
     # the raw data are untouched by the workflow: only the lab/executor wrote there
     assert not list((root / "data" / "e2e").rglob("*.parquet.*"))
+
+    # Snakemake's own report gathers the trial pages and overlays with their captions
+    snakemake(root, "--report", str(tmp_path / "snakemake_report.html"))
+    assert (tmp_path / "snakemake_report.html").stat().st_size > 10_000
 
     # a finished campaign: nothing to do
     t_done = time.time()

@@ -143,7 +143,8 @@ def campaign_tips(paths: dict, target_xy, radius, title="Tracked tip path per ex
     """paths: label -> (F,2) m tracked tip positions (NaN where not valid)."""
     fig, ax = plt.subplots(figsize=(6, 5))
     for label, p in paths.items():
-        ax.plot(p[:, 0] * 1000, p[:, 1] * 1000, ".", ms=2, label=label)
+        line, = ax.plot(p[:, 0] * 1000, p[:, 1] * 1000, ".", ms=2)
+        ax.plot([], [], "o", ms=5, color=line.get_color(), label=label)  # legend entry readable at any ms
     ax.plot(0, 0, "ks", label="arm base")
-    _plane(ax, target_xy, radius, title, markerscale=4)
+    _plane(ax, target_xy, radius, title)
     return to_data_uri(fig)

@@ -17,7 +17,7 @@ rule estimate:
         "results/{campaign}/benchmarks/estimate_{trial}.tsv"
     conda:
         "../envs/stringcast.yaml"
-    threads: workflow.cores
+    threads: 8  # capped at --cores when run locally
     params:
         cli=CLI,
         prev=prev_arg,

@@ -14,7 +14,7 @@ rule plan_first:
         "results/{campaign}/benchmarks/plan_first.tsv"
     conda:
         "../envs/stringcast.yaml"
-    threads: workflow.cores
+    threads: 8  # capped at --cores when run locally
     params:
         cli=CLI,
         cfg=config["motion"],
@@ -38,7 +38,7 @@ rule plan:
         "results/{campaign}/benchmarks/plan_{trial}.tsv"
     conda:
         "../envs/stringcast.yaml"
-    threads: workflow.cores
+    threads: 8  # capped at --cores when run locally
     params:
         cli=CLI,
         cfg=config["motion"],

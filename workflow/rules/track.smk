@@ -11,7 +11,11 @@ rule track:
         campaign="data/{campaign}/campaign.yaml",
     output:
         tracks="results/{campaign}/trial_{trial}/tracks.parquet",
-        overlay="results/{campaign}/trial_{trial}/tracking_overlay.png",
+        overlay=report(
+            "results/{campaign}/trial_{trial}/tracking_overlay.png",
+            caption="../report/overlay.rst",
+            category="Tracking",
+        ),
     log:
         "results/{campaign}/logs/track_{trial}.log",
     benchmark:
