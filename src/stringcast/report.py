@@ -3,7 +3,7 @@
 Figures are inlined as PNG data URIs (``report_figures``), the page is rendered
 with Jinja2 from ``templates/``. The trial page shows the paper's figures for the
 trial (Fig. 8a tip paths, Fig. 8b arm paths, Fig. 11 parameters, Table 4 masses),
-E over the search, the tracking overlay, calibration and sync, and the next motion.
+E over the search, a frame strip with tracked and simulated points, calibration and sync, and the next motion.
 
 Lab ground truth (``ground_truth.parquet`` / ``.json`` in a trial's data folder)
 is read here, and only here, to show the tracking error and the lab's hit
@@ -22,7 +22,9 @@ from . import __version__
 from . import report_figures as figs
 from .arm import hand_pose, motion_start
 from .config import PARAM_NAMES, Campaign, model_ranges
-from .files import TRACK_COLUMNS, read_joint_table, read_json, read_parquet, tracks_arrays, write_text
+from .report_strip import frame_strip, strip_data_uri
+from .calibration import Calibration
+from .files import TRACK_COLUMNS, find_video, read_joint_table, read_json, read_parquet, tracks_arrays, write_text
 
 
 def _env() -> jinja2.Environment:
@@ -121,10 +123,11 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
     if hist.get("evaluations"):
         figures.append({"id": "fig-search", "caption": f"Best E over the search ({params.get('optimizer')}).",
                         "src": figs.search_history(hist["evaluations"], np.asarray(hist["best_E_mm"], dtype=float) / 1000)})
-    overlay = results_dir / "tracking_overlay.png"
-    if overlay.exists():
-        figures.append({"id": "fig-overlay", "caption": "Frames with the tracked points overlaid.",
-                        "src": figs.png_file_uri(overlay)})
+    strip = frame_strip(find_video(data_dir), Calibration.from_json(results_dir / "calibration.json"), tracks, fit,
+                        campaign.string.length)
+    figures.append({"id": "fig-overlay", "caption": "Frames of the motion with the tracked points (green circles; "
+                    "red: the grasp from forward kinematics) and the model's points simulated with the estimate "
+                    "(orange crosses and line) overlaid.", "src": strip_data_uri(strip)})
     figures.append({"id": "fig-next-motion", "caption": "Next motion: joint angles and velocities "
                     f"(T = {nxt.get('T_s', float('nan')):.3f} s).", "src": figs.joint_curves(t_n, q_n)})
 

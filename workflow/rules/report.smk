@@ -6,7 +6,7 @@ rule report_trial:
         calibration="results/{campaign}/trial_{trial}/calibration.json",
         sync="results/{campaign}/trial_{trial}/sync.json",
         tracks="results/{campaign}/trial_{trial}/tracks.parquet",
-        overlay="results/{campaign}/trial_{trial}/tracking_overlay.png",
+        video=trial_video,
         params="results/{campaign}/trial_{trial}/params.json",
         fit="results/{campaign}/trial_{trial}/fit.parquet",
         motion="results/{campaign}/trial_{trial}/motion.json",
