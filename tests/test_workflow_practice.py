@@ -75,3 +75,11 @@ def test_wildcard_constraints_refuse_odd_names(project):
     proc = _run([str(BIN / "snakemake"), "-n", "--cores", "1", "results/c 1/trial_x/tracks.parquet"], project)
     assert proc.returncode != 0
     assert "MissingRuleException" in proc.stderr + proc.stdout or "No rule to produce" in proc.stderr + proc.stdout
+
+
+def test_config_typo_is_a_schema_error_naming_the_key(project, tmp_path):
+    bad = tmp_path / "typo.yaml"
+    bad.write_text((ROOT / "config" / "config.yaml").read_text().replace("\ntracking:", "\ntrackng:", 1))
+    proc = _run([str(BIN / "snakemake"), "-n", "--cores", "1", "--configfile", str(bad)], project)
+    out = proc.stdout + proc.stderr
+    assert proc.returncode != 0 and "'trackng' was unexpected" in out, out[-2000:]
