@@ -10,7 +10,7 @@ import importlib
 import json
 import time
 
-BENCHMARKS = ("model_speed", "tracking", "sync")
+BENCHMARKS = ("model_speed", "tracking", "sync", "estimation")
 
 
 def main() -> None:

@@ -135,7 +135,9 @@ def test_random_search_finds_minimum_reproducibly(config):
     np.testing.assert_array_equal(a.chi, b.chi)
     assert not np.array_equal(a.chi, c.chi)
     assert np.all(np.diff(a.history["best_E_m"]) <= 0)
-    assert a.top_E[0] == a.E_m and np.all(np.diff(a.top_E) >= 0) and a.top_chi.shape == (10, 12)
+    assert a.top_E[0] == a.E_m and np.all(np.diff(a.top_E) >= 0) and a.top_chi.shape == (20, 12)  # estimation.top_k
+    assert a.E_evaluated.shape == (1500,) and a.chi_evaluated.shape == (1500, 12)
+    np.testing.assert_array_equal(np.sort(a.E_evaluated)[:20], a.top_E)
 
 
 @pytest.mark.parametrize("name", ["cmaes", "de"])
@@ -149,6 +151,27 @@ def test_other_optimizers_improve(config, name):
     est = es.estimate(_problem_stub(), cfg, np.full(12, 0.5), 1, seed=0, objective=f)
     assert est.optimizer == name and est.n_evaluations <= 2000
     assert est.E_m < 0.1 * f(np.full((1, 12), 0.5))[0]
+
+
+def test_cmaes_reaches_a_corner_optimum(config):
+    """Table 2's bounds often hold the optimum: CMA-ES evaluates clipped points, so it lands on them exactly."""
+    corner = np.r_[np.ones(6), np.zeros(6)]
+    rec = Recording(lambda c: np.sum((c - corner) ** 2, axis=1))
+    est = es.estimate(_problem_stub(), _cfg(config, optimizer="cmaes", iterations=1500, batch=32), np.full(12, 0.2),
+                      1, seed=0, objective=rec)
+    assert est.E_m < 1e-12 and est.n_evaluations == 1500
+    cand = np.concatenate(rec.calls)
+    np.testing.assert_array_equal(cand[0], np.full(12, 0.2))  # chi_best is evaluated first (M = 1: then the centre)
+    assert np.all((cand >= 0) & (cand <= 1))
+
+
+def test_partly_blown_up_search_says_so(config):
+    def f(c):  # about 70 % of the candidates blow up, wherever they are
+        return np.where((np.sum(c, axis=1) * 1e4) % 1 > 0.3, np.inf, 1.0 + c[:, 1])
+
+    est = es.estimate(_problem_stub(), _cfg(config, iterations=300, batch=50), np.full(12, 0.5), 1, 0, objective=f)
+    assert np.isfinite(est.E_m) and est.n_blown_up > 150 and "blew up" in est.message
+    assert est.E_m == pytest.approx(1.0 + est.chi[1]) and est.E_m == np.min(est.E_evaluated)
 
 
 def test_unknown_optimizer(config):
@@ -200,6 +223,11 @@ def test_run_estimation_end_to_end(config, campaign, chi_true, tmp_path):
     assert doc["M"] == 3 and doc["evaluations"] == 64 and doc["optimizer"] == "random_search"
     assert set(doc["coefficients"]) == set(PARAM_NAMES) and len(doc["mu"]) == campaign.string.n_points
     assert doc["special_points"] == campaign.string.special_points()
+    assert len(doc["top"]) == 20 and doc["top"][0]["chi"] == pytest.approx(doc["chi"])  # the ensemble, best first
+    assert np.all(np.diff([m["E_mm"] for m in doc["top"]]) >= 0)
+    diag = doc["diagnostics"]
+    assert [p["name"] for p in diag["parameters"]] == doc["chi_names"]
+    assert set(diag["pinned"]) | set(diag["loose"]) == set(doc["chi_names"])
     w, n = config["evaluation"]["w"], campaign.string.n_points
     e_i = np.array(doc["E_i_mm"])
     assert doc["E_mm"] == pytest.approx(np.sum(e_i * (1 + w * np.arange(n))) / n, rel=1e-6)

@@ -7,7 +7,7 @@ import pytest
 from stringcast import motion as mo
 from stringcast import planning as pn
 from stringcast.arm import check_limits
-from stringcast.config import PARAM_NAMES, resolve_campaign
+from stringcast.config import PARAM_NAMES, ConfigError, resolve_campaign
 from stringcast.executor import execute
 from stringcast.files import DataError, read_joint_table, read_json, write_json
 from stringcast.model import closest_approach_batch
@@ -122,3 +122,124 @@ def test_played_motion_without_control_points_is_refused(tmp_path, campaign, sma
         pn.run_plan(tmp_path / "bad_params.json", tmp_path / "played.json", campaign, small,
                     tmp_path / "m.csv", tmp_path / "m.json")
     assert not (tmp_path / "m.csv").exists()
+
+
+# ---------------------------------------------------------------------------
+# Robust planner (motion.planner: robust): candidates scored under an ensemble of parameter sets
+# ---------------------------------------------------------------------------
+def _ensemble(config, campaign, k=4):
+    coeffs, mu = pn.first_parameters(config, campaign.string)
+    scale = np.linspace(1.0, 3.0, k)
+    return np.stack([coeffs * np.r_[1.0, [s] * 9] for s in scale]), np.stack([mu * s ** 0.5 for s in scale])
+
+
+def _params_doc(coeffs, mu, campaign):
+    groups = campaign.string.mass_groups()
+    top = [{"E_mm": 1.0 + i, "coefficients": dict(zip(PARAM_NAMES, c)),
+            "mu_groups": [float(m[groups == g][0]) for g in range(groups.max() + 1)]} for i, (c, m) in enumerate(zip(coeffs, mu))]
+    return {"coefficients": dict(zip(PARAM_NAMES, coeffs[0])), "mu": mu[0], "mass_groups": groups, "top": top}
+
+
+def test_robust_plan_scores_the_ensemble(tmp_path, campaign, small):
+    """The chosen motion's ensemble d_min is what an independent run of each member gives."""
+    coeffs, mu = pn.first_parameters(small, campaign.string)
+    first = pn.search(campaign, small, coeffs, mu, np.random.default_rng(5))
+    pn.write_motion(first, campaign, small, coeffs, mu, 0, tmp_path / "m1.csv", tmp_path / "m1.json", "first")
+    ens_c, ens_mu = _ensemble(small, campaign)
+    write_json(tmp_path / "params.json", _params_doc(ens_c, ens_mu, campaign))
+    cfg = copy.deepcopy(small)
+    cfg["motion"].update(planner="robust", max_candidates=256, extra_after_hit=64, robust_screen_mm=200.0)
+    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, cfg, tmp_path / "m2.csv",
+                      tmp_path / "m2.json", seed=1)
+    assert res.planner == "robust" and res.ensemble_d_min.shape == (4,)
+    pl = pn._Planner(campaign, cfg, ens_c[0], ens_mu[0])
+    hand_t, hand = pl.hand_trajectory(res.motion.q)
+    r = campaign.target.radius
+    for k in range(4):
+        p0 = pl.equilibrium(res.motion.q0, ens_c[k], ens_mu[k])
+        d, _, my, ok = closest_approach_batch(ens_c[k], ens_mu[k], hand_t, hand[None], np.zeros(1, np.int64), p0[None],
+                                              pl.l0, pl.psi0, pl.dt, 0.0, res.motion.T + pl.flight, campaign.target.xy)
+        assert d[0] == pytest.approx(res.ensemble_d_min[k], abs=1e-9)
+        assert ok[0] and my[0] >= campaign.arm.floor_y  # so a hit is d_min <= radius
+    assert res.hit_share == pytest.approx(np.mean(res.ensemble_d_min <= r))
+    assert res.margin == pytest.approx(r - np.median(res.ensemble_d_min))
+    doc = read_json(tmp_path / "m2.json")
+    assert doc["planner"] == "robust" and doc["ensemble_size"] == 4
+    assert doc["ensemble_hit_share"] == pytest.approx(res.hit_share)
+    assert doc["ensemble_margin_mm"] == pytest.approx(res.margin * 1000)
+    # the paper's planner (default) ignores the ensemble and writes no ensemble figures
+    res_p = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, small, tmp_path / "m3.csv",
+                        tmp_path / "m3.json", seed=1)
+    assert res_p.planner == "paper" and res_p.hit_share is None
+    assert read_json(tmp_path / "m3.json")["ensemble_hit_share"] is None
+
+
+def test_robust_prefers_hit_share_then_margin(monkeypatch, campaign, small):
+    """Fake model: candidate 3 hits under every member, 7 under most with a larger margin, 5 only under the best."""
+    state = {"k": 0}
+    d_best = {3: 0.015, 5: 0.001, 7: 0.010}
+    members = {3: [0.015, 0.019, 0.018, 0.017], 5: [0.001, 0.5, 0.5, 0.5], 7: [0.010, 0.001, 0.002, 0.5]}
+
+    def fake_evaluate(self, q, T, p_init):
+        b = len(q)
+        ids = np.arange(state["k"], state["k"] + b)
+        state["k"] += b
+        state["ids"] = ids
+        return np.array([d_best.get(int(i), 1.0) for i in ids]), np.zeros(b), np.zeros(b), np.ones(b, bool)
+
+    def fake_ensemble(self, q, T, p_init, coeffs, mu):
+        assert len(q) == 3 and p_init.shape[:2] == (3, 4)  # only the screened ones, each under all members
+        d = np.array([members[int(i)] for i in state["ids"] if int(i) in members])
+        return d, np.zeros_like(d), np.ones(d.shape, bool)
+
+    monkeypatch.setattr(pn._Planner, "evaluate", fake_evaluate)
+    monkeypatch.setattr(pn._Planner, "evaluate_ensemble", fake_ensemble)
+    monkeypatch.setattr(pn._Planner, "equilibrium", lambda self, q0, c=None, m=None: np.zeros((self.n, 2)))
+    monkeypatch.setattr(pn._Planner, "tip_path", lambda self, m, p: np.zeros((0, 3)))
+    cfg = copy.deepcopy(small)
+    cfg["motion"].update(max_candidates=20, extra_after_hit=100, batch=20)
+    coeffs, mu = pn.first_parameters(cfg, campaign.string)
+    res = pn.search(campaign, cfg, coeffs, mu, np.random.default_rng(0), ensemble=_ensemble(cfg, campaign))
+    assert res.hit_share == 1.0 and res.d_min == pytest.approx(0.015)          # candidate 3
+    members[3] = [0.015, 0.019, 0.018, 0.5]                                    # now 3 and 7 both hit 3 of 4
+    state["k"] = 0
+    res = pn.search(campaign, cfg, coeffs, mu, np.random.default_rng(0), ensemble=_ensemble(cfg, campaign))
+    assert res.hit_share == 0.75 and res.d_min == pytest.approx(0.010)         # 7: median 6 mm beats 18.5 mm
+    assert res.margin == pytest.approx(0.020 - 0.006)
+
+
+def test_robust_all_miss_and_all_blown_up(monkeypatch, config, small):
+    """No candidate near the target, or every simulation blowing up: the closest found, a message, no crash."""
+    camp = resolve_campaign({"string": 1, "target": {"x_mm": 3000, "y_mm": 300, "radius_mm": 20}}, config, "far")
+    cfg = copy.deepcopy(small)
+    cfg["motion"]["max_candidates"] = 64
+    coeffs, mu = pn.first_parameters(cfg, camp.string)
+    res = pn.search(camp, cfg, coeffs, mu, np.random.default_rng(0), ensemble=_ensemble(cfg, camp))
+    assert not res.hit and res.hit_share == 0.0 and res.candidates == 64
+    assert "no candidate hit" in res.message and "ensemble" in res.message and np.isfinite(res.d_min)
+
+    def blown(self, q, T, p_init):
+        b = len(q)
+        return np.full(b, np.inf), np.full(b, np.nan), np.full(b, -np.inf), np.zeros(b, bool)
+
+    monkeypatch.setattr(pn._Planner, "evaluate", blown)
+    for ens in (None, _ensemble(cfg, camp)):
+        res = pn.search(camp, cfg, coeffs, mu, np.random.default_rng(1), ensemble=ens)
+        assert not res.hit and res.d_min == np.inf and "no candidate hit" in res.message
+        assert res.motion.q.shape[1] == 3
+
+
+def test_robust_needs_the_ensemble(tmp_path, campaign, small):
+    coeffs, mu = pn.first_parameters(small, campaign.string)
+    write_json(tmp_path / "played.json", {"q0_rad": [0.5, 0.0, 0.0], "T_s": 0.5,
+                                          "control_points_rad_s": [[1.0, 0.0]] * 3})
+    write_json(tmp_path / "params.json", {"coefficients": dict(zip(PARAM_NAMES, coeffs)), "mu": mu})
+    cfg = copy.deepcopy(small)
+    cfg["motion"]["planner"] = "robust"
+    with pytest.raises(DataError, match="params.json.*top"):
+        pn.run_plan(tmp_path / "params.json", tmp_path / "played.json", campaign, cfg, tmp_path / "m.csv",
+                    tmp_path / "m.json")
+    cfg["motion"]["planner"] = "magic"
+    with pytest.raises(ConfigError, match="motion.planner"):
+        pn.run_plan(tmp_path / "params.json", tmp_path / "played.json", campaign, cfg, tmp_path / "m.csv",
+                    tmp_path / "m.json")

@@ -18,6 +18,10 @@ first motion was planned with (:func:`stringcast.planning.first_parameters`):
 chi = 0 for the coefficients (Table 2 minima) except k_s, lifted so the model
 carries its own weight, and chi of ``model.first_mu`` for the masses.
 
+params.json also holds ``top`` (the best ``estimation.top_k`` sets, best first, with
+chi: the robust planner's ensemble) and ``diagnostics`` (which parameters this
+trial's motion pins down, :mod:`stringcast.diagnostics`).
+
 Choices where the paper is silent: the rest state p_init is the median of the
 valid tracked positions over the last ``tracking.rest_frames`` frames before the
 motion starts (:func:`stringcast.arm.motion_start`); a point never valid there
@@ -28,7 +32,7 @@ compared at every later frame up to the end of the joint log.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Mapping
 
@@ -37,6 +41,8 @@ import pandas as pd
 
 from .arm import hand_pose, motion_start
 from .config import PARAM_NAMES, Campaign, ConfigError, model_ranges
+from .diagnostics import diagnostics
+from .diagnostics import settings as diagnostics_settings
 from .files import (TRACK_COLUMNS, DataError, read_joint_table, read_json, read_parquet, tracks_arrays, write_json,
                     write_parquet)
 from .optimizers import OPTIMIZERS, Recorder
@@ -108,8 +114,9 @@ class Estimate:
         chi: (10 + G + 1,) the exponents of eq. (2) (coefficients, mu_others, specials).
         E_m: evaluation value (m; inf if every candidate blew up). E_i: (n,) per point, m.
         history: {"evaluations": [...], "best_E_m": [...]} after each batch.
-        top_chi: (<=10, D) best candidates, top_E: (<=10,) their E (m).
+        top_chi: (<=K, D) best candidates, top_E: (<=K,) their E (m), K = ``estimation.top_k``.
         message: empty, or what went wrong (all candidates invalid, rest fallback).
+        chi_evaluated: (N, D) every candidate in evaluation order; E_evaluated: (N,) its E (m).
     """
 
     coeffs: np.ndarray
@@ -126,6 +133,8 @@ class Estimate:
     top_chi: np.ndarray
     top_E: np.ndarray
     message: str = ""
+    chi_evaluated: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    E_evaluated: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def __post_init__(self):
         n = len(self.mu)
@@ -135,6 +144,8 @@ class Estimate:
             raise ValueError(f"Estimate.E_i: expected ({n},), got {np.shape(self.E_i)}")
         if np.ndim(self.top_chi) != 2 or np.shape(self.top_chi)[:1] != np.shape(self.top_E):
             raise ValueError("Estimate.top_chi/top_E: shapes (k, D) and (k,) expected")
+        if len(self.E_evaluated) and np.shape(self.chi_evaluated) != (len(self.E_evaluated), np.shape(self.top_chi)[1]):
+            raise ValueError("Estimate.chi_evaluated/E_evaluated: shapes (N, D) and (N,) expected")
 
 
 # ---------------------------------------------------------------------------
@@ -302,7 +313,7 @@ def estimate(problem: EstimationProblem, config: Mapping, chi_start: np.ndarray,
     finally:
         rec.bar.close()
     all_chi, all_E = np.concatenate(rec.chi), np.concatenate(rec.E)
-    order = np.argsort(all_E, kind="stable")[:10]
+    order = np.argsort(all_E, kind="stable")[:diagnostics_settings(config)[0]]
     best_chi = all_chi[order[0]]
     coeffs, mu = decode(best_chi, config, problem.mass_groups)
     if custom:  # E_i needs the model; a custom objective defines no points
@@ -312,16 +323,20 @@ def estimate(problem: EstimationProblem, config: Mapping, chi_start: np.ndarray,
     else:
         E_i = np.full(problem.n_points, np.inf)
     msgs = []
+    blown = int(np.sum(~np.isfinite(all_E)))
     if not np.isfinite(all_E[order[0]]):
         msgs.append(f"every one of {len(all_E)} candidates blew up or was invalid; the parameters are the best "
                     "it had (E = inf)")
+    elif blown > len(all_E) // 2:
+        msgs.append(f"{blown} of {len(all_E)} candidates blew up (E = inf); the estimate is the best finite one")
     if problem.fallback_points:
         msgs.append(f"points {list(problem.fallback_points)} were never tracked at rest: their initial state "
                     "hangs straight down")
     return Estimate(coeffs=coeffs, mu=mu, chi=best_chi, E_m=float(all_E[order[0]]), E_i=E_i,
                     history=rec.history, optimizer=name, seed=int(seed), n_evaluations=len(all_E),
-                    n_blown_up=int(np.sum(~np.isfinite(all_E))), seconds=time.perf_counter() - t0,
-                    top_chi=all_chi[order], top_E=all_E[order], message="; ".join(msgs))
+                    n_blown_up=blown, seconds=time.perf_counter() - t0,
+                    top_chi=all_chi[order], top_E=all_E[order], message="; ".join(msgs),
+                    chi_evaluated=all_chi, E_evaluated=all_E)
 
 
 def simulate_fit(problem: EstimationProblem, config: Mapping, chi: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -368,8 +383,14 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign, c
     est = estimate(problem, config, chi0, k, seed)
 
     _, mu_groups_all = decode(est.top_chi, config, np.arange(problem.n_groups))
-    top = [{"E_mm": e * 1000, "coefficients": dict(zip(PARAM_NAMES, c)), "mu_groups": m}
-           for e, c, m in zip(est.top_E, decode(est.top_chi, config, problem.mass_groups)[0], mu_groups_all)]
+    top = [{"E_mm": e * 1000, "coefficients": dict(zip(PARAM_NAMES, c)), "mu_groups": m, "chi": x}
+           for e, c, m, x in zip(est.top_E, decode(est.top_chi, config, problem.mass_groups)[0], mu_groups_all,
+                                 est.top_chi)]
+    names = list(PARAM_NAMES) + ["mu_others"] + [f"mu_{i}" for i in campaign.string.special_points()]
+    lo, hi, (mlo, mhi) = model_ranges(config)
+    log_lo = np.log10(np.concatenate([lo, np.full(problem.n_groups, mlo)]))
+    log_hi = np.log10(np.concatenate([hi, np.full(problem.n_groups, mhi)]))
+    diag = diagnostics(est.chi_evaluated, est.E_evaluated, log_lo, log_hi, names, config)
     write_json(out_params_json, {
         "coefficients": dict(zip(PARAM_NAMES, est.coeffs)), "mu": est.mu, "mu_groups": mu_groups_all[0],
         "mass_groups": problem.mass_groups, "special_points": campaign.string.special_points(),
@@ -378,9 +399,8 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign, c
                     "best_E_mm": [e * 1000 for e in est.history["best_E_m"]]},
         "optimizer": est.optimizer, "seed": est.seed, "evaluations": est.n_evaluations,
         "blown_up": est.n_blown_up, "seconds": est.seconds, "M": k, "chi": est.chi,
-        "chi_start": chi0, "chi_names": list(PARAM_NAMES) + ["mu_others"] +
-        [f"mu_{i}" for i in campaign.string.special_points()],
-        "top": top, "message": est.message, "t_motion_start_s": problem.t_motion_start,
+        "chi_start": chi0, "chi_names": names, "top": top, "diagnostics": diag, "message": est.message,
+        "t_motion_start_s": problem.t_motion_start,
         "t_sim_start_s": problem.frame_t[0], "frames_compared": len(problem.frame_t),
         "rest_fallback_points": list(problem.fallback_points), "dt_s": problem.dt})
     write_parquet(out_fit_parquet, fit_table(tracks, problem, config, est.chi, campaign.string.n_points))

@@ -21,6 +21,17 @@ from an initial posture q0):
   hit with the smallest d_min; without a hit it returns the closest candidate with
   ``hit=False`` and a message.
 
+* Planner (``motion.planner``): ``paper`` (default) is the above. ``robust`` (later
+  motions only; the first has no estimate) also scores candidates under an ensemble:
+  the best K parameter sets of the last estimate (params.json ``top``,
+  :mod:`stringcast.diagnostics`). Our choice, to keep the cost near the paper's: a
+  candidate is scored under the ensemble, all members in one numba batch
+  (:func:`stringcast.model.closest_approach_batch`, each member from its own hanging
+  equilibrium), when under the best set it stays valid and above the floor and comes
+  within ``motion.robust_screen_mm`` (default 20) of the target's edge. The chosen
+  motion has the largest hit share (members for which it hits), then the largest
+  margin (radius - median d_min over the members); the stopping rule is the paper's.
+
 Stage entry points: :func:`run_first_plan` and :func:`run_plan` write ``motion.csv``
 and its ``motion.json`` sidecar (:func:`write_motion`).
 """
@@ -55,6 +66,13 @@ class PlanResult:
     candidates: int
     message: str = ""
     tip_path: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    planner: str = "paper"
+    ensemble_d_min: np.ndarray | None = None
+    """(K,) m, the chosen motion's closest approach under each ensemble member (robust planner only)."""
+    hit_share: float | None = None
+    """Share of the ensemble for which the chosen motion hits (robust planner only)."""
+    margin: float | None = None
+    """Target radius - median ensemble d_min, m (robust planner only; > 0: the median member hits)."""
 
 
 # ---------------------------------------------------------------------------
@@ -90,6 +108,29 @@ def planned_parameters(config: Mapping, n_points: int, params: Mapping,
     return coeffs, mu
 
 
+def ensemble_parameters(config: Mapping, n_points: int, params: Mapping,
+                        source: str = "params.json") -> tuple[np.ndarray, np.ndarray]:
+    """The robust planner's ensemble from an estimate's params.json ``top`` (best K sets, best first).
+
+    Returns:
+        coeffs (K, 10), mu (K, n) (group masses expanded with ``mass_groups``).
+
+    Raises:
+        DataError: naming ``source``, when ``top`` or ``mass_groups`` is missing or malformed.
+    """
+    try:
+        groups = np.asarray(params["mass_groups"], int)
+        top = params["top"]
+        coeffs = np.array([[float(m["coefficients"][k]) for k in PARAM_NAMES] for m in top])
+        mu = np.array([np.asarray(m["mu_groups"], float)[groups] for m in top])
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
+        raise DataError(f"{source}: the robust planner needs 'top' (entries with 'coefficients' and "
+                        f"'mu_groups') and 'mass_groups' ({exc!r})") from exc
+    if len(top) < 1 or mu.shape != (len(top), n_points) or not np.all(np.isfinite(coeffs)) or not np.all(mu > 0):
+        raise DataError(f"{source}: 'top' must hold >= 1 set of finite coefficients and {n_points} positive masses")
+    return coeffs, mu
+
+
 # ---------------------------------------------------------------------------
 # Candidate search
 # ---------------------------------------------------------------------------
@@ -117,20 +158,37 @@ class _Planner:
         self.n, self.l0 = campaign.string.n_points, campaign.string.l0
         self.warnings: list[str] = []
 
-    def equilibrium(self, q0: np.ndarray) -> np.ndarray:
-        """Hanging equilibrium (n, 2) m at posture q0 with the planned parameters.
+    def equilibrium(self, q0: np.ndarray, coeffs: np.ndarray | None = None, mu: np.ndarray | None = None) -> np.ndarray:
+        """Hanging equilibrium (n, 2) m at posture q0 with the planned parameters (or ``coeffs``, ``mu``).
 
         If the model cannot settle (RuntimeError), the string hangs straight down
         instead and a warning is kept for the plan's message.
         """
         from .model import hanging_equilibrium, straight_hanging
 
+        c = self.coeffs if coeffs is None else coeffs
+        m = self.mu if mu is None else mu
         hp = hand_pose(self.arm, q0)
         try:
-            return np.asarray(hanging_equilibrium(self.coeffs, self.mu, hp, self.l0, self.psi0, self.n, self.dt), float)
+            return np.asarray(hanging_equilibrium(c, m, hp, self.l0, self.psi0, self.n, self.dt), float)
         except RuntimeError as exc:
             self.warnings.append(f"initial state straight down: {exc}")
-            return np.asarray(straight_hanging(self.coeffs, self.mu, hp, self.l0, self.n), float)
+            return np.asarray(straight_hanging(c, m, hp, self.l0, self.n), float)
+
+    def evaluate_ensemble(self, q: np.ndarray, T: float, p_init: np.ndarray, coeffs: np.ndarray, mu: np.ndarray):
+        """S candidates q (S, K_t, J) under K parameter sets coeffs (K, 10), mu (K, n), from
+        p_init (S, K, n, 2), in one batch: d_min, min_y, ok, each (S, K)."""
+        from .model import closest_approach_batch
+
+        s, k = len(q), len(coeffs)
+        hand_t, hand = self.hand_trajectory(q)
+        hand = np.ascontiguousarray(np.repeat(hand, k, axis=0))          # (S K, K_t, 3)
+        p = np.ascontiguousarray(p_init.reshape(s * k, self.n, 2))
+        d, _, my, ok = closest_approach_batch(np.tile(coeffs, (s, 1)), np.tile(mu, (s, 1)), hand_t, hand,
+                                              np.arange(s * k, dtype=np.int64), p, self.l0, self.psi0, self.dt,
+                                              0.0, T + self.flight, self.campaign.target.xy, self.arm.floor_y)
+        return (np.asarray(d, float).reshape(s, k), np.asarray(my, float).reshape(s, k),
+                np.asarray(ok, bool).reshape(s, k))
 
     def hand_trajectory(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """q (..., K, J) over [0, T] -> hand_t (K + hold,) and hand (..., K + hold, 3), end held for the flight window."""
@@ -180,15 +238,18 @@ def _valid_curves(arm, cps: np.ndarray, T: float, rate: float, postures: np.ndar
 
 
 def search(campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarray, rng: np.random.Generator,
-           previous: Motion | None = None) -> PlanResult:
+           previous: Motion | None = None, ensemble: tuple[np.ndarray, np.ndarray] | None = None) -> PlanResult:
     """Search random motions (first plan) or perturbations of ``previous`` (later plans) for a hit.
 
     Args:
         coeffs (10,), mu (n,): the parameter set the model is simulated with.
         previous: the motion just played (its q0, T and control points are kept / perturbed).
+        ensemble: robust planner (module doc): coeffs (K, 10), mu (K, n), the sets that
+            screened candidates are scored under; None for the paper's planner.
 
     Returns:
-        :class:`PlanResult` (hit=False with a message when no candidate hits).
+        :class:`PlanResult` (hit=False with a message when no candidate hits; with an
+        ensemble, its hit share and margin, and a message when no member is hit).
 
     Raises:
         ConfigError: when no motion within the arm's limits can be generated at all.
@@ -211,6 +272,9 @@ def search(campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarr
         margin = float(mcfg.get("floor_margin_m", 0.05))
         postures = sample_postures(campaign, rng, int(mcfg.get("posture_pool", 32)), margin, box=start_box(config))
     equilibria: dict[int, np.ndarray] = {}
+    member_eq: dict[int, np.ndarray] = {}    # posture -> (K, n, 2), robust planner
+    screen = float(mcfg.get("robust_screen_mm", 20.0)) / 1000
+    radius = campaign.target.radius
     best, best_key, tried, first_hit, fails = None, None, 0, None, 0
     bar = tqdm(total=max_cand, desc="plan", unit="cand", disable=None)
     while tried < max_cand and (first_hit is None or tried < first_hit + extra):
@@ -244,25 +308,55 @@ def search(campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarr
         q = np.stack([c[2] for c in cands])
         p_init = np.stack([equilibria[c[3]] for c in cands])
         d, tm, my, ok = pl.evaluate(q, T, p_init)
-        hit = ok & (d <= campaign.target.radius) & (my >= arm.floor_y)
+        hit = ok & (d <= radius) & (my >= arm.floor_y)
+        scores = _ensemble_scores(pl, cands, q, T, ok & (my >= arm.floor_y) & (d <= radius + screen), ensemble,
+                                  postures, member_eq) if ensemble is not None else {}
         for b, c in enumerate(cands):
-            key = (not hit[b], not (ok[b] and my[b] >= arm.floor_y), not ok[b],
+            share, margin, d_k = scores.get(b, (0.0, -np.inf, None))
+            key = (-share, -margin if share > 0 else np.inf, not hit[b], not (ok[b] and my[b] >= arm.floor_y), not ok[b],
                    d[b] if np.isfinite(d[b]) else np.inf)
             if best_key is None or key < best_key:
                 best_key = key
-                best = (c, T, bool(hit[b]), float(d[b]), float(tm[b]), float(my[b]))
+                best = (c, T, bool(hit[b]), float(d[b]), float(tm[b]), float(my[b]), share, margin, d_k)
         tried += len(cands)
         bar.update(len(cands))
         if first_hit is None and hit.any():
             first_hit = tried
     bar.close()
-    (cp, q0, q, i), T, hit, d, tm, my = best
+    (cp, q0, q, i), T, hit, d, tm, my, share, margin, d_k = best
     t, _ = time_grid(T, pl.rate)
     motion = Motion(t=t, q=q, T=T, control_points=cp, q0=q0)
     msgs = [] if hit else [f"no candidate hit in {tried} tried; returning the closest "
-                           f"({d * 1000:.1f} mm from the target, radius {campaign.target.radius * 1000:.0f} mm)"]
+                           f"({d * 1000:.1f} mm from the target, radius {radius * 1000:.0f} mm)"]
+    robust = {}
+    if ensemble is not None:
+        robust = {"planner": "robust", "ensemble_d_min": d_k, "hit_share": share if d_k is not None else 0.0,
+                  "margin": margin if d_k is not None else None}
+        if d_k is None or share == 0:
+            msgs.append(f"no candidate hit under any of the {len(ensemble[0])} ensemble sets; returning the "
+                        "best under the estimate")
     msgs += sorted(set(pl.warnings))[:1]
-    return PlanResult(motion, hit, d, tm, my, tried, "; ".join(msgs), pl.tip_path(motion, equilibria[i]))
+    return PlanResult(motion, hit, d, tm, my, tried, "; ".join(msgs), pl.tip_path(motion, equilibria[i]), **robust)
+
+
+def _ensemble_scores(pl: _Planner, cands: list, q: np.ndarray, T: float, screened: np.ndarray,
+                     ensemble: tuple[np.ndarray, np.ndarray], postures: np.ndarray,
+                     member_eq: dict) -> dict[int, tuple[float, float, np.ndarray]]:
+    """Robust planner: {candidate index: (hit share, margin m, d_min (K,) m)} for the screened candidates."""
+    idx = np.nonzero(screened)[0]
+    if len(idx) == 0:
+        return {}
+    coeffs, mu = ensemble
+    for b in idx:
+        i = cands[b][3]
+        if i not in member_eq:
+            member_eq[i] = np.stack([pl.equilibrium(postures[i], c, m) for c, m in zip(coeffs, mu)])
+    p_init = np.stack([member_eq[cands[b][3]] for b in idx])              # (S, K, n, 2)
+    d, my, ok = pl.evaluate_ensemble(q[idx], T, p_init, coeffs, mu)
+    radius = pl.campaign.target.radius
+    hits = ok & (d <= radius) & (my >= pl.arm.floor_y)
+    d = np.where(ok, d, np.inf)
+    return {int(b): (float(hits[s].mean()), radius - float(np.median(d[s])), d[s]) for s, b in enumerate(idx)}
 
 
 # ---------------------------------------------------------------------------
@@ -284,6 +378,10 @@ def write_motion(result: PlanResult, campaign: Campaign, config: Mapping, coeffs
         "flight_window_s": float(config.get("motion", {}).get("flight_window_s", 0.5)),
         "target": {"x_mm": campaign.target.x * 1000, "y_mm": campaign.target.y * 1000,
                    "radius_mm": campaign.target.radius * 1000},
+        "planner": result.planner, "ensemble_size": None if result.ensemble_d_min is None else len(result.ensemble_d_min),
+        "ensemble_hit_share": result.hit_share,
+        "ensemble_margin_mm": None if result.margin is None else result.margin * 1000,
+        "ensemble_d_min_mm": None if result.ensemble_d_min is None else np.asarray(result.ensemble_d_min) * 1000,
         "message": result.message})
 
 
@@ -303,11 +401,23 @@ def run_plan(params_json: Path, played_motion_json: Path, campaign: Campaign, co
              out_json: Path, seed: int = 0) -> PlanResult:
     """Next motion (Section V.B): the played motion's posture and T, perturbed control points, estimated parameters.
 
+    With ``motion.planner: robust`` the candidates are also scored under params.json's
+    ``top`` ensemble (module doc); motion.json then carries ``ensemble_hit_share``,
+    ``ensemble_margin_mm`` and ``ensemble_d_min_mm``.
+
     Raises:
-        DataError: unreadable params.json or a played motion.json without q0_rad, T_s, control_points_rad_s.
+        DataError: unreadable params.json (or, robust, one without ``top``) or a played
+            motion.json without q0_rad, T_s, control_points_rad_s.
+        ConfigError: an unknown ``motion.planner``.
     """
-    coeffs, mu = planned_parameters(config, campaign.string.n_points, read_json(params_json), str(params_json))
+    params = read_json(params_json)
+    coeffs, mu = planned_parameters(config, campaign.string.n_points, params, str(params_json))
     previous = read_motion_json(played_motion_json, campaign.arm.n_joints, campaign.arm.controller_rate)
-    result = search(campaign, config, coeffs, mu, _rng(config, seed), previous=previous)
+    planner = str(config.get("motion", {}).get("planner", "paper"))
+    if planner not in ("paper", "robust"):
+        raise ConfigError(f"motion.planner: unknown {planner!r} (known: paper, robust)")
+    ensemble = ensemble_parameters(config, campaign.string.n_points, params, str(params_json)) \
+        if planner == "robust" else None
+    result = search(campaign, config, coeffs, mu, _rng(config, seed), previous=previous, ensemble=ensemble)
     write_motion(result, campaign, config, coeffs, mu, seed, out_csv, out_json, "next")
     return result

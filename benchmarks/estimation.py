@@ -1,0 +1,201 @@
+"""Benchmark ``estimation``: E reached against evaluations and seconds, per optimizer (DESIGN.md, "Benchmarks").
+
+For each string type (quick: types 1 and 5) the lab films the campaign's first planned
+motion (:func:`benchmarks.common.film_first_motion`) and the workflow's own stages
+calibrate, sync (``video.yaml``) and track it, exactly as for ``benchmarks.tracking``.
+The trial is then estimated as the workflow does for trial 1 (chi_best = the first
+plan's set, M = 1, seed = estimation.seed + 1, ``estimation.run_estimation``):
+
+* ``default``: the config's own settings, timed (``seconds_default``; goal <= 60 s).
+* the reference, the paper's random search (eqs. 2-3), and CMA-ES and differential
+  evolution, all at the same budget (``estimation.iterations``), each recording the
+  best E after every evaluation. When the default optimizer is the random search,
+  the default run *is* the paper's run (one run, not two). CMA-ES is run with three
+  seeds (``--cmaes-seeds``): its evaluations to the paper's E are the median over them
+  (the search is noisy; one seed's count varies by about 2x).
+
+Figures, measured in this run, per string type: ``paper_E_mm`` (the random search's
+final E), ``paper_evals`` (its budget), ``cmaes_evals_to_paper_E`` /
+``de_evals_to_paper_E`` (the first evaluation whose best-so-far E is <= paper_E_mm;
+null if never within the budget), the E traces (subsampled) and seconds per optimizer;
+overall ``median_eval_ratio_cmaes`` (cmaes_evals_to_paper_E / paper_evals, a type where
+CMA-ES never gets there counts as inf; goal <= 0.2) and ``seconds_default_max``.
+Figure: best E against evaluations per type, the three optimizers
+(results/bench/estimation.png).
+
+Run: ``python -m benchmarks.estimation [--quick] [--work DIR]`` -> results/bench/estimation.json.
+``--work`` keeps the filmed and tracked trials in DIR and reuses them in a later run
+(the estimations are always run anew).
+"""
+from __future__ import annotations
+
+import argparse
+import copy
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.common import BENCH_DIR, film_first_motion, header, write
+
+OPTIMIZERS = ("random_search", "cmaes", "de")
+TRACE_POINTS = 200
+
+
+def prepare(string_type: int, config: dict, calib_dir: Path, work: Path, seed: int):
+    """Film, calibrate, sync and track one string type's first motion (reused if ``work`` has it).
+
+    Returns (campaign, d): ``d`` holds tracks.parquet and trial_1/joints.csv."""
+    from stringcast.config import resolve_campaign
+    from stringcast.sync import run_sync
+    from stringcast.tracking import run_tracking
+
+    d = work / f"string_{string_type}"
+    if (d / "tracks.parquet").exists() and (d / "trial_1" / "joints.csv").exists():
+        return resolve_campaign({"string": string_type, "target": 1}, config, f"bench_{string_type}"), d
+    campaign, d, trial = film_first_motion(string_type, config, work, seed, calib_dir)
+    run_sync(trial, d / "calibration.json", campaign, config, d / "sync.json")
+    run_tracking(trial, d / "calibration.json", d / "sync.json", campaign, config, d / "tracks.parquet")
+    return campaign, d
+
+
+def _estimate(campaign, d: Path, config: dict, optimizer: str | None, tag: str, seed_offset: int = 0):
+    from stringcast.estimation import run_estimation
+
+    cfg = copy.deepcopy(config)
+    if optimizer is not None:
+        cfg["estimation"]["optimizer"] = optimizer
+    cfg["estimation"]["seed"] = int(cfg["estimation"].get("seed", 0)) + seed_offset
+    return run_estimation(d / "tracks.parquet", d / "trial_1" / "joints.csv", campaign, cfg, None, 1,
+                          d / f"params_{tag}.json", d / f"fit_{tag}.parquet")
+
+
+def evals_to_reach(trace: np.ndarray, level: float) -> int | None:
+    """The first evaluation count (1-based) at which the best-so-far ``trace`` is <= ``level``, else None."""
+    hit = np.nonzero(np.asarray(trace) <= level * (1 + 1e-12))[0]
+    return int(hit[0]) + 1 if len(hit) else None
+
+
+def _trace(est) -> np.ndarray:
+    return np.minimum.accumulate(np.asarray(est.E_evaluated, float)) * 1000
+
+
+def _subsample(trace: np.ndarray) -> dict:
+    idx = np.unique(np.geomspace(1, len(trace), TRACE_POINTS).astype(int)) - 1
+    return {"evaluations": (idx + 1).tolist(), "best_E_mm": [float(v) for v in trace[idx]]}
+
+
+def one_string(campaign, d: Path, config: dict, cmaes_seeds: int = 1) -> dict:
+    """Estimate one tracked trial with the default settings and with every optimizer at equal budget
+    (CMA-ES with ``cmaes_seeds`` seeds: its evaluations to the paper's E are the median over them)."""
+    default = str(config["estimation"].get("optimizer", "random_search"))
+    t0 = time.perf_counter()
+    runs = {default: _estimate(campaign, d, config, None, default)}
+    seconds_default = time.perf_counter() - t0
+    for name in OPTIMIZERS:
+        if name not in runs:
+            runs[name] = _estimate(campaign, d, config, name, name)
+    traces = {name: _trace(est) for name, est in runs.items()}
+    paper = traces["random_search"]
+    paper_E = float(paper[-1])
+    cma_runs = [traces["cmaes"]] + [_trace(_estimate(campaign, d, config, "cmaes", f"cmaes_{s}", s))
+                                    for s in range(1, cmaes_seeds)]
+    cma_reach = [evals_to_reach(tr, paper_E) for tr in cma_runs]
+    out = {"paper_E_mm": paper_E, "paper_evals": len(paper), "seconds_default": seconds_default,
+           "default_optimizer": default, "frames_compared": None,
+           "optimizers": {name: {"E_mm": float(tr[-1]), "evaluations": len(tr),
+                                 "seconds": float(runs[name].seconds), "blown_up": int(runs[name].n_blown_up),
+                                 "trace": _subsample(tr)} for name, tr in traces.items()}}
+    n = evals_to_reach(traces["de"], paper_E)
+    out["de_evals_to_paper_E"], out["de_eval_ratio"] = n, (n / len(paper)) if n is not None else None
+    med = float(np.median([np.inf if n is None else n for n in cma_reach]))
+    out["cmaes_evals_to_paper_E"] = int(med) if np.isfinite(med) else None
+    out["cmaes_eval_ratio"] = med / len(paper) if np.isfinite(med) else None
+    out["cmaes_seeds"] = {"evals_to_paper_E": cma_reach, "final_E_mm": [float(tr[-1]) for tr in cma_runs]}
+    from stringcast.files import read_json
+
+    out["frames_compared"] = read_json(d / f"params_{default}.json")["frames_compared"]
+    return out
+
+
+def _figure(per: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    keys = sorted(per, key=int)
+    cols = min(4, len(keys))
+    rows = int(np.ceil(len(keys) / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 2.8 * rows), squeeze=False)
+    for ax, k in zip(axes.ravel(), keys):
+        for name, style in zip(OPTIMIZERS, ("k-", "C0-", "C1--")):
+            tr = per[k]["optimizers"][name]["trace"]
+            ax.plot(tr["evaluations"], tr["best_E_mm"], style, lw=1.2,
+                    label={"random_search": "paper (eqs. 2-3)", "cmaes": "CMA-ES", "de": "DE"}[name])
+        ax.axhline(per[k]["paper_E_mm"], color="0.6", lw=0.8, ls=":")
+        n = per[k]["cmaes_evals_to_paper_E"]
+        if n is not None:
+            ax.axvline(n, color="C0", lw=0.8, ls=":")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_title(f"string type {k}", fontsize=9)
+        ax.set_xlabel("evaluations", fontsize=8)
+        ax.set_ylabel("best E (mm)", fontsize=8)
+    for ax in axes.ravel()[len(keys):]:
+        ax.axis("off")
+    axes.ravel()[0].legend(fontsize=7)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def run(quick: bool = False, work: Path | None = None, cmaes_seeds: int = 3) -> dict:
+    from stringcast.config import load_config, resolve_campaign
+    from stringcast.lab import write_calibration_clip
+
+    config = load_config()
+    types = [1, 5] if quick else sorted(int(k) for k in config["strings"])
+    per = {}
+    with tempfile.TemporaryDirectory(prefix="bench_estimation_") as tmp:
+        work = Path(work) if work else Path(tmp)
+        calib = work / "calib"
+        if not calib.exists():
+            write_calibration_clip(resolve_campaign({"string": 1, "target": 1}, config, "bench"), config,
+                                   calib, seed=11)
+        for k in types:
+            t0 = time.perf_counter()
+            campaign, d = prepare(k, config, calib, work, seed=k)
+            t_film = time.perf_counter() - t0
+            per[str(k)] = r = one_string(campaign, d, config, cmaes_seeds)
+            print(f"  string {k}: paper E {r['paper_E_mm']:.2f} mm in {r['paper_evals']} evals; CMA-ES reaches it "
+                  f"after {r['cmaes_evals_to_paper_E']}, DE after {r['de_evals_to_paper_E']}; default "
+                  f"{r['seconds_default']:.1f} s (film+track {t_film:.0f} s)", flush=True)
+    ratios = [r["cmaes_eval_ratio"] if r["cmaes_eval_ratio"] is not None else np.inf for r in per.values()]
+    figure = BENCH_DIR / "estimation.png"
+    _figure(per, figure)
+    est_cfg = config["estimation"]
+    doc = header("estimation", quick) | {
+        "per_string": per, "median_eval_ratio_cmaes": float(np.median(ratios)),
+        "median_eval_ratio_de": float(np.median([r["de_eval_ratio"] if r["de_eval_ratio"] is not None else np.inf
+                                                 for r in per.values()])),
+        "seconds_default_max": float(max(r["seconds_default"] for r in per.values())),
+        "goals": {"seconds_default_max": 60.0, "median_eval_ratio_cmaes": 0.2},
+        "reference": {"name": "paper_random_search", "optimizer": "random_search",
+                      "evaluations": int(est_cfg.get("iterations", 3000)), "chi0": est_cfg.get("chi0", 1.0),
+                      "beta": est_cfg.get("beta", 0.998)},
+        "settings": {k: v for k, v in est_cfg.items()}, "figure": figure.name,
+    }
+    write("estimation", doc)
+    return doc
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="string types 1 and 5 only")
+    ap.add_argument("--work", type=Path, help="keep (and reuse) the filmed, tracked trials here")
+    ap.add_argument("--cmaes-seeds", type=int, default=3, help="CMA-ES runs per string type (median)")
+    a = ap.parse_args()
+    run(a.quick, a.work, a.cmaes_seeds)
