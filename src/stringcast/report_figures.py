@@ -69,18 +69,33 @@ def arm_paths(paths: dict, target_xy, radius, title="Arm tip (grasp) paths (Fig.
     return to_data_uri(fig)
 
 
-def parameters(names, values, lo, hi, title="Estimated parameters against Table 2 (Fig. 11)"):
-    """names (P,), values/lo/hi (P,): log-axis bars of each range with the estimate."""
+def parameters(names, values, lo, hi, spread=None, title="Estimated parameters against Table 2 (Fig. 11)"):
+    """names (P,), values/lo/hi (P,): log-axis bars of each range with the estimate.
+
+    spread: optional name -> (min, max, status) of the near-best parameter sets
+    (``params.json`` diagnostics), drawn as a bar, green when pinned, orange when loose.
+    """
     fig, ax = plt.subplots(figsize=(7, 0.35 * len(names) + 1.2))
     y = np.arange(len(names))[::-1]
-    for yi, v, a, b in zip(y, values, lo, hi):
-        ax.plot([a, b], [yi, yi], color="0.8", lw=6, solid_capstyle="butt")
-        ax.plot(v, yi, "o", color="tab:blue")
+    shown = set()
+    for name, yi, v, a, b in zip(names, y, values, lo, hi):
+        ax.plot([a, b], [yi, yi], color="0.85", lw=8, solid_capstyle="butt",
+                label=None if "range" in shown else "Table 2 range")
+        shown.add("range")
+        if spread and name in spread:
+            s0, s1, status = spread[name]
+            label = f"near-best sets ({status})"
+            ax.plot([s0, s1], [yi, yi], color="tab:green" if status == "pinned" else "tab:orange", lw=3,
+                    solid_capstyle="butt", label=None if label in shown else label)
+            shown.add(label)
+        ax.plot(v, yi, "o", color="tab:blue", label=None if "est" in shown else "estimate")
+        shown.add("est")
     ax.set_yticks(y)
     ax.set_yticklabels(names)
     ax.set_xscale("log")
     ax.set_title(title)
     ax.grid(axis="x", alpha=0.3)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     return to_data_uri(fig)
 
 
