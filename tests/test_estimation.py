@@ -6,12 +6,13 @@ import pandas as pd
 import pytest
 
 from stringcast import estimation as es
+from stringcast import parameters as prm
 from stringcast.arm import hand_pose, motion_start
 from stringcast.config import PARAM_NAMES, ConfigError, model_ranges
 from stringcast.files import DataError, read_json, read_parquet, write_joint_table, write_json, write_parquet
 from stringcast.model import hanging_equilibrium, simulate
 from stringcast.motion import joint_paths
-from stringcast.planning import first_parameters
+from stringcast.parameters import first_parameters
 
 CHI_TRUE = np.array([0.6, 0.3, 0.3, 0.4, 0.4, 0.3, 0.2, 0.2, 0.5, 0.5, 0.35, 0.3])
 
@@ -53,32 +54,32 @@ def test_eq2_decode_encode(config, campaign):
     lo, hi, (mlo, mhi) = model_ranges(config)
     groups = campaign.string.mass_groups()
     d = len(PARAM_NAMES) + groups.max() + 1
-    c0, m0 = es.decode(np.zeros(d), config, groups)
-    c1, m1 = es.decode(np.ones(d), config, groups)
+    c0, m0 = prm.decode(np.zeros(d), config, groups)
+    c1, m1 = prm.decode(np.ones(d), config, groups)
     np.testing.assert_allclose(c0, lo)
     np.testing.assert_allclose(c1, hi)
     assert np.allclose(m0, mlo) and np.allclose(m1, mhi) and m0.shape == (campaign.string.n_points,)
     chi = np.random.default_rng(0).uniform(size=d)
-    c, m = es.decode(chi, config, groups)
+    c, m = prm.decode(chi, config, groups)
     np.testing.assert_allclose(c, lo * (hi / lo) ** chi[:10])  # eq. (2)
     tip = campaign.string.special_points()[0] - 1
     assert m[tip] == pytest.approx(mlo * (mhi / mlo) ** chi[11])
     mu_groups = np.array([m[groups == g][0] for g in range(groups.max() + 1)])
-    np.testing.assert_allclose(es.encode(c, mu_groups, config), chi, atol=1e-12)
+    np.testing.assert_allclose(prm.encode(c, mu_groups, config), chi, atol=1e-12)
 
 
 def test_start_chi(config, campaign, chi_true):
     c_first, _ = first_parameters(config, campaign.string)
-    chi = es.start_chi(None, campaign.string, config)
+    chi = prm.start_chi(None, campaign.string, config)
     assert chi[0] > 0 and np.all(chi[1:10] == 0)  # Table 2 minima, k_s lifted
-    np.testing.assert_allclose(es.decode(chi, config, campaign.string.mass_groups())[0], c_first)
+    np.testing.assert_allclose(prm.decode(chi, config, campaign.string.mass_groups())[0], c_first)
     assert chi[10] == pytest.approx(np.log(1.0 / 0.1) / np.log(1000))  # first_mu = 1
-    np.testing.assert_allclose(es.start_chi({"chi": chi_true.tolist()}, campaign.string, config), chi_true)
-    c, mu = es.decode(chi_true, config, np.arange(2))
+    np.testing.assert_allclose(prm.start_chi({"chi": chi_true.tolist()}, campaign.string, config), chi_true)
+    c, mu = prm.decode(chi_true, config, np.arange(2))
     prev = {"coefficients": dict(zip(PARAM_NAMES, c)), "mu_groups": mu.tolist()}
-    np.testing.assert_allclose(es.start_chi(prev, campaign.string, config), chi_true, atol=1e-12)
+    np.testing.assert_allclose(prm.start_chi(prev, campaign.string, config), chi_true, atol=1e-12)
     with pytest.raises(DataError, match="mu_groups"):
-        es.start_chi({"coefficients": prev["coefficients"]}, campaign.string, config)
+        prm.start_chi({"coefficients": prev["coefficients"]}, campaign.string, config)
 
 
 def _cfg(config, **kw):
@@ -188,7 +189,7 @@ def test_all_candidates_blown_up_does_not_crash(config):
 
 
 def test_build_problem(config, campaign, chi_true, tmp_path):
-    c, mu = es.decode(chi_true, config, campaign.string.mass_groups())
+    c, mu = prm.decode(chi_true, config, campaign.string.mass_groups())
     df, t, q, p0 = make_trial(campaign, c, mu, tmp_path, drop=(4,))
     prob = es.build_problem(df, t, q, campaign, config)
     n_rest = config["tracking"]["rest_frames"]
@@ -211,7 +212,7 @@ def test_build_problem(config, campaign, chi_true, tmp_path):
 
 
 def test_run_estimation_end_to_end(config, campaign, chi_true, tmp_path):
-    c, mu = es.decode(chi_true, config, campaign.string.mass_groups())
+    c, mu = prm.decode(chi_true, config, campaign.string.mass_groups())
     make_trial(campaign, c, mu, tmp_path)
     cfg = _cfg(config, iterations=64, batch=32)
     # started from the truth (candidate 0), E is the model's own sampling error: the timing chain is right
@@ -245,4 +246,4 @@ def test_run_estimation_end_to_end(config, campaign, chi_true, tmp_path):
                              tmp_path / "p1.json", tmp_path / "f1.parquet")
     assert est1.history["best_E_m"][-1] < 0.5 * est1.history["best_E_m"][0]
     assert read_json(tmp_path / "p1.json")["chi_start"] == pytest.approx(
-        es.start_chi(None, campaign.string, config).tolist())
+        prm.start_chi(None, campaign.string, config).tolist())

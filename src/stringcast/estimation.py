@@ -14,7 +14,7 @@ Optimizers (``config.estimation.optimizer``; :mod:`stringcast.optimizers`: the
 paper's eq. 3 ``random_search``, ``cmaes``, ``de``), all evaluating candidates in
 numba batches of ``config.estimation.batch``, start from chi_best = the previous
 trial's estimate. With no previous estimate (trial 1) chi_best is the set the
-first motion was planned with (:func:`stringcast.planning.first_parameters`):
+first motion was planned with (:func:`stringcast.parameters.first_parameters`):
 chi = 0 for the coefficients (Table 2 minima) except k_s, lifted so the model
 carries its own weight, and chi of ``model.first_mu`` for the masses.
 
@@ -46,6 +46,7 @@ from .diagnostics import settings as diagnostics_settings
 from .files import (TRACK_COLUMNS, DataError, read_joint_table, read_json, read_parquet, tracks_arrays, write_json,
                     write_parquet)
 from .optimizers import OPTIMIZERS, Recorder
+from .parameters import decode, start_chi
 
 MIN_REST_FRAMES = 3
 
@@ -209,49 +210,6 @@ def build_problem(tracks_df: pd.DataFrame, t_joints: np.ndarray, q_joints: np.nd
         dt=float(config["model"]["dt_s"]), mass_groups=s.mass_groups(),
         w=float(config.get("evaluation", {}).get("w", 0.1)), fallback_points=tuple(fallback),
         t_motion_start=t_move)
-
-
-# ---------------------------------------------------------------------------
-# Parameter vector (eq. 2)
-# ---------------------------------------------------------------------------
-def decode(chi: np.ndarray, config: Mapping, mass_groups: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Eq. (2): chi (..., 10 + G) -> coefficients (..., 10) and per-point mu (..., n)."""
-    lo, hi, (mlo, mhi) = model_ranges(config)
-    chi = np.clip(np.asarray(chi, float), 0.0, 1.0)
-    coeffs = lo * (hi / lo) ** chi[..., :len(lo)]
-    mu_groups = mlo * (mhi / mlo) ** chi[..., len(lo):]
-    return coeffs, mu_groups[..., np.asarray(mass_groups)]
-
-
-def encode(coeffs: np.ndarray, mu_groups: np.ndarray, config: Mapping) -> np.ndarray:
-    """Inverse of eq. (2): coefficients (10,) and group masses (G,) -> chi (10 + G,), clipped to [0, 1]."""
-    lo, hi, (mlo, mhi) = model_ranges(config)
-    c = np.log(np.asarray(coeffs, float) / lo) / np.log(hi / lo)
-    m = np.log(np.asarray(mu_groups, float) / mlo) / np.log(mhi / mlo)
-    return np.clip(np.concatenate([c, m]), 0.0, 1.0)
-
-
-def start_chi(prev_params: Mapping | None, string, config: Mapping, source="params.json") -> np.ndarray:
-    """chi_best at m = 0: the previous estimate's chi, else that of the first plan's set
-    (:func:`stringcast.planning.first_parameters`: Table 2 minima with k_s lifted, masses ``model.first_mu``)."""
-    n_groups = int(string.mass_groups().max()) + 1
-    if prev_params is None:
-        from .planning import first_parameters
-
-        coeffs, _ = first_parameters(config, string)
-        return encode(coeffs, np.full(n_groups, float(config["model"].get("first_mu", 1.0))), config)
-    chi = prev_params.get("chi")
-    if chi is not None and len(chi) == len(PARAM_NAMES) + n_groups:
-        return np.clip(np.asarray(chi, float), 0.0, 1.0)
-    try:
-        coeffs = [prev_params["coefficients"][k] for k in PARAM_NAMES]
-        mu_groups = prev_params["mu_groups"]
-    except (KeyError, TypeError) as exc:
-        raise DataError(f"{source}: needs 'chi' of length {len(PARAM_NAMES) + n_groups} or "
-                        f"'coefficients' and 'mu_groups' ({exc})") from exc
-    if len(mu_groups) != n_groups:
-        raise DataError(f"{source}: mu_groups has {len(mu_groups)} entries, this string has {n_groups}")
-    return encode(coeffs, mu_groups, config)
 
 
 # ---------------------------------------------------------------------------

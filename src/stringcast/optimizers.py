@@ -1,6 +1,6 @@
 """Optimizers for the parameter search (paper Section VI, eqs. 2-3).
 
-All work in chi space, x = chi in [0, 1]^D (eq. 2, :func:`stringcast.estimation.decode`),
+All work in chi space, x = chi in [0, 1]^D (eq. 2, :func:`stringcast.parameters.decode`),
 and share one interface::
 
     optimizer(rec: Recorder, chi_best (D,), batch, M, rng, settings) -> None

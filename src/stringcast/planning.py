@@ -44,8 +44,9 @@ from typing import Mapping
 import numpy as np
 
 from .arm import check_limits, hand_pose
-from .config import PARAM_NAMES, Campaign, ConfigError, model_ranges
-from .files import DataError, read_json, write_joint_table, write_json
+from .config import PARAM_NAMES, Campaign, ConfigError
+from .files import read_json, write_joint_table, write_json
+from .parameters import ensemble_parameters, first_parameters, planned_parameters
 from .motion import (Motion, joint_paths, read_motion_json, sample_control_points, sample_postures, start_box,
                      time_grid)
 
@@ -73,62 +74,6 @@ class PlanResult:
     """Share of the ensemble for which the chosen motion hits (robust planner only)."""
     margin: float | None = None
     """Target radius - median ensemble d_min, m (robust planner only; > 0: the median member hits)."""
-
-
-# ---------------------------------------------------------------------------
-# Parameter sets the model is simulated with
-# ---------------------------------------------------------------------------
-def first_parameters(config: Mapping, string) -> tuple[np.ndarray, np.ndarray]:
-    """The first plan's set: coeffs (10,) Table 2 minima, mu (n,) = ``model.first_mu``; k_s lifted (see below).
-
-    At Table 2's minimum k_s = 1e3 N/m/kg the model's string cannot carry its own
-    weight: the top segment of a hanging 10-point string (mu = 1) stretches by
-    g n / k_s = 98 mm, 4.3 l0, beyond the 3 l0 blow-up limit. Our choice: k_s is
-    raised to the least value keeping the top segment's static strain at
-    ``motion.first_max_strain`` (default 0.05): k_s = g sum(mu) / (strain l0).
-    """
-    lo, _, _ = model_ranges(config)
-    mu = np.full(string.n_points, float(config["model"].get("first_mu", 1.0)))
-    strain = float(config.get("motion", {}).get("first_max_strain", 0.05))
-    coeffs = lo.copy()
-    coeffs[0] = max(lo[0], 9.81 * mu.sum() / (strain * string.l0))
-    return coeffs, mu
-
-
-def planned_parameters(config: Mapping, n_points: int, params: Mapping,
-                       source: str = "params.json") -> tuple[np.ndarray, np.ndarray]:
-    """coeffs (10,), mu (n,) from an estimate's params.json. Raises DataError naming ``source``."""
-    try:
-        coeffs = np.array([float(params["coefficients"][k]) for k in PARAM_NAMES])
-        mu = np.asarray(params["mu"], float)
-    except (KeyError, TypeError, ValueError) as exc:
-        raise DataError(f"{source}: needs 'coefficients' ({', '.join(PARAM_NAMES)}) and 'mu' ({exc})") from exc
-    if mu.shape != (n_points,) or not np.all(np.isfinite(coeffs)) or not np.all(mu > 0):
-        raise DataError(f"{source}: mu must hold {n_points} positive values and coefficients be finite")
-    return coeffs, mu
-
-
-def ensemble_parameters(config: Mapping, n_points: int, params: Mapping,
-                        source: str = "params.json") -> tuple[np.ndarray, np.ndarray]:
-    """The robust planner's ensemble from an estimate's params.json ``top`` (best K sets, best first).
-
-    Returns:
-        coeffs (K, 10), mu (K, n) (group masses expanded with ``mass_groups``).
-
-    Raises:
-        DataError: naming ``source``, when ``top`` or ``mass_groups`` is missing or malformed.
-    """
-    try:
-        groups = np.asarray(params["mass_groups"], int)
-        top = params["top"]
-        coeffs = np.array([[float(m["coefficients"][k]) for k in PARAM_NAMES] for m in top])
-        mu = np.array([np.asarray(m["mu_groups"], float)[groups] for m in top])
-    except (KeyError, TypeError, ValueError, IndexError) as exc:
-        raise DataError(f"{source}: the robust planner needs 'top' (entries with 'coefficients' and "
-                        f"'mu_groups') and 'mass_groups' ({exc!r})") from exc
-    if len(top) < 1 or mu.shape != (len(top), n_points) or not np.all(np.isfinite(coeffs)) or not np.all(mu > 0):
-        raise DataError(f"{source}: 'top' must hold >= 1 set of finite coefficients and {n_points} positive masses")
-    return coeffs, mu
 
 
 # ---------------------------------------------------------------------------
