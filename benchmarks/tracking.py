@@ -11,8 +11,10 @@ shared by all types), sync (``video.yaml``) and track it. Figures, measured in t
 * fps: frames per second of ``tracking.run_tracking`` (whole call, incl. background);
   reference: plain decoding of the same video with ``video.open_video`` in the same run.
 
-Run: ``python -m benchmarks.tracking [--quick]`` -> results/bench/tracking.json and
-results/bench/tracking_errors.png (error distribution per string type).
+Run: ``python -m benchmarks.tracking [--quick] [--types 2,3]`` -> results/bench/tracking.json and
+results/bench/tracking_errors.png (error distribution per string type); a run over chosen
+``--types`` writes tracking_partial.json and tracking_partial_errors.png instead (same keys,
+with ``types``), so it never replaces the full run's figures.
 """
 from __future__ import annotations
 
@@ -81,12 +83,16 @@ def _figure(per: dict, path: Path) -> None:
     plt.close(fig)
 
 
-def run(quick: bool = False) -> dict:
+def run(quick: bool = False, types: list[int] | None = None) -> dict:
     from stringcast.config import load_config, resolve_campaign
     from stringcast.lab import write_calibration_clip
 
     config = load_config()
-    types = [1, 5] if quick else sorted(int(k) for k in config["strings"])
+    name = "tracking_partial" if types else "tracking"
+    types = sorted(types) if types else ([1, 5] if quick else sorted(int(k) for k in config["strings"]))
+    unknown = [k for k in types if str(k) not in config["strings"]]
+    if unknown:
+        raise SystemExit(f"--types: no string type(s) {unknown} in the config")
     per = {}
     with tempfile.TemporaryDirectory(prefix="bench_tracking_") as tmp:
         work = Path(tmp)
@@ -103,9 +109,9 @@ def run(quick: bool = False) -> dict:
     frames = sum(r["frames"] for r in per.values())
     fps = frames / sum(r["track_s"] for r in per.values())
     decode = frames / sum(r["frames"] / r["decode_fps"] for r in per.values())
-    figure = BENCH_DIR / "tracking_errors.png"
+    figure = BENCH_DIR / f"{name}_errors.png"
     _figure(per, figure)
-    doc = header("tracking", quick) | {
+    doc = header(name, quick) | {"types": types,
         "median_mm": float(np.median(e_all)), "p95_mm": float(np.percentile(e_all, 95)),
         "valid_share": float(np.mean([r["valid_share"] for r in per.values()])),
         "fps": fps, "reference": {"name": "decode_only", "fps": decode}, "ratio_to_reference": fps / decode,
@@ -115,11 +121,13 @@ def run(quick: bool = False) -> dict:
                            "fps": r["fps"], "decode_fps": r["decode_fps"], "frames": r["frames"]}
                        for k, r in per.items()},
     }
-    write("tracking", doc)
+    write(name, doc)
     return doc
 
 
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="string types 1 and 5 only")
-    run(ap.parse_args().quick)
+    ap.add_argument("--types", default=None, help="comma-separated string types (e.g. 2,3): writes tracking_partial.json")
+    args = ap.parse_args()
+    run(args.quick, [int(k) for k in args.types.split(",")] if args.types else None)

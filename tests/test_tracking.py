@@ -9,8 +9,9 @@ from scipy.spatial import cKDTree
 
 from stringcast.arm import forward_kinematics
 from stringcast.calibration import Calibration
+from stringcast.centreline import mismatch_split, resample_by_arc, trace_path
 from stringcast.files import read_json, write_joint_table, write_json
-from stringcast.centreline import resample_by_arc, trace_path
+from stringcast.prefetch import prefetch
 from stringcast.tracking import draw_arm_mask, run_tracking
 
 SIZE = 360
@@ -158,6 +159,27 @@ def test_resample_by_arc_marks_gaps_and_ends():
     assert ok.tolist() == [True, False, True, False, True]
     assert np.allclose(pos[0], [0.05, 0]) and np.allclose(pos[4], [0.3, 0]) and np.isnan(pos[1]).all()
     assert not resample_by_arc(xy, np.ones(3, bool), targets, 0.0)[1][-1]
+
+
+def test_mismatch_split_follows_the_variances():
+    d = mismatch_split(-0.006, [0.002, 0.0, 0.001])
+    assert np.isclose(d.sum(), -0.006) and np.allclose(d, [-0.0048, 0.0, -0.0012])
+    assert np.allclose(mismatch_split(0.004, [0.0, 0.0]), [0.002, 0.002])
+    with pytest.raises(ValueError):
+        mismatch_split(0.001, [np.nan, 1.0])
+
+
+def test_prefetch_keeps_order_and_raises_reader_errors():
+    frames = [(k, np.full((2, 2), k)) for k in range(100)]
+    got = list(prefetch(iter(frames), 4))
+    assert [k for k, _ in got] == list(range(100)) and all((f == k).all() for k, f in got)
+
+    def broken():
+        yield 0, np.zeros(1)
+        raise OSError("decoder failed")
+
+    with pytest.raises(OSError, match="decoder failed"):
+        list(prefetch(broken(), 2))
 
 
 # ---------------------------------------------------------------------------- virtual lab

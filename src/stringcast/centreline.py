@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 
+import cv2
 import numpy as np
 from numba import njit
 from scipy.ndimage import gaussian_filter1d, map_coordinates
@@ -164,7 +165,7 @@ def decimate_path(pts: np.ndarray, observed: np.ndarray, step: float):
     if len(pts) < 3 or step <= 0:
         return pts, observed
     cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
-    n = max(1, int(round(cum[-1] / step)))
+    n = max(1, round(cum[-1] / step))
     s = np.linspace(0.0, cum[-1], n + 1)
     out = np.column_stack([np.interp(s, cum, pts[:, 0]), np.interp(s, cum, pts[:, 1])])
     bad = np.concatenate([[0], np.cumsum(~np.asarray(observed, bool))])  # unobserved segments before vertex j
@@ -202,3 +203,99 @@ def resample_by_arc(xy: np.ndarray, observed_seg: np.ndarray, s_targets: np.ndar
         out[i] = xy[j] + a * (xy[j + 1] - xy[j])
         valid[i] = True
     return out, valid
+
+
+def branch_vertices(skel: np.ndarray, walk: np.ndarray, min_branch_px: int) -> np.ndarray:
+    """Vertices of a skeleton walk where another skeleton branch of >= ``min_branch_px`` px joins.
+
+    Such a vertex is a junction the walk went straight through: a crossing of the string
+    with itself (or with something else), where the ordering along the string is ambiguous.
+    Short spurs (noise, the rim of a clay lump) are ignored.
+
+    Args:
+        skel: (H, W) bool skeleton. walk: (M, 2) int (row, col) pixels of the walk.
+
+    Returns:
+        (M,) bool.
+    """
+    rest = skel.copy()
+    r, c = walk[:, 0].astype(int), walk[:, 1].astype(int)
+    rest[r, c] = False
+    _nlab, lab, stats, _ = cv2.connectedComponentsWithStats(rest.astype(np.uint8), connectivity=8)
+    big = stats[:, cv2.CC_STAT_AREA] >= min_branch_px
+    big[0] = False
+    near = cv2.dilate(big[lab].astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
+    return near[r, c]
+
+
+def _fwhm_across(absdiff: np.ndarray, p: np.ndarray, t: np.ndarray) -> float:
+    """Full width (px) at half contrast of ``absdiff`` across the direction t at point p."""
+    off = np.arange(-6.0, 6.0 + 1e-9, 0.25)
+    t = np.asarray(t, float) / max(float(np.hypot(*t)), 1e-9)
+    q = p + off[:, None] * np.array([-t[1], t[0]])
+    v = map_coordinates(absdiff, [q[:, 0], q[:, 1]], order=1, mode="nearest")
+    return 0.25 * float(np.count_nonzero(v > v.min() + 0.5 * (v.max() - v.min())))
+
+
+def free_end_extension(absdiff: np.ndarray, pts: np.ndarray, n_tangent: int = 6, reach: float = 8.0) -> float:
+    """How far (px) the string's free end lies past the last vertex of its centreline.
+
+    A skeleton stops short of a free end (by about the foreground's half-width, more under
+    blur). Along the path's end tangent (over its last ``n_tangent`` px), the smoothed
+    contrast ``absdiff`` is sampled every 0.25 px; the end is where it falls to half the
+    contrast on the centreline just before the end; where the string is wider at its end
+    than along its length (a lump at the end: the end is the lump's centre), less the
+    extra half width (full widths at half contrast across the path).
+
+    Args:
+        absdiff: (H, W) contrast image. pts: (M, 2) (row, col) centreline, the free end last.
+
+    Returns:
+        Extension in px (>= 0; 0 where the profile gives no edge within ``reach`` px).
+    """
+    if len(pts) < 8:
+        return 0.0
+    cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
+    a = int(np.searchsorted(cum, cum[-1] - n_tangent))
+    t = pts[-1] - pts[min(a, len(pts) - 2)]
+    nt = float(np.hypot(*t))
+    if nt < 1e-6:
+        return 0.0
+    t /= nt
+    off = np.arange(-2.0, reach + 1e-9, 0.25)
+    ray = pts[-1] + off[:, None] * t
+    prof = map_coordinates(absdiff, [ray[:, 0], ray[:, 1]], order=1, mode="nearest")
+    peak, floor = float(np.max(prof[off <= 0])), float(np.min(prof))
+    if peak - floor <= 0:
+        return 0.0
+    half = floor + 0.5 * (peak - floor)
+    below = np.nonzero((off > 0) & (prof < half))[0]
+    if len(below) == 0 or below[0] == 0:
+        return 0.0
+    i = int(below[0])
+    edge = off[i - 1] + (prof[i - 1] - half) / max(prof[i - 1] - prof[i], 1e-9) * (off[i] - off[i - 1])
+    mids = [int(np.searchsorted(cum, f * cum[-1])) for f in (1 / 3, 2 / 3)]
+    w_mid = min(_fwhm_across(absdiff, pts[j], pts[min(j + 2, len(pts) - 1)] - pts[max(j - 2, 0)]) for j in mids)
+    w_end = _fwhm_across(absdiff, pts[-1] - 2.0 * t, t)
+    return max(0.0, float(edge) - max(0.0, w_end - w_mid) / 2)
+
+
+def mismatch_split(D: float, sigmas) -> np.ndarray:
+    """Share a length mismatch D (m) among independent parts by their variances (least squares).
+
+    The string's measured length (hidden head + visible centreline + free-end extension)
+    should equal L; with both ends observed the difference D is their joint error. The
+    minimum-norm correction sum_i d_i^2 / sigma_i^2 subject to sum_i d_i = D is
+    d_i = D sigma_i^2 / sum_j sigma_j^2.
+
+    Args:
+        D: mismatch, m. sigmas: (K,) each part's length uncertainty, m (>= 0; all zero: equal shares).
+
+    Returns:
+        (K,) corrections d_i, m, summing to D.
+    """
+    v = np.square(np.asarray(sigmas, float))
+    if not np.all(np.isfinite(v)) or np.any(v < 0):
+        raise ValueError(f"mismatch_split: sigmas must be finite, got {sigmas}")
+    tot = float(v.sum())
+    return np.full(len(v), D / len(v)) if tot <= 0 else D * v / tot

@@ -1,0 +1,58 @@
+"""Static background of a trial's video and the sensor's noise model (tracking step 1).
+
+See :func:`build_background`; used by :mod:`stringcast.tracking`.
+"""
+from __future__ import annotations
+
+import math
+import warnings
+
+import numpy as np
+
+
+def build_background(video, sample_idx, pre_idx, arm_masks) -> tuple[np.ndarray, tuple[float, float]]:
+    """Arm-masked temporal median background and the sensor's noise model.
+
+    Args:
+        video: :class:`~stringcast.video.VideoReader`.
+        sample_idx: frames spread over the motion; pre_idx: pre-motion frames (fill-in).
+        arm_masks: callable frame index -> (H, W) bool arm mask.
+
+    Returns:
+        background (H, W) float32 (grey levels), and (a, b) of sigma^2 = a + b B, fitted by
+        weighted least squares to robust (MAD) spreads of the samples about the background
+        in 16 brightness bins.
+    """
+    h, w = video.height, video.width
+    stack = np.empty((len(sample_idx), h, w), np.float32)
+    for j, k in enumerate(sample_idx):
+        f = video.read(int(k)).astype(np.float32)
+        f[arm_masks(int(k))] = np.nan
+        stack[j] = f
+    bg = np.empty((h, w), np.float32)
+    with warnings.catch_warnings():  # all-NaN pixels (arm in every sample) are filled below
+        warnings.simplefilter("ignore", RuntimeWarning)
+        for r in range(0, h, 64):  # row chunks keep nanmedian's temporaries small
+            bg[r:r + 64] = np.nanmedian(stack[:, r:r + 64], axis=0)
+    hole = ~np.isfinite(bg)
+    if hole.any():
+        src = pre_idx if len(pre_idx) else sample_idx
+        pre = np.median(np.stack([video.read(int(k)) for k in src[:15]]), axis=0).astype(np.float32)
+        bg[hole] = pre[hole]
+    d = (stack[:, ::2, ::2] - bg[None, ::2, ::2]).ravel()
+    B = np.broadcast_to(bg[None, ::2, ::2], stack[:, ::2, ::2].shape).ravel()
+    ok = np.isfinite(d)
+    d, B = d[ok], B[ok]
+    which = np.clip(np.searchsorted(np.quantile(B, np.linspace(0, 1, 17)), B, side="right") - 1, 0, 15)
+    xs, ys, ws = [], [], []
+    for i in range(16):
+        di = d[which == i]
+        if len(di) >= 500:
+            xs.append(float(np.median(B[which == i])))
+            ys.append((1.4826 * float(np.median(np.abs(di - np.median(di))))) ** 2)
+            ws.append(math.sqrt(len(di)))
+    if len(xs) >= 2:
+        A = np.column_stack([np.ones(len(xs)), xs]) * np.asarray(ws)[:, None]
+        a, b = np.linalg.lstsq(A, np.asarray(ys) * ws, rcond=None)[0]
+        return bg, (max(float(a), 0.01), max(float(b), 0.0))
+    return bg, (max(float(np.mean(ys)) if ys else 1.0, 0.01), 0.0)
