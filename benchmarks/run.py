@@ -1,7 +1,9 @@
-"""Run every benchmark: ``python -m benchmarks.run [--quick] [names...]`` (``make bench``).
+"""Run every benchmark: ``python -m benchmarks.run [--quick] [--with-loop] [names...]`` (``make bench``).
 
 Each benchmark module has ``run(quick: bool) -> dict`` and writes
 results/bench/<name>.json itself; this runner prints one line per benchmark.
+``loop`` (whole campaigns on the lab: hours in full, about an hour with --quick on
+2 cores) is left out of the default list: name it, or add ``--with-loop``.
 """
 from __future__ import annotations
 
@@ -11,14 +13,17 @@ import json
 import time
 
 BENCHMARKS = ("model_speed", "tracking", "sync", "estimation")
+SLOW = ("loop",)   # run only when named or with --with-loop
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="a short version of each")
-    ap.add_argument("names", nargs="*", default=list(BENCHMARKS), choices=list(BENCHMARKS) + [[]])
+    ap.add_argument("--with-loop", action="store_true", help="also run the slow `loop` benchmark")
+    ap.add_argument("names", nargs="*", default=list(BENCHMARKS), choices=list(BENCHMARKS + SLOW) + [[]])
     args = ap.parse_args()
-    for name in args.names:
+    names = list(args.names) + [n for n in SLOW if args.with_loop and n not in args.names]
+    for name in names:
         t0 = time.perf_counter()
         doc = importlib.import_module(f"benchmarks.{name}").run(args.quick)
         keys = {k: v for k, v in doc.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
