@@ -1,5 +1,6 @@
 """Sync: the video-to-controller offset from the arm seen in a small lab clip, and from video.yaml."""
 import copy
+import warnings
 
 import numpy as np
 import pytest
@@ -35,9 +36,22 @@ def lab_trial(tmp_path_factory, config):
     q_cmd = np.concatenate([np.repeat(q0[None], int(0.15 * rate), 0), q0 + dq, np.repeat((q0 + dq)[-1:], int(0.1 * rate), 0)])
     trial = root / "trial_1"
     run_trial(np.arange(len(q_cmd)) / rate, q_cmd, campaign, cfg, trial, seed=5, motion_start_s=0.15)
-    run_calibration(trial, None, campaign, root / "calibration.json")
+    run_calibration(trial, None, campaign, root / "calibration_h.json")  # homography only
     truth = read_json(trial / "ground_truth.json")
+    true_calibration(truth).to_json(root / "calibration.json")
     return root, trial, campaign, cfg, truth
+
+
+def true_calibration(truth: dict, shift_m=(0.0, 0.0)):
+    """The lab camera's own calibration (K, dist, plane homography), optionally with the board
+    pose moved by ``shift_m`` (x, y) in the robot frame: isolates sync from calibration error."""
+    from stringcast.calibration import Calibration
+
+    cam = truth["camera"]
+    K, dist, R, t = (np.asarray(cam[k], float) for k in ("K", "dist", "R", "tvec"))
+    H = np.linalg.inv(K @ np.column_stack([R[:, 0], R[:, 1], t]))  # undistorted px -> robot m
+    H[:2] += np.outer(shift_m, H[2])
+    return Calibration(H, (int(cam["width_px"]), int(cam["height_px"])), K, dist)
 
 
 def _with_video_yaml(root, trial, name, **change):
@@ -54,48 +68,87 @@ def _with_video_yaml(root, trial, name, **change):
     return d
 
 
-@pytest.mark.parametrize("trigger", ["withheld", "wrong by 30 ms", "as written"])
+@pytest.mark.parametrize("trigger", ["withheld", "wrong by 25 ms", "as written"])
 def test_offset_from_the_video_within_half_a_millisecond(lab_trial, trigger):
     root, trial, campaign, cfg, truth = lab_trial
     written = truth["trigger_time_written_s"]
-    value = {"withheld": None, "wrong by 30 ms": written + 0.030, "as written": written}[trigger]
+    value = {"withheld": None, "wrong by 25 ms": truth["trigger_time_s"] + 0.025, "as written": written}[trigger]
     d = _with_video_yaml(root, trial, f"t_{trigger.replace(' ', '_')}", trigger_time_s=value)
-    doc = run_sync(d, root / "calibration.json", campaign, cfg, root / f"sync_{d.name}.json")
+    with warnings.catch_warnings(record=True):
+        warnings.simplefilter("always")
+        doc = run_sync(d, root / "calibration.json", campaign, cfg, root / f"sync_{d.name}.json")
     err_ms = (doc["offset_s"] - truth["trigger_time_s"]) * 1000
     print(f"sync ({trigger}): error {err_ms:+.3f} ms, time residual {doc['time_residual_ms']:.2f} ms, "
-          f"arm vs FK {doc['residual_mm']} mm, frames {doc['frames_used']}")
-    # measured -0.69 ms (trigger withheld or 30 ms off) and -0.74 ms (as written, itself 2 ms off at
-    # most) on this clip, +0.40 ms on the 1024 x 1024 demo trial; issue 3 asks for 0.5 ms
-    assert abs(err_ms) <= 1.0, err_ms
+          f"residual {doc['residual_mm']:.2f} mm, frames {doc['frames_used']}")
+    assert abs(err_ms) <= 0.5, err_ms  # issue 3: 0.5 ms at 500 fps (the exposure centre of frame 0)
     assert doc["method"].startswith("video") and doc["frames_used"] > 20
+    assert 0 < doc["residual_mm"] < 3.0
     assert (doc["coarse_offset_s"] is not None) == (trigger != "as written")
+    if value is None:
+        assert doc["trigger_disagrees"] is None and doc["trigger_minus_estimate_ms"] is None
+    else:
+        gap = (value - doc["offset_s"]) * 1000
+        assert doc["trigger_minus_estimate_ms"] == pytest.approx(gap)
+        assert doc["trigger_disagrees"] == (abs(gap) > 1000 / FPS)
+        assert any("more than a frame" in w for w in doc["warnings"]) == doc["trigger_disagrees"]
+    if trigger == "wrong by 25 ms":
+        assert doc["trigger_disagrees"]
     assert read_json(root / f"sync_{d.name}.json")["offset_s"] == doc["offset_s"]
 
 
-@pytest.mark.xfail(strict=True, reason="board check not reliable yet: with the true board it reads 13.7 mm on "
-                   "this clip (edges of the clutter behind the links are taken for the arm's), 17.7 mm with a "
-                   "board 15 mm off; 3.8 mm on the demo trial")
-def test_board_check_sees_a_misplaced_board(lab_trial):
-    """A calibration that puts the board 15 mm off shows as the arm seen ~15 mm from the FK, with a warning."""
-    from stringcast.calibration import Calibration
-
+def test_a_misplaced_board_neither_biases_the_offset_nor_goes_unnoticed(lab_trial):
+    """Board pose 20 mm off in x: the board check measures it, the strips follow it, and a warning says so."""
     root, trial, campaign, cfg, truth = lab_trial
-    cal = Calibration.from_json(root / "calibration.json")
-    H = cal.H_pixel_to_robot.copy()
-    H[:2] += np.outer([0.015, 0.0], H[2])  # robot x + 15 mm
-    Calibration(H, cal.image_size, cal.K, cal.dist).to_json(root / "calibration_off.json")
-    good = run_sync(trial, root / "calibration.json", campaign, cfg)
-    off = run_sync(trial, root / "calibration_off.json", campaign, dict(cfg, sync=dict(cfg["sync"], board_check_warn_mm=5.0)))
-    assert any("board pose" in w for w in off["warnings"])
-    print(f"arm vs FK: {good['residual_mm']:.1f} mm (true board), {off['residual_mm']:.1f} mm (15 mm off)")
-    assert good["residual_mm"] < 5.0 and not good["warnings"]
-    assert 10.0 < off["residual_mm"] < 20.0
+    true_calibration(truth, (0.020, 0.0)).to_json(root / "calibration_off.json")
+    with warnings.catch_warnings(record=True):
+        warnings.simplefilter("always")
+        doc = run_sync(trial, root / "calibration_off.json", campaign,
+                       dict(cfg, sync=dict(cfg["sync"], board_check_warn_mm=5.0)))
+    err_ms = (doc["offset_s"] - truth["trigger_time_s"]) * 1000
+    bc = doc["board_check"]
+    print(f"board 20 mm off: error {err_ms:+.3f} ms, board check dx {bc['dx_mm']:.1f} dy {bc['dy_mm']:.1f} mm")
+    assert abs(err_ms) <= 0.5
+    assert bc["dx_mm"] == pytest.approx(20.0, abs=3.0) and abs(bc["dy_mm"]) < 3.0
+    assert any("board pose" in w for w in doc["warnings"])
+
+
+def test_homography_only_calibration_still_near(lab_trial):
+    """Lens distortion left uncorrected (no calib/ clip) puts the arm 5-20 mm off where it moves;
+    the offset stays within about a millisecond (the workflow should calibrate intrinsics)."""
+    root, trial, campaign, cfg, truth = lab_trial
+    doc = run_sync(trial, root / "calibration_h.json", campaign, cfg)
+    err_ms = (doc["offset_s"] - truth["trigger_time_s"]) * 1000
+    print(f"homography only: error {err_ms:+.3f} ms, residual {doc['residual_mm']:.2f} mm")
+    assert abs(err_ms) <= 1.5
+
+
+def test_video_is_the_default_method():
+    from stringcast.sync_arm import settings
+
+    assert settings(None)["method"] == "video" and settings({"sync": {"method": "trigger"}})["method"] == "trigger"
+
+
+def test_match_residual_is_the_robust_distance_across_the_segments():
+    """Synthetic best offsets: segments 1 mm off across themselves at 0.5 m/s -> 2 ms late; bad frames ignored."""
+    from stringcast.sync_arm import match_residual
+
+    rng = np.random.default_rng(3)
+    F, S, tau = 200, 3, 0.0431
+    a = np.full((F, S), 0.5)  # m/s
+    tau_ks = tau + rng.choice([-1, 1], (F, S)) * 0.002  # 1 mm either way
+    tau_ks[:10, 0] += 0.05  # bad frames
+    tau_ks[10:20] = np.nan
+    a[20:30] = 0.0  # still segments say nothing
+    res, n = match_residual(tau_ks, a, tau)
+    assert n == (F - 20) * S and res == pytest.approx(1.4826 * 1.0, rel=0.01)
+    assert match_residual(np.full((2, S), tau), a[:2], tau) == (0.0, 6)
+    assert match_residual(np.full((4, S), np.nan), a[:4], tau) == (None, 0)
 
 
 def test_trigger_method_and_frame_times(lab_trial, tmp_path):
     root, trial, campaign, cfg, truth = lab_trial
     cfg = dict(cfg, sync=dict(cfg["sync"], method="trigger"))
-    doc = run_sync(trial, None, campaign, cfg, tmp_path / "out" / "sync.json")
+    doc = run_sync(trial, None, campaign, cfg, tmp_path / "out" / "sync.json")  # selectable, not the default
     assert doc["offset_s"] == pytest.approx(truth["trigger_time_written_s"], abs=1e-9)
     assert doc["method"] == "video.yaml trigger_time_s" and "not estimated" in doc["note"]
     t = frame_times(doc)
@@ -107,7 +160,7 @@ def test_trigger_method_and_frame_times(lab_trial, tmp_path):
 
 
 def test_bad_inputs_name_the_file(lab_trial, tmp_path):
-    root, trial, campaign, cfg, truth = lab_trial
+    root, trial, campaign, cfg, _ = lab_trial
     d = _with_video_yaml(root, trial, "bad_fps", fps=-1)
     with pytest.raises(DataError, match="video.yaml"):
         run_sync(d, root / "calibration.json", campaign, cfg)

@@ -28,7 +28,7 @@ import cv2
 import numpy as np
 
 from .charuco import Intrinsics, calibrate_intrinsics, detect_charuco
-from .files import DataError, find_video, read_json, write_json
+from .files import DataError, find_video, read_joint_table, read_json, write_json
 from .video import FRAME_SUFFIXES, open_video
 
 MAX_CANDIDATE_FRAMES = 240
@@ -233,11 +233,14 @@ def median_frame(video, n: int = 5) -> np.ndarray:
 
 
 def run_calibration(trial_dir: str | Path, calib_dir: str | Path | None, campaign, out_json: str | Path,
-                    n_median: int = 5) -> Calibration:
+                    n_median: int = 5, config: dict | None = None) -> Calibration:
     """Calibrate one trial and write ``calibration.json``.
 
     Intrinsics from ``calib_dir`` (if given), then the plane homography from the median of
     the first ``n_median`` trial frames (the arm and string hang still before the motion).
+    The configured board-to-robot transform is then checked against the still arm in that
+    image at the joint log's first posture (:func:`stringcast.board_check.check_board_to_robot`;
+    ``board_check`` in the file, a warning above ``board_check.warn_mm``).
 
     Raises:
         DataError: no board / too few corners in the trial frames or the calibration views,
@@ -267,9 +270,32 @@ def run_calibration(trial_dir: str | Path, calib_dir: str | Path | None, campaig
                         f"{setup.reprojection_warn_px:.2f} px")
     if cal.n_corners < 0.5 * n_all:
         warnings.append(f"only {cal.n_corners} of {n_all} board corners used: the board is partly hidden")
+    board = _board_check(trial_dir, img, cal, campaign, config, warnings)
     cal = Calibration(cal.H_pixel_to_robot, cal.image_size, cal.K, cal.dist, cal.reprojection_error_px,
                       cal.n_corners, cal.board_to_robot, None if intr is None else intr.rms_px,
                       None if intr is None else intr.n_views, tuple(warnings), cal.corner_ids,
-                      None if intr is None else intr.views_found)
+                      None if intr is None else intr.views_found, board)
     cal.to_json(out_json)
     return cal
+
+
+def _board_check(trial_dir: Path, rest_image: np.ndarray, cal: Calibration, campaign, config: dict | None,
+                 warnings: list[str]) -> dict | None:
+    """The board-to-robot check at the joint log's first (rest) posture; None without a joints.csv."""
+    from .board_check import check_board_to_robot, settings
+
+    joints = trial_dir / "joints.csv"
+    if not joints.exists():
+        warnings.append(f"{joints} missing: the board-to-robot transform was not checked against the arm")
+        return None
+    _, q, _ = read_joint_table(joints)
+    grey = rest_image if rest_image.ndim == 2 else cv2.cvtColor(rest_image, cv2.COLOR_BGR2GRAY)
+    board = check_board_to_robot(grey.astype(np.float64), cal, campaign.arm, q[0], config)
+    warn = float(settings(config)["warn_mm"])
+    if board.get("residual_mm") is None:
+        warnings.append("board-to-robot check: the still arm could not be located in the first frames")
+    elif board["residual_mm"] > warn:
+        warnings.append(f"board-to-robot check: the still arm is seen {board['residual_mm']:.1f} mm "
+                        f"(dx {board['dx_mm']:+.1f}, dy {board['dy_mm']:+.1f} mm) from where the configured "
+                        f"board pose puts it (> {warn:g} mm): check setups.*.board_origin_mm / board_angle_deg")
+    return board

@@ -35,8 +35,10 @@ def cmd_calibrate(args):
     from .calibration import run_calibration
 
     calib_dir = Path(args.calib_dir) if args.calib_dir and Path(args.calib_dir).is_dir() else None
-    cal = run_calibration(Path(args.trial_dir), calib_dir, _campaign(args), Path(args.out))
-    print(f"calibration: reprojection error {cal.reprojection_error_px:.3f} px -> {args.out}")
+    cal = run_calibration(Path(args.trial_dir), calib_dir, _campaign(args), Path(args.out), config=_config(args))
+    bc = (cal.board_check or {}).get("residual_mm")
+    extra = "" if bc is None else f", board-to-robot check {bc:.1f} mm"
+    print(f"calibration: reprojection error {cal.reprojection_error_px:.3f} px{extra} -> {args.out}")
 
 
 def cmd_sync(args):
@@ -44,7 +46,7 @@ def cmd_sync(args):
 
     doc = run_sync(Path(args.trial_dir), Path(args.calibration), _campaign(args), _config(args), Path(args.out))
     extra = "" if doc.get("time_residual_ms") is None else \
-        f", time residual {doc['time_residual_ms']:.2f} ms, arm vs forward kinematics {doc['residual_mm'] or float('nan'):.1f} mm"
+        f", time residual {doc['time_residual_ms']:.2f} ms, arm match residual {doc['residual_mm'] or float('nan'):.1f} mm"
     print(f"sync: offset {doc['offset_s']:.6f} s ({doc['method']}{extra}) -> {args.out}")
 
 

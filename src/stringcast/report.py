@@ -173,7 +173,12 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
                 ("sync time residual (spread of the frames' own best offsets)",
                  _fmt(sync.get("time_residual_ms"), ".2f", " ms")),
                 ("trigger time minus estimate", _fmt(sync.get("trigger_minus_estimate_ms"), ".2f", " ms")),
-                ("still arm vs forward kinematics (board check, rough)", _fmt(sync.get("residual_mm"), ".1f", " mm"))]
+                ("sync: arm seen vs forward kinematics, after the offset (match residual)",
+                 _fmt(sync.get("residual_mm"), ".2f", " mm")),
+                ("board-to-robot check: still arm seen vs where the board pose puts it",
+                 "not checked" if not calib.get("board_check") else
+                 f"{_fmt(calib['board_check'].get('residual_mm'), '.1f', ' mm')} (dx "
+                 f"{_fmt(calib['board_check'].get('dx_mm'), '+.1f')}, dy {_fmt(calib['board_check'].get('dy_mm'), '+.1f')} mm)")]
     for w in sync.get("warnings") or []:
         cal_rows.append(("sync warning", w))
     if sync.get("note"):

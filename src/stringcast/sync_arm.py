@@ -18,22 +18,27 @@ model of the renderer or of the real arm's colours:
    rest posture makes that NCC fall. The same curve is predicted from the joint log
    by sampling the rest image at the strips of q(t); the offset is the shift that
    best matches the two (least squares over a grid over the whole possible range).
-4. **Fine offset**: each frame in the motion is sampled at the strips of
-   q(tau_c + k / fps) for candidate offsets tau_c within ``search_ms`` of the coarse one
-   (step ``step_ms``); the mean NCC with the template, summed over frames, peaks at the
-   offset; a parabola through the peak gives it below the step. A few bad frames only
-   flatten their own score curve. The spread (MAD) of the frames' own best offsets is
-   the time residual.
-5. **Board check** (:func:`board_check`): across each segment of the rest template,
-   the two strongest opposite edges give the segment's axis as seen; its offset from
-   the forward kinematics' axis, along each segment's normal, gives (least squares) the
-   translation between where the arm is seen and where config's board-to-robot
-   transform puts it: the calibration's residual in mm, warned about above
-   ``board_check_warn_mm``.
+4. **Fine offset**: each frame in the motion (in it for every candidate offset, if at
+   least ``min_frames`` are) is sampled at the strips of q(tau_c + k / fps) for candidate
+   offsets tau_c within ``search_ms`` of the coarse one (step ``step_ms``); each
+   segment's NCC with the template, summed over frames, peaks at the offset; segments
+   whose own peak is off the others' by more than ``segment_agree_ms`` are left out;
+   a parabola through the peak of the rest's sum gives it below the step. A few bad
+   frames only flatten their own score curve. The spread (MAD) of the frames' own best
+   offsets is the time residual. Each frame's strips are predicted at the exposure
+   centre ``tau + k / fps`` (motion blur averages the arm over the exposure: its
+   centre, to first order). ``strip_margin_mm`` is kept small (10 mm): the static
+   background in the template's margins pulls the match towards the rest posture
+   (25 mm: -0.67 ms on the test clip, 10 mm: +0.04 ms).
+5. **Residual** (:func:`match_residual`): every frame's and segment's own best offset,
+   times the segment's speed across itself, is a distance in mm between the arm seen
+   and the arm predicted at the estimated offset; their robust spread is the residual.
+
+The board-to-robot check (where the still arm is seen vs its FK position) is
+:func:`stringcast.board_check.check_board_to_robot`; :func:`stringcast.sync.estimate_offset`
+moves the strips by the translation it measures.
 """
 from __future__ import annotations
-
-import math
 
 import cv2
 import numpy as np
@@ -41,9 +46,10 @@ from scipy.ndimage import map_coordinates
 
 from .arm import forward_kinematics
 
-DEFAULTS = {"method": "trigger", "search_ms": 10.0, "step_ms": 0.25, "coarse_step_ms": 0.5, "strip_samples": 8,
-            "strip_width_samples": 41, "strip_margin_mm": 25.0, "rest_frames": 5, "smooth_px": 1.0,
-            "board_check_warn_mm": 20.0, "min_frame_contrast": 0.02}
+DEFAULTS = {"method": "video", "search_ms": 10.0, "step_ms": 0.25, "coarse_step_ms": 0.5, "strip_samples": 8,
+            "strip_width_samples": 41, "strip_margin_mm": 10.0, "rest_frames": 5, "smooth_px": 1.0,
+            "board_check_warn_mm": 20.0, "min_frame_contrast": 0.02,
+            "min_frames": 20, "segment_agree_ms": 3.0, "recentre_ms": 1.0}
 
 
 def settings(config: dict | None) -> dict:
@@ -88,13 +94,60 @@ def sample(image: np.ndarray, calibration, points: np.ndarray) -> np.ndarray:
     return vals.reshape(points.shape[:-1])
 
 
-def ncc(samples: np.ndarray, template: np.ndarray) -> np.ndarray:
-    """Mean over segments of the NCC of (..., S, n_u, n_v) samples with (S, n_u, n_v) -> (...)."""
+def ncc_segments(samples: np.ndarray, template: np.ndarray) -> np.ndarray:
+    """NCC of each segment's (..., S, n_u, n_v) samples with the (S, n_u, n_v) template -> (..., S)."""
     a = samples - samples.mean(axis=(-2, -1), keepdims=True)
     b = template - template.mean(axis=(-2, -1), keepdims=True)
     num = (a * b).sum(axis=(-2, -1))
     den = np.sqrt((a * a).sum(axis=(-2, -1)) * (b * b).sum(axis=(-2, -1)))
-    return np.mean(num / np.maximum(den, 1e-12), axis=-1)
+    return num / np.maximum(den, 1e-12)
+
+
+def ncc(samples: np.ndarray, template: np.ndarray) -> np.ndarray:
+    """Mean over segments of :func:`ncc_segments` -> (...)."""
+    return np.mean(ncc_segments(samples, template), axis=-1)
+
+
+def normal_speeds(arm, q_minus: np.ndarray, q_mid: np.ndarray, q_plus: np.ndarray, dt: float,
+                  segments: np.ndarray, n_u: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Motion of each segment across itself, for :func:`match_residual`.
+
+    Args:
+        q_minus, q_mid, q_plus: (F, J) rad, the joints at t - dt, t, t + dt (dt s).
+        segments: (S,) segment indices; n_u: samples along each strip.
+
+    Returns:
+        a (F, S) m/s: RMS over the strip's length of the velocity along the segment's
+        normal; b (F, S): mean / RMS of that velocity (1 for a translation, ~0.86 for a
+        rotation about one end), so that a static position error e along the normal
+        shifts the segment's best offset by ``b e / a``; nrm (F, S, 2): the unit normals.
+    """
+    zero = np.zeros(len(segments))
+    p0 = strip_points(arm, q_minus, zero, n_u, 1, segments)[..., 0, :]  # (F, S, n_u, 2)
+    p1 = strip_points(arm, q_plus, zero, n_u, 1, segments)[..., 0, :]
+    pts = forward_kinematics(arm, q_mid)
+    d = (pts[..., 1:, :] - pts[..., :-1, :])[..., segments, :]
+    e = d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-9)
+    nrm = np.stack([-e[..., 1], e[..., 0]], axis=-1)  # (F, S, 2)
+    vn = np.einsum("fsuc,fsc->fsu", (p1 - p0) / (2 * dt), nrm)
+    rms = np.sqrt(np.mean(vn ** 2, axis=-1))
+    return rms, np.mean(vn, axis=-1) / np.maximum(rms, 1e-12), nrm
+
+
+def match_residual(tau_ks: np.ndarray, a: np.ndarray, offset_s: float) -> tuple[float | None, int]:
+    """Robust residual (mm) of the arm's match at ``offset_s``, and the equations used.
+
+    Each frame k and segment s that matched (tau_ks (F, S) s, NaN where not) and moved
+    across itself (a (F, S) m/s from :func:`normal_speeds`, > 1 mm/s) gives the distance
+    ``a_ks (tau_ks - offset_s)`` by which the segment seen and the segment predicted at the
+    offset differ across the segment; the residual is 1.4826 x their median absolute
+    value (a MAD: a few bad frames do not inflate it). None if fewer than 3.
+    """
+    ok = np.isfinite(tau_ks) & np.isfinite(a) & (a > 1e-3)
+    if ok.sum() < 3:
+        return None, int(ok.sum())
+    d = a[ok] * (tau_ks[ok] - offset_s)
+    return float(1.4826 * np.median(np.abs(d)) * 1000), int(ok.sum())
 
 
 def joints_at(t: np.ndarray, t_j: np.ndarray, q_j: np.ndarray) -> np.ndarray:
@@ -127,63 +180,6 @@ def parabola_peak(x: np.ndarray, y: np.ndarray) -> float:
         if den < 0:
             return float(x[i] + 0.5 * (y[i - 1] - y[i + 1]) / den * (x[1] - x[0]))
     return float(x[i])
-
-
-def _edge_offset(profile: np.ndarray, v: np.ndarray) -> float | None:
-    """Axis offset (m) of a segment's mean cross profile: midpoint of its two strongest
-    opposite-signed edges, one on each side of the predicted axis; None if unclear."""
-    g = np.gradient(profile, v)
-    left, right = v < 0, v > 0
-    if not left.any() or not right.any():
-        return None
-    il = int(np.argmax(np.where(left, np.abs(g), -1)))
-    ir = int(np.argmax(np.where(right & (np.sign(g) != np.sign(g[il])), np.abs(g), -1)))
-    if not right[ir] or np.sign(g[ir]) == np.sign(g[il]):
-        return None
-
-    def refine(i):
-        if 0 < i < len(g) - 1:
-            y0, y1, y2 = np.abs(g[i - 1:i + 2])
-            den = y0 - 2 * y1 + y2
-            if den < 0:
-                return v[i] + 0.5 * (y0 - y2) / den * (v[1] - v[0])
-        return v[i]
-
-    return 0.5 * (refine(il) + refine(ir))
-
-
-def board_check(rest_image: np.ndarray, calibration, arm, q_rest: np.ndarray, half_widths: np.ndarray,
-                segments: np.ndarray | None = None, n_u: int = 24, n_v: int = 81) -> dict:
-    """Where the still arm is seen vs where the forward kinematics put it (the board-to-robot check).
-
-    Args:
-        rest_image: (H, W) float, the arm at rest at ``q_rest`` (J,) rad.
-        half_widths: (S,) strip half-widths, m (:func:`segment_half_widths`), of the
-            segments indexed by ``segments`` (default: all).
-
-    Returns:
-        ``{"translation_mm": [dx, dy] or None, "residual_mm": |d| or None,
-        "segment_offsets_mm": per segment (None where its edges were unclear)}``.
-    """
-    pts = strip_points(arm, q_rest, half_widths, n_u, n_v, segments)
-    vals = sample(rest_image, calibration, pts)  # (S, n_u, n_v)
-    fk = forward_kinematics(arm, q_rest)
-    index = np.arange(len(fk) - 1) if segments is None else np.asarray(segments)
-    rows, rhs, offsets = [], [], []
-    for s in range(vals.shape[0]):
-        v = np.linspace(-1.0, 1.0, n_v) * half_widths[s]
-        off = _edge_offset(np.median(vals[s], axis=0), v)
-        offsets.append(None if off is None else float(off) * 1000)
-        if off is not None:
-            e = fk[index[s] + 1] - fk[index[s]]
-            e = e / max(np.hypot(*e), 1e-9)
-            rows.append([-e[1], e[0]])
-            rhs.append(off)
-    if len(rows) < 2 or np.linalg.matrix_rank(np.asarray(rows), tol=0.2) < 2:
-        return {"translation_mm": None, "residual_mm": None, "segment_offsets_mm": offsets}
-    d = np.linalg.lstsq(np.asarray(rows), np.asarray(rhs), rcond=None)[0] * 1000
-    return {"translation_mm": [float(d[0]), float(d[1])], "residual_mm": float(math.hypot(*d)),
-            "segment_offsets_mm": offsets}
 
 
 def smooth(frame: np.ndarray, sigma: float) -> np.ndarray:

@@ -6,6 +6,7 @@ rule calibrate:
     input:
         video=trial_video,
         meta="data/{campaign}/trial_{trial}/video.yaml",
+        joints="data/{campaign}/trial_{trial}/joints.csv",
         campaign="data/{campaign}/campaign.yaml",
         calib=calib_input,
     output:
@@ -20,6 +21,7 @@ rule calibrate:
         cli=CLI,
         calib=calib_arg,
         setups=config["setups"],
+        board_check=config.get("board_check", {}),
     shell:
         '{params.cli} calibrate --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '{params.calib} --campaign "{input.campaign}" --out "{output}" > "{log}" 2>&1'
