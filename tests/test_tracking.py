@@ -232,3 +232,25 @@ def test_tracking_on_a_tiny_lab_render(tmp_path, config):
     assert pts["valid"].mean() > 0.7, pts["valid"].mean()
     # measured 0.88 / 1.91 mm at 1.3 mm per px; the margin absorbs changes to the lab's renderer
     assert np.median(e) < 1.5 and np.percentile(e, 95) < 4.0, (np.median(e), np.percentile(e, 95))
+
+
+@pytest.mark.parametrize("end", ["plain", "ball", "sleeve"])
+def test_free_end_extension_finds_where_the_string_ends(end):
+    """A plain end and a pipe (sleeve) end at their far edge; a clay ball ends at its centre."""
+    from stringcast.centreline import free_end_extension
+
+    img = np.zeros((60, 120), np.float32)
+    img[29:32, 10:80] = 1.0                     # the string: 3 px wide, rows 29-31, to column 80
+    if end == "ball":
+        cv2.circle(img, (80, 30), 5, 1.0, -1)    # 11 px ball centred on the string's end (column 80)
+        want = 80.0
+    elif end == "sleeve":
+        img[25:36, 60:86] = 1.0                  # 11 px wide, 26 px long pipe over the last part
+        want = 85.5
+    else:
+        want = 79.5
+    img = cv2.GaussianBlur(img, (0, 0), 1.0)
+    last = 78.0 if end != "ball" else 79.0      # a skeleton stops short of the end
+    pts = np.column_stack([np.full(70, 30.0), np.linspace(10.0, last, 70)])
+    ext = free_end_extension(img, pts)
+    assert last + ext == pytest.approx(want, abs=1.0), (end, last + ext)

@@ -243,9 +243,10 @@ def free_end_extension(absdiff: np.ndarray, pts: np.ndarray, n_tangent: int = 6,
     A skeleton stops short of a free end (by about the foreground's half-width, more under
     blur). Along the path's end tangent (over its last ``n_tangent`` px), the smoothed
     contrast ``absdiff`` is sampled every 0.25 px; the end is where it falls to half the
-    contrast on the centreline just before the end; where the string is wider at its end
-    than along its length (a lump at the end: the end is the lump's centre), less the
-    extra half width (full widths at half contrast across the path).
+    contrast on the centreline just before the end. Where the string is wider at its end
+    than along its length, a lump ends it: a ball (clay: the end is its centre, half its
+    width back) or a sleeve longer than wide (a pipe: the end is its far edge); widths are
+    full widths at half contrast across the path.
 
     Args:
         absdiff: (H, W) contrast image. pts: (M, 2) (row, col) centreline, the free end last.
@@ -277,7 +278,17 @@ def free_end_extension(absdiff: np.ndarray, pts: np.ndarray, n_tangent: int = 6,
     mids = [int(np.searchsorted(cum, f * cum[-1])) for f in (1 / 3, 2 / 3)]
     w_mid = min(_fwhm_across(absdiff, pts[j], pts[min(j + 2, len(pts) - 1)] - pts[max(j - 2, 0)]) for j in mids)
     w_end = _fwhm_across(absdiff, pts[-1] - 2.0 * t, t)
-    return max(0.0, float(edge) - max(0.0, w_end - w_mid) / 2)
+    if w_end - w_mid <= 0.5:  # a plain end: the string ends at its half-contrast edge
+        return max(0.0, float(edge))
+    # A lump at the end: a ball (as long as wide: the end is its centre, half its width back from
+    # the far edge) or a sleeve (longer than wide, e.g. a pipe: the end is its far edge). One lump
+    # width and a quarter back from the far edge, a ball is over; a sleeve is still as wide.
+    back = cum[-1] + float(edge) - 1.25 * w_end
+    j = int(np.clip(np.searchsorted(cum, back), 1, len(pts) - 2))
+    w_back = _fwhm_across(absdiff, pts[j], pts[j + 1] - pts[j - 1])
+    if w_back > w_mid + 0.5 * (w_end - w_mid):
+        return max(0.0, float(edge))
+    return max(0.0, float(edge) - w_end / 2)
 
 
 def mismatch_split(D: float, sigmas) -> np.ndarray:
