@@ -222,3 +222,13 @@ def test_run_calibration_without_board(tmp_path, campaign):
     with pytest.raises(DataError, match="video.mkv.*no ChArUco board"):
         run_calibration(trial, None, campaign, tmp_path / "c.json")
     assert not (tmp_path / "c.json").exists()
+
+
+def test_fix_k3_holds_k3_at_zero_on_the_real_clip():
+    """cv2.CALIB_FIX_K3 (config: cameras.<name>.fix_k3): k3 stays 0 and the real clip still calibrates."""
+    _needs(CLIP)
+    board = cv2.aruco.CharucoBoard((4, 5), 0.054, 0.054 * 0.75, cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50))
+    frames = [f for _, f in open_video(CLIP / "cam_0.mp4")]
+    fixed = calibrate_intrinsics(frames, board, "clip", flags=cv2.CALIB_FIX_K3)
+    assert fixed.dist[4] == 0.0
+    assert _rel(fixed.K[0, 0], 894.5) < 0.03 and fixed.rms_px < 0.25   # reference_cam_0.toml (k1, k2 only)

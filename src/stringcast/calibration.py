@@ -255,7 +255,8 @@ def run_calibration(trial_dir: str | Path, calib_dir: str | Path | None, campaig
         calib_dir = Path(calib_dir)
         reader = _calib_reader(calib_dir)
         stride = max(1, math.ceil(reader.n_frames / MAX_CANDIDATE_FRAMES))
-        intr = calibrate_intrinsics((f for i, f in reader if i % stride == 0), board, str(reader.path))
+        flags = cv2.CALIB_FIX_K3 if setup.camera.get("fix_k3") else 0
+        intr = calibrate_intrinsics((f for i, f in reader if i % stride == 0), board, str(reader.path), flags=flags)
         if intr.views_rejected:
             warnings.append(f"intrinsics: {intr.views_rejected} calibration views rejected (reprojection outliers)")
     else:

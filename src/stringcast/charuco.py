@@ -139,7 +139,8 @@ class Intrinsics:
 
 
 def calibrate_intrinsics(frames: Iterable[np.ndarray], board, source: str = "calibration frames",
-                         invert: bool | None = None, min_views: int = 3, max_views: int = MAX_VIEWS) -> Intrinsics:
+                         invert: bool | None = None, min_views: int = 3, max_views: int = MAX_VIEWS,
+                         flags: int = 0) -> Intrinsics:
     """Camera matrix and distortion from views of a ChArUco board (``cv2.calibrateCameraExtended``).
 
     Args:
@@ -149,6 +150,8 @@ def calibrate_intrinsics(frames: Iterable[np.ndarray], board, source: str = "cal
         invert: board polarity (see :func:`detect_charuco`).
         min_views: views with >= :data:`MIN_VIEW_CORNERS` corners needed.
         max_views: at most this many views, chosen for pose diversity (:func:`select_views`).
+        flags: ``cv2.calibrateCamera`` flags, e.g. ``cv2.CALIB_FIX_K3`` for an ordinary
+            (not wide-angle) lens, where a free k3 fits the views' noise, not the lens.
 
     Raises:
         DataError: fewer than ``min_views`` usable views, or frames of different sizes.
@@ -176,7 +179,7 @@ def calibrate_intrinsics(frames: Iterable[np.ndarray], board, source: str = "cal
     keep = np.arange(len(obj))
     for _ in range(4):
         rms, K, dist, _, _, _, _, per_view = cv2.calibrateCameraExtended(
-            [obj[k] for k in keep], [img[k] for k in keep], size, None, None)
+            [obj[k] for k in keep], [img[k] for k in keep], size, None, None, flags=flags)
         per_view = per_view.ravel()
         bad = per_view > max(3.0 * float(np.median(per_view)), 0.5)
         if not bad.any() or len(keep) - bad.sum() < min_views:
