@@ -195,12 +195,16 @@ def step(px, py, vx, vy, fx, fy, hx, hy, hvx, hvy, phi, dphi, c, inv_mu,
 
 
 @njit(cache=True, fastmath=False)
-def _load(p_init, px, py, vx, vy):
-    for j in range(px.shape[0]):
+def _state(p_init):
+    """Work arrays of one simulation: positions px, py (n,) from p_init (n, 2) at rest
+    (vx = vy = 0) and force buffers fx, fy (n,)."""
+    n = p_init.shape[0]
+    px = np.empty(n)
+    py = np.empty(n)
+    for j in range(n):
         px[j] = p_init[j, 0]
         py[j] = p_init[j, 1]
-        vx[j] = 0.0
-        vy[j] = 0.0
+    return px, py, np.zeros(n), np.zeros(n), np.empty(n), np.empty(n)
 
 
 @njit(cache=True, fastmath=False)
@@ -213,14 +217,8 @@ def run_samples(c, mu, hand_t, hand, p_init, l0, psi0, dt, sample_t, g, lmax, ou
     """
     n = p_init.shape[0]
     F = sample_t.shape[0]
-    px = np.empty(n)
-    py = np.empty(n)
-    vx = np.empty(n)
-    vy = np.empty(n)
-    fx = np.empty(n)
-    fy = np.empty(n)
+    px, py, vx, vy, fx, fy = _state(p_init)
     inv_mu = 1.0 / mu
-    _load(p_init, px, py, vx, vy)
     t0 = sample_t[0]
     f = 0
     while f < F and sample_t[f] <= t0:
@@ -271,14 +269,8 @@ def run_closest(c, mu, hand_t, hand, p_init, l0, psi0, dt, t_start, t_end, tx, t
     on blow-up (inf, nan, -inf, False).
     """
     n = p_init.shape[0]
-    px = np.empty(n)
-    py = np.empty(n)
-    vx = np.empty(n)
-    vy = np.empty(n)
-    fx = np.empty(n)
-    fy = np.empty(n)
+    px, py, vx, vy, fx, fy = _state(p_init)
     inv_mu = 1.0 / mu
-    _load(p_init, px, py, vx, vy)
     ax = px[n - 1]
     ay = py[n - 1]
     d_min = math.sqrt((ax - tx) ** 2 + (ay - ty) ** 2)
@@ -344,16 +336,10 @@ def settle(c, mu, hand_pose, p_init, l0, psi0, dt, g, lmax, relax, tol, t_max, c
     2 t_max reached.
     """
     n = p_init.shape[0]
-    px = np.empty(n)
-    py = np.empty(n)
-    vx = np.empty(n)
-    vy = np.empty(n)
-    fx = np.empty(n)
-    fy = np.empty(n)
+    px, py, vx, vy, fx, fy = _state(p_init)
     wx = np.empty(n)
     wy = np.empty(n)
     inv_mu = 1.0 / mu
-    _load(p_init, px, py, vx, vy)
     out = np.empty((n, 2))
     nsteps = int(math.ceil(t_max / dt))
     a_tol = tol * max(relax, 1.0)
