@@ -254,3 +254,20 @@ def test_free_end_extension_finds_where_the_string_ends(end):
     pts = np.column_stack([np.full(70, 30.0), np.linspace(10.0, last, 70)])
     ext = free_end_extension(img, pts)
     assert last + ext == pytest.approx(want, abs=1.0), (end, last + ext)
+
+
+def test_nan_median0_matches_numpy_nanmedian():
+    """The sort-based background median is NumPy's nanmedian, including all-NaN and even counts."""
+    from stringcast.background import nan_median0
+
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(8, 5, 7)).astype(np.float32)
+    a[rng.random(a.shape) < 0.4] = np.nan
+    a[:, 0, 0] = np.nan  # all NaN
+    a[:, 1, 1] = np.arange(8)  # even count, no NaN
+    a[:5, 2, 2] = np.nan  # three left
+    with np.errstate(all="ignore"), pytest.warns(RuntimeWarning):
+        ref = np.nanmedian(a, axis=0)
+    got = nan_median0(a)
+    assert np.isnan(got[0, 0]) and got[1, 1] == 3.5
+    np.testing.assert_array_equal(got, ref)

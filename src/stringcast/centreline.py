@@ -224,8 +224,13 @@ def branch_vertices(skel: np.ndarray, walk: np.ndarray, min_branch_px: int) -> n
     _nlab, lab, stats, _ = cv2.connectedComponentsWithStats(rest.astype(np.uint8), connectivity=8)
     big = stats[:, cv2.CC_STAT_AREA] >= min_branch_px
     big[0] = False
-    near = cv2.dilate(big[lab].astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
-    return near[r, c]
+    near = np.zeros(len(walk), bool)  # a big branch pixel in the walk vertex's 3x3 neighbourhood
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            rr, cc = r + dr, c + dc
+            ok = (rr >= 0) & (rr < lab.shape[0]) & (cc >= 0) & (cc < lab.shape[1])
+            near[ok] |= big[lab[rr[ok], cc[ok]]]
+    return near
 
 
 def _fwhm_across(absdiff: np.ndarray, p: np.ndarray, t: np.ndarray) -> float:

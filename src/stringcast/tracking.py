@@ -206,10 +206,10 @@ class FrameTracker:
         last 3 px at least ``end_contrast_min`` of the path's median: a blurred tip), and no
         background edge across the end (a step of ``end_edge_max`` x that median between the
         background behind and past it: the rim of an occluder or of a region the string left)."""
-        r, c = pts[-1].astype(int)
+        r, c = pts[-1].astype(int) - self._skel_at  # in the skeleton's box
         r0, c0 = max(r - 6, 0), max(c - 6, 0)
         win = self._skel[r0:r + 7, c0:c + 7].copy()
-        wr, wc = (pts.astype(int) - [r0, c0]).T
+        wr, wc = (pts.astype(int) - self._skel_at - [r0, c0]).T
         inside = (wr >= 0) & (wr < win.shape[0]) & (wc >= 0) & (wc < win.shape[1])
         win[wr[inside], wc[inside]] = False  # off the walk: a loop's other strand, or a spur
         _, lab, stats, _ = cv2.connectedComponentsWithStats(win.astype(np.uint8), connectivity=8)
@@ -240,7 +240,7 @@ class FrameTracker:
         weak = (z > st["threshold_low"]) & ~arm
         nlab, lab = cv2.connectedComponents(weak.astype(np.uint8), connectivity=8)
         keep = np.zeros(nlab, bool)
-        keep[np.unique(lab[weak & (z > st["threshold_high"])])] = True
+        keep[lab[weak & (z > st["threshold_high"])]] = True
         keep[0] = False
         return absd, keep[lab]
 
@@ -252,18 +252,22 @@ class FrameTracker:
         (dropping detours along slivers of the gripper's rim), then its vertices within rho
         px of the grasp are dropped (there the string mixes with the fingertips).
         """
-        rows, cols = np.nonzero(fg)
-        if len(rows) == 0:
+        x, y, w, h = cv2.boundingRect(fg.astype(np.uint8))
+        if w == 0:
             return None
-        b0, b1 = max(0, rows.min() - 1), max(0, cols.min() - 1)
-        skel = np.zeros_like(fg)
-        skel[b0:rows.max() + 2, b1:cols.max() + 2] = skeletonize(fg[b0:rows.max() + 2, b1:cols.max() + 2])
-        self._skel = skel
+        b = np.array([max(0, y - 1), max(0, x - 1)])  # the foreground's box, 1 px margin: all work is in it
+        skel = skeletonize(fg[b[0]:y + h + 1, b[1]:x + w + 1])
+        self._skel, self._skel_at = skel, b
+        found = self._walk(skel, g - b, r0, rho)
+        return None if found is None else (found[0] + b, found[1], found[2])
+
+    def _walk(self, skel: np.ndarray, g: np.ndarray, r0: float, rho: float):
+        """:meth:`_centreline` inside the foreground's box: skel (h, w) bool, g (row, col) in the box."""
         sy, sx = np.nonzero(skel)
         dist = np.hypot(sy - g[0], sx - g[1])
         idx = np.nonzero(dist <= r0)[0]
         if len(idx) == 0:
-                return None
+            return None
         _, comp = cv2.connectedComponents(skel.astype(np.uint8), connectivity=8)
         cid = comp[sy[idx], sx[idx]]
         seeds = []  # per component: its pixel nearest the grasp; if the walk from it ends in a spur of the
