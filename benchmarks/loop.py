@@ -6,7 +6,9 @@ person would run it: :func:`stringcast.campaign.run_campaign` in a project root 
 (the repo's Snakefile and workflow/ linked, its own config/config.yaml carrying the
 method), at most ``CAP`` = 8 executions. Whether the tip hit is the *lab's* verdict
 (``ground_truth.json`` of the last trial, as the campaign loop reads it to stop); the
-workflow's stages never read it.
+workflow's stages never read it. The campaigns run with ``reports=False``: no HTML
+reports, and the hitting trial is not processed (its E is then null), about a third
+less time per run.
 
 Methods are config overlays:
 
@@ -108,7 +110,7 @@ def run_one(string_type: int, seed: int, method: str, config: dict, work: Path, 
     try:
         summary = run_campaign(name, str(string_type), str(PAPER_TARGET[string_type]),
                                config_path=str(cfg_path), max_executions=CAP, cores=cores,
-                               seed=seed, root=root)
+                               seed=seed, root=root, reports=False)
     except (RuntimeError, DataError) as exc:  # a failed workflow step or trial is a result, not the end
         rec.update(executions=None, hit=False, closest_approach_mm=[], E_mm=[], timings_s={},
                    wall_s=time.perf_counter() - t0, s_per_execution=None,

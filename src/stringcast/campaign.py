@@ -42,13 +42,15 @@ def _snakemake(root: Path, targets: list[str], cores: int, config_path: str | No
 
 def run_campaign(name: str, string: str, target: str, config_path: str | None = None,
                  max_executions: int = 5, cores: int = 2, seed: int = 0,
-                 root: Path = Path(".")) -> dict:
+                 root: Path = Path("."), reports: bool = True) -> dict:
     """Run (or resume) a campaign on the virtual lab.
 
     Args:
         name: campaign name: data/<name>/ and results/<name>/.
         string, target: ids from the config.
         max_executions: stop after this many executions without a hit.
+        reports: False: only what the loop needs (no HTML reports, and the hitting trial is
+            not processed); the loop benchmark's setting, about a third faster.
 
     Returns:
         dict with per-trial rows (lab hit, closest approach mm) and the report path.
@@ -101,21 +103,25 @@ def run_campaign(name: str, string: str, target: str, config_path: str | None = 
                      "closest_approach_mm": float(truth["closest_approach_mm"])})
         print(f"[campaign {name}] execution {k}: lab tip closest approach "
               f"{truth['closest_approach_mm']:.1f} mm -> {'HIT' if truth['hit'] else 'miss'}", flush=True)
+        if truth["hit"] and not reports:
+            break
         timings[f"process_{k}_s"] = _snakemake(
-            root, [f"results/{name}/trial_{k}/report.html", f"results/{name}/trial_{k}/motion.csv"],
+            root, [f"results/{name}/trial_{k}/motion.csv"] + [f"results/{name}/trial_{k}/report.html"] * reports,
             cores, config_path)
         if truth["hit"]:
             break
         motion = root / "results" / name / f"trial_{k}" / "motion.csv"
-    timings["campaign_report_s"] = _snakemake(root, [f"results/{name}/report.html"], cores, config_path)
+    if reports:
+        timings["campaign_report_s"] = _snakemake(root, [f"results/{name}/report.html"], cores, config_path)
     report = root / "results" / name / "report.html"
     summary = {"campaign": name, "string": campaign.string_id, "target": campaign.target.name,
                "executions": len(rows), "hit": any(r["hit"] for r in rows), "trials": rows,
-               "timings_s": timings, "report": str(report)}
+               "timings_s": timings, "report": str(report) if reports else None}
     (root / "results" / name / "campaign_summary.json").write_text(json.dumps(summary, indent=2))
     verdict = f"hit after {len(rows)} execution(s)" if summary["hit"] else f"no hit in {len(rows)} execution(s)"
     print(f"[campaign {name}] {verdict}")
-    print(f"report: {report}")
+    if reports:
+        print(f"report: {report}")
     return summary
 
 
