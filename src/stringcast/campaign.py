@@ -33,7 +33,7 @@ def _snakemake(root: Path, targets: list[str], cores: int, config_path: str | No
     if config_path:
         cmd += ["--configfile", str(config_path)]
     t0 = time.perf_counter()
-    proc = subprocess.run(cmd, cwd=root)
+    proc = subprocess.run(cmd, check=False, cwd=root)  # the return code is checked below, with the log named
     if proc.returncode != 0:
         raise RuntimeError(f"snakemake failed for {' '.join(targets)} (exit {proc.returncode}); "
                            f"see the logs under {root / 'results'}/<campaign>/logs/")
