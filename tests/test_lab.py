@@ -29,6 +29,10 @@ Q0 = np.array([0.2, -0.4, -0.3])
 def tiny(config):
     """A tiny campaign + config: inline string, a 320 x 240 camera seeing 0.4 x 0.3 m
     around the grasp, and a small ChArUco board beside the hanging string."""
+    return _tiny(config)
+
+
+def _tiny(config, string: dict | None = None):
     cfg = copy.deepcopy(config)
     from stringcast.config import ArmSpec
 
@@ -39,8 +43,8 @@ def tiny(config):
     cfg["lab"]["strings"] = {"default": {"density_g_per_m": 20.0, "diameter_mm": 3.0}}
     cfg["lab"]["camera"] = dict(cfg["lab"].get("camera", {}), focal_px=2000.0, center_mm=[g[0] + 90, g[1] - 110])
     doc = {
-        "string": {"length_mm": 150.0, "n_points": 5, "weights": [{"at_mm": 150.0, "mass_g": 5.0}],
-                   "stiff_sections": []},
+        "string": string or {"length_mm": 150.0, "n_points": 5, "weights": [{"at_mm": 150.0, "mass_g": 5.0}],
+                             "stiff_sections": []},
         "target": {"x_mm": g[0] + 150, "y_mm": g[1] + 10, "radius_mm": 20.0},
         "allow_reachable": True,
         "setup": {"camera": "tiny", "board": {"squares_x": 5, "squares_y": 4, "square_mm": 40.0,
@@ -236,6 +240,30 @@ def test_string_drawn_where_physics_puts_it(tiny):
         prof = _bilinear(dark, p + s[:, None] * nn)
         assert prof.max() > 40                          # clearly darker than the background
         assert abs(np.sum(prof * s) / np.sum(prof)) < 0.15
+
+
+@pytest.mark.parametrize("pipe", [False, True])
+def test_string_ends_where_its_ground_truth_ends(config, pipe):
+    """The cord's or pipe's end is flat: the contrast along the axis falls to half within 0.5 px
+    of the projected tip, 0.8 px/mm here (cv2.polylines' round caps drew d/2 = 1.5 or 4 mm, 1.3 or 3.2 px past it)."""
+    string = {"length_mm": 150.0, "n_points": 5, "weights": [],
+              "stiff_sections": [{"from_mm": 100.0, "to_mm": 150.0}] if pipe else []}
+    campaign, cfg = _tiny(config, string)
+    phys = StringPhysics.from_campaign(campaign, cfg)
+    r = build_renderer(campaign, cfg, phys)
+    g = hand_pose(campaign.arm, Q0)[:2]
+    u = np.array([np.cos(np.radians(-70)), np.sin(np.radians(-70))])
+    look = StringLook.from_physics(phys)
+    assert (len(look.pipes) == 1) == pipe
+    sites = g + np.outer(look.arc, u)
+    dark = r.bg_dn - r.dynamic_dn(sites[None], Q0[None])
+    tip = r.cam.project(sites[-1:])[0]
+    step = r.cam.project(sites[-1:] + 1e-3 * u)[0] - tip      # 1 mm along the axis, px
+    s = np.linspace(-3, 3, 601)                             # px along the axis, 0 at the tip
+    prof = _bilinear(dark, tip + s[:, None] * step / np.linalg.norm(step))
+    inside = prof[s < -1.5].max()
+    edge = s[np.nonzero(prof >= 0.5 * inside)[0][-1]]
+    assert abs(edge) < 0.5, edge
 
 
 # ---------------------------------------------------------------------------- trial files

@@ -248,6 +248,24 @@ class StringLook:
         return self.along(sites, np.concatenate([[a], inner, [b]]))
 
 
+def _flat_ended(mask: np.ndarray, look: StringLook, q: np.ndarray, a: float, b: float, d: float,
+                width_px: int) -> None:
+    """Draw the string's span from arc a to b (m) on the site polyline q (S, 2) (px) into ``mask``,
+    ``width_px`` wide (d in m), with flat ends: a cord or a pipe ends where its ground truth
+    does. ``cv2.polylines`` draws round caps, width/2 past each end (4 mm for an 8 mm pipe),
+    so the line stops d/2 short of each end and a quad of the full width closes it."""
+    h = min(d / 2, (b - a) / 2)
+    cv2.polylines(mask, [_fix(look.span(q, a + h, b - h))], False, 255, width_px, cv2.LINE_AA, SHIFT)
+    for end, inner in ((a, a + h), (b, b - h)):
+        e, p = look.along(q, np.array([end, inner]))
+        t = e - p
+        n = float(np.hypot(*t))
+        if n > 1e-9:
+            side = np.array([-t[1], t[0]]) / n * (width_px / 2)
+            cv2.fillConvexPoly(mask, _fix(np.array([p + side, e + side, e - side, p - side])), 255,
+                               cv2.LINE_AA, SHIFT)
+
+
 class FrameRenderer:
     """Renders camera frames of the lab (static background once, dynamic parts per frame).
 
@@ -331,14 +349,12 @@ class FrameRenderer:
         for p in px:
             q = (p - lo) * s + (s - 1) / 2             # crop px -> supersampled px
             mask[:] = 0
-            cv2.polylines(mask, [_fix(q)], False, 255, th, cv2.LINE_AA, SHIFT)
+            _flat_ended(mask, self.look, q, 0.0, float(self.look.arc[-1]), self.look.diameter, th)
             acc["cord"] += mask
             if "pipe" in acc:
                 mask[:] = 0
                 for a, b, d in self.look.pipes:
-                    seg = self.look.span(q, a, b)
-                    cv2.polylines(mask, [_fix(seg)], False, 255, max(1, int(round(d * self.px_per_m * s))),
-                                  cv2.LINE_AA, SHIFT)
+                    _flat_ended(mask, self.look, q, a, b, d, max(1, int(round(d * self.px_per_m * s))))
                 acc["pipe"] += mask
             if "clay" in acc:
                 mask[:] = 0
