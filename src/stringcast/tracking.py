@@ -184,6 +184,8 @@ class FrameTracker:
                 s_poly[-1]) - L_head), scale * st["end_sigma_px"]]))
         elif free_end and -tol - slack < D <= st["max_missing_frac"] * self.L:  # anchored at the tip: valid after the last ambiguity
             shift, lo = D, (events[-1] if len(events) else (L_head if hidden_start else -np.inf))
+            if D > tol:  # the missing length hides by the grasp (a loop at the fingers, under the arm's mask):
+                lo = max(lo, L_head + D)  # the visible path's first D past the head may be that loop's
         elif not hidden_start and not self._head_clutter and not ((loop_back or free_end) and D > tol):  # anchored at the grasp: valid before the first ambiguity
             hi = events[0] if len(events) else np.inf
             if free_end:
