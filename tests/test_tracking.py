@@ -271,3 +271,31 @@ def test_nan_median0_matches_numpy_nanmedian():
     got = nan_median0(a)
     assert np.isnan(got[0, 0]) and got[1, 1] == 3.5
     np.testing.assert_array_equal(got, ref)
+
+
+def test_clean_end_refuses_a_tip_curled_back_onto_the_string():
+    """A straight walk ends clean; the same walk whose last 40 px hook back to within 5 px of an
+    earlier stretch does not (the tip could be either strand), and neither does one that fades."""
+    from stringcast.centreline import clean_end
+
+    st = {"branch_min_px": 6, "end_contrast_min": 0.4, "end_edge_max": 0.25}
+    straight = np.column_stack([np.full(120, 60.0), np.arange(20.0, 140.0)])
+    hook = np.vstack([straight[:100], [[60.0 - r, 119.0] for r in range(1, 21)],
+                      [[40.0, 119.0 - c] for c in range(1, 21)], [[40.0 + r, 99.0] for r in range(1, 16)]])
+
+    def scene(walk):
+        skel = np.zeros((200, 200), bool)
+        skel[walk[:, 0].astype(int), walk[:, 1].astype(int)] = True
+        absd = np.where(cv2.dilate(skel.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0, 20.0, 0.0)
+        return skel, absd
+
+    bg = np.full((200, 200), 100.0)
+    skel, absd = scene(straight)
+    assert clean_end(straight, skel, np.array([0, 0]), absd, bg, st, touch_px=10.0)
+    skel, absd = scene(hook)
+    assert np.hypot(*(hook[-1] - hook[80])) < 10  # the hook's end lies by the string's earlier stretch
+    assert not clean_end(hook, skel, np.array([0, 0]), absd, bg, st, touch_px=10.0)
+    assert clean_end(hook, skel, np.array([0, 0]), absd, bg, st, touch_px=4.0)  # farther than a lump's size
+    faded = absd.copy()
+    faded[60, 137:140] = 2.0
+    assert not clean_end(straight, scene(straight)[0], np.array([0, 0]), faded, bg, st, touch_px=10.0)

@@ -315,3 +315,45 @@ def mismatch_split(D: float, sigmas) -> np.ndarray:
         raise ValueError(f"mismatch_split: sigmas must be finite, got {sigmas}")
     tot = float(v.sum())
     return np.full(len(v), D / len(v)) if tot <= 0 else D * v / tot
+
+
+def clean_end(pts: np.ndarray, skel: np.ndarray, skel_at: np.ndarray, absd: np.ndarray, bg: np.ndarray,
+              st: dict, touch_px: float) -> bool:
+    """Whether a skeleton walk's last vertex is the string's free end.
+
+    It is not when: the walk more than 3 ``touch_px`` back comes within ``touch_px`` of the
+    end (``end_touch_mm``, a clay lump's size: a tip curled back onto the string, in a hook
+    or a closed loop, can end the walk on either strand); a skeleton pixel off the walk lies
+    within 2 px (a walk stopped by its own visited pixels, in a loop); the contrast fades
+    (``absd`` over the last 3 px below ``end_contrast_min`` of the path's median: a blurred
+    tip); or the background ``bg`` steps across the end (by ``end_edge_max`` x that median:
+    the rim of an occluder or of a region the string left).
+
+    Args:
+        pts: (M, 2) (row, col) walk, the end last (image px). skel: (h, w) bool skeleton whose
+            pixel (0, 0) is ``skel_at`` (row, col) in the image. absd, bg: (H, W) contrast and
+            background. st: tracking settings (``branch_min_px``, ``end_contrast_min``, ``end_edge_max``).
+    """
+    cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
+    back = pts[cum < cum[-1] - 3 * touch_px]
+    if len(back) and float(np.min(np.hypot(*(back - pts[-1]).T))) < touch_px:
+        return False
+    r, c = pts[-1].astype(int) - skel_at  # in the skeleton's box
+    r0, c0 = max(r - 6, 0), max(c - 6, 0)
+    win = skel[r0:r + 7, c0:c + 7].copy()
+    wr, wc = (pts.astype(int) - skel_at - [r0, c0]).T
+    inside = (wr >= 0) & (wr < win.shape[0]) & (wc >= 0) & (wc < win.shape[1])
+    win[wr[inside], wc[inside]] = False  # off the walk: a loop's other strand, or a spur
+    _, lab, stats, _ = cv2.connectedComponentsWithStats(win.astype(np.uint8), connectivity=8)
+    core = np.unique(lab[max(r - 2 - r0, 0):r + 3 - r0, max(c - 2 - c0, 0):c + 3 - c0])
+    if np.any(stats[core[core > 0], cv2.CC_STAT_AREA] >= st["branch_min_px"]):
+        return False
+    ij = pts.astype(int)
+    v = absd[ij[:, 0], ij[:, 1]]
+    t = pts[-1] - pts[max(len(pts) - 7, 0)]
+    t = t / max(float(np.hypot(*t)), 1e-9)
+    ray = pts[-1] + np.arange(-4.0, 5.0)[:, None] * t  # behind and past the end
+    b = map_coordinates(bg, ray.T, order=1, mode="nearest")
+    step = abs(float(np.median(b[6:])) - float(np.median(b[:3])))  # the background changes at the end:
+    return (float(v[-3:].mean()) >= st["end_contrast_min"] * float(np.median(v))  # an occluder's rim
+            and step < st["end_edge_max"] * float(np.median(v)))

@@ -39,7 +39,6 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pandas as pd
-from scipy.ndimage import map_coordinates
 from skimage.morphology import skeletonize
 
 from .arm import forward_kinematics, motion_window
@@ -48,6 +47,7 @@ from .background import build_background
 from .calibration import Calibration
 from .centreline import (
     branch_vertices,
+    clean_end,
     decimate_path,
     free_end_extension,
     hidden_arc,
@@ -72,6 +72,7 @@ DEFAULTS = {
     "gripper_widths_mm": [66.0, 30.0], "gripper_mask_extend_mm": 3.0, "arm_mask_margin_px": 2.0,
     "arm_guard_px": 3.0, "branch_min_px": 6, "anchor_tol_mm": 3.0, "anchor_tol_px": 2.0, "end_sigma_px": 1.0,
     "scale_sigma": 0.003, "tip_shortfall_mm": 0.0, "end_contrast_min": 0.4, "end_edge_max": 0.25, "max_missing_frac": 0.3,
+    "end_touch_mm": 12.0,
     "background_window_s": 0.4, "prefetch_frames": 48,
 }
 
@@ -150,7 +151,8 @@ class FrameTracker:
         e0, e1 = np.maximum(end - 3, 0), end + 4
         free_end = bool(3 <= end[0] + y0 < H - 3 and 3 <= end[1] + x0 < W - 3
                         and not arm[e0[0]:e1[0], e0[1]:e1[1]].any() and np.hypot(*(end - g)) > 2 * rho
-                        and self._clean_end(pts, absd))
+                        and clean_end(pts, self._skel, self._skel_at, absd, self._bg, st,
+                                      st["end_touch_mm"] / 1000 / scale))
         hidden_start = np.hypot(*(pts[0] - g)) > rho + 3 or self._fallback
         loop_back = np.hypot(*(end - g)) <= 2 * rho  # the walk came back to the grasp
         pts = odd_smooth(refine_centreline(absd, pts), 1.5)
@@ -179,6 +181,8 @@ class FrameTracker:
         tol = max(st["anchor_tol_mm"] / 1000, 0.01 * self.L, st["anchor_tol_px"] * scale)  # both ends +-1 px
         slack = L_head - float(np.linalg.norm(xy[len(head)] - xy[0]))  # the head may be shorter, not below its chord
         lo, hi, shift, split = -np.inf, np.inf, 0.0, None
+        if free_end and len(events) and float(s_poly[-1]) - events[-1] < self.L / n:
+            free_end = False  # a branch joins within a point spacing of the end: is the tip this end or the branch's?
         if free_end and abs(D) <= tol:  # both anchors agree: share the mismatch (head, visible arc, free end)
             split = mismatch_split(D, np.array([scale * st["end_sigma_px"] + slack, st["scale_sigma"] * (float(
                 s_poly[-1]) - L_head), scale * st["end_sigma_px"]]))
@@ -201,32 +205,6 @@ class FrameTracker:
         valid &= (s_t >= max(lo, 0.0)) & (s_t <= hi) & (self.s_targets >= 0)
         pos[~valid] = np.nan
         return FrameTrack(pos, valid, px)
-
-    def _clean_end(self, pts: np.ndarray, absd: np.ndarray) -> bool:
-        """The walk's last pixel is the string's end: no skeleton pixel off the walk within 2 px
-        (a walk stopped by its own visited pixels, in a loop), no fading (contrast over the
-        last 3 px at least ``end_contrast_min`` of the path's median: a blurred tip), and no
-        background edge across the end (a step of ``end_edge_max`` x that median between the
-        background behind and past it: the rim of an occluder or of a region the string left)."""
-        r, c = pts[-1].astype(int) - self._skel_at  # in the skeleton's box
-        r0, c0 = max(r - 6, 0), max(c - 6, 0)
-        win = self._skel[r0:r + 7, c0:c + 7].copy()
-        wr, wc = (pts.astype(int) - self._skel_at - [r0, c0]).T
-        inside = (wr >= 0) & (wr < win.shape[0]) & (wc >= 0) & (wc < win.shape[1])
-        win[wr[inside], wc[inside]] = False  # off the walk: a loop's other strand, or a spur
-        _, lab, stats, _ = cv2.connectedComponentsWithStats(win.astype(np.uint8), connectivity=8)
-        core = np.unique(lab[max(r - 2 - r0, 0):r + 3 - r0, max(c - 2 - c0, 0):c + 3 - c0])
-        if np.any(stats[core[core > 0], cv2.CC_STAT_AREA] >= self.st["branch_min_px"]):
-            return False
-        ij = pts.astype(int)
-        v = absd[ij[:, 0], ij[:, 1]]
-        t = pts[-1] - pts[max(len(pts) - 7, 0)]
-        t = t / max(float(np.hypot(*t)), 1e-9)
-        ray = pts[-1] + np.arange(-4.0, 5.0)[:, None] * t  # behind and past the end
-        b = map_coordinates(self._bg, ray.T, order=1, mode="nearest")
-        step = abs(float(np.median(b[6:])) - float(np.median(b[:3])))  # the background changes at the end:
-        return (float(v[-3:].mean()) >= self.st["end_contrast_min"] * float(np.median(v))  # an occluder's rim
-                and step < self.st["end_edge_max"] * float(np.median(v)))
 
     def _segment(self, img: np.ndarray, bg: np.ndarray, sigma: np.ndarray, arm: np.ndarray):
         """Smoothed |I - g B| (gain g for flicker) and its hysteresis foreground outside the arm."""
