@@ -18,15 +18,17 @@ Settings: ``config['tracking']`` over :data:`DEFAULTS`.
    (:func:`trace_path`) from near the grasp, straight through junctions, bridging gaps up to
    ``max_gap_px`` (bridged parts are never valid); the first ``grasp_clear_mm`` replaced by
    a circular arc from the grasp (:func:`hidden_arc`); sub-pixel refinement across the path,
-   smoothing, chords of ``arc_step_px``; a free end is extended to where the contrast fades
-   (:func:`free_end_extension`).
+   smoothing, chords of ``arc_step_px``; a free end (:func:`clean_end`: not fading, not at an
+   occluder's rim, not within ``end_touch_mm`` of the string's own earlier stretch, no branch
+   within a point spacing) is extended to where the contrast fades (:func:`free_end_extension`).
 5. **Metric resampling** (:func:`resample_by_arc`): :meth:`Calibration.pixel_to_robot`, arc
    length from the grasp, points at s_i = i L / n. With a trusted free end whose length
    agrees with L (within ``anchor_tol_mm`` / ``anchor_tol_px``), the mismatch is shared
    among the hidden head, the visible arc and the free end by their uncertainties
    (:func:`mismatch_split`); a longer mismatch (the start hidden or folded behind the
    gripper) anchors the arc at the free end, valid after the last ambiguity (a branch
-   joining the walk, a bridged gap); without a free end, at the grasp, valid before the
+   joining the walk, a bridged gap) and, for a missing length D, not within D past the
+   hidden head (a loop at the fingers); without a free end, at the grasp, valid before the
    first ambiguity. Invalid points keep NaN positions: never a guess.
 """
 from __future__ import annotations
