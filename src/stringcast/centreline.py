@@ -148,6 +148,11 @@ def hidden_arc(g: np.ndarray, pts: np.ndarray, n: int = 8) -> np.ndarray:
     return g + np.column_stack([z.real, z.imag])
 
 
+def arc_length(pts: np.ndarray) -> np.ndarray:
+    """Cumulative arc length along a polyline: pts (M, 2) -> (M,), 0 at pts[0], in pts' units."""
+    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
+
+
 def decimate_path(pts: np.ndarray, observed: np.ndarray, step: float):
     """Vertices every ``step`` px of arc along a dense path (first and last kept).
 
@@ -164,7 +169,7 @@ def decimate_path(pts: np.ndarray, observed: np.ndarray, step: float):
     """
     if len(pts) < 3 or step <= 0:
         return pts, observed
-    cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
+    cum = arc_length(pts)
     n = max(1, round(cum[-1] / step))
     s = np.linspace(0.0, cum[-1], n + 1)
     out = np.column_stack([np.interp(s, cum, pts[:, 0]), np.interp(s, cum, pts[:, 1])])
@@ -261,7 +266,7 @@ def free_end_extension(absdiff: np.ndarray, pts: np.ndarray, n_tangent: int = 6,
     """
     if len(pts) < 8:
         return 0.0
-    cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
+    cum = arc_length(pts)
     a = int(np.searchsorted(cum, cum[-1] - n_tangent))
     t = pts[-1] - pts[min(a, len(pts) - 2)]
     nt = float(np.hypot(*t))
@@ -334,7 +339,7 @@ def clean_end(pts: np.ndarray, skel: np.ndarray, skel_at: np.ndarray, absd: np.n
             pixel (0, 0) is ``skel_at`` (row, col) in the image. absd, bg: (H, W) contrast and
             background. st: tracking settings (``branch_min_px``, ``end_contrast_min``, ``end_edge_max``).
     """
-    cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
+    cum = arc_length(pts)
     back = pts[cum < cum[-1] - 3 * touch_px]
     if len(back) and float(np.min(np.hypot(*(back - pts[-1]).T))) < touch_px:
         return False

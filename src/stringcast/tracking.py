@@ -48,6 +48,7 @@ from .arm_mask import draw_arm_mask
 from .background import build_background
 from .calibration import Calibration
 from .centreline import (
+    arc_length,
     branch_vertices,
     clean_end,
     decimate_path,
@@ -165,7 +166,7 @@ class FrameTracker:
                 pts = np.vstack([pts, pts[-1] + ext * t / max(float(np.hypot(*t)), 1e-9)])
                 bridged = np.r_[bridged, False]
                 branch = np.r_[branch, False]
-        cum_px = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
+        cum_px = arc_length(pts)
         gap = np.nonzero(bridged & (np.r_[0.0, np.diff(cum_px)] > 2.5))[0]
         ev_px = np.sort(np.concatenate([cum_px[branch], cum_px[gap - 1], cum_px[gap]]))
         pts, obs = decimate_path(pts, ~bridged[1:], st["arc_step_px"])
@@ -173,7 +174,7 @@ class FrameTracker:
         px = np.vstack([head, pts])[:, ::-1] + [x0, y0]  # (x, y) image px, grasp first
         obs = np.concatenate([np.full(len(head), not hidden_start), obs])
         xy = cal.pixel_to_robot(px)
-        s_poly = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
+        s_poly = arc_length(xy)
         L_head = float(s_poly[len(head)])
         s_dec = np.linspace(0.0, cum_px[-1], len(pts))
         events = np.interp(ev_px, s_dec, s_poly[len(head):])  # ambiguities, polyline arc (m)
@@ -264,7 +265,7 @@ class FrameTracker:
                     break
                 d0 = np.array([sy[c], sx[c]], float) - g
                 pts, bridged = trace_path(skel, (sy[c], sx[c]), self.st["max_gap_px"], d0 if np.hypot(*d0) >= 1 else None)
-                cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
+                cum = arc_length(pts)
                 head = np.nonzero(cum <= 2 * r0)[0]
                 j0 = int(head[np.argmin(np.hypot(*(pts[head] - g).T))])
                 far = np.nonzero(np.hypot(*(pts[j0:] - g).T) >= rho)[0]
