@@ -194,6 +194,17 @@ def _disc_offsets(image, calibration, arm, q_rest, st, tst) -> list[np.ndarray]:
     return out
 
 
+def _huber_lstsq(A: np.ndarray, y: np.ndarray, scale: float = 0.002, iters: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    """Huber least squares by iteratively reweighted least squares: A (N, P), y (N,) (m) ->
+    (solution (P,), residuals A x - y (N,)); residuals beyond ``scale`` (2 mm) weigh as |r|, not r^2."""
+    w = np.ones(len(y))
+    for _ in range(iters):
+        x = np.linalg.lstsq(A * w[:, None], y * w, rcond=None)[0]
+        r = A @ x - y
+        w = np.sqrt(np.minimum(1.0, scale / np.maximum(np.abs(r), 1e-12)))
+    return x, r
+
+
 def _rim_fit(image, calibration, centre, r, ray, step, st):
     """(r0 m, centre correction (2,) m, inlier share) of a disc rim seen on rays from centre; None off-image."""
     prof = _sample(image, calibration, centre + r[None, :, None] * ray[:, None, :])  # (rays, r)
@@ -203,11 +214,7 @@ def _rim_fit(image, calibration, centre, r, ray, step, st):
     idx = np.argmax(g, axis=1)
     r_obs = r[0] + step * np.array([_refine(g[i], int(idx[i])) for i in range(len(ray))])
     A = np.column_stack([np.ones(len(ray)), ray])
-    w = np.ones(len(ray))
-    for _ in range(8):
-        sol = np.linalg.lstsq(A * w[:, None], r_obs * w, rcond=None)[0]
-        res = A @ sol - r_obs
-        w = np.sqrt(np.minimum(1.0, 0.002 / np.maximum(np.abs(res), 1e-12)))
+    sol, res = _huber_lstsq(A, r_obs)
     inl = np.abs(res) <= st["max_spread_mm"] / 1000
     if inl.sum() >= 3:
         sol = np.linalg.lstsq(A[inl], r_obs[inl], rcond=None)[0]
@@ -299,11 +306,7 @@ def check_board_to_robot(rest_image: np.ndarray, calibration, arm, q_rest: np.nd
     if len(rows) < 2 or np.linalg.svd(A, compute_uv=False)[-1] < 0.3:
         doc["method"] += " (too few independent features: not checked)"
         return doc
-    w = np.ones(len(y))
-    for _ in range(8):  # Huber IRLS, scale 2 mm
-        d = np.linalg.lstsq(A * w[:, None], y * w, rcond=None)[0]
-        r = A @ d - y
-        w = np.sqrt(np.minimum(1.0, 0.002 / np.maximum(np.abs(r), 1e-12)))
+    d, r = _huber_lstsq(A, y)
     doc.update(dx_mm=float(d[0] * 1000), dy_mm=float(d[1] * 1000), residual_mm=float(math.hypot(*d) * 1000),
                fit_rms_mm=float(np.sqrt(np.mean(r ** 2)) * 1000))
     return doc

@@ -65,13 +65,11 @@ def near_best(chi: np.ndarray, E: np.ndarray, k: int, tol: float) -> tuple[np.nd
 
     With no finite E at all (every candidate blew up) the best k (all inf) are returned.
     """
-    chi_k, E_k = best_k(chi, E, k)
-    if not np.isfinite(E_k[0]):
-        return chi_k, E_k
-    order = np.argsort(E, kind="stable")
-    E_sorted = np.asarray(E, float)[order]
-    s = max(len(E_k), int(np.searchsorted(E_sorted, E_sorted[0] * (1 + tol), side="right")))
-    return np.asarray(chi, float)[order[:s]], E_sorted[:s]
+    chi_s, E_s = best_k(chi, E, len(E))  # all, sorted
+    s = min(k, len(E_s))
+    if np.isfinite(E_s[0]):
+        s = max(s, int(np.searchsorted(E_s, E_s[0] * (1 + tol), side="right")))
+    return chi_s[:s], E_s[:s]
 
 
 def parameter_spread(chi_set: np.ndarray, log10_lo: np.ndarray, log10_hi: np.ndarray, names: Sequence[str],

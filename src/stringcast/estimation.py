@@ -41,7 +41,7 @@ import pandas as pd
 
 from .arm import hand_pose, motion_start
 from .config import PARAM_NAMES, Campaign, ConfigError, model_ranges
-from .diagnostics import diagnostics
+from .diagnostics import best_k, diagnostics
 from .diagnostics import settings as diagnostics_settings
 from .files import (TRACK_COLUMNS, DataError, read_joint_table, read_json, read_parquet, tracks_arrays, write_json,
                     write_parquet)
@@ -271,18 +271,18 @@ def estimate(problem: EstimationProblem, config: Mapping, chi_start: np.ndarray,
     finally:
         rec.bar.close()
     all_chi, all_E = np.concatenate(rec.chi), np.concatenate(rec.E)
-    order = np.argsort(all_E, kind="stable")[:diagnostics_settings(config)[0]]
-    best_chi = all_chi[order[0]]
+    top_chi, top_E = best_k(all_chi, all_E, diagnostics_settings(config)[0])
+    best_chi = top_chi[0]
     coeffs, mu = decode(best_chi, config, problem.mass_groups)
     if custom:  # E_i needs the model; a custom objective defines no points
         E_i = np.full(problem.n_points, np.nan)
-    elif np.isfinite(all_E[order[0]]):
+    elif np.isfinite(top_E[0]):
         E_i = point_errors(problem, config, best_chi)
     else:
         E_i = np.full(problem.n_points, np.inf)
     msgs = []
     blown = int(np.sum(~np.isfinite(all_E)))
-    if not np.isfinite(all_E[order[0]]):
+    if not np.isfinite(top_E[0]):
         msgs.append(f"every one of {len(all_E)} candidates blew up or was invalid; the parameters are the best "
                     "it had (E = inf)")
     elif blown > len(all_E) // 2:
@@ -290,10 +290,10 @@ def estimate(problem: EstimationProblem, config: Mapping, chi_start: np.ndarray,
     if problem.fallback_points:
         msgs.append(f"points {list(problem.fallback_points)} were never tracked at rest: their initial state "
                     "hangs straight down")
-    return Estimate(coeffs=coeffs, mu=mu, chi=best_chi, E_m=float(all_E[order[0]]), E_i=E_i,
+    return Estimate(coeffs=coeffs, mu=mu, chi=best_chi, E_m=float(top_E[0]), E_i=E_i,
                     history=rec.history, optimizer=name, seed=int(seed), n_evaluations=len(all_E),
                     n_blown_up=blown, seconds=time.perf_counter() - t0,
-                    top_chi=all_chi[order], top_E=all_E[order], message="; ".join(msgs),
+                    top_chi=top_chi, top_E=top_E, message="; ".join(msgs),
                     chi_evaluated=all_chi, E_evaluated=all_E)
 
 
