@@ -37,7 +37,13 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.common import BENCH_DIR, film_first_motion, header, write
+from benchmarks.common import (
+    BENCH_DIR,
+    film_first_motion,
+    header,
+    lab_calibration_clip,
+    write,
+)
 
 OPTIMIZERS = ("random_search", "cmaes", "de")
 TRACE_POINTS = 200
@@ -153,8 +159,7 @@ def _figure(per: dict, path: Path) -> None:
 
 
 def run(quick: bool = False, work: Path | None = None, cmaes_seeds: int = 3) -> dict:
-    from stringcast.config import load_config, resolve_campaign
-    from stringcast.lab import write_calibration_clip
+    from stringcast.config import load_config
 
     config = load_config()
     types = [1, 5] if quick else sorted(int(k) for k in config["strings"])
@@ -163,8 +168,7 @@ def run(quick: bool = False, work: Path | None = None, cmaes_seeds: int = 3) -> 
         work = Path(work) if work else Path(tmp)
         calib = work / "calib"
         if not calib.exists():
-            write_calibration_clip(resolve_campaign({"string": 1, "target": 1}, config, "bench"), config,
-                                   calib, seed=11)
+            lab_calibration_clip(config, work)
         for k in types:
             t0 = time.perf_counter()
             campaign, d = prepare(k, config, calib, work, seed=k)

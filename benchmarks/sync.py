@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from benchmarks.common import film_first_motion, header, write
+from benchmarks.common import film_first_motion, header, lab_calibration_clip, write
 
 WRONG_TRIGGER_MS = 25.0
 
@@ -55,9 +55,8 @@ def _sync_case(trial: Path, calibration_json: Path, campaign, config: dict, out:
 
 def run(quick: bool = False) -> dict:
     from stringcast.calibration import run_calibration
-    from stringcast.config import load_config, resolve_campaign
+    from stringcast.config import load_config
     from stringcast.files import read_json
-    from stringcast.lab import write_calibration_clip
 
     config = load_config()
     config["sync"] = dict(config.get("sync", {}), method="video")
@@ -65,8 +64,7 @@ def run(quick: bool = False) -> dict:
     cases, extra = {}, {}
     with tempfile.TemporaryDirectory(prefix="bench_sync_") as tmp:
         work = Path(tmp)
-        calib = write_calibration_clip(resolve_campaign({"string": 1, "target": 1}, config, "bench"), config,
-                                       work / "calib", seed=11)
+        calib = lab_calibration_clip(config, work)
         for k in types:
             campaign, d, trial = film_first_motion(k, config, work, seed=10 + k, calib_dir=calib)
             truth = read_json(trial / "ground_truth.json")

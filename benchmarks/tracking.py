@@ -26,7 +26,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from benchmarks.common import BENCH_DIR, film_first_motion, header, write
+from benchmarks.common import (
+    BENCH_DIR,
+    film_first_motion,
+    header,
+    lab_calibration_clip,
+    write,
+)
 
 
 def _errors(tracks: pd.DataFrame, truth: pd.DataFrame) -> tuple[np.ndarray, float]:
@@ -84,8 +90,7 @@ def _figure(per: dict, path: Path) -> None:
 
 
 def run(quick: bool = False, types: list[int] | None = None) -> dict:
-    from stringcast.config import load_config, resolve_campaign
-    from stringcast.lab import write_calibration_clip
+    from stringcast.config import load_config
 
     config = load_config()
     name = "tracking_partial" if types else "tracking"
@@ -96,8 +101,7 @@ def run(quick: bool = False, types: list[int] | None = None) -> dict:
     per = {}
     with tempfile.TemporaryDirectory(prefix="bench_tracking_") as tmp:
         work = Path(tmp)
-        calib = write_calibration_clip(resolve_campaign({"string": 1, "target": 1}, config, "bench"), config,
-                                       work / "calib", seed=11)
+        calib = lab_calibration_clip(config, work)
         for k in types:
             t0 = time.perf_counter()
             per[str(k)] = track_string(k, config, calib, work, seed=k)
