@@ -113,11 +113,12 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
     lo, hi, (mu_lo, mu_hi) = model_ranges(config)
     coeffs = params["coefficients"]
     values = [coeffs[k] for k in PARAM_NAMES]
+    diagnostics = params.get("diagnostics") or {}
     diag = {d["name"]: (10 ** d["log10_min"], 10 ** d["log10_max"], d["status"])
-            for d in (params.get("diagnostics") or {}).get("parameters", []) if d.get("name") in PARAM_NAMES}
+            for d in diagnostics.get("parameters", []) if d.get("name") in PARAM_NAMES}
     figures.append({"id": "fig-params", "caption": "Estimated coefficients on log axes within Table 2's ranges "
                     "(paper Fig. 11), with the range of the parameter sets whose E is within "
-                    f"{(params.get('diagnostics') or {}).get('near_best_tol', 0.05) * 100:.0f} % of the best: a short "
+                    f"{diagnostics.get('near_best_tol', 0.05) * 100:.0f} % of the best: a short "
                     "(green) bar means this motion pins the parameter down, a long (orange) one that it does not.",
                     "src": figs.parameters(list(PARAM_NAMES), values, lo, hi, diag)})
     mu = np.asarray(params["mu"], float)
@@ -140,7 +141,7 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
                ("optimizer, evaluations", f"{params.get('optimizer')}, {params.get('evaluations')}"),
                ("estimation time", _fmt(params.get("seconds"), ".1f", " s")),
                ("pinned down by this motion / loose", " / ".join(
-                   ", ".join((params.get("diagnostics") or {}).get(k) or ["-"]) for k in ("pinned", "loose"))),
+                   ", ".join(diagnostics.get(k) or ["-"]) for k in ("pinned", "loose"))),
                ("tracked points valid", f"{valid[:, 1:].mean() * 100:.1f} %"),
                ("measured closest approach of the tip", _fmt(d_meas * 1000, ".1f", " mm")),
                ("measured hit", "yes" if d_meas <= campaign.target.radius else "no"),
