@@ -14,8 +14,10 @@ Methods are config overlays:
 
 * ``paper``: ``estimation.optimizer: random_search`` (eqs. 2-3) and ``motion.planner: paper``
   (Section V), the paper's method as the config describes it.
-* ``ours``: ``estimation.optimizer: cmaes`` and ``motion.planner: robust`` (the motion that
-  hits under the most of the estimate's best K sets, then by margin).
+* ``ours``: ``estimation.optimizer: cmaes``, ``motion.planner: robust`` (the motion that
+  hits under the most of the estimate's best K sets, then by margin) and
+  ``motion.residual_correction`` (each set aimed at the target minus the model's error on
+  the played motion's tracked tip, :mod:`stringcast.residual`).
 
 A seed ``s`` sets the lab's noise (the campaign's seed: camera noise, joint noise, trigger
 error) and the pipeline's own searches (``estimation.seed`` and ``motion.seed`` = ``s``), so
@@ -56,7 +58,8 @@ PAPER_TABLE3 = {1: 2, 2: 2, 3: 2, 4: 2, 5: 3, 6: 2, 7: 2}          # executions,
 PAPER_TARGET = {1: 1, 2: 1, 3: 2, 4: 3, 5: 3, 6: 3, 7: 4}          # DESIGN.md, string types
 METHODS = {
     "paper": {"estimation": {"optimizer": "random_search"}, "motion": {"planner": "paper"}},
-    "ours": {"estimation": {"optimizer": "cmaes"}, "motion": {"planner": "robust"}},
+    "ours": {"estimation": {"optimizer": "cmaes", "cmaes_runs": 2}, "motion": {"planner": "robust", "residual_correction": True},
+             "model": {"ranges": {"k_ph": [1.0e-3, 1.0], "c_ph": [1.0e-3, 1.0]}}},
 }
 LABELS = {"paper": "paper_method", "ours": "ours"}
 
@@ -67,9 +70,15 @@ def method_config(config: dict, method: str, seed: int) -> dict:
     Raises:
         KeyError: unknown method (not in ``METHODS``).
     """
+    def merge(into: dict, over: dict) -> None:
+        for key, value in over.items():
+            if isinstance(value, dict) and isinstance(into.get(key), dict):
+                merge(into[key], value)
+            else:
+                into[key] = copy.deepcopy(value)
+
     cfg = copy.deepcopy({k: v for k, v in config.items() if k != "_path"})
-    for section, values in METHODS[method].items():
-        cfg[section].update(values)
+    merge(cfg, METHODS[method])
     cfg["estimation"]["seed"] = int(seed)
     cfg["motion"]["seed"] = int(seed)
     return cfg

@@ -244,6 +244,32 @@ def test_closest_approach_matches_dense_simulation(campaign, mid):
         assert d[b] <= np.min(np.linalg.norm(pos[:, -1] - target, axis=1))
 
 
+def test_closest_approach_to_a_moving_target(campaign, mid):
+    """A target path (the residual-corrected target) is met where the dense simulation says;
+    a path that stands still gives the fixed target's result exactly."""
+    hand_t, hand = swing(campaign.arm)
+    p_init = hanging(mid, hand[0])[None]
+    t0, t1, step = 0.1, 0.8, 0.01
+    ts = t0 + step * np.arange(round((t1 - t0) / step) + 1)
+    path = np.column_stack([1.2 - 0.3 * (ts - t0), 0.3 + 0.2 * np.sin(6 * ts)])
+    still = np.repeat([[1.2, 0.3]], len(ts), axis=0)
+    d, tm, _, ok = closest_approach_batch(mid, np.ones(N), hand_t, hand[None], [0, 0], p_init, L0, 0.0, DT, t0, t1,
+                                          np.stack([path, still]), target_dt=step, target_idx=[0, 1])
+    fixed = closest_approach_batch(mid, np.ones(N), hand_t, hand[None], [0], p_init, L0, 0.0, DT, t0, t1,
+                                   np.array([1.2, 0.3]))
+    assert ok.all() and d[1] == fixed[0][0] and tm[1] == fixed[1][0]
+    t = t0 + DT * np.arange(round((t1 - t0) / DT) + 1)
+    pos, _ = simulate(mid, np.ones(N), hand_t, hand, p_init[0], L0, 0.0, DT, t)
+    tgt = np.column_stack([np.interp(t, ts, path[:, 0]), np.interp(t, ts, path[:, 1])])
+    dist = np.linalg.norm(pos[:, -1] - tgt, axis=1)
+    assert d[0] <= dist.min() + 1e-9            # segments, not only the substep points
+    assert d[0] == pytest.approx(dist.min(), abs=2e-3)  # within a substep's travel of the tip
+    assert abs(tm[0] - t[np.argmin(dist)]) <= 2 * DT
+    assert abs(d[0] - d[1]) > 0.01              # the moving target really moved the answer
+    with pytest.raises(ValueError, match="target_dt"):
+        closest_approach_batch(mid, np.ones(N), hand_t, hand[None], [0], p_init, L0, 0.0, DT, t0, t1, path[None])
+
+
 def test_bad_inputs_raise_value_error(mid):
     hand = np.zeros((1, 2, 3))
     p = np.zeros((1, N, 2)) + np.arange(N)[:, None] * [0, -L0]

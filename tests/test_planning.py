@@ -46,7 +46,7 @@ def test_first_plan_hits_and_is_consistent(tmp_path, campaign, small):
     np.testing.assert_allclose(q, m.q, atol=1e-8)
     np.testing.assert_allclose(t, m.t, atol=1e-12)
     doc = read_json(tmp_path / "motion.json")
-    pl = pn._Planner(campaign, small, np.array([doc["params"][k] for k in PARAM_NAMES]), np.array(doc["mu"]))
+    pl = pn.Predictor(campaign, small, np.array([doc["params"][k] for k in PARAM_NAMES]), np.array(doc["mu"]))
     hand_t, hand = pl.hand_trajectory(m.q)
     d, tm, my, ok = closest_approach_batch(pl.coeffs, pl.mu, hand_t, hand[None], np.zeros(1, np.int64),
                                            pl.equilibrium(m.q0)[None], pl.l0, pl.psi0, pl.dt, 0.0,
@@ -100,8 +100,8 @@ def test_search_keeps_looking_after_first_hit(monkeypatch, campaign, small):
         d = np.array([special.get(int(i), 1.0) for i in ids])
         return d, np.zeros(b), np.zeros(b), np.ones(b, bool)
 
-    monkeypatch.setattr(pn._Planner, "evaluate", fake_evaluate)
-    monkeypatch.setattr(pn._Planner, "tip_path", lambda self, m, p: np.zeros((0, 3)))
+    monkeypatch.setattr(pn.Predictor, "evaluate", fake_evaluate)
+    monkeypatch.setattr(pn.Predictor, "tip_path", lambda self, m, p: np.zeros((0, 3)))
     cfg = copy.deepcopy(small)
     cfg["motion"].update(max_candidates=1000, extra_after_hit=100, batch=50)
     coeffs, mu = pn.first_parameters(cfg, campaign.string)
@@ -152,7 +152,7 @@ def test_robust_plan_scores_the_ensemble(tmp_path, campaign, small):
     res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, cfg, tmp_path / "m2.csv",
                       tmp_path / "m2.json", seed=1)
     assert res.planner == "robust" and res.ensemble_d_min.shape == (4,)
-    pl = pn._Planner(campaign, cfg, ens_c[0], ens_mu[0])
+    pl = pn.Predictor(campaign, cfg, ens_c[0], ens_mu[0])
     hand_t, hand = pl.hand_trajectory(res.motion.q)
     r = campaign.target.radius
     for k in range(4):
@@ -192,10 +192,10 @@ def test_robust_prefers_hit_share_then_margin(monkeypatch, campaign, small):
         d = np.array([members[int(i)] for i in state["ids"] if int(i) in members])
         return d, np.zeros_like(d), np.ones(d.shape, bool)
 
-    monkeypatch.setattr(pn._Planner, "evaluate", fake_evaluate)
-    monkeypatch.setattr(pn._Planner, "evaluate_ensemble", fake_ensemble)
-    monkeypatch.setattr(pn._Planner, "equilibrium", lambda self, q0, c=None, m=None: np.zeros((self.n, 2)))
-    monkeypatch.setattr(pn._Planner, "tip_path", lambda self, m, p: np.zeros((0, 3)))
+    monkeypatch.setattr(pn.Predictor, "evaluate", fake_evaluate)
+    monkeypatch.setattr(pn.Predictor, "evaluate_ensemble", fake_ensemble)
+    monkeypatch.setattr(pn.Predictor, "equilibrium", lambda self, q0, c=None, m=None: np.zeros((self.n, 2)))
+    monkeypatch.setattr(pn.Predictor, "tip_path", lambda self, m, p: np.zeros((0, 3)))
     cfg = copy.deepcopy(small)
     cfg["motion"].update(max_candidates=20, extra_after_hit=100, batch=20)
     coeffs, mu = pn.first_parameters(cfg, campaign.string)
@@ -222,7 +222,7 @@ def test_robust_all_miss_and_all_blown_up(monkeypatch, config, small):
         b = len(q)
         return np.full(b, np.inf), np.full(b, np.nan), np.full(b, -np.inf), np.zeros(b, bool)
 
-    monkeypatch.setattr(pn._Planner, "evaluate", blown)
+    monkeypatch.setattr(pn.Predictor, "evaluate", blown)
     for ens in (None, _ensemble(cfg, camp)):
         res = pn.search(camp, cfg, coeffs, mu, np.random.default_rng(1), ensemble=ens)
         assert not res.hit and res.d_min == np.inf and "no candidate hit" in res.message

@@ -80,7 +80,8 @@ def cmd_plan(args):
 
     out = Path(args.out_dir)
     run_plan(Path(args.params), Path(args.played_motion), _campaign(args), _config(args),
-             out / "motion.csv", out / "motion.json", int(args.seed))
+             out / "motion.csv", out / "motion.json", int(args.seed),
+             Path(args.tracks) if args.tracks else None, Path(args.joints) if args.joints else None)
     print(f"next motion -> {out / 'motion.csv'}")
 
 
@@ -168,6 +169,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp = add("plan", cmd_plan, "next motion from estimated parameters")
     sp.add_argument("--params", required=True)
     sp.add_argument("--played-motion", required=True, help="motion.json of the motion just played")
+    sp.add_argument("--tracks", help="tracks.parquet of the played trial (motion.residual_correction)")
+    sp.add_argument("--joints", help="joints.csv of the played trial (motion.residual_correction)")
     sp.add_argument("--campaign", required=True)
     sp.add_argument("--out-dir", required=True)
     sp.add_argument("--seed", default=0)

@@ -153,8 +153,8 @@ def simulate(coeffs, mu, hand_t, hand, p_init, l0, psi0, dt, sample_t, *, g: flo
 
 
 def closest_approach_batch(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt,
-                           t_start, t_end, target_xy, floor_y=None, *, g: float = G,
-                           max_stretch: float = 3.0):
+                           t_start, t_end, target_xy, floor_y=None, *, target_dt: float | None = None,
+                           target_idx=None, g: float = G, max_stretch: float = 3.0):
     """Closest approach of each candidate's tip path to a target (motion planning).
 
     Simulates from t_start (at rest at p_init) to t_end without storing the path.
@@ -164,13 +164,21 @@ def closest_approach_batch(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0,
     Args:
         coeffs: (10,) or (B, 10); mu: (n,) or (B, n) (broadcast to the batch).
         hand_t (K,), hand (H, K, 3), hand_idx (B,), p_init (H, n, 2): as in
-            :func:`simulate_batch`. t_start < t_end: s. target_xy: (2,) m.
+            :func:`simulate_batch`. t_start < t_end: s.
+        target_xy: (2,) m, a fixed target; or (P, S, 2) m, moving targets sampled every
+            ``target_dt`` s from t_start (linear between samples, held beyond them), candidate
+            b taking path ``target_idx[b]`` (default 0): the residual-corrected target
+            of :mod:`stringcast.residual`.
         floor_y: unused here (the caller compares min_y with it); kept for the API.
 
     Returns:
         d_min (B,) m, t_min (B,) s, min_y (B,) m (lowest y of any point 1..n over the
         run), ok (B,) bool. A blown-up candidate has d_min = inf, t_min = NaN,
         min_y = -inf and ok = False.
+
+    Raises:
+        ValueError: inconsistent shapes, non-finite targets, or a moving target without
+            target_dt > 0.
     """
     n = np.shape(p_init)[-2] if np.ndim(p_init) == 3 else -1
     B = len(np.atleast_1d(hand_idx))
@@ -180,11 +188,29 @@ def closest_approach_batch(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0,
         m = np.ascontiguousarray(np.broadcast_to(m, (B, n)))
     ht, h, idx, p = _hands(hand_t, hand, np.atleast_1d(hand_idx), p_init, c.shape[0])
     l0, dt, lmax = _scalars(l0, dt, max_stretch)
-    txy = _f64(target_xy, "target_xy", 1, 2)
+    targets, tidx, tdt = _targets(target_xy, target_dt, target_idx, B)
     if not (math.isfinite(t_start) and math.isfinite(t_end) and t_end > t_start):
         raise ValueError(f"need finite t_start < t_end (got {t_start}, {t_end})")
     return _k.closest_batch_kernel(c, m, ht, h, idx, p, l0, float(psi0), dt, float(t_start),
-                                   float(t_end), float(txy[0]), float(txy[1]), float(g), lmax)
+                                   float(t_end), targets, tidx, tdt, float(g), lmax)
+
+
+def _targets(target_xy, target_dt, target_idx, B: int):
+    """target_xy (2,) or (P, S, 2) -> targets (P, S, 2), target_idx (B,), target_dt (checked)."""
+    t = _f64(target_xy, "target_xy")
+    if t.ndim == 1:
+        t = _f64(t, "target_xy", 1, 2)[None, None]
+    if t.ndim != 3 or t.shape[-1] != 2 or t.shape[0] < 1 or t.shape[1] < 1:
+        raise ValueError(f"target_xy: expected (2,) or (P, S, 2), got shape {t.shape}")
+    if not np.all(np.isfinite(t)):
+        raise ValueError("target_xy: must be finite")
+    tdt = 1.0 if target_dt is None else float(target_dt)
+    if t.shape[1] > 1 and not (target_dt is not None and math.isfinite(tdt) and tdt > 0):
+        raise ValueError("target_dt: a moving target (S > 1 samples) needs target_dt > 0")
+    idx = np.zeros(B, np.int64) if target_idx is None else np.ascontiguousarray(target_idx, dtype=np.int64)
+    if idx.shape != (B,) or (B and (idx.min() < 0 or idx.max() >= t.shape[0])):
+        raise ValueError(f"target_idx: expected ({B},) values in [0, {t.shape[0]}), got {idx}")
+    return t, idx, tdt
 
 
 def straight_hanging(coeffs, mu, hand_pose, l0, n, *, g: float = G) -> np.ndarray:

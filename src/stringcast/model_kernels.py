@@ -261,18 +261,38 @@ def simulate_batch_kernel(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, 
 
 
 @njit(cache=True, fastmath=False)
-def run_closest(c, mu, hand_t, hand, p_init, l0, psi0, dt, t_start, t_end, tx, ty, g, lmax):
-    """One candidate: closest approach of the tip path to (tx, ty) over [t_start, t_end].
+def target_at(target, target_dt, s):
+    """The target (x, y) at time s after t_start: target (S, 2) sampled every target_dt,
+    linearly interpolated, held beyond its ends (S = 1: a fixed target)."""
+    S = target.shape[0]
+    if S == 1:
+        return target[0, 0], target[0, 1]
+    f = s / target_dt
+    if f <= 0.0:
+        return target[0, 0], target[0, 1]
+    i = int(f)
+    if i >= S - 1:
+        return target[S - 1, 0], target[S - 1, 1]
+    w = f - i
+    return (target[i, 0] + w * (target[i + 1, 0] - target[i, 0]),
+            target[i, 1] + w * (target[i + 1, 1] - target[i, 1]))
 
-    The tip path is the polyline through the substep tip positions; the distance is
-    to each of its segments. Returns (d_min m, t_min s, min_y m over all points, ok);
-    on blow-up (inf, nan, -inf, False).
+
+@njit(cache=True, fastmath=False)
+def run_closest(c, mu, hand_t, hand, p_init, l0, psi0, dt, t_start, t_end, target, target_dt, g, lmax):
+    """One candidate: closest approach of the tip path to a target over [t_start, t_end].
+
+    target (S, 2) m: the target's position every target_dt s from t_start (S = 1: fixed;
+    :func:`target_at`). The tip path is the polyline through the substep tip positions;
+    the distance is to each of its segments, from the target at the segment's end time.
+    Returns (d_min m, t_min s, min_y m over all points, ok); on blow-up (inf, nan, -inf, False).
     """
     n = p_init.shape[0]
     px, py, vx, vy, fx, fy = _state(p_init)
     inv_mu = 1.0 / mu
     ax = px[n - 1]
     ay = py[n - 1]
+    tx, ty = target_at(target, target_dt, 0.0)
     d_min = math.sqrt((ax - tx) ** 2 + (ay - ty) ** 2)
     t_min = t_start
     min_y = py[0]
@@ -289,6 +309,7 @@ def run_closest(c, mu, hand_t, hand, p_init, l0, psi0, dt, t_start, t_end, tx, t
             return math.inf, math.nan, -math.inf, False
         bx = px[n - 1]
         by = py[n - 1]
+        tx, ty = target_at(target, target_dt, (m + 1) * dt)
         sx = bx - ax
         sy = by - ay
         s2 = sx * sx + sy * sy
@@ -311,8 +332,9 @@ def run_closest(c, mu, hand_t, hand, p_init, l0, psi0, dt, t_start, t_end, tx, t
 
 @njit(cache=True, fastmath=False, parallel=True)
 def closest_batch_kernel(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt,
-                         t_start, t_end, tx, ty, g, lmax):
-    """Batched :func:`run_closest`: returns d_min, t_min, min_y (B,) and ok (B,)."""
+                         t_start, t_end, targets, target_idx, target_dt, g, lmax):
+    """Batched :func:`run_closest` (candidate b against targets[target_idx[b]], each (S, 2)):
+    returns d_min, t_min, min_y (B,) and ok (B,)."""
     B = coeffs.shape[0]
     d_min = np.empty(B)
     t_min = np.empty(B)
@@ -322,7 +344,7 @@ def closest_batch_kernel(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, d
         h = hand_idx[b]
         d_min[b], t_min[b], min_y[b], ok[b] = run_closest(
             coeffs[b], mu[b], hand_t, hand[h], p_init[h], l0, psi0, dt, t_start, t_end,
-            tx, ty, g, lmax)
+            targets[target_idx[b]], target_dt, g, lmax)
     return d_min, t_min, min_y, ok
 
 

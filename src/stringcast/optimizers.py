@@ -28,7 +28,8 @@ its E and the search history. ``settings`` is ``config.estimation``.
   estimate): it is evaluated first and CMA-ES starts at the centre of the box
   (``cmaes_first_start: best`` starts at chi_best instead); later trials start at
   chi_best; (c) when CMA-ES converges with budget left it restarts from the best
-  point. Candidates that blow up are told a finite worst value.
+  point; (d) at M = 1, ``cmaes_runs`` independent runs from the centre share the budget
+  (default 1). Candidates that blow up are told a finite worst value.
 * ``de``: SciPy differential evolution (vectorized), x0 = chi_best.
 """
 from __future__ import annotations
@@ -97,23 +98,36 @@ def cmaes_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: n
                  settings: Mapping) -> None:
     """CMA-ES (``cma.CMAEvolutionStrategy``, ask/tell) in [0, 1]^D (module doc); one generation per batch
     (a population larger than ``batch`` is evaluated in chunks of ``batch``). Restarts from the best
-    point with the initial step when CMA-ES stops early (converged) and budget is left."""
-    import cma
-
+    point with the initial step when CMA-ES stops early (converged) and budget is left. At M = 1 from
+    the centre, ``cmaes_runs`` (default 1) independent runs share the budget equally (E is multi-modal:
+    on the lab strings a run ends in a weak-hand-spring basin about one time in three)."""
     d = len(chi_best)
     sigma0 = float(settings.get("cmaes_sigma0", 0.3 * float(settings.get("chi0", 1.0)))) / M
     popsize = int(settings.get("cmaes_popsize", 0)) or 4 + int(3 * np.log(d))
-    x0, best = np.asarray(chi_best, float), (np.inf, None)
+    x0, runs = np.asarray(chi_best, float), 1
     if M == 1 and settings.get("cmaes_first_start", "centre") == "centre":
-        best = (float(rec(x0[None])[0]), x0)  # chi_best is evaluated, but not an estimate yet: start at the centre
-        x0 = np.full(d, 0.5)
-    while rec.remaining >= popsize:
+        rec(x0[None])  # chi_best is evaluated, but not an estimate yet: start at the centre
+        x0, runs = np.full(d, 0.5), max(1, int(settings.get("cmaes_runs", 1)))
+    for r in range(runs):
+        keep = rec.remaining - rec.remaining // (runs - r)      # budget left for the later runs
+        best = _cma_run(rec, x0, sigma0, popsize, batch, rng, keep)
+    while rec.remaining > 0:  # spend the rest (< popsize, or after a stop) around the last run's best point
+        rec(np.clip(best + (sigma0 / 4) * rng.standard_normal((min(batch, rec.remaining), d)), 0.0, 1.0))
+
+
+def _cma_run(rec: Recorder, x0: np.ndarray, sigma0: float, popsize: int, batch: int, rng: np.random.Generator,
+             keep: int) -> np.ndarray:
+    """One CMA-ES run from x0 until ``keep`` evaluations of the budget are left; returns its best point."""
+    import cma
+
+    best = (np.inf, x0)
+    while rec.remaining - keep >= popsize:
         es = cma.CMAEvolutionStrategy(x0, sigma0, {
             "popsize": popsize, "seed": int(rng.integers(1, 2**31 - 1)),
             "verbose": -9, "tolfun": 1e-12, "tolx": 1e-6})
         if es.stop():
             break
-        while rec.remaining >= popsize and not es.stop():
+        while rec.remaining - keep >= popsize and not es.stop():
             xs = np.asarray(es.ask())
             inside = np.clip(xs, 0.0, 1.0)
             E = np.concatenate([rec(inside[a:a + batch]) for a in range(0, popsize, batch)])
@@ -124,9 +138,8 @@ def cmaes_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: n
             i = int(np.argmin(E))
             if E[i] < best[0]:
                 best = (float(E[i]), inside[i])
-        x0 = best[1] if best[1] is not None else x0
-    while rec.remaining > 0:  # spend the rest (< popsize, or after a stop) around the best point
-        rec(np.clip(x0 + (sigma0 / 4) * rng.standard_normal((min(batch, rec.remaining), d)), 0.0, 1.0))
+        x0 = best[1]
+    return best[1]
 
 
 def de_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: np.random.Generator,

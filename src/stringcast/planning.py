@@ -31,8 +31,12 @@ from an initial posture q0):
   within ``motion.robust_screen_mm`` (default 20) of the target's edge. The chosen
   motion has the largest hit share (members for which it hits), then the largest
   margin (radius - median d_min over the members); the stopping rule is the paper's.
+* Residual correction (``motion.residual_correction``, later motions, with either
+  planner; ours): every set aims at the target minus the model's error on the played
+  motion's tracked tip (:mod:`stringcast.residual`), so d_min is the corrected one.
 
-Stage entry points: :func:`run_first_plan` and :func:`run_plan` write ``motion.csv``
+The model's predictions (equilibrium, closest approach, tip path) are
+:class:`stringcast.prediction.Predictor`'s. Stage entry points: :func:`run_first_plan` and :func:`run_plan` write ``motion.csv``
 and its ``motion.json`` sidecar (:func:`write_motion`).
 """
 from __future__ import annotations
@@ -43,12 +47,13 @@ from typing import Mapping
 
 import numpy as np
 
-from .arm import check_limits, hand_pose
+from .arm import check_limits
 from .config import PARAM_NAMES, Campaign, ConfigError
 from .files import read_json, write_joint_table, write_json
 from .parameters import ensemble_parameters, first_parameters, planned_parameters
 from .motion import (Motion, joint_paths, read_motion_json, sample_control_points, sample_postures, start_box,
                      time_grid)
+from .prediction import Predictor
 
 
 LIMIT_MARGIN = 1e-3
@@ -74,6 +79,8 @@ class PlanResult:
     """Share of the ensemble for which the chosen motion hits (robust planner only)."""
     margin: float | None = None
     """Target radius - median ensemble d_min, m (robust planner only; > 0: the median member hits)."""
+    residual: dict | None = None
+    """Residual correction (:meth:`stringcast.residual.TipResidual.summary`); d_min is then corrected."""
 
 
 # ---------------------------------------------------------------------------
@@ -87,80 +94,6 @@ def _fast_limits(arm, dq: np.ndarray, qd: np.ndarray, rate: float) -> tuple[np.n
     lo = arm.q_min - dq.min(axis=-2)
     hi = arm.q_max - dq.max(axis=-2)
     return ok & np.all(lo <= hi, axis=-1), lo, hi
-
-
-class _Planner:
-    """Holds the planned parameter set, the target and the model settings for one plan."""
-
-    def __init__(self, campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarray):
-        self.campaign, self.arm, self.config = campaign, campaign.arm, config
-        self.mcfg = config.get("motion", {})
-        self.coeffs, self.mu = np.asarray(coeffs, float), np.asarray(mu, float)
-        self.rate = float(self.arm.controller_rate)
-        self.flight = float(self.mcfg.get("flight_window_s", 0.5))
-        self.dt = float(config["model"]["dt_s"])
-        self.psi0 = np.radians(float(config["model"].get("psi0_deg", 0.0)))
-        self.n, self.l0 = campaign.string.n_points, campaign.string.l0
-        self.warnings: list[str] = []
-
-    def equilibrium(self, q0: np.ndarray, coeffs: np.ndarray | None = None, mu: np.ndarray | None = None) -> np.ndarray:
-        """Hanging equilibrium (n, 2) m at posture q0 with the planned parameters (or ``coeffs``, ``mu``).
-
-        If the model cannot settle (RuntimeError), the string hangs straight down
-        instead and a warning is kept for the plan's message.
-        """
-        from .model import hanging_equilibrium, straight_hanging
-
-        c = self.coeffs if coeffs is None else coeffs
-        m = self.mu if mu is None else mu
-        hp = hand_pose(self.arm, q0)
-        try:
-            return np.asarray(hanging_equilibrium(c, m, hp, self.l0, self.psi0, self.n, self.dt), float)
-        except RuntimeError as exc:
-            self.warnings.append(f"initial state straight down: {exc}")
-            return np.asarray(straight_hanging(c, m, hp, self.l0, self.n), float)
-
-    def evaluate_ensemble(self, q: np.ndarray, T: float, p_init: np.ndarray, coeffs: np.ndarray, mu: np.ndarray):
-        """S candidates q (S, K_t, J) under K parameter sets coeffs (K, 10), mu (K, n), from
-        p_init (S, K, n, 2), in one batch: d_min, min_y, ok, each (S, K)."""
-        from .model import closest_approach_batch
-
-        s, k = len(q), len(coeffs)
-        hand_t, hand = self.hand_trajectory(q)
-        hand = np.ascontiguousarray(np.repeat(hand, k, axis=0))          # (S K, K_t, 3)
-        p = np.ascontiguousarray(p_init.reshape(s * k, self.n, 2))
-        d, _, my, ok = closest_approach_batch(np.tile(coeffs, (s, 1)), np.tile(mu, (s, 1)), hand_t, hand,
-                                              np.arange(s * k, dtype=np.int64), p, self.l0, self.psi0, self.dt,
-                                              0.0, T + self.flight, self.campaign.target.xy, self.arm.floor_y)
-        return (np.asarray(d, float).reshape(s, k), np.asarray(my, float).reshape(s, k),
-                np.asarray(ok, bool).reshape(s, k))
-
-    def hand_trajectory(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """q (..., K, J) over [0, T] -> hand_t (K + hold,) and hand (..., K + hold, 3), end held for the flight window."""
-        hold = int(round(self.flight * self.rate))
-        q_ext = np.concatenate([q, np.repeat(q[..., -1:, :], hold, axis=-2)], axis=-2)
-        return np.arange(q_ext.shape[-2]) / self.rate, hand_pose(self.arm, q_ext)
-
-    def evaluate(self, q: np.ndarray, T: float, p_init: np.ndarray):
-        """Closest approach of B candidates q (B, K, J) from p_init (B, n, 2): d_min, t_min, min_y, ok (B,)."""
-        from .model import closest_approach_batch
-
-        hand_t, hand = self.hand_trajectory(q)
-        b = len(q)
-        d, tm, my, ok = closest_approach_batch(self.coeffs, self.mu, hand_t, np.ascontiguousarray(hand),
-                                               np.arange(b, dtype=np.int64), np.ascontiguousarray(p_init),
-                                               self.l0, self.psi0, self.dt, 0.0, T + self.flight,
-                                               self.campaign.target.xy, self.arm.floor_y)
-        return (np.asarray(d, float), np.asarray(tm, float), np.asarray(my, float), np.asarray(ok, bool))
-
-    def tip_path(self, motion: Motion, p_init: np.ndarray, rate_hz: float = 200.0) -> np.ndarray:
-        """Predicted tip path (S, 3) = (t, x, y) over [0, T + flight window]."""
-        from .model import simulate
-
-        hand_t, hand = self.hand_trajectory(motion.q)
-        sample_t = np.arange(0.0, hand_t[-1] + 1e-12, 1.0 / rate_hz)
-        pos, _ = simulate(self.coeffs, self.mu, hand_t, hand, p_init, self.l0, self.psi0, self.dt, sample_t)
-        return np.column_stack([sample_t, np.asarray(pos)[:, -1, :]])
 
 
 def _valid_curves(arm, cps: np.ndarray, T: float, rate: float, postures: np.ndarray, rng: np.random.Generator):
@@ -183,7 +116,8 @@ def _valid_curves(arm, cps: np.ndarray, T: float, rate: float, postures: np.ndar
 
 
 def search(campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarray, rng: np.random.Generator,
-           previous: Motion | None = None, ensemble: tuple[np.ndarray, np.ndarray] | None = None) -> PlanResult:
+           previous: Motion | None = None, ensemble: tuple[np.ndarray, np.ndarray] | None = None,
+           observed: tuple | None = None) -> PlanResult:
     """Search random motions (first plan) or perturbations of ``previous`` (later plans) for a hit.
 
     Args:
@@ -191,6 +125,9 @@ def search(campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarr
         previous: the motion just played (its q0, T and control points are kept / perturbed).
         ensemble: robust planner (module doc): coeffs (K, 10), mu (K, n), the sets that
             screened candidates are scored under; None for the paper's planner.
+        observed: residual correction (with ``previous``): the played motion's tracked tip
+            (:func:`stringcast.residual.observed_tip`); every set then aims at its own
+            corrected target (:mod:`stringcast.residual`).
 
     Returns:
         :class:`PlanResult` (hit=False with a message when no candidate hits; with an
@@ -202,7 +139,7 @@ def search(campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarr
     from tqdm.auto import tqdm
 
     arm, mcfg = campaign.arm, config.get("motion", {})
-    pl = _Planner(campaign, config, coeffs, mu)
+    pl = Predictor(campaign, config, coeffs, mu)
     batch, max_cand = int(mcfg.get("batch", 64)), int(mcfg.get("max_candidates", 20000))
     extra = int(mcfg.get("extra_after_hit", 200))
     t_lo, t_hi = (float(x) for x in mcfg.get("T_range_s", [0.2, 1.2]))
@@ -220,6 +157,15 @@ def search(campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarr
     member_eq: dict[int, np.ndarray] = {}    # posture -> (K, n, 2), robust planner
     screen = float(mcfg.get("robust_screen_mm", 20.0)) / 1000
     radius = campaign.target.radius
+    why_not = ""
+    if observed is not None and previous is not None:
+        equilibria[0] = pl.equilibrium(previous.q0)
+        sets_c, sets_mu, eq = coeffs[None], mu[None], equilibria[0][None]
+        if ensemble is not None:
+            member_eq[0] = np.stack([pl.equilibrium(previous.q0, c, m) for c, m in zip(*ensemble)])
+            sets_c, sets_mu, eq = (np.concatenate(a) for a in ((sets_c, ensemble[0]), (sets_mu, ensemble[1]),
+                                                               (eq, member_eq[0])))
+        why_not = pl.set_residual(previous, observed, eq, sets_c, sets_mu)
     best, best_key, tried, first_hit, fails = None, None, 0, None, 0
     bar = tqdm(total=max_cand, desc="plan", unit="cand", disable=None)
     while tried < max_cand and (first_hit is None or tried < first_hit + extra):
@@ -280,11 +226,13 @@ def search(campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarr
         if d_k is None or share == 0:
             msgs.append(f"no candidate hit under any of the {len(ensemble[0])} ensemble sets; returning the "
                         "best under the estimate")
-    msgs += sorted(set(pl.warnings))[:1]
-    return PlanResult(motion, hit, d, tm, my, tried, "; ".join(msgs), pl.tip_path(motion, equilibria[i]), **robust)
+    msgs += sorted(set(pl.warnings))[:1] + [why_not] * bool(why_not)
+    residual = None if pl.residual is None else pl.residual.summary()
+    return PlanResult(motion, hit, d, tm, my, tried, "; ".join(msgs), pl.tip_path(motion, equilibria[i]),
+                      residual=residual, **robust)
 
 
-def _ensemble_scores(pl: _Planner, cands: list, q: np.ndarray, T: float, screened: np.ndarray,
+def _ensemble_scores(pl: Predictor, cands: list, q: np.ndarray, T: float, screened: np.ndarray,
                      ensemble: tuple[np.ndarray, np.ndarray], postures: np.ndarray,
                      member_eq: dict) -> dict[int, tuple[float, float, np.ndarray]]:
     """Robust planner: {candidate index: (hit share, margin m, d_min (K,) m)} for the screened candidates."""
@@ -327,7 +275,7 @@ def write_motion(result: PlanResult, campaign: Campaign, config: Mapping, coeffs
         "ensemble_hit_share": result.hit_share,
         "ensemble_margin_mm": None if result.margin is None else result.margin * 1000,
         "ensemble_d_min_mm": None if result.ensemble_d_min is None else np.asarray(result.ensemble_d_min) * 1000,
-        "message": result.message})
+        "residual_correction": result.residual, "message": result.message})
 
 
 def _rng(config: Mapping, seed: int) -> np.random.Generator:
@@ -343,17 +291,21 @@ def run_first_plan(campaign: Campaign, config: Mapping, out_csv: Path, out_json:
 
 
 def run_plan(params_json: Path, played_motion_json: Path, campaign: Campaign, config: Mapping, out_csv: Path,
-             out_json: Path, seed: int = 0) -> PlanResult:
+             out_json: Path, seed: int = 0, tracks_parquet: Path | None = None,
+             joints_csv: Path | None = None) -> PlanResult:
     """Next motion (Section V.B): the played motion's posture and T, perturbed control points, estimated parameters.
 
     With ``motion.planner: robust`` the candidates are also scored under params.json's
     ``top`` ensemble (module doc); motion.json then carries ``ensemble_hit_share``,
-    ``ensemble_margin_mm`` and ``ensemble_d_min_mm``.
+    ``ensemble_margin_mm`` and ``ensemble_d_min_mm``. With ``motion.residual_correction``
+    the played trial's ``tracks_parquet`` and ``joints_csv`` correct every prediction
+    (:mod:`stringcast.residual`); motion.json's ``residual_correction`` says how.
 
     Raises:
-        DataError: unreadable params.json (or, robust, one without ``top``) or a played
-            motion.json without q0_rad, T_s, control_points_rad_s.
-        ConfigError: an unknown ``motion.planner``.
+        DataError: unreadable params.json (or, robust, one without ``top``), a played
+            motion.json without q0_rad, T_s, control_points_rad_s, or (residual correction)
+            unreadable tracks or a joint log that is not the played motion.
+        ConfigError: an unknown ``motion.planner``; residual correction without the trial's files.
     """
     params = read_json(params_json)
     coeffs, mu = planned_parameters(config, campaign.string.n_points, params, str(params_json))
@@ -363,6 +315,17 @@ def run_plan(params_json: Path, played_motion_json: Path, campaign: Campaign, co
         raise ConfigError(f"motion.planner: unknown {planner!r} (known: paper, robust)")
     ensemble = ensemble_parameters(config, campaign.string.n_points, params, str(params_json)) \
         if planner == "robust" else None
-    result = search(campaign, config, coeffs, mu, _rng(config, seed), previous=previous, ensemble=ensemble)
+    observed = None
+    if config.get("motion", {}).get("residual_correction", False):
+        from .files import TRACK_COLUMNS, read_joint_table, read_parquet
+        from .residual import observed_tip
+
+        if tracks_parquet is None or joints_csv is None:
+            raise ConfigError("motion.residual_correction needs the played trial's tracks.parquet and joints.csv")
+        t_j, q_j, _ = read_joint_table(joints_csv)
+        observed = observed_tip(read_parquet(tracks_parquet, TRACK_COLUMNS), t_j, q_j, previous.q,
+                                campaign.string.n_points, campaign.arm.controller_rate, str(tracks_parquet))
+    result = search(campaign, config, coeffs, mu, _rng(config, seed), previous=previous, ensemble=ensemble,
+                    observed=observed)
     write_motion(result, campaign, config, coeffs, mu, seed, out_csv, out_json, "next")
     return result

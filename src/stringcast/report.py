@@ -148,6 +148,11 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
                ("played motion: predicted closest approach", _fmt(played.get("closest_approach_mm"), ".1f", " mm")),
                ("next motion: predicted closest approach", _fmt(nxt.get("closest_approach_mm"), ".1f", " mm")),
                ("next motion: predicted hit", str(nxt.get("hit_predicted")))]
+    res = nxt.get("residual_correction")
+    if res:
+        summary.append(("next motion: residual correction (tip error of the played motion, median / max)",
+                        f"{res['median_mm']:.1f} / {res['max_mm']:.1f} mm, tip tracked in "
+                        f"{res['valid_share'] * 100:.0f} % of its frames"))
     warnings = [str(w) for w in calib.get("warnings", [])] + [str(w) for w in [params.get("message")] if w]
     gt = data_dir / "ground_truth.parquet"
     if gt.exists():

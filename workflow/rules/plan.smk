@@ -28,6 +28,8 @@ rule plan:
     input:
         params="results/{campaign}/trial_{trial}/params.json",
         played="data/{campaign}/trial_{trial}/motion.json",
+        tracks="results/{campaign}/trial_{trial}/tracks.parquet",
+        joints="data/{campaign}/trial_{trial}/joints.csv",
         campaign="data/{campaign}/campaign.yaml",
     output:
         csv="results/{campaign}/trial_{trial}/motion.csv",
@@ -44,5 +46,5 @@ rule plan:
         cfg=config["motion"],
     shell:
         'NUMBA_NUM_THREADS={threads} {params.cli} plan --params "{input.params}" --played-motion "{input.played}" '
-        '--campaign "{input.campaign}" --seed {wildcards.trial} '
+        '--tracks "{input.tracks}" --joints "{input.joints}" --campaign "{input.campaign}" --seed {wildcards.trial} '
         '--out-dir "results/{wildcards.campaign}/trial_{wildcards.trial}" > "{log}" 2>&1'
