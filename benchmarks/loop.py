@@ -58,7 +58,8 @@ PAPER_TABLE3 = {1: 2, 2: 2, 3: 2, 4: 2, 5: 3, 6: 2, 7: 2}          # executions,
 PAPER_TARGET = {1: 1, 2: 1, 3: 2, 4: 3, 5: 3, 6: 3, 7: 4}          # DESIGN.md, string types
 METHODS = {
     "paper": {"estimation": {"optimizer": "random_search"}, "motion": {"planner": "paper"}},
-    "ours": {"estimation": {"optimizer": "cmaes", "cmaes_runs": 2}, "motion": {"planner": "robust", "residual_correction": True},
+    "ours": {"estimation": {"optimizer": "cmaes", "cmaes_runs": 2},
+             "motion": {"planner": "robust", "residual_correction": True, "replan_miss_mm": 100.0},
              "model": {"ranges": {"k_ph": [1.0e-3, 1.0], "c_ph": [1.0e-3, 1.0]}}},
 }
 LABELS = {"paper": "paper_method", "ours": "ours"}

@@ -109,6 +109,15 @@ def test_planner_aims_the_model_at_the_corrected_target(tmp_path, config, campai
     d, *_ = closest_approach_batch(coeffs, mu, hand_t, hand[None], [0], p0[None], pl.l0, pl.psi0, pl.dt, 0.0,
                                    res.motion.T + pl.flight, campaign.target.xy - offset)
     assert d[0] == pytest.approx(res.d_min, abs=2e-3) and d[0] <= campaign.target.radius
+    doc = pn.read_json(tmp_path / "m2.json")
+    assert doc["played_observed_miss_mm"] > 0 and doc["residual_correction"]["sets"] == 1
+    # a tracked miss beyond replan_miss_mm: a new motion from scratch (a new posture or T), no correction
+    cfg["motion"]["replan_miss_mm"] = 1.0
+    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, cfg, tmp_path / "m4.csv",
+                      tmp_path / "m4.json", seed=1, tracks_parquet=tmp_path / "tracks.parquet",
+                      joints_csv=tmp_path / "joints.csv")
+    assert "replan_miss_mm" in res.message and res.residual is None
+    assert res.motion.T != m1.T or not np.allclose(res.motion.q0, m1.q0)
     # without the trial's files the correction cannot be made, and says so
     with pytest.raises(pn.ConfigError, match="residual_correction"):
         pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, cfg, tmp_path / "m3.csv",

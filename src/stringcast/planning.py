@@ -34,6 +34,10 @@ from an initial posture q0):
 * Residual correction (``motion.residual_correction``, later motions, with either
   planner; ours): every set aims at the target minus the model's error on the played
   motion's tracked tip (:mod:`stringcast.residual`), so d_min is the corrected one.
+* Replan (``motion.replan_miss_mm`` > 0; ours): when the played motion's tracked tip missed
+  the target by more than that, the next motion is searched afresh (random posture and T,
+  as the first) with the estimate, not as a perturbation: a small change cannot bridge a
+  large miss, and the residual is a first-order correction.
 
 The model's predictions (equilibrium, closest approach, tip path) are
 :class:`stringcast.prediction.Predictor`'s. Stage entry points: :func:`run_first_plan` and :func:`run_plan` write ``motion.csv``
@@ -41,7 +45,7 @@ and its ``motion.json`` sidecar (:func:`write_motion`).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Mapping
 
@@ -256,8 +260,9 @@ def _ensemble_scores(pl: Predictor, cands: list, q: np.ndarray, T: float, screen
 # Files and stage entry points
 # ---------------------------------------------------------------------------
 def write_motion(result: PlanResult, campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarray,
-                 seed: int, out_csv: Path, out_json: Path, kind: str) -> None:
-    """Write ``motion.csv`` (t_s, q1_rad..) and its ``motion.json`` sidecar."""
+                 seed: int, out_csv: Path, out_json: Path, kind: str, observed_miss_mm: float | None = None) -> None:
+    """Write ``motion.csv`` (t_s, q1_rad..) and its ``motion.json`` sidecar (``observed_miss_mm``: the
+    played motion's tracked tip's closest approach, when the plan read it)."""
     m = result.motion
     write_joint_table(out_csv, m.t, m.q)
     step = max(1, len(result.tip_path) // 400)
@@ -275,7 +280,8 @@ def write_motion(result: PlanResult, campaign: Campaign, config: Mapping, coeffs
         "ensemble_hit_share": result.hit_share,
         "ensemble_margin_mm": None if result.margin is None else result.margin * 1000,
         "ensemble_d_min_mm": None if result.ensemble_d_min is None else np.asarray(result.ensemble_d_min) * 1000,
-        "residual_correction": result.residual, "message": result.message})
+        "residual_correction": result.residual, "played_observed_miss_mm": observed_miss_mm,
+        "message": result.message})
 
 
 def _rng(config: Mapping, seed: int) -> np.random.Generator:
@@ -315,17 +321,28 @@ def run_plan(params_json: Path, played_motion_json: Path, campaign: Campaign, co
         raise ConfigError(f"motion.planner: unknown {planner!r} (known: paper, robust)")
     ensemble = ensemble_parameters(config, campaign.string.n_points, params, str(params_json)) \
         if planner == "robust" else None
-    observed = None
-    if config.get("motion", {}).get("residual_correction", False):
+    mcfg = config.get("motion", {})
+    residual, replan_mm = bool(mcfg.get("residual_correction", False)), float(mcfg.get("replan_miss_mm", 0.0))
+    observed, miss = None, float("nan")
+    if residual or replan_mm > 0:
         from .files import TRACK_COLUMNS, read_joint_table, read_parquet
-        from .residual import observed_tip
+        from .residual import observed_miss, observed_tip
 
         if tracks_parquet is None or joints_csv is None:
-            raise ConfigError("motion.residual_correction needs the played trial's tracks.parquet and joints.csv")
+            raise ConfigError("motion.residual_correction and motion.replan_miss_mm need the played trial's "
+                              "tracks.parquet and joints.csv")
         t_j, q_j, _ = read_joint_table(joints_csv)
         observed = observed_tip(read_parquet(tracks_parquet, TRACK_COLUMNS), t_j, q_j, previous.q,
                                 campaign.string.n_points, campaign.arm.controller_rate, str(tracks_parquet))
-    result = search(campaign, config, coeffs, mu, _rng(config, seed), previous=previous, ensemble=ensemble,
-                    observed=observed)
-    write_motion(result, campaign, config, coeffs, mu, seed, out_csv, out_json, "next")
+        miss = observed_miss(*observed[:3], campaign.target.xy, previous.T + float(mcfg.get("flight_window_s", 0.5)))
+    if replan_mm > 0 and miss * 1000 > replan_mm:
+        result = search(campaign, config, coeffs, mu, _rng(config, seed), ensemble=ensemble)
+        result = replace(result, message="; ".join(
+            [f"the tracked tip missed by {miss * 1000:.0f} mm (> replan_miss_mm {replan_mm:.0f}): a new motion "
+             "(random posture and T), not a perturbation of the played one"] + [result.message] * bool(result.message)))
+    else:
+        result = search(campaign, config, coeffs, mu, _rng(config, seed), previous=previous, ensemble=ensemble,
+                        observed=observed if residual else None)
+    write_motion(result, campaign, config, coeffs, mu, seed, out_csv, out_json, "next",
+                 observed_miss_mm=miss * 1000 if np.isfinite(miss) else None)
     return result

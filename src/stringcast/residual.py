@@ -161,3 +161,14 @@ def observed_tip(tracks_df, t_log: np.ndarray, q_log: np.ndarray, q_cmd: np.ndar
     delay = motion_delay(t_log, q_log, q_cmd, rate)
     _, t, xy, valid = tracks_arrays(tracks_df, n, source)
     return t - delay, xy[:, n], valid[:, n], delay
+
+
+def observed_miss(frame_t: np.ndarray, tip: np.ndarray, valid: np.ndarray, target_xy: np.ndarray,
+                  horizon: float) -> float:
+    """The tracked tip's closest approach to the target over [0, horizon] of motion time, m
+    (NaN when the tip was never tracked there). Args as :func:`tip_residual`'s; target_xy (2,) m."""
+    sel = (np.asarray(frame_t) >= 0) & (np.asarray(frame_t) <= horizon) & np.asarray(valid, bool)
+    sel &= np.all(np.isfinite(tip), axis=1)
+    if not sel.any():
+        return float("nan")
+    return float(np.min(np.hypot(tip[sel, 0] - target_xy[0], tip[sel, 1] - target_xy[1])))
