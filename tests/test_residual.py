@@ -50,6 +50,11 @@ def test_tip_residual_is_tracked_minus_model():
     expect = np.column_stack([np.sin(grid) + 0.02 + 0.1 * grid - grid, np.cos(grid) - 0.01 - grid])
     np.testing.assert_allclose(res.delta[1][seen], expect[seen], atol=2e-6)
     np.testing.assert_allclose(res.targets(np.array([1.2, 0.3]))[0, 0], [1.18, 0.31], atol=1e-12)
+    blown = model.copy()
+    blown[1, 200:] = np.nan                          # set 1 blew up on the played motion: it takes set 0's residual
+    res_b, _ = tip_residual(ft, tip, valid, blown, horizon=0.4901, delay_s=0.31, dt=0.002)
+    np.testing.assert_array_equal(res_b.delta[1], res_b.delta[0])
+    np.testing.assert_allclose(res_b.delta[0], res.delta[0])
     valid[:] = False
     valid[::3] = True                                # a third of the frames: not enough
     res, why = tip_residual(ft, np.where(valid[:, None], tip, np.nan), valid, model, 0.5, 0.31)

@@ -116,7 +116,8 @@ def tip_residual(frame_t: np.ndarray, tip: np.ndarray, valid: np.ndarray, model_
     Args:
         frame_t: (F,) s, motion time of each frame (t_s - delay). tip: (F, 2) m tracked tip,
             valid: (F,) bool. model_tip: (P, F, 2) m, the model's tip at frame_t, one row
-            per parameter set (NaN where a set's simulation blew up).
+            per parameter set (NaN where a set's simulation blew up: such a set, but set 0,
+            takes set 0's residual; frames where set 0 is NaN are not used).
         horizon: s, T + flight window. delay_s: recorded in the result.
         min_valid_share: fewer valid frames than this share of those in [0, horizon]: no
             correction.
@@ -129,13 +130,14 @@ def tip_residual(frame_t: np.ndarray, tip: np.ndarray, valid: np.ndarray, model_
         raise ValueError(f"tip_residual: shapes frame_t (F,), tip (F, 2), model_tip (P, F, 2) expected; got "
                          f"{frame_t.shape}, {tip.shape}, {model_tip.shape}")
     window = (frame_t >= 0) & (frame_t <= horizon)
-    ok = window & valid.astype(bool) & np.all(np.isfinite(tip), axis=1) & np.all(np.isfinite(model_tip), axis=(0, 2))
+    ok = window & valid.astype(bool) & np.all(np.isfinite(tip), axis=1) & np.all(np.isfinite(model_tip[0]), axis=1)
     share = float(ok.sum() / max(1, window.sum()))
     if share < min_valid_share or ok.sum() < 2:
         return None, (f"no residual correction: the tip was tracked in {share:.0%} of the {int(window.sum())} frames "
                       f"of the played motion (need {min_valid_share:.0%})")
     grid = np.arange(0.0, horizon + 0.5 * dt, dt)
     d = tip[None, ok] - model_tip[:, ok]
+    d[~np.all(np.isfinite(d), axis=(1, 2))] = d[0]      # a set that blew up on the played motion: set 0's residual
     delta = np.stack([np.column_stack([np.interp(grid, frame_t[ok], d[p, :, 0]),
                                        np.interp(grid, frame_t[ok], d[p, :, 1])]) for p in range(len(d))])
     return TipResidual(dt=float(dt), delta=delta, delay_s=float(delay_s), valid_share=share), ""
