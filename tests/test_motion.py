@@ -52,3 +52,26 @@ def test_no_posture_for_too_long_string(config):
     camp = resolve_campaign({"string": {"length_mm": 4000, "n_points": 10}, "target": 1}, config, "long")
     with pytest.raises(ConfigError, match="floor"):
         mo.sample_postures(camp, np.random.default_rng(0), 4, 0.05)
+
+
+def test_hanging_string_clear_of_the_arm(config):
+    """hang_clearance: the exact segment distance agrees with a dense brute force, and a posture whose
+    gripper points up (the string hanging down over the wrist, hidden behind the arm) is refused."""
+    from stringcast.arm import forward_kinematics
+    from stringcast.config import resolve_campaign
+
+    camp = resolve_campaign({"string": 5, "target": 3}, config, "t")
+    q = np.random.default_rng(0).uniform(camp.arm.q_min, camp.arm.q_max, (60, 3))
+    pts = forward_kinematics(camp.arm, q)
+    top, bottom = pts[:, -1] - [0.0, 0.06], pts[:, -1] - [0.0, camp.string.length]
+    d = mo._vertical_clearance(top, bottom, pts)
+    s = np.linspace(0, 1, 600)[:, None]
+    for i in range(len(q)):
+        v = top[i] + s * (bottom[i] - top[i])
+        brute = min(np.linalg.norm(v[:, None] - (pts[i, k] + s * (pts[i, k + 1] - pts[i, k]))[None], axis=-1).min()
+                    for k in range(pts.shape[1] - 1))
+        assert d[i] == pytest.approx(brute, abs=1e-3)
+    up = np.array([0.6, 0.9, 0.0])      # wrist above the elbow, gripper pointing up and back over the forearm
+    down = np.array([0.5, -1.0, -0.3])  # gripper pointing down and out: the string hangs free
+    assert mo.postures_ok(camp, up, 0.05) and not mo.postures_ok(camp, up, 0.05, clearance=0.06)
+    assert mo.postures_ok(camp, down, 0.05, clearance=0.06)

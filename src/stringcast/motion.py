@@ -102,13 +102,19 @@ def joint_paths(control_points: np.ndarray, T: float, rate: float) -> tuple[np.n
 # ---------------------------------------------------------------------------
 # Postures
 # ---------------------------------------------------------------------------
-def postures_ok(campaign: Campaign, q0: np.ndarray, margin: float, box: np.ndarray | None = None) -> np.ndarray:
+def postures_ok(campaign: Campaign, q0: np.ndarray, margin: float, box: np.ndarray | None = None,
+                clearance: float = 0.0) -> np.ndarray:
     """For postures q0 (..., J): within limits, arm above the floor, the hanging string
     (L straight down from the grasp) above floor + margin, and, if ``box`` ((2, 2) m:
-    [[x_min, x_max], [y_min, y_max]]) is given, the grasp inside it. Returns bool (...).
+    [[x_min, x_max], [y_min, y_max]]) is given, the grasp inside it; with ``clearance`` > 0
+    (m), the hanging string below its first ``clearance`` at least that far from every
+    link's and the gripper's centre line. Returns bool (...).
 
-    The box keeps the start posture where the camera sees the hanging string: the
-    estimation starts from the tracked rest state (config ``motion.start_grasp_box_mm``)."""
+    The box and the clearance keep the start posture where the camera sees the hanging
+    string, so the estimation starts from the tracked rest state (config
+    ``motion.start_grasp_box_mm``, ``motion.hang_clearance_mm``): a string hanging across
+    the arm (a gripper pointing up, the string down over the wrist) is hidden behind it
+    in the picture, and would lie on it in reality, which neither model has."""
     arm = campaign.arm
     q0 = np.asarray(q0, float)
     pts = forward_kinematics(arm, q0)
@@ -116,10 +122,38 @@ def postures_ok(campaign: Campaign, q0: np.ndarray, margin: float, box: np.ndarr
     arm_up = np.min(pts[..., 1:, 1], axis=-1) >= arm.floor_y + margin
     string_up = pts[..., -1, 1] - campaign.string.length >= arm.floor_y + margin
     ok = inside & arm_up & string_up
+    if clearance > 0:
+        g = pts[..., -1, :]
+        top = g - [0.0, clearance]
+        bottom = g - [0.0, campaign.string.length]
+        ok &= _vertical_clearance(top, bottom, pts) >= clearance
     if box is not None:
         g = pts[..., -1, :]
         ok &= (g[..., 0] >= box[0][0]) & (g[..., 0] <= box[0][1]) & (g[..., 1] >= box[1][0]) & (g[..., 1] <= box[1][1])
     return ok
+
+
+def _vertical_clearance(top: np.ndarray, bottom: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Distance (...,) m between the vertical segments top -> bottom (..., 2) (same x) and the
+    polyline pts (..., P, 2): 0 where they cross, else the least point-to-segment distance."""
+    a, b = pts[..., :-1, :], pts[..., 1:, :]                           # (..., P-1, 2) arm segments
+    x, y0, y1 = top[..., None, 0], bottom[..., None, 1], top[..., None, 1]
+    # crossing: the arm segment spans x, and meets it within [y0, y1]
+    dx = b[..., 0] - a[..., 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w = (x - a[..., 0]) / dx
+        y_at = a[..., 1] + w * (b[..., 1] - a[..., 1])
+    cross = (w >= 0) & (w <= 1) & (y_at >= y0) & (y_at <= y1)
+
+    def point_seg(p, s0, s1):                                          # point (..., k, 2) to segments
+        d = s1 - s0
+        t = np.clip(np.sum((p - s0) * d, -1) / np.maximum(np.sum(d * d, -1), 1e-18), 0, 1)
+        return np.linalg.norm(s0 + t[..., None] * d - p, axis=-1)
+
+    ends = np.minimum(point_seg(top[..., None, :], a, b), point_seg(bottom[..., None, :], a, b))
+    vt, vb = top[..., None, :], bottom[..., None, :]
+    arm_ends = np.minimum(point_seg(a, vt, vb), point_seg(b, vt, vb))
+    return np.where(cross, 0.0, np.minimum(ends, arm_ends)).min(axis=-1)
 
 
 def start_box(config: Mapping) -> np.ndarray | None:
@@ -134,7 +168,7 @@ def posture_ok(campaign: Campaign, q0: np.ndarray, margin: float) -> bool:
 
 
 def sample_postures(campaign: Campaign, rng: np.random.Generator, count: int, margin: float,
-                    max_tries: int = 100000, box: np.ndarray | None = None) -> np.ndarray:
+                    max_tries: int = 100000, box: np.ndarray | None = None, clearance: float = 0.0) -> np.ndarray:
     """(count, J) random initial postures, uniform within the joint limits, passing :func:`postures_ok`.
 
     Raises:
@@ -144,12 +178,13 @@ def sample_postures(campaign: Campaign, rng: np.random.Generator, count: int, ma
     found = np.zeros((0, arm.n_joints))
     for _ in range(0, max_tries, 5000):
         q0 = rng.uniform(arm.q_min, arm.q_max, (5000, arm.n_joints))
-        found = np.vstack([found, q0[postures_ok(campaign, q0, margin, box)]])
+        found = np.vstack([found, q0[postures_ok(campaign, q0, margin, box, clearance)]])
         if len(found) >= count:
             return found[:count]
     raise ConfigError(f"arm {arm.name}: no initial posture keeps a {campaign.string.length * 1000:.0f} mm string "
                       f"above the floor (floor_y {arm.floor_y * 1000:.0f} mm + margin {margin * 1000:.0f} mm)"
-                      + ("" if box is None else f" with the grasp inside start_grasp_box_mm {np.round(box * 1000).tolist()}"))
+                      + ("" if box is None else f" with the grasp inside start_grasp_box_mm {np.round(box * 1000).tolist()}")
+                      + (f", hanging {clearance * 1000:.0f} mm clear of the arm" if clearance > 0 else ""))
 
 
 # ---------------------------------------------------------------------------

@@ -156,7 +156,8 @@ def search(campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarr
         fixed_T = previous.T
     else:
         margin = float(mcfg.get("floor_margin_m", 0.05))
-        postures = sample_postures(campaign, rng, int(mcfg.get("posture_pool", 32)), margin, box=start_box(config))
+        postures = sample_postures(campaign, rng, int(mcfg.get("posture_pool", 32)), margin, box=start_box(config),
+                                   clearance=float(mcfg.get("hang_clearance_mm", 0.0)) / 1000)
     equilibria: dict[int, np.ndarray] = {}
     member_eq: dict[int, np.ndarray] = {}    # posture -> (K, n, 2), robust planner
     screen = float(mcfg.get("robust_screen_mm", 20.0)) / 1000

@@ -5,8 +5,10 @@ point 0 = grasp, 1..n = the model's points at arc length s_i = i L / n, n = tip)
 Settings: ``config['tracking']`` over :data:`DEFAULTS`.
 
 1. **Background** (:func:`~stringcast.background.build_background`): the arm-masked temporal
-   median of ``background_samples`` frames from the first ``background_window_s`` of the
-   arm's motion (the string and arm hang still before it, and again after it), pixels the arm
+   median of ``background_samples`` frames spread over the arm's motion (the string and arm
+   hang still before it, and again after it; ``background_window_s`` limits the samples to the
+   motion's first seconds, for containers that cannot seek: but a string that leaves its rest
+   place late in that span becomes background there, and is lost at rest), pixels the arm
    covers throughout taken from pre-motion frames; the same samples give the sensor's noise
    model sigma^2 = a + b B. The main pass decodes ahead in a thread (:mod:`stringcast.prefetch`).
 2. **Segmentation** (per frame, within L + ``roi_margin_mm`` of the grasp): a gain for
@@ -76,7 +78,7 @@ DEFAULTS = {
     "arm_guard_px": 3.0, "branch_min_px": 6, "anchor_tol_mm": 3.0, "anchor_tol_px": 2.0, "end_sigma_px": 1.0,
     "scale_sigma": 0.003, "tip_shortfall_mm": 0.0, "end_contrast_min": 0.4, "end_edge_max": 0.25, "max_missing_frac": 0.3,
     "end_touch_mm": 12.0,
-    "background_window_s": 0.4, "prefetch_frames": 48,
+    "background_window_s": None, "prefetch_frames": 48,
 }
 
 
@@ -345,7 +347,8 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, config, out_p
     win = np.nonzero((t >= t_start) & (t <= t_end + 0.1) & in_log)[0]
     if len(win) < 9:
         win = np.arange(F)
-    early = win[t[win] <= t[win[0]] + st["background_window_s"]]  # decoded twice: keep it short
+    span = st["background_window_s"]   # None: the whole motion window (the string hangs still in a short one)
+    early = win if span is None else win[t[win] <= t[win[0]] + span]
     bwin = early if len(early) >= 9 else win
     samples = np.unique(np.round(np.linspace(bwin[0], bwin[-1], min(len(bwin), int(st["background_samples"])))))
     pre = np.nonzero(t < t_start - 0.02)[0][-int(st["rest_frames"]):]
