@@ -148,6 +148,8 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
                ("played motion: predicted closest approach", _fmt(played.get("closest_approach_mm"), ".1f", " mm")),
                ("next motion: predicted closest approach", _fmt(nxt.get("closest_approach_mm"), ".1f", " mm")),
                ("next motion: predicted hit", str(nxt.get("hit_predicted")))]
+    if nxt.get("message"):
+        summary.append(("next motion: planner's note", str(nxt["message"])))
     res = nxt.get("residual_correction")
     if res:
         summary.append(("next motion: residual correction (tip error of the played motion, median / max)",
