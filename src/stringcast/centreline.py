@@ -1,7 +1,8 @@
 """Centreline geometry of one frame's string: skeleton walk, sub-pixel refinement, arc resampling.
 
-Plain functions on arrays used by :mod:`stringcast.tracking` (steps 4-5 of its pipeline);
-:func:`trace_path` is compiled with numba, the rest is NumPy/SciPy.
+Plain functions on arrays used by :mod:`stringcast.tracking` (steps 4-5 of its pipeline),
+NumPy/SciPy; the skeleton walk is in :mod:`stringcast.skeleton_walk` (pixel by pixel, numba)
+and :mod:`stringcast.junctions` (the choice at crossings).
 """
 from __future__ import annotations
 
@@ -9,91 +10,9 @@ import math
 
 import cv2
 import numpy as np
-from numba import njit
 from scipy.ndimage import gaussian_filter1d, map_coordinates
 
-
-def trace_path(skel: np.ndarray, start: tuple[int, int], max_gap: float, direction=None):
-    """Walk a skeleton from ``start`` (row, col), straight at junctions, bridging small gaps.
-
-    At each step the unvisited 8-neighbour best aligned with the current direction (over the
-    last 5 steps) is taken and all the current pixel's neighbours are marked visited; with
-    no neighbour left, the nearest unvisited skeleton pixel within ``max_gap`` px and 35 deg
-    of the direction is jumped to (a bridged gap). Compiled with numba.
-
-    Args:
-        skel: (H, W) bool skeleton. direction: (drow, dcol) initial direction or None.
-
-    Returns:
-        pts (M, 2) float (row, col) and bridged (M,) bool (True: reached by a gap jump).
-    """
-    d = np.array([np.nan, np.nan]) if direction is None else np.asarray(direction, float)
-    pts, bridged = _walk(np.ascontiguousarray(skel, dtype=np.bool_), int(start[0]), int(start[1]),
-                         float(max_gap), d[0], d[1])
-    return pts.astype(float), bridged
-
-
-@njit(cache=True)
-def _walk(skel, r0, c0, max_gap, d0r, d0c):  # pragma: no cover - compiled
-    H, W = skel.shape
-    visited = np.zeros((H, W), np.bool_)
-    cap = 4 * (H + W)
-    pts = np.empty((cap, 2), np.int64)
-    bridged = np.zeros(cap, np.bool_)
-    pts[0, 0], pts[0, 1] = r0, c0
-    visited[r0, c0] = True
-    m = 1
-    have_d = not (np.isnan(d0r) or np.isnan(d0c))
-    dn = np.hypot(d0r, d0c) if have_d else 1.0
-    dr, dc = (d0r / dn, d0c / dn) if have_d else (0.0, 0.0)
-    g = int(np.ceil(max_gap))
-    cos_max = np.cos(np.radians(35.0))
-    r, c = r0, c0
-    while m < cap:
-        br, bc, bscore, found = -1, -1, -1e9, False
-        for a in range(-1, 2):
-            for b in range(-1, 2):
-                rr, cc = r + a, c + b
-                if (a == 0 and b == 0) or rr < 0 or rr >= H or cc < 0 or cc >= W:
-                    continue
-                if skel[rr, cc] and not visited[rr, cc]:
-                    score = (a * dr + b * dc) / np.hypot(a, b) if have_d else 0.0
-                    if not found or score > bscore:
-                        br, bc, bscore, found = rr, cc, score, True
-        jump = False
-        if found:
-            for a in range(-1, 2):
-                for b in range(-1, 2):
-                    rr, cc = r + a, c + b
-                    if 0 <= rr < H and 0 <= cc < W and skel[rr, cc]:
-                        visited[rr, cc] = True
-        elif have_d:
-            best = 1e9
-            for a in range(-g, g + 1):
-                for b in range(-g, g + 1):
-                    dist = np.hypot(a, b)
-                    rr, cc = r + a, c + b
-                    if dist <= 1.5 or dist > max_gap or rr < 0 or rr >= H or cc < 0 or cc >= W:
-                        continue
-                    if not skel[rr, cc] or visited[rr, cc]:
-                        continue
-                    cosang = (a * dr + b * dc) / dist
-                    if cosang > cos_max and dist * (2.0 - cosang) < best:
-                        best, br, bc, found = dist * (2.0 - cosang), rr, cc, True
-            jump = found
-        if not found:
-            break
-        visited[br, bc] = True
-        pts[m, 0], pts[m, 1] = br, bc
-        bridged[m] = jump
-        m += 1
-        r, c = br, bc
-        k = max(0, m - 6)
-        vr, vc = r - pts[k, 0], c - pts[k, 1]
-        nv = np.hypot(vr, vc)
-        if nv > 0:
-            dr, dc, have_d = vr / nv, vc / nv, True
-    return pts[:m].copy(), bridged[:m].copy()
+from .skeleton_walk import trace_path  # noqa: F401 (part of this module's interface)
 
 
 def odd_smooth(p: np.ndarray, sigma: float) -> np.ndarray:

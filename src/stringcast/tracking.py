@@ -15,7 +15,8 @@ Settings: ``config['tracking']`` over :data:`DEFAULTS`.
 3. **Arm mask** from the *measured* joints at the start, middle and end of each frame period
    (:func:`~stringcast.arm_mask.draw_arm_mask`), plus a guard band of ``arm_guard_px``.
 4. **Centreline** (:mod:`stringcast.centreline`): skeleton of the foreground; a walk
-   (:func:`trace_path`) from near the grasp, straight through junctions, bridging gaps up to
+   (:func:`~stringcast.junctions.walk_skeleton`) from near the grasp, through a crossing by
+   the smoothest way on (a pass whose choice is a guess is an ambiguity), bridging gaps up to
    ``max_gap_px`` (bridged parts are never valid); the first ``grasp_clear_mm`` replaced by
    a circular arc from the grasp (:func:`hidden_arc`); sub-pixel refinement across the path,
    smoothing, chords of ``arc_step_px``; a free end (:func:`clean_end`: not fading, not at an
@@ -27,8 +28,8 @@ Settings: ``config['tracking']`` over :data:`DEFAULTS`.
    among the hidden head, the visible arc and the free end by their uncertainties
    (:func:`mismatch_split`); a longer mismatch (the start hidden or folded behind the
    gripper) anchors the arc at the free end, valid after the last ambiguity (a branch
-   joining the walk, a bridged gap) and, for a missing length D, not within D past the
-   hidden head (a loop at the fingers); without a free end, at the grasp, valid before the
+   joining the walk, a guess at a crossing, a bridged gap) and, for a missing length D, not
+   within D past the hidden head (a loop at the fingers); without a free end, at the grasp, valid before the
    first ambiguity. Invalid points keep NaN positions: never a guess.
 """
 from __future__ import annotations
@@ -58,8 +59,8 @@ from .centreline import (
     odd_smooth,
     refine_centreline,
     resample_by_arc,
-    trace_path,
 )
+from .junctions import Zones, walk_skeleton
 from .files import DataError, find_video, read_joint_table, read_json, write_parquet
 from .overlay import write_overlay
 from .prefetch import prefetch
@@ -239,8 +240,11 @@ class FrameTracker:
         if w == 0:
             return None
         b = np.array([max(0, y - 1), max(0, x - 1)])  # the foreground's box, 1 px margin: all work is in it
-        skel = skeletonize(fg[b[0]:y + h + 1, b[1]:x + w + 1])
+        box = fg[b[0]:y + h + 1, b[1]:x + w + 1]
+        skel = skeletonize(box)
         self._skel, self._skel_at = skel, b
+        dist = cv2.distanceTransform(box.astype(np.uint8), cv2.DIST_L2, 3)  # the string's width: twice the
+        self._width = 2.0 * float(np.median(dist[skel])) if skel.any() else 1.0  # skeleton's distance to the rim
         found = self._walk(skel, g - b, r0, rho)
         return None if found is None else (found[0] + b, found[1], found[2])
 
@@ -258,13 +262,14 @@ class FrameTracker:
             own = idx[cid == c]
             out = own[dist[own] >= rho]
             seeds.append((own[np.argmin(dist[own])], out[np.argmin(dist[out])] if len(out) else None))
-        best = None
+        best, zones = None, Zones(skel, self._width, int(self.st["branch_min_px"]))
         for pair in sorted(seeds, key=lambda p: dist[p[0]])[:6]:
             for fallback, c in enumerate(pair):
                 if c is None:
                     break
                 d0 = np.array([sy[c], sx[c]], float) - g
-                pts, bridged = trace_path(skel, (sy[c], sx[c]), self.st["max_gap_px"], d0 if np.hypot(*d0) >= 1 else None)
+                pts, bridged, amb, passed = walk_skeleton(skel, (sy[c], sx[c]), self.st["max_gap_px"], d0 if np.hypot(
+                    *d0) >= 1 else None, zones=zones)
                 cum = arc_length(pts)
                 head = np.nonzero(cum <= 2 * r0)[0]
                 j0 = int(head[np.argmin(np.hypot(*(pts[head] - g).T))])
@@ -275,7 +280,7 @@ class FrameTracker:
                 if best is None or cum[-1] - cum[j1] > best[2]:
                     b = bridged[j1:].copy()
                     b[0] = False
-                    best = (pts[j1:], b, cum[-1] - cum[j1], pts, fallback)
+                    best = (pts[j1:], b, cum[-1] - cum[j1], pts, fallback, amb, passed)
                 break
         if best is None:
             return None
@@ -284,7 +289,7 @@ class FrameTracker:
         if best[4]:  # the walk skipped a tangle at the fingertips: not a branch
             skel = skel.astype(np.uint8)
             cv2.circle(skel, (round(g[1]), round(g[0])), round(rho + 1), 0, -1)
-        ev = branch_vertices(skel > 0, walk, int(self.st["branch_min_px"]))
+        ev = branch_vertices((skel > 0) & ~best[6], walk, int(self.st["branch_min_px"])) | best[5]
         # a branch joining the walk near the grasp: a loop there, the ordering is ambiguous
         self._head_clutter = bool(np.any(ev & (np.hypot(*(walk - g).T) <= 2 * rho)))
         return best[0], best[1], ev[len(best[3]) - len(best[0]):]
