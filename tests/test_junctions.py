@@ -26,7 +26,7 @@ def test_walk_goes_straight_through_an_x_crossing():
     skel = _skeleton([a, b])
     assert junction_zones(skel, 3.0).max() == 1  # one crossing (however the skeleton drew it)
     start = np.argwhere(skel)[np.argmin(np.argwhere(skel)[:, 1])]  # the left end of A
-    pts, bridged, ambiguous, passed = walk_skeleton(skel, start, 6.0, (0, 1), width_px=3.0)
+    pts, bridged, ambiguous, _, passed = walk_skeleton(skel, start, 6.0, (0, 1), width_px=3.0)
     assert abs(pts[-1][0] - 60) <= 1 and pts[-1][1] >= 145  # it ended at A's right end
     assert np.all(np.abs(pts[:, 0] - 60) <= 3)  # never turned onto B
     assert not bridged.any() and passed.any()
@@ -46,7 +46,7 @@ def test_walk_follows_a_loop_through_its_crossing_twice():
     zones = junction_zones(skel, 3.0)
     assert zones.max() >= 1
     start = np.argwhere(skel)[np.argmin(np.argwhere(skel)[:, 1])]
-    pts, bridged, ambiguous, _ = walk_skeleton(skel, start, 6.0, (0, 1), width_px=3.0)
+    pts, bridged, ambiguous, _, _ = walk_skeleton(skel, start, 6.0, (0, 1), width_px=3.0)
     k, worst = 0, 0.0  # follow the curve along the walk: each walk pixel near the curve just ahead
     for p in pts:
         j = np.arange(max(k - 10, 0), min(k + 30, len(curve)))
@@ -62,11 +62,11 @@ def test_a_symmetric_fork_and_an_unwalked_branch_are_ambiguous():
     fork = _skeleton([[[10, 60], [80, 60]], [[80, 60], [150, 60 + 70 * math.tan(math.radians(35))]],
                       [[80, 60], [150, 60 - 70 * math.tan(math.radians(35))]]])
     start = np.argwhere(fork)[np.argmin(np.argwhere(fork)[:, 1])]
-    pts, _, ambiguous, _ = walk_skeleton(fork, start, 6.0, (0, 1), width_px=3.0)
+    pts, _, ambiguous, _, _ = walk_skeleton(fork, start, 6.0, (0, 1), width_px=3.0)
     assert ambiguous.any() and not ambiguous[:50].any()
     tee = _skeleton([[[10, 60], [150, 60]], [[80, 60], [80, 110]]])
     start = np.argwhere(tee)[np.argmin(np.argwhere(tee)[:, 1])]
-    pts, _, ambiguous, _ = walk_skeleton(tee, start, 6.0, (0, 1), width_px=3.0)
+    pts, _, ambiguous, _, _ = walk_skeleton(tee, start, 6.0, (0, 1), width_px=3.0)
     assert pts[-1][1] >= 145 and np.all(np.abs(pts[:, 0] - 60) <= 3)  # straight on
     assert ambiguous.any() and abs(float(np.mean(pts[ambiguous, 1])) - 80) < 5  # at the branch
 

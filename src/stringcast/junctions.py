@@ -17,8 +17,12 @@ visited, so the second pass through a crossing finds its way too (the one exit l
 
 A choice is *ambiguous* (the ordering beyond it is a guess) when the runner-up bends less
 than ``margin`` more; every pass through a zone where a choice was ambiguous, or where a real
-branch is never walked (something joins there), is marked ambiguous. The tracker treats
-these like branches joining the walk (points past them are not valid from that side).
+branch is never walked (something joins there), is marked ambiguous; one by a spur never
+walked (1 px or more out of the zone) is marked *folded*: a fold of the string (a hairpin,
+a collapsed loop) leaves only a short spur and may hold length the walk does not measure.
+The tracker treats both like branches joining the walk (points past them are not valid from
+that side), but only ambiguities by the grasp make the ordering there unknown (spurs of the
+fingertips' tangle are common).
 
 Units: pixels of the skeleton image, (row, col); skeletons (H, W) bool.
 """
@@ -47,19 +51,27 @@ def junction_zones(skel: np.ndarray, width_px: float) -> np.ndarray:
     Candidates are pixels with 3 or more neighbours (a junction of an 8-connected skeleton is
     one pixel, a 2 x 2 block where two lines cross between pixels, or a triangle; staircase
     corners are candidates too, and fail the test of arms below). A zone is the skeleton
-    within w / 4 of candidates, with the pieces of skeleton without an end that join two of
-    them within 4 w px (the two junctions of one crossing: strokes crossing at an angle a
-    overlap along ~ w cot(a / 2), 4 w at 28 deg) or touch them within 1.5 w px (a small loop),
+    within w / 4 of candidates, with the pieces of skeleton without an end that join two
+    three-way junctions within 2 w px (a crossing: strokes crossing at an angle a overlap along
+    ~ w cot(a / 2), 2 w at 53 deg; shallower crossings stay two zones, and the choice at the
+    second is mostly a tie) or loop back to one within 1.5 w px (a small loop),
     grouped by 8-connectivity, and only if three or more separate arms leave it (else it is
     a thick spot of a line). A short spur stays an arm (:class:`Zones` tells it from a branch).
 
     Args:
         skel: (H, W) bool skeleton. width_px: the string's width w in px (the foreground's).
     """
-    skel = np.asarray(skel, bool)
-    jp = skel & (_degree(skel) >= 3)
+    return _zone_parts(np.asarray(skel, bool), width_px)[0]
+
+
+def _zone_parts(skel: np.ndarray, width_px: float):
+    """:func:`junction_zones` (ids), with the exit pixels' group labels (H, W) int (0 elsewhere),
+    the zone id beside each pixel (H, W) int, and the skeleton's degrees."""
+    deg = _degree(skel)
+    jp = skel & (deg >= 3)
     if not jp.any():
-        return np.zeros(skel.shape, np.int32)
+        zero = np.zeros(skel.shape, np.int32)
+        return zero, zero, zero, deg
     d = cv2.distanceTransform((~jp).astype(np.uint8), cv2.DIST_L2, 3)
     core = skel & (d <= max(1.0, 0.25 * width_px))
     rest = skel & ~core
@@ -67,25 +79,27 @@ def junction_zones(skel: np.ndarray, width_px: float) -> np.ndarray:
     nc, cl = cv2.connectedComponents(core.astype(np.uint8), connectivity=8)
     ring = cv2.dilate(cl.astype(np.float32), np.ones((3, 3), np.uint8)).astype(np.int32)
     ends = np.zeros(n, bool)  # pieces with an end pixel (one neighbour): spurs and the string's ends
-    ends[lab[rest & (_degree(skel) == 1)]] = True
-    pairs = np.unique(np.column_stack([lab[rest & (ring > 0)], ring[rest & (ring > 0)]]), axis=0)
+    ends[lab[rest & (deg == 1)]] = True
+    pairs = np.unique(np.column_stack([lab[rest & (ring > 0)], ring[rest & (ring > 0)]]), axis=0)  # (piece, core)
     cores = np.bincount(pairs[:, 0], minlength=n)  # how many cores each piece touches
     size = stats[:, cv2.CC_STAT_AREA]
-    short = ~ends & (((cores >= 1) & (size <= max(2.0, 1.5 * width_px))) | ((cores >= 2) & (size <= 4 * width_px)))
+    short = ~ends & (cores == 1) & (size <= max(2.0, 1.5 * width_px))  # a small loop on a core
+    _, el = cv2.connectedComponents((rest & (ring > 0)).astype(np.uint8), connectivity=8)
+    arms = np.bincount(np.unique(np.column_stack([ring[el > 0], el[el > 0]]), axis=0)[:, 0], minlength=nc)
+    for k in np.nonzero(~ends & (cores == 2) & (size <= 2 * width_px))[0]:  # two three-way junctions joined
+        short[k] = bool(np.all(arms[pairs[pairs[:, 0] == k, 1]] == 3))  # by a short piece: a crossing
     short[0] = False
     zone = core | short[lab]
     nz, zl = cv2.connectedComponents(zone.astype(np.uint8), connectivity=8)
     ring = cv2.dilate(zl.astype(np.float32), np.ones((3, 3), np.uint8)).astype(np.int32)
     ex = skel & ~zone & (ring > 0)  # exit pixels, grouped into arms
-    ne, el = cv2.connectedComponents(ex.astype(np.uint8), connectivity=8)
-    arms = np.zeros(nz, int)
-    pairs = np.unique(np.column_stack([ring[ex], el[ex]]), axis=0)
-    np.add.at(arms, pairs[:, 0], 1)
+    _, el = cv2.connectedComponents(ex.astype(np.uint8), connectivity=8)
+    arms = np.bincount(np.unique(np.column_stack([ring[ex], el[ex]]), axis=0)[:, 0], minlength=nz)
     keep = arms >= 3
     keep[0] = False
-    out = np.where(keep[zl], zl, 0)
-    _, relab = np.unique(out, return_inverse=True)
-    return relab.reshape(out.shape).astype(np.int32)
+    new = np.where(keep, np.cumsum(keep), 0).astype(np.int32)  # kept zones renumbered 1..Z
+    ring = new[ring]
+    return new[zl], np.where(ex & (ring > 0), el, 0), ring, deg
 
 
 class Zones:
@@ -98,28 +112,27 @@ class Zones:
 
     def __init__(self, skel: np.ndarray, width_px: float, min_branch_px: int):
         self.skel = skel
-        self.id = junction_zones(skel, width_px)
+        self.id, el, ring, deg = _zone_parts(np.asarray(skel, bool), width_px)
         self.reach, self.bridge = max(3.0, 1.5 * width_px), 6.0 * width_px
+        self.fold = 1.0  # a spur this far out of its zone may be the end of a fold
         self.skip = 0.5 * width_px  # the skeleton bends toward a junction within about w / 2 of it
         self.min_branch = int(min_branch_px)
         self.map = self.id.copy()  # for the walk: > 0 zone, -1 exit pixel
-        ring = cv2.dilate(self.id.astype(np.float32), np.ones((3, 3), np.uint8)).astype(np.int32)  # a zone id beside
-        ex = skel & (self.id == 0) & (ring > 0)
-        self.map[ex] = -1
-        _, lab = cv2.connectedComponents(ex.astype(np.uint8), connectivity=8)
-        px = np.argwhere(ex)
-        px = px[np.argsort(lab[ex], kind="stable")]
+        self.map[el > 0] = -1
+        px = np.argwhere(el > 0)
+        order = np.argsort(el[el > 0], kind="stable")
+        px, g = px[order], el[el > 0][order]
         self.exits: dict[int, list[np.ndarray]] = {}
-        for grp in np.split(px, np.nonzero(np.diff(np.sort(lab[ex])))[0] + 1) if len(px) else []:
+        for grp in np.split(px, np.nonzero(np.diff(g))[0] + 1) if len(px) else []:
             self.exits.setdefault(int(ring[grp[0, 0], grp[0, 1]]), []).append(grp)
         self._arm: dict[tuple, tuple] = {}
-        jp = np.argwhere((_degree(skel) >= 3) & (self.id > 0))
+        jp = np.argwhere((deg >= 3) & (self.id > 0))
         zj = self.id[jp[:, 0], jp[:, 1]]
         self.core = {int(z): jp[zj == z].mean(axis=0) for z in np.unique(zj)}
 
     def arm(self, z: int, k: int):
         """Exit k of zone z: (first pixel, unit direction outward over ``reach`` px, real branch?,
-        the zone it leads to within 6 w px or 0)."""
+        the zone it leads to within 6 w px or 0, its length in px as far as measured)."""
         key = (z, k)
         if key not in self._arm:
             px = self.exits[z][k]
@@ -150,7 +163,7 @@ class Zones:
             start = px[np.argmin(np.hypot(*(px - tip).T))]
             v = tip - (np.mean(near, axis=0) if near and depth > self.skip else start)
             n = float(np.hypot(*v))
-            self._arm[key] = (start, v / n if n > 0 else v * 0.0, real, to)
+            self._arm[key] = (start, v / n if n > 0 else v * 0.0, real, to, depth)
         return self._arm[key]
 
 
@@ -224,15 +237,16 @@ def walk_skeleton(skel: np.ndarray, start, max_gap: float, direction=None, width
 
     Returns:
         pts (M, 2) float (row, col); bridged (M,) bool (reached by a gap jump); ambiguous (M,)
-        bool (on a straight path across a zone where the choice was ambiguous); passed (H, W)
-        bool, the pixels of the zones walked through (they belong to the walk).
+        bool (on the path across a zone where a choice was a guess or a branch is never walked);
+        folded (M,) bool (across a zone, not ambiguous, where a spur is never walked); passed
+        (H, W) bool, the pixels of the zones walked through (they belong to the walk).
     """
     skel = np.ascontiguousarray(skel, dtype=np.bool_)
     Z = zones if zones is not None else Zones(skel, width_px, min_branch_px)
     visited = np.zeros(skel.shape, np.bool_)
     parts, brid, amb = [], [], []
     passages: dict[int, list[tuple[int, int]]] = {}
-    pos, d, total, last = np.asarray(start, np.int64), direction, 0, (0, None, None)
+    pos, d, total = np.asarray(start, np.int64), direction, 0
     z = int(Z.id[pos[0], pos[1]])
     if z == 0:
         p, b, z = walk_pixels(skel, Z.map, visited, pos, max_gap, d)
@@ -249,10 +263,8 @@ def walk_skeleton(skel: np.ndarray, start, max_gap: float, direction=None, width
             break  # every way out walked already: the walk ends in the zone
         entry = [k for k, px in enumerate(groups) if np.any(np.all(px == path[-1], axis=1))]
         if entry:
-            p0, v0, _, came = Z.arm(z, entry[0])
+            p0, v0 = Z.arm(z, entry[0])[:2]
             t0 = -v0
-            if came and came == last[0] and last[2] is not None:  # an arm of <= 6 w from the zone just passed:
-                p0, t0 = last[1], last[2]  # one shallow crossing (two junctions), judged from before it
         else:  # the walk starts in the zone (heading for its branch pixels), or reached it by a gap
             p0, t0 = path[-1], _direction(path, Z.reach)
             if t0 is None and np.hypot(*(Z.core[z] - p0)) >= 1:  # from the start on through the branch pixels
@@ -273,7 +285,6 @@ def walk_skeleton(skel: np.ndarray, start, max_gap: float, direction=None, width
         k = order[0]
         unsure = len(order) > 1 and (t0 is None or cost[order[1]] - cost[k] < margin)
         first, v = Z.arm(z, k)[:2]
-        last = (z, p0, t0)
         line = _through(Z.id, z, path[-1], first)
         visited[first[0], first[1]] = True
         passages.setdefault(z, []).append((total, total + len(line), unsure))
@@ -286,9 +297,12 @@ def walk_skeleton(skel: np.ndarray, start, max_gap: float, direction=None, width
     pts = np.concatenate(parts).astype(float)
     ambiguous = np.concatenate(amb)
     passed = np.isin(Z.id, list(passages)) if passages else np.zeros(skel.shape, bool)
-    for zz, spans in passages.items():  # a real branch of a zone passed that the walk never took, or a
-        if any(u for _, _, u in spans) or any(Z.arm(zz, k)[2] and not visited[px[:, 0], px[:, 1]].any()  # guess
-                                              for k, px in enumerate(Z.exits[zz])):  # at any pass: all passes
-            for a, b, _ in spans:
-                ambiguous[a:b + 1] = True
-    return pts, np.concatenate(brid), ambiguous, passed
+    folded = np.zeros(len(pts), bool)
+    for zz, spans in passages.items():  # every pass through a zone is ambiguous after a guess at any of them,
+        left = [Z.arm(zz, k) for k, px in enumerate(Z.exits[zz]) if not visited[px[:, 0], px[:, 1]].any()]
+        hard = any(u for _, _, u in spans) or any(arm[2] for arm in left)  # or by a branch never walked; folded
+        fold = any(arm[4] >= 1 for arm in left)  # by a spur never walked (the end of a fold, a hairpin or a
+        for i, j, _ in spans:  # collapsed loop, may hold string length the walk does not measure)
+            ambiguous[i:j + 1] |= hard
+            folded[i:j + 1] |= fold and not hard
+    return pts, np.concatenate(brid), ambiguous, folded, passed

@@ -16,12 +16,13 @@ Settings: ``config['tracking']`` over :data:`DEFAULTS`.
    (:func:`~stringcast.arm_mask.draw_arm_mask`), plus a guard band of ``arm_guard_px``.
 4. **Centreline** (:mod:`stringcast.centreline`): skeleton of the foreground; a walk
    (:func:`~stringcast.junctions.walk_skeleton`) from near the grasp, through a crossing by
-   the smoothest way on (a pass whose choice is a guess is an ambiguity), bridging gaps up to
-   ``max_gap_px`` (bridged parts are never valid); the first ``grasp_clear_mm`` replaced by
-   a circular arc from the grasp (:func:`hidden_arc`); sub-pixel refinement across the path,
-   smoothing, chords of ``arc_step_px``; a free end (:func:`clean_end`: not fading, not at an
-   occluder's rim, not within ``end_touch_mm`` of the string's own earlier stretch, no branch
-   within a point spacing) is extended to where the contrast fades (:func:`free_end_extension`).
+   the smoothest way on (a pass whose choice is a guess, or by an arm never walked, is an
+   ambiguity), bridging gaps up to ``max_gap_px`` (bridged parts are never valid); the first
+   ``grasp_clear_mm`` replaced by a circular arc from the grasp (:func:`hidden_arc`); sub-pixel
+   refinement across the path, smoothing that keeps bends, chords of ``arc_step_px`` joined
+   by a spline; a free end (:func:`clean_end`: not fading, not at an occluder's rim, not
+   within ``end_touch_mm`` of the string's own earlier stretch, no branch within a point
+   spacing) is extended to where the contrast fades (:func:`free_end_extension`).
 5. **Metric resampling** (:func:`resample_by_arc`): :meth:`Calibration.pixel_to_robot`, arc
    length from the grasp, points at s_i = i L / n. With a trusted free end whose length
    agrees with L (within ``anchor_tol_mm`` / ``anchor_tol_px``), the mismatch is shared
@@ -268,8 +269,8 @@ class FrameTracker:
                 if c is None:
                     break
                 d0 = np.array([sy[c], sx[c]], float) - g
-                pts, bridged, amb, passed = walk_skeleton(skel, (sy[c], sx[c]), self.st["max_gap_px"], d0 if np.hypot(
-                    *d0) >= 1 else None, zones=zones)
+                pts, bridged, amb, fold, passed = walk_skeleton(
+                    skel, (sy[c], sx[c]), self.st["max_gap_px"], d0 if np.hypot(*d0) >= 1 else None, zones=zones)
                 cum = arc_length(pts)
                 head = np.nonzero(cum <= 2 * r0)[0]
                 j0 = int(head[np.argmin(np.hypot(*(pts[head] - g).T))])
@@ -280,7 +281,7 @@ class FrameTracker:
                 if best is None or cum[-1] - cum[j1] > best[2]:
                     b = bridged[j1:].copy()
                     b[0] = False
-                    best = (pts[j1:], b, cum[-1] - cum[j1], pts, fallback, amb, passed)
+                    best = (pts[j1:], b, cum[-1] - cum[j1], pts, fallback, amb, passed, fold)
                 break
         if best is None:
             return None
@@ -290,9 +291,10 @@ class FrameTracker:
             skel = skel.astype(np.uint8)
             cv2.circle(skel, (round(g[1]), round(g[0])), round(rho + 1), 0, -1)
         ev = branch_vertices((skel > 0) & ~best[6], walk, int(self.st["branch_min_px"])) | best[5]
-        # a branch joining the walk near the grasp: a loop there, the ordering is ambiguous
-        self._head_clutter = bool(np.any(ev & (np.hypot(*(walk - g).T) <= 2 * rho)))
-        return best[0], best[1], ev[len(best[3]) - len(best[0]):]
+        # a branch joining the walk near the grasp: a loop there, the ordering is ambiguous; a fold there
+        head = np.hypot(*(walk - g).T) <= 2 * rho  # (a spur) is the fingertips' tangle, or the loop at
+        self._head_clutter = bool(np.any(ev & head))  # the fingers that a missing length is anchored for
+        return best[0], best[1], (ev | (best[7] & ~head))[len(best[3]) - len(best[0]):]
 
 
 def _joint_px(cal: Calibration, arm, q: np.ndarray) -> np.ndarray:
