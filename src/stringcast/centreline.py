@@ -15,13 +15,19 @@ from scipy.ndimage import gaussian_filter1d, map_coordinates
 from .skeleton_walk import trace_path  # noqa: F401 (part of this module's interface)
 
 
-def odd_smooth(p: np.ndarray, sigma: float) -> np.ndarray:
-    """Gaussian smoothing along a path with odd (point-reflected) ends, so ends do not shrink."""
+def odd_smooth(p: np.ndarray, sigma: float, twice: bool = False) -> np.ndarray:
+    """Gaussian smoothing along a path with odd (point-reflected) ends, so ends do not shrink.
+
+    With ``twice`` the smoothed residual is added back (Tukey's twicing, the filter 2G - G^2):
+    noise is still smoothed, but a bend of radius r is no longer pulled inward by ~ sigma^2 / (2 r)
+    (on a loop of 5 px radius with sigma 1.5 px that made its length 4 % short).
+    """
     k = int(min(len(p) - 1, math.ceil(3 * sigma)))
     if k < 1 or sigma <= 0:
         return p
     pad = np.concatenate([2 * p[0] - p[k:0:-1], p, 2 * p[-1] - p[-2:-k - 2:-1]])
-    return gaussian_filter1d(pad, sigma, axis=0, mode="nearest")[k:k + len(p)]
+    out = gaussian_filter1d(pad, sigma, axis=0, mode="nearest")[k:k + len(p)]
+    return out + odd_smooth(p - out, sigma) if twice else out
 
 
 def refine_centreline(absdiff: np.ndarray, pts: np.ndarray, half_width: float = 3.0) -> np.ndarray:
@@ -72,19 +78,22 @@ def arc_length(pts: np.ndarray) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
 
 
-def decimate_path(pts: np.ndarray, observed: np.ndarray, step: float):
+def decimate_path(pts: np.ndarray, observed: np.ndarray, step: float, sub: int = 1):
     """Vertices every ``step`` px of arc along a dense path (first and last kept).
 
     Arc length summed over ~1 px steps grows with the centreline's lateral noise (by about
-    the mean of (dx / ds)^2 / 2); chords ``step`` px long are insensitive to it and still
-    follow bends (a 4 px chord on a 30 px radius is 0.07 % short).
+    the mean of (dx / ds)^2 / 2); chords ``step`` px long are insensitive to it, but cut bends:
+    a chord c on a radius r is short by c^2 / (24 r^2) (0.07 % for 4 px on 30 px, 2.7 % on a
+    5 px loop). With ``sub`` > 1 the vertices are joined by cubic Hermite pieces (tangents along
+    the neighbours' chord, as long as the arc between vertices), sampled ``sub`` times per chord
+    instead, which follow the bend (0.7 % short on that loop, ends included).
 
     Args:
-        pts: (M, 2) dense path. observed: (M - 1,) bool per segment. step: px.
+        pts: (M, 2) dense path. observed: (M - 1,) bool per segment. step: px. sub: >= 1.
 
     Returns:
         (K, 2) vertices and (K - 1,) observed (a decimated segment is observed only if
-        every dense segment it spans is).
+        every dense segment it spans is; a spline's pieces as their chord).
     """
     if len(pts) < 3 or step <= 0:
         return pts, observed
@@ -95,7 +104,16 @@ def decimate_path(pts: np.ndarray, observed: np.ndarray, step: float):
     bad = np.concatenate([[0], np.cumsum(~np.asarray(observed, bool))])  # unobserved segments before vertex j
     ja = np.clip(np.searchsorted(cum, s[:-1], side="right") - 1, 0, len(pts) - 2)
     jb = np.clip(np.searchsorted(cum, s[1:], side="left"), 1, len(pts) - 1)
-    return out, bad[jb] - bad[ja] == 0
+    obs = bad[jb] - bad[ja] == 0
+    if sub <= 1 or len(out) < 3:
+        return out, obs
+    tan = np.gradient(out, axis=0)  # Catmull-Rom directions; lengths: the arc between vertices
+    tan *= (cum[-1] / n) / np.maximum(np.hypot(*tan.T), 1e-12)[:, None]
+    t = (np.arange(sub) / sub)[None, :, None]
+    p0, p1, m0, m1 = out[:-1, None], out[1:, None], tan[:-1, None], tan[1:, None]
+    h = ((2 * t ** 3 - 3 * t ** 2 + 1) * p0 + (t ** 3 - 2 * t ** 2 + t) * m0 + (-2 * t ** 3 + 3 * t ** 2) * p1
+         + (t ** 3 - t ** 2) * m1)
+    return np.vstack([h.reshape(-1, 2), out[-1:]]), np.repeat(obs, sub)
 
 
 def resample_by_arc(xy: np.ndarray, observed_seg: np.ndarray, s_targets: np.ndarray, end_tol: float = 0.0):

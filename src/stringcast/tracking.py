@@ -160,7 +160,7 @@ class FrameTracker:
                                       st["end_touch_mm"] / 1000 / scale))
         hidden_start = np.hypot(*(pts[0] - g)) > rho + 3 or self._fallback
         loop_back = np.hypot(*(end - g)) <= 2 * rho  # the walk came back to the grasp
-        pts = odd_smooth(refine_centreline(absd, pts), 1.5)
+        pts = odd_smooth(refine_centreline(absd, pts), 1.5, twice=True)
         if free_end:  # the skeleton stops short of a free end: move the end to the string's end
             ext = free_end_extension(absd, pts)
             if ext > 0.05:
@@ -171,7 +171,7 @@ class FrameTracker:
         cum_px = arc_length(pts)
         gap = np.nonzero(bridged & (np.r_[0.0, np.diff(cum_px)] > 2.5))[0]
         ev_px = np.sort(np.concatenate([cum_px[branch], cum_px[gap - 1], cum_px[gap]]))
-        pts, obs = decimate_path(pts, ~bridged[1:], st["arc_step_px"])
+        pts, obs = decimate_path(pts, ~bridged[1:], st["arc_step_px"], sub=4)
         head = hidden_arc(g, pts)  # grasp -> first visible vertex, under the gripper's mask
         px = np.vstack([head, pts])[:, ::-1] + [x0, y0]  # (x, y) image px, grasp first
         obs = np.concatenate([np.full(len(head), not hidden_start), obs])
