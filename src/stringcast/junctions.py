@@ -113,7 +113,7 @@ class Zones:
     def __init__(self, skel: np.ndarray, width_px: float, min_branch_px: int):
         self.skel = skel
         self.id, el, ring, deg = _zone_parts(np.asarray(skel, bool), width_px)
-        self.reach, self.bridge = max(3.0, 1.5 * width_px), 6.0 * width_px
+        self.reach = max(3.0, 1.5 * width_px)
         self.fold = 1.0  # a spur this far out of its zone may be the end of a fold
         self.skip = 0.5 * width_px  # the skeleton bends toward a junction within about w / 2 of it
         self.min_branch = int(min_branch_px)
@@ -131,15 +131,15 @@ class Zones:
         self.core = {int(z): jp[zj == z].mean(axis=0) for z in np.unique(zj)}
 
     def arm(self, z: int, k: int):
-        """Exit k of zone z: (first pixel, unit direction outward over ``reach`` px, real branch?,
-        the zone it leads to within 6 w px or 0, its length in px as far as measured)."""
+        """Exit k of zone z: (first pixel, unit direction outward over ``reach`` px past w / 2, real
+        branch?, the zone it leads to or 0, its length in px as far as measured)."""
         key = (z, k)
         if key not in self._arm:
             px = self.exits[z][k]
             H, W = self.skel.shape
             seen = {tuple(p) for p in px}
             front, depth, real, to, far, near = [tuple(p) for p in px], 0, False, 0, None, None
-            while front and depth < max(self.skip + self.reach, self.min_branch, self.bridge) and not to:
+            while front and depth < max(self.skip + self.reach, self.min_branch) and not to:
                 nxt = []
                 for r, c in front:
                     for dr, dc in _RING:
