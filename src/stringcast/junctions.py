@@ -107,14 +107,15 @@ class Zones:
 
     Attributes: id (H, W) int32 zone ids (:func:`junction_zones`); map (H, W) int32 for
     :func:`~stringcast.skeleton_walk.walk_pixels` (zone ids, -1 on exits); exits {zone: [(K, 2) int
-    pixels of each exit]}; core {zone: (2,) mean of its branch pixels}; reach: arm length measured, px.
+    pixels of each exit]}; core {zone: (2,) mean of its branch pixels}; reach, skip: an arm's
+    direction is measured from skip to skip + reach px out of its zone; fold: px.
     """
 
     def __init__(self, skel: np.ndarray, width_px: float, min_branch_px: int):
         self.skel = skel
         self.id, el, ring, deg = _zone_parts(np.asarray(skel, bool), width_px)
         self.reach = max(3.0, 1.5 * width_px)
-        self.fold = 1.0  # a spur this far out of its zone may be the end of a fold
+        self.fold = 1  # a spur this many px out of its zone may be the end of a fold
         self.skip = 0.5 * width_px  # the skeleton bends toward a junction within about w / 2 of it
         self.min_branch = int(min_branch_px)
         self.map = self.id.copy()  # for the walk: > 0 zone, -1 exit pixel
@@ -245,7 +246,7 @@ def walk_skeleton(skel: np.ndarray, start, max_gap: float, direction=None, width
     Z = zones if zones is not None else Zones(skel, width_px, min_branch_px)
     visited = np.zeros(skel.shape, np.bool_)
     parts, brid, amb = [], [], []
-    passages: dict[int, list[tuple[int, int]]] = {}
+    passages: dict[int, list[tuple[int, int, bool]]] = {}  # zone: (first, last index on the path, a guess?)
     pos, d, total = np.asarray(start, np.int64), direction, 0
     z = int(Z.id[pos[0], pos[1]])
     if z == 0:
@@ -301,7 +302,7 @@ def walk_skeleton(skel: np.ndarray, start, max_gap: float, direction=None, width
     for zz, spans in passages.items():  # every pass through a zone is ambiguous after a guess at any of them,
         left = [Z.arm(zz, k) for k, px in enumerate(Z.exits[zz]) if not visited[px[:, 0], px[:, 1]].any()]
         hard = any(u for _, _, u in spans) or any(arm[2] for arm in left)  # or by a branch never walked; folded
-        fold = any(arm[4] >= 1 for arm in left)  # by a spur never walked (the end of a fold, a hairpin or a
+        fold = any(arm[4] >= Z.fold for arm in left)  # by a spur never walked (the end of a fold, a hairpin or a
         for i, j, _ in spans:  # collapsed loop, may hold string length the walk does not measure)
             ambiguous[i:j + 1] |= hard
             folded[i:j + 1] |= fold and not hard
