@@ -190,9 +190,6 @@ def test_string_leaves_the_frame(tmp_path, config):
     assert not valid[gone].any()
 
 
-@pytest.mark.xfail(strict=True, reason="tracking.py: at a self-crossing the skeleton walk can take the wrong branch; "
-                   "measured on the 21 crossing frames: valid 0.49, median 1.1 mm, p95 17 mm (ambiguity anchoring "
-                   "and the missing-length zone by the grasp catch part of it, not all)")
 def test_string_crossing_itself(tmp_path, config):
     """A fast downward wrist flick makes a 150 mm string of 10 points whip into a loop."""
     campaign, cfg = _setup(config, focal=1500.0, centre=(-40.0, -80.0), board=(10.0, 110.0), target=(-200.0, 60.0),

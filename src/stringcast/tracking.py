@@ -17,20 +17,22 @@ Settings: ``config['tracking']`` over :data:`DEFAULTS`.
 3. **Arm mask** from the *measured* joints at the start, middle and end of each frame period
    (:func:`~stringcast.arm_mask.draw_arm_mask`), plus a guard band of ``arm_guard_px``.
 4. **Centreline** (:mod:`stringcast.centreline`): skeleton of the foreground; a walk
-   (:func:`trace_path`) from near the grasp, straight through junctions, bridging gaps up to
-   ``max_gap_px`` (bridged parts are never valid); the first ``grasp_clear_mm`` replaced by
-   a circular arc from the grasp (:func:`hidden_arc`); sub-pixel refinement across the path,
-   smoothing, chords of ``arc_step_px``; a free end (:func:`clean_end`: not fading, not at an
-   occluder's rim, not within ``end_touch_mm`` of the string's own earlier stretch, no branch
-   within a point spacing) is extended to where the contrast fades (:func:`free_end_extension`).
+   (:func:`~stringcast.junctions.walk_skeleton`) from near the grasp, through a crossing by
+   the smoothest way on (a pass whose choice is a guess, or by an arm never walked, is an
+   ambiguity), bridging gaps up to ``max_gap_px`` (bridged parts are never valid); the first
+   ``grasp_clear_mm`` replaced by a circular arc from the grasp (:func:`hidden_arc`); sub-pixel
+   refinement across the path, smoothing that keeps bends, chords of ``arc_step_px`` joined
+   by a spline; a free end (:func:`clean_end`: not fading, not at an occluder's rim, not
+   within ``end_touch_mm`` of the string's own earlier stretch, no branch within a point
+   spacing) is extended to where the contrast fades (:func:`free_end_extension`).
 5. **Metric resampling** (:func:`resample_by_arc`): :meth:`Calibration.pixel_to_robot`, arc
    length from the grasp, points at s_i = i L / n. With a trusted free end whose length
    agrees with L (within ``anchor_tol_mm`` / ``anchor_tol_px``), the mismatch is shared
    among the hidden head, the visible arc and the free end by their uncertainties
    (:func:`mismatch_split`); a longer mismatch (the start hidden or folded behind the
    gripper) anchors the arc at the free end, valid after the last ambiguity (a branch
-   joining the walk, a bridged gap) and, for a missing length D, not within D past the
-   hidden head (a loop at the fingers); without a free end, at the grasp, valid before the
+   joining the walk, a guess at a crossing, a bridged gap) and, for a missing length D, not
+   within D past the hidden head (a loop at the fingers); without a free end, at the grasp, valid before the
    first ambiguity. Invalid points keep NaN positions: never a guess.
 """
 from __future__ import annotations
@@ -60,8 +62,8 @@ from .centreline import (
     odd_smooth,
     refine_centreline,
     resample_by_arc,
-    trace_path,
 )
+from .junctions import Zones, walk_skeleton
 from .files import DataError, find_video, read_joint_table, read_json, write_parquet
 from .overlay import write_overlay
 from .prefetch import prefetch
@@ -160,7 +162,7 @@ class FrameTracker:
                                       st["end_touch_mm"] / 1000 / scale))
         hidden_start = np.hypot(*(pts[0] - g)) > rho + 3 or self._fallback
         loop_back = np.hypot(*(end - g)) <= 2 * rho  # the walk came back to the grasp
-        pts = odd_smooth(refine_centreline(absd, pts), 1.5)
+        pts = odd_smooth(refine_centreline(absd, pts), 1.5, twice=True)
         if free_end:  # the skeleton stops short of a free end: move the end to the string's end
             ext = free_end_extension(absd, pts)
             if ext > 0.05:
@@ -171,7 +173,7 @@ class FrameTracker:
         cum_px = arc_length(pts)
         gap = np.nonzero(bridged & (np.r_[0.0, np.diff(cum_px)] > 2.5))[0]
         ev_px = np.sort(np.concatenate([cum_px[branch], cum_px[gap - 1], cum_px[gap]]))
-        pts, obs = decimate_path(pts, ~bridged[1:], st["arc_step_px"])
+        pts, obs = decimate_path(pts, ~bridged[1:], st["arc_step_px"], sub=4)
         head = hidden_arc(g, pts)  # grasp -> first visible vertex, under the gripper's mask
         px = np.vstack([head, pts])[:, ::-1] + [x0, y0]  # (x, y) image px, grasp first
         obs = np.concatenate([np.full(len(head), not hidden_start), obs])
@@ -241,8 +243,11 @@ class FrameTracker:
         if w == 0:
             return None
         b = np.array([max(0, y - 1), max(0, x - 1)])  # the foreground's box, 1 px margin: all work is in it
-        skel = skeletonize(fg[b[0]:y + h + 1, b[1]:x + w + 1])
+        box = fg[b[0]:y + h + 1, b[1]:x + w + 1]
+        skel = skeletonize(box)
         self._skel, self._skel_at = skel, b
+        dist = cv2.distanceTransform(box.astype(np.uint8), cv2.DIST_L2, 3)  # the string's width: twice the
+        self._width = 2.0 * float(np.median(dist[skel])) if skel.any() else 1.0  # skeleton's distance to the rim
         found = self._walk(skel, g - b, r0, rho)
         return None if found is None else (found[0] + b, found[1], found[2])
 
@@ -260,13 +265,14 @@ class FrameTracker:
             own = idx[cid == c]
             out = own[dist[own] >= rho]
             seeds.append((own[np.argmin(dist[own])], out[np.argmin(dist[out])] if len(out) else None))
-        best = None
+        best, zones = None, Zones(skel, self._width, int(self.st["branch_min_px"]))
         for pair in sorted(seeds, key=lambda p: dist[p[0]])[:6]:
             for fallback, c in enumerate(pair):
                 if c is None:
                     break
                 d0 = np.array([sy[c], sx[c]], float) - g
-                pts, bridged = trace_path(skel, (sy[c], sx[c]), self.st["max_gap_px"], d0 if np.hypot(*d0) >= 1 else None)
+                pts, bridged, amb, fold, passed = walk_skeleton(
+                    skel, (sy[c], sx[c]), self.st["max_gap_px"], d0 if np.hypot(*d0) >= 1 else None, zones=zones)
                 cum = arc_length(pts)
                 head = np.nonzero(cum <= 2 * r0)[0]
                 j0 = int(head[np.argmin(np.hypot(*(pts[head] - g).T))])
@@ -277,7 +283,7 @@ class FrameTracker:
                 if best is None or cum[-1] - cum[j1] > best[2]:
                     b = bridged[j1:].copy()
                     b[0] = False
-                    best = (pts[j1:], b, cum[-1] - cum[j1], pts, fallback)
+                    best = (pts[j1:], b, cum[-1] - cum[j1], pts, fallback, amb, passed, fold)
                 break
         if best is None:
             return None
@@ -286,10 +292,11 @@ class FrameTracker:
         if best[4]:  # the walk skipped a tangle at the fingertips: not a branch
             skel = skel.astype(np.uint8)
             cv2.circle(skel, (round(g[1]), round(g[0])), round(rho + 1), 0, -1)
-        ev = branch_vertices(skel > 0, walk, int(self.st["branch_min_px"]))
-        # a branch joining the walk near the grasp: a loop there, the ordering is ambiguous
-        self._head_clutter = bool(np.any(ev & (np.hypot(*(walk - g).T) <= 2 * rho)))
-        return best[0], best[1], ev[len(best[3]) - len(best[0]):]
+        ev = branch_vertices((skel > 0) & ~best[6], walk, int(self.st["branch_min_px"])) | best[5]
+        # a branch joining the walk near the grasp: a loop there, the ordering is ambiguous; a fold there
+        head = np.hypot(*(walk - g).T) <= 2 * rho  # (a spur) is the fingertips' tangle, or the loop at
+        self._head_clutter = bool(np.any(ev & head))  # the fingers that a missing length is anchored for
+        return best[0], best[1], (ev | (best[7] & ~head))[len(best[3]) - len(best[0]):]
 
 
 def _joint_px(cal: Calibration, arm, q: np.ndarray) -> np.ndarray:
