@@ -40,8 +40,9 @@ from an initial posture q0):
   large miss, and the residual is a first-order correction.
 
 The model's predictions (equilibrium, closest approach, tip path) are
-:class:`stringcast.prediction.Predictor`'s. Stage entry points: :func:`run_first_plan` and :func:`run_plan` write ``motion.csv``
-and its ``motion.json`` sidecar (:func:`write_motion`).
+:class:`stringcast.prediction.Predictor`'s. Stage entry points: :func:`run_first_plan`
+and :func:`run_plan` write ``motion.csv`` and its ``motion.json`` sidecar
+(:func:`write_motion`).
 """
 from __future__ import annotations
 
@@ -306,7 +307,10 @@ def run_plan(params_json: Path, played_motion_json: Path, campaign: Campaign, co
     ``top`` ensemble (module doc); motion.json then carries ``ensemble_hit_share``,
     ``ensemble_margin_mm`` and ``ensemble_d_min_mm``. With ``motion.residual_correction``
     the played trial's ``tracks_parquet`` and ``joints_csv`` correct every prediction
-    (:mod:`stringcast.residual`); motion.json's ``residual_correction`` says how.
+    (:mod:`stringcast.residual`); motion.json's ``residual_correction`` says how. With
+    ``motion.replan_miss_mm`` > 0 and a tracked miss beyond it, the next motion is a new
+    search (:func:`search` without ``previous``); motion.json's ``played_observed_miss_mm``
+    is that miss.
 
     Raises:
         DataError: unreadable params.json (or, robust, one without ``top``), a played
