@@ -10,7 +10,7 @@ from stringcast import planning as pn
 from stringcast.executor import build_command
 from stringcast.files import DataError, write_joint_table, write_json, write_parquet
 from stringcast.model import closest_approach_batch, simulate
-from stringcast.residual import motion_delay, observed_tip, tip_residual
+from stringcast.residual import motion_delay, observed_miss, observed_tip, tip_residual
 
 RATE = 500.0
 
@@ -59,6 +59,18 @@ def test_tip_residual_is_tracked_minus_model():
     valid[::3] = True                                # a third of the frames: not enough
     res, why = tip_residual(ft, np.where(valid[:, None], tip, np.nan), valid, model, 0.5, 0.31)
     assert res is None and "tracked in 28%" in why and "need 50%" in why
+
+
+def test_observed_miss_is_the_tracked_closest_approach():
+    """Only valid frames inside [0, horizon] count; a tip never tracked there gives NaN."""
+    ft = np.linspace(-0.2, 1.0, 121)
+    tip = np.column_stack([ft, np.zeros_like(ft)])        # along x, through (0.5, 0) at t = 0.5
+    valid = np.ones(len(ft), bool)
+    assert observed_miss(ft, tip, valid, np.array([0.5, 0.03]), 0.8) == pytest.approx(0.03)
+    assert observed_miss(ft, tip, valid, np.array([0.9, 0.0]), 0.8) == pytest.approx(0.1, abs=1e-9)  # horizon
+    valid[(ft > 0.4) & (ft < 0.6)] = False
+    assert observed_miss(ft, tip, valid, np.array([0.5, 0.0]), 0.8) == pytest.approx(0.1, abs=1e-9)
+    assert np.isnan(observed_miss(ft, tip, np.zeros(len(ft), bool), np.array([0.5, 0.0]), 0.8))
 
 
 def test_observed_tip_reads_the_tip_on_motion_time(tmp_path):
