@@ -20,9 +20,13 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="a short version of each")
     ap.add_argument("--with-loop", action="store_true", help="also run the slow `loop` benchmark")
-    ap.add_argument("names", nargs="*", default=list(BENCHMARKS), choices=list(BENCHMARKS + SLOW) + [[]])
+    ap.add_argument("names", nargs="*", metavar="name", help=f"any of {', '.join(BENCHMARKS + SLOW)} "
+                    f"(default: {', '.join(BENCHMARKS)})")
     args = ap.parse_args()
-    names = list(args.names) + [n for n in SLOW if args.with_loop and n not in args.names]
+    unknown = sorted(set(args.names) - set(BENCHMARKS + SLOW))
+    if unknown:
+        ap.error(f"unknown benchmark(s) {', '.join(unknown)} (known: {', '.join(BENCHMARKS + SLOW)})")
+    names = list(args.names or BENCHMARKS) + [n for n in SLOW if args.with_loop and n not in args.names]
     for name in names:
         t0 = time.perf_counter()
         doc = importlib.import_module(f"benchmarks.{name}").run(args.quick)
