@@ -166,26 +166,26 @@ def test_cmaes_reaches_a_corner_optimum(config):
     assert np.all((cand >= 0) & (cand <= 1))
 
 
-def test_cmaes_runs_share_the_first_budget(config):
-    """cmaes_runs = 2 at M = 1: the second run starts at the centre again with the initial step, after
-    the first has converged; both halves of the budget are used, and the best of both is the estimate."""
+def test_cmaes_runs_share_the_budget(config):
+    """cmaes_runs = 2: at M = 1 both runs start at the centre; at M = 2 the first refines chi_best
+    with sigma0 / 2 and the second starts at the centre again with sigma0. Each run converges on
+    its half of the budget, and the best of both is the estimate."""
     corner = np.r_[np.ones(6), np.zeros(6)]
     cfg = _cfg(config, optimizer="cmaes", iterations=1200, batch=32, cmaes_runs=2)
-    rec = Recording(lambda c: np.sum((c - corner) ** 2, axis=1))
-    est = es.estimate(_problem_stub(), cfg, np.full(12, 0.2), 1, seed=0, objective=rec)
-    cand = np.concatenate(rec.calls)
-    assert len(cand) == 1200 and est.E_m < 1e-6
     pop = 4 + int(3 * np.log(12))
-    second = 1 + 599 // pop * pop                     # first candidate of run 2 (run 1 stops a population short of 600)
-    E = np.sum((cand - corner) ** 2, axis=1)
-    assert E[:second].min() < 1e-6 and E[second:].min() < 1e-6                       # each run converged
-    for first in (1, second):                                                          # each started at the centre
-        assert np.abs(cand[first:first + pop].mean(axis=0) - 0.5).mean() < 0.15, first
-    assert np.abs(cand[second - pop:second].mean(axis=0) - corner).mean() < 0.15        # not where run 1 ended
-    # M > 1 (a later trial): one run from chi_best, whatever cmaes_runs says
-    rec2 = Recording(lambda c: np.sum((c - corner) ** 2, axis=1))
-    es.estimate(_problem_stub(), cfg, np.full(12, 0.2), 2, seed=0, objective=rec2)
-    assert np.abs(np.concatenate(rec2.calls)[:pop] - 0.2).max() < 0.5
+    for M, start, n_first in ((1, np.full(12, 0.5), 1), (2, np.full(12, 0.2), 0)):
+        rec = Recording(lambda c: np.sum((c - corner) ** 2, axis=1))
+        est = es.estimate(_problem_stub(), cfg, np.full(12, 0.2), M, seed=0, objective=rec)
+        cand = np.concatenate(rec.calls)
+        assert len(cand) == 1200 and est.E_m < 1e-6
+        second = n_first + (1200 - n_first) // 2 // pop * pop   # first candidate of run 2
+        E = np.sum((cand - corner) ** 2, axis=1)
+        assert E[:second].min() < 1e-6 and E[second:].min() < 1e-6                        # each run converged
+        assert np.abs(cand[n_first:n_first + pop].mean(axis=0) - start).mean() < 0.15, M  # run 1's start
+        assert np.abs(cand[second:second + pop].mean(axis=0) - 0.5).mean() < 0.15, M      # run 2: the centre
+        assert np.abs(cand[second - pop:second].mean(axis=0) - corner).mean() < 0.15      # not where run 1 ended
+        spread = np.abs(cand[n_first:n_first + pop] - start).mean()
+        assert spread < (0.3 / M) and spread > 0.3 / M / 4, (M, spread)                  # step sigma0 / M
 
 
 def test_partly_blown_up_search_says_so(config):

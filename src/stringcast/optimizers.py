@@ -28,8 +28,9 @@ its E and the search history. ``settings`` is ``config.estimation``.
   estimate): it is evaluated first and CMA-ES starts at the centre of the box
   (``cmaes_first_start: best`` starts at chi_best instead); later trials start at
   chi_best; (c) when CMA-ES converges with budget left it restarts from the best
-  point; (d) at M = 1, ``cmaes_runs`` independent runs from the centre share the budget
-  (default 1). Candidates that blow up are told a finite worst value.
+  point; (d) ``cmaes_runs`` runs share the budget (default 1): the first from chi_best (at
+  M = 1 the centre), the others from the centre with the full step. Candidates that blow up
+  are told a finite worst value.
 * ``de``: SciPy differential evolution (vectorized), x0 = chi_best.
 """
 from __future__ import annotations
@@ -98,26 +99,33 @@ def cmaes_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: n
                  settings: Mapping) -> None:
     """CMA-ES (``cma.CMAEvolutionStrategy``, ask/tell) in [0, 1]^D (module doc); one generation per batch
     (a population larger than ``batch`` is evaluated in chunks of ``batch``). Restarts from the best
-    point with the initial step when CMA-ES stops early (converged) and budget is left. At M = 1 from
-    the centre, ``cmaes_runs`` (default 1) independent runs share the budget equally (E is multi-modal:
-    on the lab strings a run ends in a weak-hand-spring basin about one time in three)."""
+    point with the initial step when CMA-ES stops early (converged) and budget is left.
+
+    ``cmaes_runs`` (default 1) runs share the budget equally: the first from chi_best with the
+    step sigma0 / M (at M = 1 from the centre), the others from the centre with sigma0, so that
+    a later trial can leave the basin an earlier one settled in (E is multi-modal: on the lab
+    strings a run ends in a weak-hand-spring basin about one time in three)."""
     d = len(chi_best)
-    sigma0 = float(settings.get("cmaes_sigma0", 0.3 * float(settings.get("chi0", 1.0)))) / M
+    sigma0 = float(settings.get("cmaes_sigma0", 0.3 * float(settings.get("chi0", 1.0))))
     popsize = int(settings.get("cmaes_popsize", 0)) or 4 + int(3 * np.log(d))
-    x0, runs = np.asarray(chi_best, float), 1
+    runs = max(1, int(settings.get("cmaes_runs", 1)))
+    first = np.asarray(chi_best, float)
     if M == 1 and settings.get("cmaes_first_start", "centre") == "centre":
-        rec(x0[None])  # chi_best is evaluated, but not an estimate yet: start at the centre
-        x0, runs = np.full(d, 0.5), max(1, int(settings.get("cmaes_runs", 1)))
-    for r in range(runs):
+        rec(first[None])  # chi_best is evaluated, but not an estimate yet: start at the centre
+        first = np.full(d, 0.5)
+    starts = [(first, sigma0 / M)] + [(np.full(d, 0.5), sigma0)] * (runs - 1)
+    results = []
+    for r, (x0, s0) in enumerate(starts):
         keep = rec.remaining - rec.remaining // (runs - r)      # budget left for the later runs
-        best = _cma_run(rec, x0, sigma0, popsize, batch, rng, keep)
-    while rec.remaining > 0:  # spend the rest (< popsize, or after a stop) around the last run's best point
-        rec(np.clip(best + (sigma0 / 4) * rng.standard_normal((min(batch, rec.remaining), d)), 0.0, 1.0))
+        results.append((*_cma_run(rec, x0, s0, popsize, batch, rng, keep), s0))
+    _, best, s0 = min(results, key=lambda x: x[0])
+    while rec.remaining > 0:  # spend the rest (< popsize, or after a stop) around the best run's best point
+        rec(np.clip(best + (s0 / 4) * rng.standard_normal((min(batch, rec.remaining), d)), 0.0, 1.0))
 
 
 def _cma_run(rec: Recorder, x0: np.ndarray, sigma0: float, popsize: int, batch: int, rng: np.random.Generator,
-             keep: int) -> np.ndarray:
-    """One CMA-ES run from x0 until ``keep`` evaluations of the budget are left; returns its best point."""
+             keep: int) -> tuple[float, np.ndarray]:
+    """One CMA-ES run from x0 until ``keep`` evaluations of the budget are left; returns its best (E, point)."""
     import cma
 
     best = (np.inf, x0)
@@ -139,7 +147,7 @@ def _cma_run(rec: Recorder, x0: np.ndarray, sigma0: float, popsize: int, batch: 
             if E[i] < best[0]:
                 best = (float(E[i]), inside[i])
         x0 = best[1]
-    return best[1]
+    return best
 
 
 def de_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: np.random.Generator,
