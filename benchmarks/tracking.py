@@ -11,10 +11,12 @@ shared by all types), sync (``video.yaml``) and track it. Figures, measured in t
 * fps: frames per second of ``tracking.run_tracking`` (whole call, incl. background);
   reference: plain decoding of the same video with ``video.open_video`` in the same run.
 
-Run: ``python -m benchmarks.tracking [--quick] [--types 2,3]`` -> results/bench/tracking.json and
+Run: ``python -m benchmarks.tracking [--quick] [--types 2,3] [--work DIR]`` -> results/bench/tracking.json and
 results/bench/tracking_errors.png (error distribution per string type); a run over chosen
 ``--types`` writes tracking_partial.json and tracking_partial_errors.png instead (same keys,
-with ``types``), so it never replaces the full run's figures.
+with ``types``), so it never replaces the full run's figures. ``--work`` keeps the filmed trials
+in DIR and reuses them in a later run (tracking is always run anew), so a tracking change can be
+measured on the same footage.
 """
 from __future__ import annotations
 
@@ -56,8 +58,15 @@ def track_string(string_type: int, config: dict, calib_dir: Path, work: Path, se
     from stringcast.sync import run_sync
     from stringcast.tracking import run_tracking
 
-    campaign, d, trial = film_first_motion(string_type, config, work, seed, calib_dir)
-    run_sync(trial, d / "calibration.json", campaign, config, d / "sync.json")
+    from stringcast.config import resolve_campaign
+
+    d = work / f"string_{string_type}"
+    trial = d / "trial_1"
+    if (d / "sync.json").exists() and (trial / "ground_truth.parquet").exists():
+        campaign = resolve_campaign({"string": string_type, "target": 1}, config, f"bench_{string_type}")
+    else:
+        campaign, d, trial = film_first_motion(string_type, config, work, seed, calib_dir)
+        run_sync(trial, d / "calibration.json", campaign, config, d / "sync.json")
     decode = _decode_fps(trial / "video.mkv")
     t0 = time.perf_counter()
     tracks = run_tracking(trial, d / "calibration.json", d / "sync.json", campaign, config, d / "tracks.parquet")
@@ -89,7 +98,7 @@ def _figure(per: dict, path: Path) -> None:
     plt.close(fig)
 
 
-def run(quick: bool = False, types: list[int] | None = None) -> dict:
+def run(quick: bool = False, types: list[int] | None = None, work: Path | None = None) -> dict:
     from stringcast.config import load_config
 
     config = load_config()
@@ -100,8 +109,10 @@ def run(quick: bool = False, types: list[int] | None = None) -> dict:
         raise SystemExit(f"--types: no string type(s) {unknown} in the config")
     per = {}
     with tempfile.TemporaryDirectory(prefix="bench_tracking_") as tmp:
-        work = Path(tmp)
-        calib = lab_calibration_clip(config, work)
+        work = Path(work) if work else Path(tmp)
+        calib = work / "calib"
+        if not calib.exists():
+            lab_calibration_clip(config, work)
         for k in types:
             t0 = time.perf_counter()
             per[str(k)] = track_string(k, config, calib, work, seed=k)
@@ -133,5 +144,6 @@ if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="string types 1 and 5 only")
     ap.add_argument("--types", default=None, help="comma-separated string types (e.g. 2,3): writes tracking_partial.json")
+    ap.add_argument("--work", type=Path, help="keep (and reuse) the filmed trials here")
     args = ap.parse_args()
-    run(args.quick, [int(k) for k in args.types.split(",")] if args.types else None)
+    run(args.quick, [int(k) for k in args.types.split(",")] if args.types else None, args.work)

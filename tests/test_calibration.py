@@ -111,13 +111,22 @@ def _h_board_to_px():
     return cv2.getPerspectiveTransform(src.astype(np.float32), dst.astype(np.float32)).astype(float)
 
 
+def _pose_h(rvec, tvec):
+    """Board m -> undistorted px homography K_TRUE [r1 r2 t] of a real board pose (what a camera with
+    K_TRUE can see; the arbitrary map of :func:`_h_board_to_px` is not one)."""
+    R = cv2.Rodrigues(np.asarray(rvec, float))[0]
+    H = K_TRUE @ np.c_[R[:, :2], np.asarray(tvec, float)]
+    return H / H[2, 2]
+
+
 B2R = np.array([[1.0, 0, 0.78], [0, -1.0, -0.34], [0, 0, 1]])  # board flipped, origin at (0.78, -0.34) m
 
 
 @pytest.mark.parametrize("with_intrinsics", [False, True])
 def test_plane_homography_maps_board_to_robot(with_intrinsics):
     board = _board()
-    Hb = _h_board_to_px()
+    # the board in the middle of the image, seen slightly in perspective
+    Hb = _pose_h([0.05, -0.07, 0.03], [-0.275, -0.185, 0.667]) if with_intrinsics else _h_board_to_px()
     K, dist = (K_TRUE, DIST_TRUE) if with_intrinsics else (None, None)
     img = _render_plane(board, Hb, K, dist)
     from stringcast.calibration import Intrinsics
@@ -138,6 +147,38 @@ def test_plane_homography_maps_board_to_robot(with_intrinsics):
     # round trip robot -> pixel -> robot
     assert np.max(np.abs(cal.robot_to_pixel(robot_true) - uv)) < 0.25
     assert np.allclose(cal.pixel_to_robot(cal.robot_to_pixel(robot_true)), robot_true, atol=1e-9)
+
+
+def test_plane_homography_from_the_board_pose_holds_far_from_the_board():
+    """With intrinsics the homography is the board's pose (K [r1 r2 t]): a board in one corner of
+    the image still maps the far side of the swing plane within a pixel, where a free
+    8-DOF homography of the same noisy corners extrapolates its perspective terms (Calibration
+    module doc). The render is a real pose of K_TRUE, the frame carries sensor noise."""
+    from stringcast.calibration import Intrinsics
+
+    board = _board()
+    Hb = _pose_h([0.06, -0.09, 0.02], [-0.55, -0.41, 1.05])   # board origin near the top-left corner
+    img = _render_plane(board, Hb, K_TRUE, DIST_TRUE, px_per_m=1600.0).astype(float)
+    img = np.clip(img + np.random.default_rng(4).normal(0, 6.0, img.shape), 0, 255).astype(np.uint8)
+    cal = plane_homography(img, board, B2R, Intrinsics(K_TRUE, DIST_TRUE, 0.1, 10, SIZE), "synthetic")
+    corners = cv2.perspectiveTransform(np.array([[[0, 0]], [[0.54, 0.36]]], float), Hb).reshape(-1, 2)
+    assert corners[1, 0] < 0.6 * SIZE[0] and corners[1, 1] < 0.7 * SIZE[1]   # the board covers one corner
+    # the whole image: pixel -> plane by the true pose, then back through the calibration
+    u, v = np.meshgrid(np.linspace(10, SIZE[0] - 10, 12), np.linspace(10, SIZE[1] - 10, 10))
+    uv = np.c_[u.ravel(), v.ravel()]
+    und = Calibration(np.eye(3), SIZE, K_TRUE, DIST_TRUE).undistort(uv)
+    plane = cv2.perspectiveTransform(und.reshape(-1, 1, 2), np.linalg.inv(Hb)).reshape(-1, 2)
+    truth = cv2.perspectiveTransform(plane.reshape(-1, 1, 2), B2R).reshape(-1, 2)
+    scale = float(np.median(cal.m_per_px(uv)))
+    err_pose = np.linalg.norm(cal.pixel_to_robot(uv) - truth, axis=1) / scale
+    # the free 8-DOF fit of the same detected corners, for comparison
+    found, ids = detect_charuco(img, board)
+    bxy = np.asarray(board.getChessboardCorners(), float)[ids, :2]
+    H_free = cv2.findHomography(bxy, cal.undistort(found), 0)[0]
+    free = cv2.perspectiveTransform(cv2.perspectiveTransform(und.reshape(-1, 1, 2), np.linalg.inv(H_free)), B2R)
+    err_free = np.linalg.norm(free.reshape(-1, 2) - truth, axis=1) / scale
+    assert np.max(err_pose) < 1.0 and np.mean(err_pose) < 0.3, err_pose    # measured 0.68 / 0.20 px
+    assert np.max(err_pose) < 0.7 * np.max(err_free), (np.max(err_pose), np.max(err_free))  # free: 1.33 px
 
 
 def test_distortion_round_trip_is_exact():
@@ -180,7 +221,8 @@ def test_calibration_json_round_trip(tmp_path):
 
 def test_run_calibration_on_trial_folder(tmp_path, campaign):
     board = campaign.setup.board.make()
-    img = _render_plane(board, _h_board_to_px(), K_TRUE, DIST_TRUE)
+    Hb = _pose_h([0.05, -0.07, 0.03], [-0.275, -0.185, 0.667])
+    img = _render_plane(board, Hb, K_TRUE, DIST_TRUE)
     trial = tmp_path / "trial_1"
     trial.mkdir()
     rng = np.random.default_rng(0)
@@ -203,7 +245,7 @@ def test_run_calibration_on_trial_folder(tmp_path, campaign):
     assert np.allclose(doc["board_to_robot"], campaign.setup.board_to_robot)
     # board origin corner (board (0.06, 0.06) m) lands where the config says
     b = np.array([[0.06, 0.06]])
-    px = cv2.perspectiveTransform(b.reshape(-1, 1, 2), _h_board_to_px()).reshape(-1, 2)
+    px = cv2.perspectiveTransform(b.reshape(-1, 1, 2), Hb).reshape(-1, 2)
     px = Calibration(np.eye(3), SIZE, K_TRUE, DIST_TRUE).distort(px)
     want = cv2.perspectiveTransform(b.reshape(-1, 1, 2), campaign.setup.board_to_robot).reshape(-1, 2)
     assert np.linalg.norm(cal.pixel_to_robot(px) - want) < 1e-3
