@@ -321,3 +321,21 @@ def test_smoothing_and_chords_keep_the_length_of_a_tight_loop():
     rng = np.random.default_rng(0)
     line = np.column_stack([np.arange(200.0), rng.normal(0, 0.3, 200)])
     assert length(line, True, 4) < 199 * 1.003
+
+
+def test_background_samples_come_in_bursts_spread_over_the_motion():
+    """Bursts of every other frame, evenly placed from the motion's start to its end: few frames to
+    decode, but the spread over the whole motion kept. Short windows fall back to even spacing."""
+    from stringcast.background import background_samples
+
+    win = np.arange(330, 930)
+    s = background_samples(win, 31, 5)
+    assert len(s) == 31 and np.all(np.diff(s) > 0) and set(s) <= set(win)
+    assert s[0] == win[0] and s[-1] > win[-1] - 20                      # the whole motion is covered
+    assert np.sum(np.diff(s) == 2) == 31 - 5                             # five runs of every other frame
+    decoded = np.sum(np.minimum(np.diff(s), 40))                          # frames a reader decodes (seeks past 40)
+    assert decoded < 0.4 * len(win)
+    short = background_samples(np.arange(0, 40), 31, 5)                  # too short for bursts: evenly spread
+    assert len(short) == 31 and short[0] == 0 and short[-1] == 39
+    even = background_samples(np.arange(100, 300), 31, 0)
+    assert len(even) == 31 and even[0] == 100 and even[-1] == 299 and np.ptp(np.diff(even)) <= 1

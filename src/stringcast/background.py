@@ -23,6 +23,28 @@ def nan_median0(a: np.ndarray) -> np.ndarray:
     return out
 
 
+def background_samples(window: np.ndarray, n_samples: int, n_bursts: int) -> np.ndarray:
+    """Frames for the background: ``n_bursts`` short runs spread evenly over ``window``.
+
+    A container decodes every frame between two samples, and a seek costs about 20 decodes
+    (FFV1 in Matroska, OpenCV's FFmpeg backend), so samples spread evenly over a whole motion
+    cost as much as decoding it. Bursts of every other frame, evenly placed, keep the spread
+    over the motion (where the string is elsewhere most of the time) and decode about
+    2 ``n_samples`` frames. ``n_bursts`` <= 0 or >= ``n_samples``: evenly spread samples.
+
+    Args:
+        window: (W,) sorted frame indices to sample from. Returns (<= n_samples,) sorted int.
+    """
+    window = np.asarray(window)
+    n = min(len(window), n_samples)
+    if n_bursts <= 0 or n_bursts >= n or 2 * n >= len(window):
+        return np.unique(window[np.round(np.linspace(0, len(window) - 1, n)).astype(int)])
+    per = -(-n // n_bursts)  # frames per burst, every other frame
+    starts = np.round(np.linspace(0, len(window) - 2 * per + 1, n_bursts)).astype(int)
+    idx = (starts[:, None] + 2 * np.arange(per)[None]).ravel()[:n]
+    return np.unique(window[np.clip(idx, 0, len(window) - 1)])
+
+
 def build_background(video, sample_idx, pre_idx, arm_masks) -> tuple[np.ndarray, tuple[float, float]]:
     """Arm-masked temporal median background and the sensor's noise model.
 

@@ -49,7 +49,7 @@ from skimage.morphology import skeletonize
 
 from .arm import forward_kinematics, motion_window
 from .arm_mask import draw_arm_mask
-from .background import build_background
+from .background import background_samples, build_background
 from .calibration import Calibration
 from .centreline import (
     arc_length,
@@ -80,7 +80,7 @@ DEFAULTS = {
     "arm_guard_px": 3.0, "branch_min_px": 6, "anchor_tol_mm": 3.0, "anchor_tol_px": 2.0, "end_sigma_px": 1.0,
     "scale_sigma": 0.003, "tip_shortfall_mm": 0.0, "end_contrast_min": 0.4, "end_edge_max": 0.25, "max_missing_frac": 0.3,
     "end_touch_mm": 12.0,
-    "background_window_s": None, "prefetch_frames": 48,
+    "background_window_s": None, "background_bursts": 5, "prefetch_frames": 48,
 }
 
 
@@ -357,7 +357,7 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, config, out_p
     span = st["background_window_s"]   # None: the whole motion window (the string hangs still in a short one)
     early = win if span is None else win[t[win] <= t[win[0]] + span]
     bwin = early if len(early) >= 9 else win
-    samples = np.unique(np.round(np.linspace(bwin[0], bwin[-1], min(len(bwin), int(st["background_samples"])))))
+    samples = background_samples(bwin, int(st["background_samples"]), int(st["background_bursts"]))
     pre = np.nonzero(t < t_start - 0.02)[0][-int(st["rest_frames"]):]
     frames = prefetch(video, int(st["prefetch_frames"]))  # the main pass decodes while the background is built
     second = open_video(vpath)
