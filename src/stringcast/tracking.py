@@ -5,8 +5,9 @@ point 0 = grasp, 1..n = the model's points at arc length s_i = i L / n, n = tip)
 Settings: ``config['tracking']`` over :data:`DEFAULTS`.
 
 1. **Background** (:func:`~stringcast.background.build_background`): the arm-masked temporal
-   median of ``background_samples`` frames spread over the arm's motion (the string and arm
-   hang still before it, and again after it; ``background_window_s`` limits the samples to the
+   median of ``background_samples`` frames spread over the arm's motion in ``background_bursts``
+   short runs (:func:`~stringcast.background.background_samples`: only the runs are decoded; the
+   string and arm hang still before the motion, and again after it; ``background_window_s`` limits the samples to the
    motion's first seconds, for containers that cannot seek: but a string that leaves its rest
    place late in that span becomes background there, and is lost at rest), pixels the arm
    covers throughout taken from pre-motion frames; the same samples give the sensor's noise
