@@ -269,3 +269,28 @@ def test_run_estimation_end_to_end(config, campaign, chi_true, tmp_path):
     assert est1.history["best_E_m"][-1] < 0.5 * est1.history["best_E_m"][0]
     assert read_json(tmp_path / "p1.json")["chi_start"] == pytest.approx(
         prm.start_chi(None, campaign.string, config).tolist())
+
+
+def test_cmaes_options_reach_cma_and_unknown_ones_are_refused(config, monkeypatch):
+    """estimation.cmaes_options goes to every cma.CMAEvolutionStrategy the search builds, over our
+    defaults; a name cma does not know is a ConfigError that names it."""
+    import cma
+
+    seen = []
+    real = cma.CMAEvolutionStrategy
+
+    def spy(x0, sigma0, opts):
+        seen.append(dict(opts))
+        return real(x0, sigma0, opts)
+
+    monkeypatch.setattr(cma, "CMAEvolutionStrategy", spy)
+    corner = np.r_[np.ones(6), np.zeros(6)]
+    cfg = _cfg(config, optimizer="cmaes", iterations=600, batch=32, cmaes_runs=2,
+               cmaes_options={"CSA_dampfac": 0.5, "tolx": 1e-3})
+    est = es.estimate(_problem_stub(), cfg, np.full(12, 0.2), 1, seed=0,
+                      objective=lambda c: np.sum((c - corner) ** 2, axis=1))
+    assert len(seen) >= 2 and all(o["CSA_dampfac"] == 0.5 and o["tolx"] == 1e-3 for o in seen)
+    assert est.E_m < 1e-3
+    with pytest.raises(ConfigError, match="CSA_dampfak"):
+        es.estimate(_problem_stub(), _cfg(config, optimizer="cmaes", cmaes_options={"CSA_dampfak": 0.3}),
+                    np.full(12, 0.2), 1, seed=0, objective=lambda c: np.zeros(len(c)))

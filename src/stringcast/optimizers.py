@@ -30,7 +30,8 @@ its E and the search history. ``settings`` is ``config.estimation``.
   chi_best; (c) when CMA-ES converges with budget left it restarts from the best
   point; (d) ``cmaes_runs`` runs share the budget (default 1): the first from chi_best (at
   M = 1 the centre), the others from the centre with the full step. Candidates that blow up
-  are told a finite worst value.
+  are told a finite worst value. ``cmaes_options`` (a mapping) is passed on to
+  ``cma.CMAOptions`` (e.g. ``CSA_dampfac``); an unknown name is a ConfigError.
 * ``de``: SciPy differential evolution (vectorized), x0 = chi_best.
 """
 from __future__ import annotations
@@ -106,6 +107,7 @@ def cmaes_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: n
     a later trial can leave the basin an earlier one settled in (E is multi-modal: on the lab
     strings a run ends in a weak-hand-spring basin about one time in three)."""
     d = len(chi_best)
+    options = cma_options(settings)
     sigma0 = float(settings.get("cmaes_sigma0", 0.3 * float(settings.get("chi0", 1.0))))
     popsize = int(settings.get("cmaes_popsize", 0)) or 4 + int(3 * np.log(d))
     runs = max(1, int(settings.get("cmaes_runs", 1)))
@@ -117,22 +119,41 @@ def cmaes_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: n
     results = []
     for r, (x0, s0) in enumerate(starts):
         keep = rec.remaining - rec.remaining // (runs - r)      # budget left for the later runs
-        results.append((*_cma_run(rec, x0, s0, popsize, batch, rng, keep), s0))
+        results.append((*_cma_run(rec, x0, s0, popsize, batch, rng, keep, options), s0))
     _, best, s0 = min(results, key=lambda x: x[0])
     while rec.remaining > 0:  # spend the rest (< popsize, or after a stop) around the best run's best point
         rec(np.clip(best + (s0 / 4) * rng.standard_normal((min(batch, rec.remaining), d)), 0.0, 1.0))
 
 
+def cma_options(settings: Mapping) -> dict:
+    """``estimation.cmaes_options`` checked against ``cma.CMAOptions``.
+
+    Raises:
+        ConfigError: not a mapping, or a name cma does not know."""
+    import cma
+
+    from .config import ConfigError
+
+    options = settings.get("cmaes_options") or {}
+    if not isinstance(options, Mapping):
+        raise ConfigError("estimation.cmaes_options: expected a mapping of cma.CMAOptions names to values")
+    unknown = sorted(set(options) - set(cma.CMAOptions()))
+    if unknown:
+        raise ConfigError(f"estimation.cmaes_options: unknown cma option(s) {unknown} (see cma.CMAOptions())")
+    return dict(options)
+
+
 def _cma_run(rec: Recorder, x0: np.ndarray, sigma0: float, popsize: int, batch: int, rng: np.random.Generator,
-             keep: int) -> tuple[float, np.ndarray]:
-    """One CMA-ES run from x0 until ``keep`` evaluations of the budget are left; returns its best (E, point)."""
+             keep: int, options: Mapping | None = None) -> tuple[float, np.ndarray]:
+    """One CMA-ES run from x0 until ``keep`` evaluations of the budget are left; returns its best (E, point).
+    ``options`` (checked by :func:`cma_options`) override the defaults below."""
     import cma
 
     best = (np.inf, x0)
     while rec.remaining - keep >= popsize:
         es = cma.CMAEvolutionStrategy(x0, sigma0, {
             "popsize": popsize, "seed": int(rng.integers(1, 2**31 - 1)),
-            "verbose": -9, "tolfun": 1e-12, "tolx": 1e-6})
+            "verbose": -9, "tolfun": 1e-12, "tolx": 1e-6, **(options or {})})
         if es.stop():
             break
         while rec.remaining - keep >= popsize and not es.stop():
