@@ -38,7 +38,7 @@ def background_samples(window: np.ndarray, n_samples: int, n_bursts: int) -> np.
     window = np.asarray(window)
     n = min(len(window), n_samples)
     if n_bursts <= 0 or n_bursts >= n or 2 * n >= len(window):
-        return np.unique(window[np.round(np.linspace(0, len(window) - 1, n)).astype(int)])
+        return np.unique(np.round(np.linspace(window[0], window[-1], n))).astype(int)
     per = -(-n // n_bursts)  # frames per burst, every other frame
     starts = np.round(np.linspace(0, len(window) - 2 * per + 1, n_bursts)).astype(int)
     idx = (starts[:, None] + 2 * np.arange(per)[None]).ravel()[:n]
