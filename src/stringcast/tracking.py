@@ -35,6 +35,9 @@ Settings: ``config['tracking']`` over :data:`DEFAULTS`.
    joining the walk, a guess at a crossing, a bridged gap) and, for a missing length D, not
    within D past the hidden head (a loop at the fingers); without a free end, at the grasp, valid before the
    first ambiguity. Invalid points keep NaN positions: never a guess.
+6. **Markers** (``mode: markers``, :mod:`stringcast.markers`): strings with a band at each mass
+   point; a point's position is its band's centre on the centreline, valid where step 5 trusts
+   the order along the path and the band is found whole and unambiguous.
 """
 from __future__ import annotations
 
@@ -64,7 +67,9 @@ from .centreline import (
     refine_centreline,
     resample_by_arc,
 )
+from .config import ConfigError
 from .junctions import Zones, walk_skeleton
+from .markers import MODES, POLARITIES, band_points, path_contrast
 from .files import DataError, find_video, read_joint_table, read_json, write_parquet
 from .overlay import write_overlay
 from .prefetch import prefetch
@@ -82,6 +87,9 @@ DEFAULTS = {
     "scale_sigma": 0.003, "tip_shortfall_mm": 0.0, "end_contrast_min": 0.4, "end_edge_max": 0.25, "max_missing_frac": 0.3,
     "end_touch_mm": 12.0,
     "background_window_s": None, "background_bursts": 5, "prefetch_frames": 48,
+    # markers (stringcast.markers): a band centred at each mass point gives its position
+    "mode": "markerless", "band_width_mm": 8.0, "band_contrast_min": 0.25, "band_tolerance": 0.35,
+    "band_length_tol": 0.5, "band_polarity": "auto", "band_step_px": 0.25,
 }
 
 
@@ -89,6 +97,8 @@ def settings(config: dict | None) -> dict:
     """Tracking settings: ``config['tracking']`` over :data:`DEFAULTS`."""
     s = dict(DEFAULTS)
     s.update((config or {}).get("tracking", {}) or {})
+    if s["mode"] not in MODES or s["band_polarity"] not in POLARITIES:
+        raise ConfigError(f"tracking: mode {s['mode']!r} (one of {MODES}), band_polarity {s['band_polarity']!r}")
     return s
 
 
@@ -210,7 +220,11 @@ class FrameTracker:
             s_t = np.interp(self.s_targets, [0.0, L_head + split[0], end], [0.0, L_head, float(s_poly[-1])])
             s_t = np.where(self.s_targets > end, float(s_poly[-1]) + self.s_targets - end, s_t)
         pos, valid = resample_by_arc(xy, obs, s_t, st["end_tolerance_mm"] / 1000 if free_end else 0.0)
-        valid &= (s_t >= max(lo, 0.0)) & (s_t <= hi) & (self.s_targets >= 0)
+        trusted = (s_t >= max(lo, 0.0)) & (s_t <= hi) & (self.s_targets >= 0)
+        valid &= trusted
+        if st["mode"] == "markers":  # the bands' centres, where the order along the path is trusted
+            pos, valid = band_points(frame, px, obs & (np.arange(len(obs)) >= len(head)), s_poly, s_t, trusted,
+                                     free_end, path_contrast(absd, pts), cal, st)
         pos[~valid] = np.nan
         return FrameTrack(pos, valid, px)
 

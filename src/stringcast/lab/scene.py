@@ -226,18 +226,28 @@ def arm_shapes(arm: ArmSpec, q: np.ndarray) -> list[tuple[np.ndarray, str]]:
 
 @dataclass(frozen=True)
 class StringLook:
-    """How the string looks: cord diameter, site arc positions, clay lumps, pipes (m)."""
+    """How the string looks: cord diameter, site arc positions, clay lumps, pipes, bands (m).
+
+    Bands (``lab.string_bands``, none by default): sleeves of tape of another shade, of the
+    cord's diameter unless set, centred at each of the model's mass points i L / n (i = 1..n;
+    the tip's covers the last half band width); drawn over the cord, under pipes and clay.
+    """
 
     arc: np.ndarray            # (S,) arc length of each physics site
     diameter: float
     weights: tuple             # ((at, diameter), ...)
     pipes: tuple               # ((from, to, diameter), ...)
+    bands: tuple = ()          # ((from, to), ...)
+    band_diameter: float = 0.0
+    band_reflectance: float = 0.0
 
     @classmethod
-    def from_physics(cls, phys) -> "StringLook":
+    def from_physics(cls, phys, bands: tuple = (), band_diameter: float = 0.0,
+                     band_reflectance: float = 0.0) -> "StringLook":
+        """The look of the lab string ``phys``, with bands ((from, to), ...) m (:func:`.trial.string_bands`)."""
         arc = np.arange(phys.n_links + 1) * phys.link_length
         return cls(arc, phys.diameter, tuple((a, d) for a, _, d in phys.weights),
-                   tuple((a, b, d) for a, b, _, d in phys.pipes))
+                   tuple((a, b, d) for a, b, _, d in phys.pipes), tuple(bands), band_diameter, band_reflectance)
 
     def along(self, sites: np.ndarray, s: np.ndarray) -> np.ndarray:
         """Points at arc lengths s (K,) on the site polyline (S, 2) -> (K, 2)."""
@@ -335,14 +345,16 @@ class FrameRenderer:
     def _draw_string(self, crop: np.ndarray, px: list[np.ndarray], m: int) -> None:
         s = STRING_SS
         allp = np.concatenate(px)
-        r_max = max([self.look.diameter] + [d for _, d in self.look.weights] + [d for *_, d in self.look.pipes])
+        r_max = max([self.look.diameter, self.look.band_diameter] + [d for _, d in self.look.weights]
+                    + [d for *_, d in self.look.pipes])
         pad = r_max * self.px_per_m + 2
         lo = np.maximum(np.floor(allp.min(axis=0) - pad).astype(int), 0)
         hi = np.minimum(np.ceil(allp.max(axis=0) + pad).astype(int), [crop.shape[1], crop.shape[0]])
         if np.any(hi <= lo):
             return
         w, h = (hi - lo) * s
-        names = ["cord"] + (["pipe"] if self.look.pipes else []) + (["clay"] if self.look.weights else [])
+        names = (["cord"] + (["band"] if self.look.bands else []) + (["pipe"] if self.look.pipes else [])
+                 + (["clay"] if self.look.weights else []))
         acc = {k: np.zeros((h, w), np.uint16) for k in names}  # coverage summed over sub-exposures
         mask = np.zeros((h, w), np.uint8)
         th = max(1, int(round(self.look.diameter * self.px_per_m * s)))
@@ -351,6 +363,12 @@ class FrameRenderer:
             mask[:] = 0
             _flat_ended(mask, self.look, q, 0.0, float(self.look.arc[-1]), self.look.diameter, th)
             acc["cord"] += mask
+            if "band" in acc:
+                mask[:] = 0
+                bw = max(1, int(round(self.look.band_diameter * self.px_per_m * s)))
+                for a, b in self.look.bands:
+                    _flat_ended(mask, self.look, q, a, b, self.look.band_diameter, bw)
+                acc["band"] += mask
             if "pipe" in acc:
                 mask[:] = 0
                 for a, b, d in self.look.pipes:
@@ -367,7 +385,7 @@ class FrameRenderer:
         for name in names:                              # area-average 4x -> 1x, then composite
             a = cv2.resize(acc[name].astype(np.float32), (hi[0] - lo[0], hi[1] - lo[1]),
                            interpolation=cv2.INTER_AREA)
-            _composite(sub, a, REFLECTANCE[name], 1 / (255 * m))
+            _composite(sub, a, self.look.band_reflectance if name == "band" else REFLECTANCE[name], 1 / (255 * m))
 
     def _draw_arm(self, crop: np.ndarray, shapes_per_sub: list, m: int) -> None:
         h, w = crop.shape

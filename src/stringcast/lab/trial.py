@@ -118,11 +118,37 @@ class FFV1Writer:
         self.close()
 
 
+def string_bands(config: Mapping, n_points: int, phys: StringPhysics) -> dict:
+    """``lab.string_bands`` as :meth:`StringLook.from_physics` keywords ({} without bands).
+
+    Bands are sleeves of tape ``width_mm`` long (default 8), of ``reflectance`` in [0, 1]
+    (default 0.45: lighter than the cord's 0.10, darker than the wall's 0.62) and
+    ``diameter_mm`` (default the cord's), centred at the model's mass points i L / n, i = 1..n
+    (the tip's covers the string's last half band width).
+
+    Raises:
+        ConfigError: unknown keys or values out of range.
+    """
+    bands = _lab(config).get("string_bands")
+    if not bands:
+        return {}
+    bands = dict(bands)
+    unknown = set(bands) - {"width_mm", "reflectance", "diameter_mm"}
+    w, refl = float(bands.get("width_mm", 8.0)) / 1000, float(bands.get("reflectance", 0.45))
+    d = float(bands.get("diameter_mm", phys.diameter * 1000)) / 1000
+    if unknown or not (w > 0 and 0 <= refl <= 1 and d > 0 and n_points >= 1):
+        raise ConfigError(f"lab.string_bands: {bands} (keys width_mm > 0, reflectance in [0, 1], diameter_mm > 0)")
+    L = phys.length
+    spans = tuple((max(0.0, c - w / 2), min(L, c + w / 2)) for c in np.arange(1, n_points + 1) * L / n_points)
+    return {"bands": spans, "band_diameter": d, "band_reflectance": refl}
+
+
 def build_renderer(campaign: Campaign, config: Mapping, phys: StringPhysics | None = None) -> FrameRenderer:
     """The trial camera's :class:`FrameRenderer` (same scene, light and camera as :func:`run_trial`)."""
     phys = phys or StringPhysics.from_campaign(campaign, config)
     _, cam, canvas, sensor, gain, bg = _scene(campaign, config, int(_lab(config).get("scene_seed", 11)))
-    return FrameRenderer(cam, canvas, sensor, bg, gain, campaign.arm, StringLook.from_physics(phys))
+    look = StringLook.from_physics(phys, **string_bands(config, campaign.string.n_points, phys))
+    return FrameRenderer(cam, canvas, sensor, bg, gain, campaign.arm, look)
 
 
 def motion_end(t_cmd: np.ndarray, q_cmd: np.ndarray) -> float:
