@@ -30,14 +30,17 @@ def background_samples(window: np.ndarray, n_samples: int, n_bursts: int) -> np.
     (FFV1 in Matroska, OpenCV's FFmpeg backend), so samples spread evenly over a whole motion
     cost as much as decoding it. Bursts of every other frame, evenly placed, keep the spread
     over the motion (where the string is elsewhere most of the time) and decode about
-    2 ``n_samples`` frames. ``n_bursts`` <= 0 or >= ``n_samples``: evenly spread samples.
+    2 ``n_samples`` frames. A window shorter than 8 ``n_samples`` (decoding it whole costs
+    little more), ``n_bursts`` <= 0 or >= ``n_samples``: evenly spread samples, the better
+    background (on a short clip of the string leaving the frame, bursts let an unseen point
+    pass for a seen one).
 
     Args:
         window: (W,) sorted frame indices to sample from. Returns (<= n_samples,) sorted int.
     """
     window = np.asarray(window)
     n = min(len(window), n_samples)
-    if n_bursts <= 0 or n_bursts >= n or 2 * n >= len(window):
+    if n_bursts <= 0 or n_bursts >= n or 8 * n > len(window):
         return np.unique(np.round(np.linspace(window[0], window[-1], n))).astype(int)
     per = -(-n // n_bursts)  # frames per burst, every other frame
     starts = np.round(np.linspace(0, len(window) - 2 * per + 1, n_bursts)).astype(int)
