@@ -1,7 +1,8 @@
-"""Shared fixtures: the project's config and a resolved demo campaign."""
+"""Shared fixtures: the project's config, a resolved demo campaign, a tiny lab clip."""
 import os
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from stringcast.config import load_config, resolve_campaign
@@ -19,3 +20,42 @@ def config():
 @pytest.fixture(scope="session")
 def campaign(config):
     return resolve_campaign({"string": 1, "target": 1}, config, "test")
+
+
+def tiny_lab_trial(tmp_path, config, bands=None):
+    """A 0.35 s lab clip (320 x 240 px, 1.3 mm per px, 87 frames) of a 150 mm string of 5 points swung
+    by the wrist, with ``lab.string_bands`` = bands (None: a plain string); calibrated
+    and synced. Returns (trial folder, results folder, campaign, config)."""
+    import copy
+
+    lab = pytest.importorskip("stringcast.lab")
+    from stringcast.arm import hand_pose
+    from stringcast.calibration import run_calibration
+    from stringcast.config import resolve_campaign
+    from stringcast.sync import run_sync
+
+    cfg = copy.deepcopy(config)
+    q0 = np.array([0.2, -0.4, -0.3])
+    g = hand_pose(resolve_campaign({"string": 1, "target": 1}, cfg, "t").arm, q0)[:2] * 1000
+    cfg["cameras"]["tiny"] = {"width_px": 320, "height_px": 240, "fps": 250.0, "bit_depth": 8, "mono": True}
+    cfg["lab"] = dict(cfg.get("lab", {}), links_per_point=2, settle_s=0.1, trigger_error_s=0.0)
+    if bands:
+        cfg["lab"]["string_bands"] = bands
+    cfg["sync"] = dict(cfg.get("sync", {}), method="trigger")
+    cfg["lab"]["camera"] = dict(cfg["lab"].get("camera", {}), focal_px=1900.0, center_mm=[g[0] + 60, g[1] - 90])
+    doc = {"string": {"length_mm": 150.0, "n_points": 5, "weights": [], "stiff_sections": []},
+           "target": {"x_mm": g[0] + 150, "y_mm": g[1] + 10, "radius_mm": 20.0}, "allow_reachable": True,
+           "setup": {"camera": "tiny", "board": {"squares_x": 5, "squares_y": 4, "square_mm": 40.0,
+                                                 "marker_mm": 30.0, "dictionary": "DICT_4X4_50"},
+                     "board_origin_mm": [g[0] + 60, g[1] - 80], "board_angle_deg": 0.0, "board_flip_y": True}}
+    campaign = resolve_campaign(doc, cfg, "tiny")
+    rate, T = 500.0, 0.16
+    sw = 0.5 * (1 - np.cos(np.pi * np.arange(0, T, 1 / rate) / T))
+    q = np.repeat(q0[None], len(sw), 0)
+    q[:, 2] -= 0.35 * sw
+    q_cmd = np.concatenate([np.repeat(q0[None], 60, 0), q, np.repeat(q[-1:], 60, 0)])
+    trial, res = tmp_path / "trial_1", tmp_path / "res"
+    lab.run_trial(np.arange(len(q_cmd)) / rate, q_cmd, campaign, cfg, trial, seed=3, motion_start_s=0.12)
+    run_calibration(trial, None, campaign, res / "calibration.json")
+    run_sync(trial, res / "calibration.json", campaign, cfg, res / "sync.json")
+    return trial, res, campaign, cfg

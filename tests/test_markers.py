@@ -5,10 +5,13 @@ import cv2
 import numpy as np
 import pandas as pd
 import pytest
+
 from scipy.spatial import cKDTree
 
 from stringcast.markers import assign_bands, centreline_profile, find_band_runs, find_bands
 from stringcast.tracking import DEFAULTS
+
+from conftest import tiny_lab_trial
 
 N, SPACING, BAND = 5, 40.0, 8.0        # points, their spacing and the bands' length, px
 ST = {k: v for k, v in DEFAULTS.items() if k.startswith("band_")}
@@ -145,45 +148,6 @@ def test_mode_and_bands_are_checked(config):
 
 
 # ---------------------------------------------------------------------------- virtual lab
-def _tiny_lab(tmp_path, config, bands):
-    """A 0.35 s lab clip (320 x 240 px, 1.3 mm per px, 87 frames) of a 150 mm string of 5 points swung
-    by the wrist, as tests/test_tracking.py's tiny render, with ``lab.string_bands`` = bands; calibrated
-    and synced. Returns (trial folder, results folder, campaign, config)."""
-    import copy
-
-    lab = pytest.importorskip("stringcast.lab")
-    from stringcast.arm import hand_pose
-    from stringcast.calibration import run_calibration
-    from stringcast.config import resolve_campaign
-    from stringcast.sync import run_sync
-
-    cfg = copy.deepcopy(config)
-    q0 = np.array([0.2, -0.4, -0.3])
-    g = hand_pose(resolve_campaign({"string": 1, "target": 1}, cfg, "t").arm, q0)[:2] * 1000
-    cfg["cameras"]["tiny"] = {"width_px": 320, "height_px": 240, "fps": 250.0, "bit_depth": 8, "mono": True}
-    cfg["lab"] = dict(cfg.get("lab", {}), links_per_point=2, settle_s=0.1, trigger_error_s=0.0)
-    if bands:
-        cfg["lab"]["string_bands"] = bands
-    cfg["sync"] = dict(cfg.get("sync", {}), method="trigger")
-    cfg["lab"]["camera"] = dict(cfg["lab"].get("camera", {}), focal_px=1900.0, center_mm=[g[0] + 60, g[1] - 90])
-    doc = {"string": {"length_mm": 150.0, "n_points": 5, "weights": [], "stiff_sections": []},
-           "target": {"x_mm": g[0] + 150, "y_mm": g[1] + 10, "radius_mm": 20.0}, "allow_reachable": True,
-           "setup": {"camera": "tiny", "board": {"squares_x": 5, "squares_y": 4, "square_mm": 40.0,
-                                                 "marker_mm": 30.0, "dictionary": "DICT_4X4_50"},
-                     "board_origin_mm": [g[0] + 60, g[1] - 80], "board_angle_deg": 0.0, "board_flip_y": True}}
-    campaign = resolve_campaign(doc, cfg, "tiny")
-    rate, T = 500.0, 0.16
-    sw = 0.5 * (1 - np.cos(np.pi * np.arange(0, T, 1 / rate) / T))
-    q = np.repeat(q0[None], len(sw), 0)
-    q[:, 2] -= 0.35 * sw
-    q_cmd = np.concatenate([np.repeat(q0[None], 60, 0), q, np.repeat(q[-1:], 60, 0)])
-    trial, res = tmp_path / "trial_1", tmp_path / "res"
-    lab.run_trial(np.arange(len(q_cmd)) / rate, q_cmd, campaign, cfg, trial, seed=3, motion_start_s=0.12)
-    run_calibration(trial, None, campaign, res / "calibration.json")
-    run_sync(trial, res / "calibration.json", campaign, cfg, res / "sync.json")
-    return trial, res, campaign, cfg
-
-
 def test_the_lab_draws_bands_at_the_models_points(config):
     """lab.string_bands: a band of the set shade centred at each i L / n (the tip's ending at the tip),
     seen in a noise-free frame along the true projection of a still string."""
@@ -258,7 +222,7 @@ def test_marker_mode_on_a_tiny_lab_render_with_bands(tmp_path, config):
     from stringcast.calibration import Calibration
     from stringcast.files import read_json
 
-    trial, res, campaign, cfg = _tiny_lab(tmp_path, config, {"width_mm": 8.0, "reflectance": 0.45})
+    trial, res, campaign, cfg = tiny_lab_trial(tmp_path, config, {"width_mm": 8.0, "reflectance": 0.45})
     stats = {}
     for mode in ("markers", "markerless"):
         e_mm, e_px, share, per_point = stats[mode] = _track(trial, res, campaign, cfg, mode)
@@ -289,7 +253,7 @@ def test_marker_mode_on_a_tiny_lab_render_with_bands(tmp_path, config):
 
 def test_marker_mode_invents_nothing_on_a_plain_string(tmp_path, config):
     """The same clip without bands: marker mode must leave (almost) every point invalid."""
-    trial, res, campaign, cfg = _tiny_lab(tmp_path, config, None)
+    trial, res, campaign, cfg = tiny_lab_trial(tmp_path, config, None)
     e_mm, e_px, share, per_point = _track(trial, res, campaign, cfg, "markers")
     print(f"lab tiny without bands, markers: valid {share:.3f}, per point {per_point}")
     # measured: valid 0.000 (no point in any of the 87 frames)

@@ -14,6 +14,8 @@ from stringcast.files import read_json, write_joint_table, write_json
 from stringcast.prefetch import prefetch
 from stringcast.tracking import draw_arm_mask, run_tracking
 
+from conftest import tiny_lab_trial
+
 SIZE = 360
 M_PER_PX = 0.002
 ORIGIN = np.array([0.55, 0.25])  # robot (x, y) at pixel (0, 0); y up -> rows down
@@ -185,40 +187,10 @@ def test_prefetch_keeps_order_and_raises_reader_errors():
 # ---------------------------------------------------------------------------- virtual lab
 def test_tracking_on_a_tiny_lab_render(tmp_path, config):
     """The whole metrology chain (calibration, sync, tracking) on a short lab clip."""
-    import copy
-
-    lab = pytest.importorskip("stringcast.lab")
-    from stringcast.arm import hand_pose
-    from stringcast.calibration import run_calibration
-    from stringcast.config import resolve_campaign
-    from stringcast.sync import run_sync
-
-    cfg = copy.deepcopy(config)
-    q0 = np.array([0.2, -0.4, -0.3])
-    campaign0 = resolve_campaign({"string": 1, "target": 1}, cfg, "t")
-    g = hand_pose(campaign0.arm, q0)[:2] * 1000
-    cfg["cameras"]["tiny"] = {"width_px": 320, "height_px": 240, "fps": 250.0, "bit_depth": 8, "mono": True}
-    cfg["lab"] = dict(cfg.get("lab", {}), links_per_point=2, settle_s=0.1, trigger_error_s=0.0)
-    cfg["sync"] = dict(cfg.get("sync", {}), method="trigger")  # a close-up of the gripper: no whole arm segment
-    cfg["lab"]["camera"] = dict(cfg["lab"].get("camera", {}), focal_px=1900.0, center_mm=[g[0] + 60, g[1] - 90])
-    doc = {"string": {"length_mm": 150.0, "n_points": 5, "weights": [], "stiff_sections": []},
-           "target": {"x_mm": g[0] + 150, "y_mm": g[1] + 10, "radius_mm": 20.0}, "allow_reachable": True,
-           "setup": {"camera": "tiny", "board": {"squares_x": 5, "squares_y": 4, "square_mm": 40.0,
-                                                 "marker_mm": 30.0, "dictionary": "DICT_4X4_50"},
-                     "board_origin_mm": [g[0] + 60, g[1] - 80], "board_angle_deg": 0.0, "board_flip_y": True}}
-    campaign = resolve_campaign(doc, cfg, "tiny")
-    rate = 500.0
-    T = 0.16
-    s = 0.5 * (1 - np.cos(np.pi * np.arange(0, T, 1 / rate) / T))
-    q = np.repeat(q0[None], len(s), 0)
-    q[:, 2] -= 0.35 * s
-    q_cmd = np.concatenate([np.repeat(q0[None], 60, 0), q, np.repeat(q[-1:], 60, 0)])
-    trial = tmp_path / "trial_1"
-    lab.run_trial(np.arange(len(q_cmd)) / rate, q_cmd, campaign, cfg, trial, seed=3, motion_start_s=0.12)
-    res = tmp_path / "res"
-    cal = run_calibration(trial, None, campaign, res / "calibration.json")
+    trial, res, campaign, cfg = tiny_lab_trial(tmp_path, config)
+    cal = Calibration.from_json(res / "calibration.json")
     assert cal.reprojection_error_px < 0.5
-    sync = run_sync(trial, res / "calibration.json", campaign, cfg, res / "sync.json")
+    sync = read_json(res / "sync.json")
     truth_trigger = read_json(trial / "ground_truth.json")["trigger_time_s"]
     assert abs(sync["offset_s"] - truth_trigger) < 1e-3, (sync["offset_s"], truth_trigger)
     df = run_tracking(trial, res / "calibration.json", res / "sync.json", campaign, cfg, res / "tracks.parquet",
