@@ -171,7 +171,7 @@ def test_cmaes_runs_share_the_budget(config):
     with sigma0 / 2 and the second starts at the centre again with sigma0. Each run converges on
     its half of the budget, and the best of both is the estimate."""
     corner = np.r_[np.ones(6), np.zeros(6)]
-    cfg = _cfg(config, optimizer="cmaes", iterations=1200, batch=32, cmaes_runs=2)
+    cfg = _cfg(config, optimizer="cmaes", iterations=1200, batch=32, cmaes_runs=2, cmaes_first_look=0)
     pop = 4 + int(3 * np.log(12))
     for M, start, n_first in ((1, np.full(12, 0.5), 1), (2, np.full(12, 0.2), 0)):
         rec = Recording(lambda c: np.sum((c - corner) ** 2, axis=1))
@@ -294,3 +294,23 @@ def test_cmaes_options_reach_cma_and_unknown_ones_are_refused(config, monkeypatc
     with pytest.raises(ConfigError, match="CSA_dampfak"):
         es.estimate(_problem_stub(), _cfg(config, optimizer="cmaes", cmaes_options={"CSA_dampfak": 0.3}),
                     np.full(12, 0.2), 1, seed=0, objective=lambda c: np.zeros(len(c)))
+
+
+def test_cmaes_first_look_samples_eq3_and_starts_at_its_best(config):
+    """cmaes_first_look = L: the first L candidates are eq. (3) at m = 0 around chi_best (the first is
+    chi_best itself, the rest chi_best + chi0 / M RAND(-1, 1) clipped: many on the box's faces), and
+    CMA-ES's first generation is centred on the best of them."""
+    corner = np.r_[np.ones(6), np.zeros(6)]
+    L, pop = 96, 4 + int(3 * np.log(12))
+    cfg = _cfg(config, optimizer="cmaes", iterations=L + 40 * pop, batch=32, cmaes_first_look=L)
+    rec = Recording(lambda c: np.sum((c - corner) ** 2, axis=1))
+    start = np.full(12, 0.2)
+    es.estimate(_problem_stub(), cfg, start, 1, seed=0, objective=rec)
+    cand = np.concatenate(rec.calls)
+    look = cand[:L]
+    assert np.array_equal(look[0], start)
+    assert np.all(np.abs(look[1:] - start) <= 1.0 + 1e-12)
+    assert 0.5 < np.mean(look[1:] == 0.0) / 0.4 < 1.5          # P(step < -0.2) = 0.4: clipped onto the face
+    best = look[np.argmin(np.sum((look - corner) ** 2, axis=1))]
+    assert np.abs(cand[L:L + pop].mean(axis=0) - best).mean() < 0.15   # CMA-ES starts at the look's best
+    assert np.sum((cand - corner) ** 2, axis=1).min() < 1e-3

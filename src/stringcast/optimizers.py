@@ -30,7 +30,14 @@ its E and the search history. ``settings`` is ``config.estimation``.
   chi_best; (c) when CMA-ES converges with budget left it restarts from the best
   point; (d) ``cmaes_runs`` runs share the budget (default 1): the first from chi_best (at
   M = 1 the centre), the others from the centre with the full step. Candidates that blow up
-  are told a finite worst value. ``cmaes_options`` (a mapping) is passed on to
+  are told a finite worst value; (e) ``cmaes_first_look`` = L > 0: the first L candidates are
+  eq. (3) at m = 0 around chi_best (chi_best itself, then chi_best + chi0 / M RAND(-1, 1)
+  clipped, so many lie on the box's faces, where the lab strings' best sets sit) and the first
+  run starts at their best instead of the centre. On the estimation benchmark's seven lab
+  trials (3000 evaluations, 3 seeds) L = 300 ended lower than the centre start on 6 of 7 types
+  (median final E, type 3: 84 -> 59 mm, type 2: 64 -> 53 mm): from the centre, CMA-ES settled
+  in basins with a light clay point (its mu's chi 0.0-0.4 against 0.8-0.9 in the paper
+  search's best sets). ``cmaes_options`` (a mapping) is passed on to
   ``cma.CMAOptions`` (e.g. ``CSA_dampfac``); an unknown name is a ConfigError.
 * ``de``: SciPy differential evolution (vectorized), x0 = chi_best.
 """
@@ -112,7 +119,14 @@ def cmaes_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: n
     popsize = int(settings.get("cmaes_popsize", 0)) or 4 + int(3 * np.log(d))
     runs = max(1, int(settings.get("cmaes_runs", 1)))
     first = np.asarray(chi_best, float)
-    if M == 1 and settings.get("cmaes_first_start", "centre") == "centre":
+    look = min(int(settings.get("cmaes_first_look", 0)), rec.remaining)
+    if look > 0:  # eq. (3) at m = 0 around chi_best: clipped steps put many samples on the box's faces
+        step = (float(settings.get("chi0", 1.0)) / M) * rng.uniform(-1.0, 1.0, (look, d))
+        step[0] = 0.0
+        cand = np.clip(first + step, 0.0, 1.0)
+        E = np.concatenate([rec(cand[a:a + batch]) for a in range(0, look, batch)])
+        first = cand[int(np.argmin(E))]
+    elif M == 1 and settings.get("cmaes_first_start", "centre") == "centre":
         rec(first[None])  # chi_best is evaluated, but not an estimate yet: start at the centre
         first = np.full(d, 0.5)
     starts = [(first, sigma0 / M)] + [(np.full(d, 0.5), sigma0)] * (runs - 1)
