@@ -311,3 +311,16 @@ def test_background_samples_come_in_bursts_spread_over_the_motion():
     assert len(short) == 31 and short[0] == 0 and short[-1] == 199 and np.ptp(np.diff(short)) <= 1
     even = background_samples(np.arange(100, 300), 31, 0)
     assert len(even) == 31 and even[0] == 100 and even[-1] == 299 and np.ptp(np.diff(even)) <= 1
+
+
+def test_overlay_with_the_grasp_out_of_view(tmp_path):
+    """A shown frame whose grasp lies far outside the image (the arm reaching out of view) still gives a
+    tile: the crop is centred on the nearest image pixel (the crop was empty and cv2.resize raised)."""
+    from stringcast.overlay import write_overlay
+
+    frame = np.full((120, 160), 90, np.uint8)
+    pts = np.array([[-900.0, -700.0], [10.0, 10.0], [np.nan, np.nan]])
+    shown = [(0, frame, np.array([[5.0, 5.0], [20.0, 30.0]]), pts, np.array([True, True, False]))]
+    write_overlay(tmp_path / "o.png", shown, np.array([0.0]), 0.002, 0.3, tile=64)
+    img = cv2.imread(str(tmp_path / "o.png"))
+    assert img.shape == (64, 64, 3) and img.max() > 0

@@ -11,7 +11,10 @@ from .files import atomic_path
 
 
 def write_overlay(path, shown, t, m_per_px: float, L: float, tile: int = 320) -> None:
-    """A strip of frames (crops around the grasp) with the centreline and tracked points drawn."""
+    """A strip of frames (crops around the grasp) with the centreline and tracked points drawn.
+
+    shown: (frame index, (H, W) frame, (P, 2) centreline px, (n + 1, 2) points px, (n + 1,) valid)
+    per tile; a grasp outside the image is cropped around the nearest image pixel."""
     tiles = []
     for k, frame, path_px, pts_px, ok in shown:
         img = frame if frame.dtype == np.uint8 else cv2.convertScaleAbs(frame, alpha=255.0 / max(1, int(frame.max())))
@@ -23,7 +26,8 @@ def write_overlay(path, shown, t, m_per_px: float, L: float, tile: int = 320) ->
                 cv2.circle(rgb, tuple(np.round(p * 4).astype(int)), 12, (0, 0, 255) if i == 0 else (0, 200, 0), 1,
                            cv2.LINE_AA, 2)
         R = int((L + 0.12) / m_per_px)
-        c = pts_px[0].astype(int)
+        h, w = img.shape[:2]  # the crop's centre: the grasp, kept on the image (the arm may reach out of view)
+        c = np.clip(np.nan_to_num(pts_px[0], nan=0.0), [0, 0], [w - 1, h - 1]).astype(int)
         crop = cv2.copyMakeBorder(rgb, R, R, R, R, cv2.BORDER_CONSTANT, value=(0, 0, 0))[c[1]:c[1] + 2 * R, c[0]:c[0] + 2 * R]
         crop = cv2.resize(crop, (tile, tile), interpolation=cv2.INTER_AREA)
         cv2.putText(crop, f"frame {k}  t={t[k]:.3f} s", (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 255, 255), 1, cv2.LINE_AA)
