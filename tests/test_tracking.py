@@ -319,8 +319,11 @@ def test_overlay_with_the_grasp_out_of_view(tmp_path):
     from stringcast.overlay import write_overlay
 
     frame = np.full((120, 160), 90, np.uint8)
-    pts = np.array([[-900.0, -700.0], [10.0, 10.0], [np.nan, np.nan]])
-    shown = [(0, frame, np.array([[5.0, 5.0], [20.0, 30.0]]), pts, np.array([True, True, False]))]
-    write_overlay(tmp_path / "o.png", shown, np.array([0.0]), 0.002, 0.3, tile=64)
+    shown = []
+    for k, grasp in enumerate(([-50.0, -30.0], [400.0, 500.0], [-900.0, 60.0])):  # above/left, beyond, far left
+        pts = np.array([grasp, [10.0, 10.0], [np.nan, np.nan]])
+        shown.append((k, frame, np.array([[5.0, 5.0], [20.0, 30.0]]), pts, np.array([True, True, False])))
+    write_overlay(tmp_path / "o.png", shown, np.arange(3.0), 0.002, 0.3, tile=64)
     img = cv2.imread(str(tmp_path / "o.png"))
-    assert img.shape == (64, 64, 3) and img.max() > 0
+    assert img.shape == (64, 3 * 64, 3)
+    assert all(img[:, 64 * k:64 * (k + 1)].max() >= 90 for k in range(3))  # every tile shows the frame
