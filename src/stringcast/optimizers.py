@@ -83,6 +83,21 @@ class Recorder:
         return E
 
 
+def eq3_candidates(chi_best: np.ndarray, chi0: float, M: int, decay: np.ndarray, first: bool,
+                   rng: np.random.Generator) -> np.ndarray:
+    """Candidates of the paper's eq. (3): chi_best + (chi0 / M) decay_m RAND(-1, 1), clipped to [0, 1].
+
+    Args:
+        chi_best: (D,). decay: (B,) beta^m of each candidate. first: the batch starts at m = 0,
+            whose candidate is chi_best itself.
+    Returns:
+        (B, D) candidates."""
+    step = (chi0 / M) * decay[:, None] * rng.uniform(-1.0, 1.0, (len(decay), len(chi_best)))
+    if first:
+        step[0] = 0.0
+    return np.clip(chi_best + step, 0.0, 1.0)
+
+
 def random_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: np.random.Generator,
                   settings: Mapping) -> None:
     """The paper's eq. (3) (see module doc); chi_best moves to the best candidate after each batch."""
@@ -91,11 +106,7 @@ def random_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: 
     best_E, m = np.inf, 0
     while rec.remaining > 0:
         b = min(batch, rec.remaining)
-        ms = np.arange(m, m + b)
-        step = (chi0 / M) * beta ** ms[:, None] * rng.uniform(-1.0, 1.0, (b, len(chi_best)))
-        if m == 0:
-            step[0] = 0.0  # candidate 0 is chi_best itself
-        cand = np.clip(chi_best + step, 0.0, 1.0)
+        cand = eq3_candidates(chi_best, chi0, M, beta ** np.arange(m, m + b), m == 0, rng)
         E = rec(cand)
         i = int(np.argmin(E))
         if E[i] < best_E:
@@ -121,9 +132,7 @@ def cmaes_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: n
     first = np.asarray(chi_best, float)
     look = min(int(settings.get("cmaes_first_look", 0)), rec.remaining)
     if look > 0:  # eq. (3) at m = 0 around chi_best: clipped steps put many samples on the box's faces
-        step = (float(settings.get("chi0", 1.0)) / M) * rng.uniform(-1.0, 1.0, (look, d))
-        step[0] = 0.0
-        cand = np.clip(first + step, 0.0, 1.0)
+        cand = eq3_candidates(first, float(settings.get("chi0", 1.0)), M, np.ones(look), True, rng)
         E = np.concatenate([rec(cand[a:a + batch]) for a in range(0, look, batch)])
         first = cand[int(np.argmin(E))]
     elif M == 1 and settings.get("cmaes_first_start", "centre") == "centre":

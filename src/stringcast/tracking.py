@@ -7,8 +7,8 @@ Settings: ``config['tracking']`` over :data:`DEFAULTS`.
 1. **Background** (:func:`~stringcast.background.build_background`): the arm-masked temporal
    median of ``background_samples`` frames spread over the arm's motion in ``background_bursts``
    short runs (:func:`~stringcast.background.background_samples`: only the runs are decoded; the
-   string and arm hang still before the motion, and again after it; ``background_window_s`` limits the samples to the
-   motion's first seconds, for containers that cannot seek: but a string that leaves its rest
+   string and arm hang still before the motion, and again after it; ``background_window_s``
+   limits the samples to the motion's first seconds, for containers that cannot seek: but a string that leaves its rest
    place late in that span becomes background there, and is lost at rest), pixels the arm
    covers throughout taken from pre-motion frames; the same samples give the sensor's noise
    model sigma^2 = a + b B. The main pass decodes ahead in a thread (:mod:`stringcast.prefetch`).
