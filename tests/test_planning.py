@@ -29,6 +29,51 @@ def test_first_parameters_carry_their_weight(config, campaign):
     assert top_stretch == pytest.approx(config["motion"].get("first_max_strain", 0.05) * campaign.string.l0)
 
 
+def test_prior_ensemble_spans_table2_and_carries_its_weight(config, campaign):
+    from stringcast.parameters import encode, prior_ensemble
+
+    coeffs, mu = prior_ensemble(config, campaign.string, 64, np.random.default_rng(0))
+    n = campaign.string.n_points
+    assert coeffs.shape == (64, len(PARAM_NAMES)) and mu.shape == (64, n)
+    lo = np.array([config["model"]["ranges"][k][0] for k in PARAM_NAMES])
+    hi = np.array([config["model"]["ranges"][k][1] for k in PARAM_NAMES])
+    assert np.all(coeffs >= lo * (1 - 1e-12)) and np.all(coeffs[:, 1:] <= hi[1:] * (1 + 1e-12))
+    # log-uniform: every coefficient but the lifted k_s spreads over most of its log range
+    chi = np.log(coeffs / lo) / np.log(hi / lo)
+    assert np.all(chi[:, 1:].max(axis=0) - chi[:, 1:].min(axis=0) > 0.7)
+    # the k_s lift of first_parameters, per member: the top segment stretches at most first_max_strain
+    strain = config["motion"].get("first_max_strain", 0.05)
+    assert np.all(9.81 * mu.sum(axis=1) / coeffs[:, 0] <= strain * campaign.string.l0 * (1 + 1e-9))
+    # plain points share one mass (one group), special points have their own
+    plain = campaign.string.mass_groups() == 0
+    assert np.all(mu[:, plain] == mu[:, plain][:, :1])
+    with pytest.raises(ValueError, match="k must be"):
+        prior_ensemble(config, campaign.string, 0, np.random.default_rng(0))
+    assert encode(coeffs[0], mu[0, :1], config).shape == (len(PARAM_NAMES) + 1,)
+
+
+def test_first_plan_with_prior_ensemble(tmp_path, campaign, small):
+    """motion.first_ensemble: the first plan is scored under K random sets, and says so in motion.json."""
+    cfg = copy.deepcopy(small)
+    cfg["motion"].update(first_ensemble=6, first_extra_after_hit=32, robust_screen_mm=200.0)
+    res = pn.run_first_plan(campaign, cfg, tmp_path / "motion.csv", tmp_path / "motion.json", seed=0)
+    assert res.planner == "robust" and res.ensemble_d_min.shape == (6,)
+    assert res.hit_share == pytest.approx(np.mean(res.ensemble_d_min <= campaign.target.radius))
+    doc = read_json(tmp_path / "motion.json")
+    assert doc["kind"] == "first" and doc["ensemble_size"] == 6
+    # the search went on past the first hit by first_extra_after_hit, not extra_after_hit
+    assert res.candidates <= small["motion"]["max_candidates"]
+    base = pn.run_first_plan(campaign, small, tmp_path / "m0.csv", tmp_path / "m0.json", seed=0)
+    assert base.planner == "paper" and base.hit_share is None
+    # the chosen motion hits under at least as many sets as the paper's first plan does
+    ens = pn.prior_ensemble(cfg, campaign.string, 6, pn._rng(cfg, 0))
+    pl = pn.Predictor(campaign, cfg, *pn.first_parameters(cfg, campaign.string))
+    p0 = np.stack([pl.equilibrium(base.motion.q0, c, m) for c, m in zip(*ens)])
+    d, my, ok = pl.evaluate_ensemble(base.motion.q[None], base.motion.T, p0[None], *ens)
+    base_share = np.mean(ok[0] & (d[0] <= campaign.target.radius) & (my[0] >= campaign.arm.floor_y))
+    assert res.hit_share >= base_share
+
+
 def test_first_plan_hits_and_is_consistent(tmp_path, campaign, small):
     res = pn.run_first_plan(campaign, small, tmp_path / "motion.csv", tmp_path / "motion.json", seed=0)
     m = res.motion

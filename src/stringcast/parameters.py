@@ -3,7 +3,8 @@
 * :func:`decode` / :func:`encode`: chi in [0, 1]^(10 + G) <-> the ten coefficients
   (k_s, c_s, k_h, c_h, k_sh, c_sh, C_c1, C_c2, k_ph, c_ph) on log scales over Table 2's
   ranges, and G group masses mu (Table 4's special points plus one shared value).
-* :func:`first_parameters`: the first plan's set (no estimate yet).
+* :func:`first_parameters`: the first plan's set (no estimate yet); :func:`prior_ensemble`:
+  random sets over Table 2's box for a first plan that hits under many of them.
 * :func:`planned_parameters`, :func:`ensemble_parameters`: the estimate's best set and
   best K sets, read from ``params.json``.
 * :func:`start_chi`: where the estimation's search starts (eq. 3's chi_best at m = 0).
@@ -37,6 +38,32 @@ def first_parameters(config: Mapping, string) -> tuple[np.ndarray, np.ndarray]:
     strain = float(config.get("motion", {}).get("first_max_strain", 0.05))
     coeffs = lo.copy()
     coeffs[0] = max(lo[0], 9.81 * mu.sum() / (strain * string.l0))
+    return coeffs, mu
+
+
+def prior_ensemble(config: Mapping, string, k: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """K random sets over Table 2's box for the first plan's ensemble (ours, ``motion.first_ensemble``).
+
+    chi ~ U[0, 1]^(10 + G) (eq. 2, log-uniform over every range, one mass per group of
+    :meth:`StringSpec.mass_groups`), with k_s lifted per set as in :func:`first_parameters`
+    (top-segment static strain <= ``motion.first_max_strain``; for heavy sets above Table 2's
+    maximum), so that no member hangs stretched beyond the model's blow-up limit. Before any execution nothing is known of the
+    string; a motion that hits under many of these sets is one whose tip path depends little
+    on the parameters.
+
+    Returns:
+        coeffs (K, 10), mu (K, n).
+
+    Raises:
+        ValueError: k < 1.
+    """
+    if k < 1:
+        raise ValueError(f"prior_ensemble: k must be >= 1, got {k}")
+    groups = string.mass_groups()
+    chi = rng.uniform(0.0, 1.0, (int(k), len(PARAM_NAMES) + int(groups.max()) + 1))
+    coeffs, mu = decode(chi, config, groups)
+    strain = float(config.get("motion", {}).get("first_max_strain", 0.05))
+    coeffs[:, 0] = np.maximum(coeffs[:, 0], 9.81 * mu.sum(axis=1) / (strain * string.l0))
     return coeffs, mu
 
 
