@@ -251,6 +251,14 @@ def test_robust_prefers_hit_share_then_margin(monkeypatch, campaign, small):
     res = pn.search(campaign, cfg, coeffs, mu, np.random.default_rng(0), ensemble=_ensemble(cfg, campaign))
     assert res.hit_share == 0.75 and res.d_min == pytest.approx(0.010)         # 7: median 6 mm beats 18.5 mm
     assert res.margin == pytest.approx(0.020 - 0.006)
+    # a motion that misses under the planning set (30 mm) but hits under 3 of 4 members with the larger
+    # margin is chosen, and the message says why rather than "no candidate hit"
+    d_best[7], members[7] = 0.030, [0.030, 0.001, 0.002, 0.003]
+    state["k"] = 0
+    res = pn.search(campaign, cfg, coeffs, mu, np.random.default_rng(0), ensemble=_ensemble(cfg, campaign))
+    assert not res.hit and res.d_min == pytest.approx(0.030) and res.hit_share == 0.75
+    assert "chosen for the ensemble (hits under 75% of its 4 sets)" in res.message
+    assert "no candidate hit" not in res.message
 
 
 def test_robust_all_miss_and_all_blown_up(monkeypatch, config, small):

@@ -231,6 +231,9 @@ def search(campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarr
     motion = Motion(t=t, q=q, T=T, control_points=cp, q0=q0)
     msgs = [] if hit else [f"no candidate hit in {tried} tried; returning the closest "
                            f"({d * 1000:.1f} mm from the target, radius {radius * 1000:.0f} mm)"]
+    if not hit and ensemble is not None and share > 0:  # chosen for the ensemble, not for the planning set
+        msgs = [f"chosen for the ensemble (hits under {share:.0%} of its {len(ensemble[0])} sets); under the "
+                f"planning set it passes {d * 1000:.1f} mm from the target (radius {radius * 1000:.0f} mm)"]
     robust = {}
     if ensemble is not None:
         robust = {"planner": "robust", "ensemble_d_min": d_k, "hit_share": share if d_k is not None else 0.0,
