@@ -36,7 +36,10 @@ from an initial posture q0):
   candidates past the first hit: a motion that hits under many arbitrary strings is one
   whose tip path depends little on the string. Measured offline on the loop benchmark's 21
   campaigns (K = 16, 2000 extra, the lab's physics as judge): the first execution hit on 8
-  (closest approach <= 20 mm), against 4 with the paper's first plan.
+  (closest approach <= 20 mm) in one draw of the sets and 4 of 15 in another, against 4 of 21
+  (2 of 15) with the paper's first plan; in the loop, though, the later plans that perturb
+  such a motion kept missing by 20-25 mm (types 5, 6: 4 and 7 executions against 2), so ours
+  leaves it off.
 * Residual correction (``motion.residual_correction``, later motions, with either
   planner; ours): every set aims at the target minus the model's error on the played
   motion's tracked tip (:mod:`stringcast.residual`), so d_min is the corrected one.
