@@ -41,7 +41,9 @@ Run: ``python -m benchmarks.loop [--quick] [--types 1 5] [--seeds 0 1 2] [--meth
 [--work DIR]``. A full run (7 types x 3 seeds x 2 methods, full-size lab) takes hours on
 2 cores; ``--quick`` is types 1 and 5, seed 0, both methods. ``--work`` keeps every
 campaign (data/ and results/) and its ``run.json``; a later run with the same DIR reuses
-finished runs and resumes unfinished campaigns. loop.json, loop.png and loop.md are
+finished runs and resumes unfinished campaigns; ``--finished-only`` runs nothing and
+summarizes the finished ones (``paired_mean_*``: the means over the campaigns both
+methods finished). loop.json, loop.png and loop.md are
 rewritten after every run (``"complete": false`` until the last), so a stopped run leaves
 a consistent partial result.
 """
@@ -175,6 +177,12 @@ def summarize(runs: list[dict], types: list[int], methods: list[str]) -> dict:
         out[f"max_{lab}"] = int(max(allx)) if allx else None
         out[f"all_hit_{lab}"] = bool(allx) and all(h for k in types for h in per[str(k)][f"{lab}_hit"])
     out["paper_table3_mean"] = float(np.mean([PAPER_TABLE3[k] for k in types]))
+    if len(methods) > 1:  # the campaigns (type, seed) every method finished: a like-for-like comparison
+        done = {m: {(r["string"], r["seed"]): _executions(r) for r in runs if r["method"] == m} for m in methods}
+        both = sorted(set.intersection(*(set(d) for d in done.values())))
+        out["paired_campaigns"] = len(both)
+        for m in methods:
+            out[f"paired_mean_{LABELS[m]}"] = float(np.mean([done[m][c] for c in both])) if both else None
     return out
 
 
@@ -225,6 +233,10 @@ def _table(doc: dict, methods: list[str]) -> str:
                      + " | ".join(cell(r[LABELS[m]], r[f"{LABELS[m]}_hit"]) for m in methods) + " |")
     means = [f"{doc[f'mean_{LABELS[m]}']:.2f}" if doc.get(f"mean_{LABELS[m]}") is not None else "-" for m in methods]
     lines.append(f"| mean | | {doc['paper_table3_mean']:.2f} | " + " | ".join(means) + " |")
+    if doc.get("paired_campaigns"):
+        paired = [f"{doc[f'paired_mean_{LABELS[m]}']:.2f}" for m in methods]
+        lines.append(f"| mean over the {doc['paired_campaigns']} campaigns both methods finished | | | "
+                     + " | ".join(paired) + " |")
     total = len(doc["types"]) * len(doc["seeds"]) * len(methods)
     partial = "" if doc["complete"] else f" Partial run: {len(doc['runs'])} of {total} campaigns so far."
     return (f"Executions until the lab's tip hits (cap {CAP}; * = no hit, counted as {CAP}).{partial}\n\n"
@@ -232,8 +244,15 @@ def _table(doc: dict, methods: list[str]) -> str:
 
 
 def run(quick: bool = False, types: list[int] | None = None, seeds: list[int] | None = None,
-        methods: list[str] | None = None, work: Path | None = None, cores: int = 2) -> dict:
-    """Run the campaigns and write results/bench/loop.json (after every run), loop.png and loop.md."""
+        methods: list[str] | None = None, work: Path | None = None, cores: int = 2,
+        finished_only: bool = False) -> dict:
+    """Run the campaigns and write results/bench/loop.json (after every run), loop.png and loop.md.
+
+    ``finished_only``: run nothing; summarize the campaigns ``work`` holds a run.json for
+    (``"complete"`` only if that is all of them).
+
+    Raises:
+        ValueError: a type outside 1-7, or ``finished_only`` without ``work``."""
     from stringcast.config import load_config
     from stringcast.files import write_text
 
@@ -247,6 +266,11 @@ def run(quick: bool = False, types: list[int] | None = None, seeds: list[int] | 
     runs: list[dict] = []
     settings = {m: METHODS[m] for m in methods}
     todo = [(k, s, m) for s in seeds for k in types for m in methods]  # seed by seed: a partial run covers every type
+    n_all = len(todo)
+    if finished_only:
+        if not work:
+            raise ValueError("finished_only: name the campaigns' folder (--work)")
+        todo = [(k, s, m) for k, s, m in todo if (Path(work) / f"loop_s{k}_seed{s}_{m}" / "run.json").exists()]
     with tempfile.TemporaryDirectory(prefix="bench_loop_") as tmp:
         work = Path(work).resolve() if work else Path(tmp)
         for i, (k, s, m) in enumerate(todo, 1):
@@ -258,7 +282,7 @@ def run(quick: bool = False, types: list[int] | None = None, seeds: list[int] | 
                      + ", ".join(f"{c:.1f}" for c in r["closest_approach_mm"]) + f" mm; {r['wall_s']:.0f} s"),
                   flush=True)
             doc = header("loop", quick) | summarize(runs, types, methods) | {
-                "cap": CAP, "complete": i == len(todo), "types": types, "seeds": seeds, "methods": settings,
+                "cap": CAP, "complete": i == n_all, "types": types, "seeds": seeds, "methods": settings,
                 "paper_table3": {str(k): v for k, v in PAPER_TABLE3.items()}, "paper_table3_mean_all": 2.14,
                 "reference": {"name": "paper_table3", "mean": float(np.mean(list(PAPER_TABLE3.values())))},
                 "goals": {"all_hit_ours": True, "max_ours": CAP, "mean_ours": 2.0},
@@ -285,5 +309,7 @@ if __name__ == "__main__":
     ap.add_argument("--methods", nargs="+", choices=list(METHODS), help="methods (default both)")
     ap.add_argument("--work", type=Path, help="keep (and reuse/resume) the campaigns here")
     ap.add_argument("--cores", type=int, default=2, help="Snakemake --cores per campaign")
+    ap.add_argument("--finished-only", action="store_true",
+                    help="run nothing: summarize the finished campaigns in --work")
     a = ap.parse_args()
-    run(a.quick, a.types, a.seeds, a.methods, a.work, a.cores)
+    run(a.quick, a.types, a.seeds, a.methods, a.work, a.cores, a.finished_only)
