@@ -42,14 +42,14 @@ def first_parameters(config: Mapping, string) -> tuple[np.ndarray, np.ndarray]:
 
 
 def prior_ensemble(config: Mapping, string, k: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """K random sets over Table 2's box for the first plan's ensemble (ours, ``motion.first_ensemble``).
+    """K random sets over Table 2's box for the first plan's ensemble (``motion.first_ensemble``).
 
     chi ~ U[0, 1]^(10 + G) (eq. 2, log-uniform over every range, one mass per group of
     :meth:`StringSpec.mass_groups`), with k_s lifted per set as in :func:`first_parameters`
     (top-segment static strain <= ``motion.first_max_strain``; for heavy sets above Table 2's
-    maximum), so that no member hangs stretched beyond the model's blow-up limit. Before any execution nothing is known of the
-    string; a motion that hits under many of these sets is one whose tip path depends little
-    on the parameters.
+    maximum), so that no member hangs stretched beyond the model's blow-up limit. Before any
+    execution nothing is known of the string; a motion that hits under many of these sets is
+    one whose tip path depends little on the parameters.
 
     Returns:
         coeffs (K, 10), mu (K, n).

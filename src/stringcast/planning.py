@@ -23,14 +23,14 @@ from an initial posture q0):
 
 * Planner (``motion.planner``): ``paper`` (default) is the above. ``robust`` (later
   motions) also scores candidates under an ensemble: the best K parameter sets of the
-  last estimate (params.json ``top``, :mod:`stringcast.diagnostics`). Our choice, to keep the cost near the paper's: a
-  candidate is scored under the ensemble, all members in one numba batch
+  last estimate (params.json ``top``, :mod:`stringcast.diagnostics`). Our choice, to keep
+  the cost near the paper's: a candidate is scored under the ensemble, all members in one numba batch
   (:func:`stringcast.model.closest_approach_batch`, each member from its own hanging
   equilibrium), when under the best set it stays valid and above the floor and comes
   within ``motion.robust_screen_mm`` (default 20) of the target's edge. The chosen
   motion has the largest hit share (members for which it hits), then the largest
   margin (radius - median d_min over the members); the stopping rule is the paper's.
-* First-plan ensemble (``motion.first_ensemble`` = K > 0; ours): the first plan, with no
+* First-plan ensemble (``motion.first_ensemble`` = K > 0; tried, off in ours): the first plan, with no
   estimate yet, is scored the same way under K random sets over Table 2's box
   (:func:`stringcast.parameters.prior_ensemble`), searching ``motion.first_extra_after_hit``
   candidates past the first hit: a motion that hits under many arbitrary strings is one
