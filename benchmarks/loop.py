@@ -106,6 +106,11 @@ def project_root(path: Path, cfg: dict) -> Path:
     return cfg_path
 
 
+def run_dir(work: Path, string_type: int, seed: int, method: str) -> Path:
+    """The campaign's project folder (and campaign name) under ``work``."""
+    return work / f"loop_s{string_type}_seed{seed}_{method}"
+
+
 def run_one(string_type: int, seed: int, method: str, config: dict, work: Path, cores: int = 2) -> dict:
     """One campaign: string ``string_type`` at its paper target, ``method``, ``seed``, at most ``CAP``
     executions. Reuses ``work/<name>/run.json`` when a previous run finished.
@@ -115,8 +120,8 @@ def run_one(string_type: int, seed: int, method: str, config: dict, work: Path, 
     from stringcast.campaign import run_campaign
     from stringcast.files import DataError, read_json, write_json
 
-    name = f"loop_s{string_type}_seed{seed}_{method}"
-    root = work / name
+    root = run_dir(work, string_type, seed, method)
+    name = root.name
     done = root / "run.json"
     if done.exists():
         return read_json(done)
@@ -270,7 +275,7 @@ def run(quick: bool = False, types: list[int] | None = None, seeds: list[int] | 
     if finished_only:
         if not work:
             raise ValueError("finished_only: name the campaigns' folder (--work)")
-        todo = [(k, s, m) for k, s, m in todo if (Path(work) / f"loop_s{k}_seed{s}_{m}" / "run.json").exists()]
+        todo = [(k, s, m) for k, s, m in todo if (run_dir(Path(work), k, s, m) / "run.json").exists()]
     with tempfile.TemporaryDirectory(prefix="bench_loop_") as tmp:
         work = Path(work).resolve() if work else Path(tmp)
         for i, (k, s, m) in enumerate(todo, 1):

@@ -35,10 +35,16 @@ def first_parameters(config: Mapping, string) -> tuple[np.ndarray, np.ndarray]:
     """
     lo, _, _ = model_ranges(config)
     mu = np.full(string.n_points, float(config["model"].get("first_mu", 1.0)))
-    strain = float(config.get("motion", {}).get("first_max_strain", 0.05))
     coeffs = lo.copy()
-    coeffs[0] = max(lo[0], 9.81 * mu.sum() / (strain * string.l0))
+    coeffs[0] = max(lo[0], _k_s_carrying(config, string, mu))
     return coeffs, mu
+
+
+def _k_s_carrying(config: Mapping, string, mu: np.ndarray) -> np.ndarray:
+    """The least k_s at which the top segment's static strain is ``motion.first_max_strain``:
+    g sum(mu) / (strain l0), for mu (..., n) -> (...)."""
+    strain = float(config.get("motion", {}).get("first_max_strain", 0.05))
+    return 9.81 * np.sum(mu, axis=-1) / (strain * string.l0)
 
 
 def prior_ensemble(config: Mapping, string, k: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -62,8 +68,7 @@ def prior_ensemble(config: Mapping, string, k: int, rng: np.random.Generator) ->
     groups = string.mass_groups()
     chi = rng.uniform(0.0, 1.0, (int(k), len(PARAM_NAMES) + int(groups.max()) + 1))
     coeffs, mu = decode(chi, config, groups)
-    strain = float(config.get("motion", {}).get("first_max_strain", 0.05))
-    coeffs[:, 0] = np.maximum(coeffs[:, 0], 9.81 * mu.sum(axis=1) / (strain * string.l0))
+    coeffs[:, 0] = np.maximum(coeffs[:, 0], _k_s_carrying(config, string, mu))
     return coeffs, mu
 
 
