@@ -47,6 +47,28 @@ def test_wrong_value_is_named(tmp_path, config):
         load_config(p)
 
 
+def test_config_files_merge_in_order_as_snakemake_does(tmp_path, config):
+    """--configfile files over the project's: sections merge key by key, lists are replaced."""
+    base = config["_path"]
+    over = tmp_path / "over.yaml"
+    over.write_text("estimation: {optimizer: cmaes, joint_trials: 0}\nmotion: {T_range_s: [0.3, 0.9]}\n")
+    merged = load_config([base, over])
+    assert merged["estimation"]["optimizer"] == "cmaes" and merged["estimation"]["joint_trials"] == 0
+    assert merged["estimation"]["iterations"] == config["estimation"]["iterations"]   # kept from the base
+    assert merged["motion"]["T_range_s"] == [0.3, 0.9] and merged["strings"] == config["strings"]
+    assert str(over) in merged["_path"]
+    with pytest.raises(ConfigError, match=r"over.yaml.*required property"):   # a partial file alone is not a config
+        load_config(over)
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("estimation: {optimiser: cmaes}\n")
+    with pytest.raises(ConfigError, match=r"bad.yaml.*optimiser"):   # the merge is validated, naming the files
+        load_config([base, bad])
+    lst = tmp_path / "list.yaml"
+    lst.write_text("- 1\n")
+    with pytest.raises(ConfigError, match=r"list.yaml: a config file must be a mapping"):
+        load_config([base, lst])
+
+
 def test_reachable_target_is_refused(config):
     with pytest.raises(ConfigError, match="within the grasp's reach"):
         resolve_campaign({"string": 1, "target": {"x_mm": 900, "y_mm": 0}}, config)

@@ -9,7 +9,8 @@ from stringcast import estimation as es
 from stringcast import parameters as prm
 from stringcast.arm import hand_pose, motion_start
 from stringcast.config import PARAM_NAMES, ConfigError, model_ranges
-from stringcast.files import DataError, read_json, read_parquet, write_joint_table, write_json, write_parquet
+from stringcast.files import (DataError, read_joint_table, read_json, read_parquet, write_joint_table, write_json,
+                              write_parquet)
 from stringcast.model import hanging_equilibrium, simulate
 from stringcast.motion import joint_paths
 from stringcast.parameters import first_parameters
@@ -17,13 +18,15 @@ from stringcast.parameters import first_parameters
 CHI_TRUE = np.array([0.6, 0.3, 0.3, 0.4, 0.4, 0.3, 0.2, 0.2, 0.5, 0.5, 0.35, 0.3])
 
 
-def make_trial(campaign, coeffs, mu, out, fps=500.0, offset=0.0013, drop=(), t0=10.0):
-    """A synthetic trial made by the model itself: joints.csv and tracks.parquet (frames offset from the log)."""
+def make_trial(campaign, coeffs, mu, out, fps=500.0, offset=0.0013, drop=(), t0=10.0, speed=1.0):
+    """A synthetic trial made by the model itself: joints.csv and tracks.parquet (frames offset from the log).
+
+    speed scales the motion's control points (another motion of the same string)."""
     arm, rate, n = campaign.arm, campaign.arm.controller_rate, campaign.string.n_points
     q0 = np.array([1.0, -0.8, -0.5])
     cp = np.zeros((3, 6))
     cp[0, :5], cp[1, :5], cp[2, :5] = [2, 2.5, 1, -1, -0.5], [-1, 1, 2, 1, 0], [1, -1, 1, 0, 0]
-    dq, _ = joint_paths(cp, 0.5, rate)
+    dq, _ = joint_paths(speed * cp, 0.5, rate)
     q = np.vstack([np.repeat(q0[None], int(0.3 * rate), 0), q0 + dq, np.repeat((q0 + dq[-1])[None], int(0.3 * rate), 0)])
     t = t0 + np.arange(len(q)) / rate
     write_joint_table(out / "joints.csv", t, q)
@@ -269,6 +272,39 @@ def test_run_estimation_end_to_end(config, campaign, chi_true, tmp_path):
     assert est1.history["best_E_m"][-1] < 0.5 * est1.history["best_E_m"][0]
     assert read_json(tmp_path / "p1.json")["chi_start"] == pytest.approx(
         prm.start_chi(None, campaign.string, config).tolist())
+
+
+def test_joint_estimation_fits_every_trial(config, campaign, chi_true, tmp_path):
+    """estimation.joint_trials: E is the mean of the trials' E; params.json says each trial's."""
+    c, mu = prm.decode(chi_true, config, campaign.string.mass_groups())
+    (tmp_path / "a").mkdir(), (tmp_path / "b").mkdir()
+    make_trial(campaign, c, mu, tmp_path / "a")
+    make_trial(campaign, c, mu, tmp_path / "b", speed=0.6, t0=20.0)
+    problems = []
+    for d in ("a", "b"):
+        t, q, _ = read_joint_table(tmp_path / d / "joints.csv")
+        problems.append(es.build_problem(read_parquet(tmp_path / d / "tracks.parquet"), t, q, campaign, config))
+    chi = np.random.default_rng(0).uniform(0.2, 0.8, (6, len(chi_true)))
+    chi[0] = chi_true
+    each = [es.make_objective(pb, config)(chi) for pb in problems]
+    joint = es.make_joint_objective(problems, config)(chi)
+    assert joint == pytest.approx((each[0] + each[1]) / 2)
+    assert joint[0] < 1e-4 < joint[1:].min()  # the truth fits both motions; random sets fit neither
+    assert not np.allclose(each[0][1:], each[1][1:])  # the two motions are different evidence
+
+    write_json(tmp_path / "prev.json", {"chi": chi_true})
+    est = es.run_estimation(tmp_path / "b" / "tracks.parquet", tmp_path / "b" / "joints.csv", campaign,
+                            _cfg(config, iterations=64, batch=32), tmp_path / "prev.json", 2,
+                            tmp_path / "params.json", tmp_path / "fit.parquet",
+                            earlier=((tmp_path / "a" / "tracks.parquet", tmp_path / "a" / "joints.csv"),))
+    doc = read_json(tmp_path / "params.json")
+    assert len(doc["E_trials_mm"]) == 2 and doc["trials_fitted"][0].endswith("tracks.parquet")
+    assert doc["E_mm"] == pytest.approx(np.mean(doc["E_trials_mm"])) == pytest.approx(est.E_m * 1000)
+    assert max(doc["E_trials_mm"]) < 0.1
+
+    other = es.EstimationProblem(**{**problems[0].__dict__, "mass_groups": np.zeros(problems[0].n_points, np.int64)})
+    with pytest.raises(ValueError, match="disagree"):
+        es.make_joint_objective([problems[0], other], config)
 
 
 def test_cmaes_options_reach_cma_and_unknown_ones_are_refused(config, monkeypatch):

@@ -25,13 +25,13 @@ from .config import ConfigError, load_config, load_yaml, resolve_campaign
 from .files import write_yaml
 
 
-def _snakemake(root: Path, targets: list[str], cores: int, config_path: str | None) -> float:
+def _snakemake(root: Path, targets: list[str], cores: int, config_files: list[Path]) -> float:
     """Run the workflow for ``targets``; returns wall seconds. Raises RuntimeError on failure."""
     cmd = [sys.executable, "-m", "snakemake", *targets, "--cores", str(cores), "--snakefile",
            str(root / "Snakefile"), "--directory", str(root), "--rerun-incomplete",
            "--quiet", "rules"]
-    if config_path:
-        cmd += ["--configfile", str(config_path)]
+    if config_files:
+        cmd += ["--configfile", *map(str, config_files)]
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, check=False, cwd=root)  # the return code is checked below, with the log named
     if proc.returncode != 0:
@@ -40,7 +40,7 @@ def _snakemake(root: Path, targets: list[str], cores: int, config_path: str | No
     return time.perf_counter() - t0
 
 
-def run_campaign(name: str, string: str, target: str, config_path: str | None = None,
+def run_campaign(name: str, string: str, target: str, config_path: str | Path | list | None = None,
                  max_executions: int = 5, cores: int = 2, seed: int = 0,
                  root: Path = Path("."), reports: bool = True) -> dict:
     """Run (or resume) a campaign on the virtual lab.
@@ -48,6 +48,8 @@ def run_campaign(name: str, string: str, target: str, config_path: str | None = 
     Args:
         name: campaign name: data/<name>/ and results/<name>/.
         string, target: ids from the config.
+        config_path: config file(s) merged over the project's ``config/config.yaml``, passed to
+            Snakemake as ``--configfile``; the lab reads the same merge.
         max_executions: stop after this many executions without a hit.
         reports: False: only what the loop needs (no HTML reports, and the hitting trial is
             not processed); the loop benchmark's setting, about a third faster.
@@ -63,7 +65,11 @@ def run_campaign(name: str, string: str, target: str, config_path: str | None = 
     from .lab import write_calibration_clip
 
     root = Path(root).resolve()
-    config = load_config(config_path)
+    # the lab reads the config the workflow's jobs read: the project's, then the given files over it
+    given = [] if config_path is None else [config_path] if isinstance(config_path, (str, Path)) else config_path
+    given = [Path(p).resolve() for p in given]
+    base = root / "config" / "config.yaml"
+    config = load_config(([base] if base.exists() else []) + given or None)
     data = root / "data" / name
     camp_yaml = data / "campaign.yaml"
     doc = {"string": _id(string), "target": _id(target), "setup": "default", "seed": int(seed)}
@@ -86,7 +92,7 @@ def run_campaign(name: str, string: str, target: str, config_path: str | None = 
         os.replace(tmp, data / "calib")
         timings["lab_calibration_clip_s"] = time.perf_counter() - t0
 
-    timings["plan_first_s"] = _snakemake(root, [f"results/{name}/first_motion/motion.csv"], cores, config_path)
+    timings["plan_first_s"] = _snakemake(root, [f"results/{name}/first_motion/motion.csv"], cores, given)
     motion = root / "results" / name / "first_motion" / "motion.csv"
     rows = []
     for k in range(1, max_executions + 1):
@@ -107,12 +113,12 @@ def run_campaign(name: str, string: str, target: str, config_path: str | None = 
             break
         timings[f"process_{k}_s"] = _snakemake(
             root, [f"results/{name}/trial_{k}/motion.csv"] + [f"results/{name}/trial_{k}/report.html"] * reports,
-            cores, config_path)
+            cores, given)
         if truth["hit"]:
             break
         motion = root / "results" / name / f"trial_{k}" / "motion.csv"
     if reports:
-        timings["campaign_report_s"] = _snakemake(root, [f"results/{name}/report.html"], cores, config_path)
+        timings["campaign_report_s"] = _snakemake(root, [f"results/{name}/report.html"], cores, given)
     report = root / "results" / name / "report.html"
     summary = {"campaign": name, "string": campaign.string_id, "target": campaign.target.name,
                "executions": len(rows), "hit": any(r["hit"] for r in rows), "trials": rows,

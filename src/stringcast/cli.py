@@ -27,7 +27,7 @@ def _config(args):
 
     key = str(args.config)
     if key not in _CONFIG_CACHE:
-        _CONFIG_CACHE[key] = load_config(args.config)
+        _CONFIG_CACHE[key] = load_config(args.config or None)
     return _CONFIG_CACHE[key]
 
 
@@ -58,12 +58,20 @@ def cmd_track(args):
     print(f"tracking: {df['frame'].nunique()} frames, valid share {df['valid'].mean():.3f} -> {args.out}")
 
 
+def _earlier(args) -> tuple:
+    """Pairs (tracks, joints) of the earlier trials fitted together (estimation.joint_trials)."""
+    tracks, joints = args.earlier_tracks or [], args.earlier_joints or []
+    if len(tracks) != len(joints):
+        raise SystemExit(f"estimate: {len(tracks)} --earlier-tracks but {len(joints)} --earlier-joints")
+    return tuple(zip(map(Path, tracks), map(Path, joints)))
+
+
 def cmd_estimate(args):
     from .estimation import run_estimation
 
     est = run_estimation(Path(args.tracks), Path(args.joints), _campaign(args), _config(args),
                          Path(args.prev) if args.prev else None, int(args.trial),
-                         Path(args.out_params), Path(args.out_fit))
+                         Path(args.out_params), Path(args.out_fit), _earlier(args))
     print(f"estimation: E = {est.E_m * 1000:.2f} mm after {est.n_evaluations} evaluations -> {args.out_params}")
 
 
@@ -124,7 +132,9 @@ def cmd_campaign(args):
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="stringcast", description=__doc__.split("\n\n")[0])
-    p.add_argument("--config", default=None, help="config YAML (default: config/config.yaml)")
+    p.add_argument("--config", action="append", default=None,
+                   help="config YAML (default: config/config.yaml); given again, each file is merged over the ones "
+                        "before it, as Snakemake merges --configfile over the Snakefile's configfile")
     sub = p.add_subparsers(dest="command", required=True)
 
     def add(name, func, help_):
@@ -160,6 +170,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--trial", required=True, help="trial index k = executions so far (M of eq. 3)")
     sp.add_argument("--out-params", required=True)
     sp.add_argument("--out-fit", required=True)
+    sp.add_argument("--earlier-tracks", nargs="*", help="earlier trials' tracks.parquet, fitted together")
+    sp.add_argument("--earlier-joints", nargs="*", help="their joints.csv, in the same order")
 
     sp = add("plan-first", cmd_plan_first, "first motion with Table 2's minimum parameters")
     sp.add_argument("--campaign", required=True)

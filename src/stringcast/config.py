@@ -10,12 +10,13 @@ Errors: :class:`ConfigError` (a ``ValueError``) naming the file and the key.
 """
 from __future__ import annotations
 
+import copy
 import json
 import math
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 import yaml
@@ -64,12 +65,39 @@ def load_yaml(path: str | Path) -> Any:
         raise ConfigError(f"{path}: not valid YAML: {exc}") from exc
 
 
-def load_config(path: str | Path | None = None) -> dict:
-    """Load and schema-validate the config file (default ``config/config.yaml``)."""
-    path = Path(path) if path else DEFAULT_CONFIG
-    doc = load_yaml(path)
-    validate(doc, "config.schema.json", path)
-    doc["_path"] = str(path)
+def merge_config(into: dict, over: Mapping) -> dict:
+    """Merge ``over`` into ``into`` in place, mappings key by key, anything else replaced
+    (as Snakemake merges ``--configfile`` over the Snakefile's ``configfile:``). Returns ``into``."""
+    for key, value in over.items():
+        if isinstance(value, Mapping) and isinstance(into.get(key), dict):
+            merge_config(into[key], value)
+        else:
+            into[key] = copy.deepcopy(value)
+    return into
+
+
+def load_config(path: str | Path | Sequence | None = None) -> dict:
+    """Load and schema-validate the config (default ``config/config.yaml``).
+
+    ``path`` may be several files: each is merged over the ones before it
+    (:func:`merge_config`), as Snakemake merges ``--configfile`` files over the
+    Snakefile's, and the result is validated.
+
+    Raises:
+        ConfigError: a missing or malformed file, or a merged config the schema refuses (named).
+    """
+    paths = [Path(p) for p in path] if isinstance(path, (list, tuple)) else [Path(path) if path else DEFAULT_CONFIG]
+    if not paths:
+        paths = [DEFAULT_CONFIG]
+    doc: dict = {}
+    for p in paths:
+        part = load_yaml(p)
+        if not isinstance(part, Mapping):
+            raise ConfigError(f"{p}: a config file must be a mapping of sections")
+        merge_config(doc, part)
+    source = " + ".join(map(str, paths))
+    validate(doc, "config.schema.json", source)
+    doc["_path"] = source
     return doc
 
 

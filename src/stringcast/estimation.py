@@ -235,14 +235,40 @@ def make_objective(problem: EstimationProblem, config: Mapping) -> Callable[[np.
     return objective
 
 
+def make_joint_objective(problems, config: Mapping) -> Callable[[np.ndarray], np.ndarray]:
+    """E over several trials of one string: chi (B, D) -> mean over ``problems`` of E (B,), m.
+
+    The issue's "fit all of a campaign's trials at once": a set must reproduce every
+    motion played so far, not only the last (our choice: each trial weighs the same,
+    whatever its number of frames). +inf where any trial's simulation blew up.
+
+    Raises:
+        ValueError: no problems, or problems of different strings (points, mass groups).
+    """
+    problems = list(problems)
+    if not problems:
+        raise ValueError("make_joint_objective: no problems")
+    if len({(p.n_points, p.n_groups) for p in problems}) != 1:
+        raise ValueError("make_joint_objective: the trials disagree on the string's points or mass groups")
+    objectives = [make_objective(p, config) for p in problems]
+
+    def objective(chi: np.ndarray) -> np.ndarray:
+        return np.mean([f(chi) for f in objectives], axis=0)
+
+    return objective
+
+
 def estimate(problem: EstimationProblem, config: Mapping, chi_start: np.ndarray, M: int, seed: int,
-             objective: Callable | None = None) -> Estimate:
+             objective: Callable | None = None, earlier: tuple = ()) -> Estimate:
     """Run the configured optimizer on ``problem``.
 
     Args:
         chi_start: (10 + G,) chi_best at m = 0. M: executions so far (>= 1, eq. 3).
         objective: batch objective chi (B, D) -> E (B,); default :func:`make_objective`
             (with a custom objective ``E_i`` is NaN).
+        earlier: problems of earlier trials of the same string, fitted together with
+            ``problem`` (:func:`make_joint_objective`; E_m is then the mean over the
+            trials, E_i stays ``problem``'s).
 
     Returns:
         The :class:`Estimate` (never raises on blown-up candidates: E = inf and a message).
@@ -262,7 +288,8 @@ def estimate(problem: EstimationProblem, config: Mapping, chi_start: np.ndarray,
     if chi_start.shape != (d,):
         raise ValueError(f"chi_start: expected ({d},), got {chi_start.shape}")
     custom = objective is not None
-    objective = objective if custom else make_objective(problem, config)
+    if not custom:
+        objective = make_joint_objective((*earlier, problem), config) if earlier else make_objective(problem, config)
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
     rec = Recorder(objective, budget, f"estimate ({name})")
@@ -320,13 +347,16 @@ def point_errors(problem: EstimationProblem, config: Mapping, chi: np.ndarray) -
 # ---------------------------------------------------------------------------
 def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign, config: Mapping,
                    prev_params_json: Path | None, trial_index: int, out_params_json: Path,
-                   out_fit_parquet: Path) -> Estimate:
+                   out_fit_parquet: Path, earlier: tuple = ()) -> Estimate:
     """Estimate the parameters of one trial and write ``params.json`` and ``fit.parquet``.
 
     Args:
         tracks_parquet, joints_csv: the trial's tracked points and measured joint log.
         prev_params_json: the previous trial's ``params.json`` (chi_best of eq. 3) or None.
         trial_index: k >= 1, the number of executions so far (M of eq. 3); seed = estimation.seed + k.
+        earlier: (tracks_parquet, joints_csv) pairs of earlier trials of the campaign, fitted
+            together with this one (``estimation.joint_trials``; :func:`make_joint_objective`).
+            params.json's ``E_mm`` is then the mean over the trials, ``E_trials_mm`` each one's.
 
     Raises:
         DataError: unreadable or inconsistent inputs (named). ConfigError: bad optimizer settings.
@@ -338,7 +368,13 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign, c
     chi0 = start_chi(prev, campaign.string, config, str(prev_params_json))
     k = max(1, int(trial_index))
     seed = int(config.get("estimation", {}).get("seed", 0)) + k
-    est = estimate(problem, config, chi0, k, seed)
+    earlier_problems = []
+    for tr, jo in earlier:
+        t_e, q_e, _ = read_joint_table(jo)
+        earlier_problems.append(build_problem(read_parquet(tr, TRACK_COLUMNS), t_e, q_e, campaign, config,
+                                              source=str(tr)))
+    est = estimate(problem, config, chi0, k, seed, earlier=tuple(earlier_problems))
+    E_trials = [float(make_objective(p, config)(est.chi[None])[0]) * 1000 for p in (*earlier_problems, problem)]
 
     _, mu_groups_all = decode(est.top_chi, config, np.arange(problem.n_groups))
     top = [{"E_mm": e * 1000, "coefficients": dict(zip(PARAM_NAMES, c)), "mu_groups": m, "chi": x}
@@ -352,7 +388,8 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign, c
     write_json(out_params_json, {
         "coefficients": dict(zip(PARAM_NAMES, est.coeffs)), "mu": est.mu, "mu_groups": mu_groups_all[0],
         "mass_groups": problem.mass_groups, "special_points": campaign.string.special_points(),
-        "E_mm": est.E_m * 1000, "E_i_mm": est.E_i * 1000,
+        "E_mm": est.E_m * 1000, "E_i_mm": est.E_i * 1000, "E_trials_mm": E_trials,
+        "trials_fitted": [str(tr) for tr, _ in earlier] + [str(tracks_parquet)],
         "history": {"evaluations": est.history["evaluations"],
                     "best_E_mm": [e * 1000 for e in est.history["best_E_m"]]},
         "optimizer": est.optimizer, "seed": est.seed, "evaluations": est.n_evaluations,

@@ -3,6 +3,8 @@
 import sys
 from pathlib import Path
 
+from snakemake.exceptions import WorkflowError
+
 
 wildcard_constraints:
     campaign=r"[A-Za-z0-9_\-]+",
@@ -13,8 +15,24 @@ wildcard_constraints:
 # (the project's venv), found by PATH so that the command line (a param, tracked for
 # provenance) does not depend on which interpreter path started Snakemake.
 shell.prefix(f'set -euo pipefail; export PATH="{Path(sys.executable).parent}:$PATH"; ')
-CONFIG_FILE = workflow.configfiles[-1] if workflow.configfiles else "config/config.yaml"
-CLI = f'stringcast --config "{CONFIG_FILE}"'
+# The jobs read the config Snakemake uses: the Snakefile's configfile, then every
+# --configfile over it (stringcast merges them the same way). --config KEY=VALUE
+# overrides would not reach them, so they are refused.
+if workflow.config_settings.config:
+    raise WorkflowError(
+        "stringcast: --config KEY=VALUE overrides do not reach the jobs, which read config "
+        "files; put the overrides in a YAML file and pass it with --configfile"
+    )
+CONFIG_FILES = [
+    *(
+        ["config/config.yaml"]
+        if Path("config/config.yaml").exists()
+        and not workflow.config_settings.replace_workflow_config
+        else []
+    ),
+    *map(str, workflow.config_settings.configfiles),
+]
+CLI = "stringcast " + " ".join(f'--config "{f}"' for f in CONFIG_FILES)
 VIDEO_NAMES = ("video.mkv", "video.avi", "video.mp4", "video.cihx", "video")
 
 
@@ -58,6 +76,30 @@ def previous_params(wildcards):
     if k <= 1:
         return []
     return [f"results/{wildcards.campaign}/trial_{k - 1}/params.json"]
+
+
+def earlier_trials(wildcards):
+    """The earlier trials fitted together with this one (estimation.joint_trials; 1: none)."""
+    k = int(wildcards.trial)
+    n = int(config["estimation"].get("joint_trials", 1))
+    first = 1 if n == 0 else max(1, k - n + 1)
+    return {
+        "earlier_tracks": [
+            f"results/{wildcards.campaign}/trial_{j}/tracks.parquet"
+            for j in range(first, k)
+        ],
+        "earlier_joints": [
+            f"data/{wildcards.campaign}/trial_{j}/joints.csv" for j in range(first, k)
+        ],
+    }
+
+
+def earlier_arg(wildcards, input):
+    if not input.earlier_tracks:
+        return ""
+    tracks = " ".join(f'"{p}"' for p in input.earlier_tracks)
+    joints = " ".join(f'"{p}"' for p in input.earlier_joints)
+    return f"--earlier-tracks {tracks} --earlier-joints {joints}"
 
 
 def prev_arg(wildcards, input):

@@ -4,6 +4,7 @@
 
 rule estimate:
     input:
+        unpack(earlier_trials),
         tracks="results/{campaign}/trial_{trial}/tracks.parquet",
         joints="data/{campaign}/trial_{trial}/joints.csv",
         campaign="data/{campaign}/campaign.yaml",
@@ -21,10 +22,11 @@ rule estimate:
     params:
         cli=CLI,
         prev=prev_arg,
+        earlier=earlier_arg,
         cfg=config["estimation"],
         model=config["model"],
     shell:
         'NUMBA_NUM_THREADS={threads} {params.cli} estimate --tracks "{input.tracks}" '
-        '--joints "{input.joints}" --campaign "{input.campaign}" {params.prev} '
+        '--joints "{input.joints}" --campaign "{input.campaign}" {params.prev} {params.earlier} '
         '--trial {wildcards.trial} --out-params "{output.params}" --out-fit "{output.fit}" '
         '> "{log}" 2>&1'
