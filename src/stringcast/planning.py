@@ -46,7 +46,10 @@ from an initial posture q0):
 * Replan (``motion.replan_miss_mm`` > 0; ours): when the played motion's tracked tip missed
   the target by more than that, the next motion is searched afresh (random posture and T,
   as the first) with the estimate, not as a perturbation: a small change cannot bridge a
-  large miss, and the residual is a first-order correction.
+  large miss, and the residual is a first-order correction. Ours uses 45 mm: re-planning the
+  loop benchmark's steps offline (the lab's physics as judge), after misses over 45 mm the
+  played perturbations hit 2 of 11 and fresh plans 17 of 33 (3 seeds each); after misses
+  under 45 mm the perturbations hit 9 of 11 and fresh plans 5 of 9.
 
 The model's predictions (equilibrium, closest approach, tip path) are
 :class:`stringcast.prediction.Predictor`'s. Stage entry points: :func:`run_first_plan`
