@@ -249,6 +249,12 @@ def test_run_calibration_on_trial_folder(tmp_path, campaign):
     px = Calibration(np.eye(3), SIZE, K_TRUE, DIST_TRUE).distort(px)
     want = cv2.perspectiveTransform(b.reshape(-1, 1, 2), campaign.setup.board_to_robot).reshape(-1, 2)
     assert np.linalg.norm(cal.pixel_to_robot(px) - want) < 1e-3
+    # reproducible: the same files give the same bytes (OpenCV's threads once made the 9th digit vary)
+    threads = cv2.getNumThreads()
+    for i in range(3):
+        run_calibration(trial, calib, campaign, tmp_path / "out" / f"again_{i}.json")
+        assert (tmp_path / "out" / f"again_{i}.json").read_bytes() == (tmp_path / "out" / "calibration.json").read_bytes()
+    assert cv2.getNumThreads() == threads   # restored after the stage
     # homography only (no calib/) still works but warns
     cal2 = run_calibration(trial, None, campaign, tmp_path / "out2.json")
     assert cal2.K is None and any("homography only" in w for w in cal2.warnings)

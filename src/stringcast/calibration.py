@@ -26,6 +26,7 @@ too few views, image size mismatch).
 from __future__ import annotations
 
 import math
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -253,9 +254,26 @@ def median_frame(video, n: int = 5) -> np.ndarray:
     return np.median(np.stack(frames), axis=0).astype(video.dtype)
 
 
+@contextmanager
+def single_threaded_opencv():
+    """Run OpenCV on one thread inside the block (``cv2.setNumThreads``), then restore.
+
+    With its worker threads, calibration on the same views gave intrinsics that differed run
+    to run in the 9th significant digit (the threads' partial sums add up in varying order);
+    the estimation's search amplifies such a difference into another estimate, so a
+    reprocessed trial would not reproduce its results. One thread costs this stage ~1 s.
+    """
+    n = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        yield
+    finally:
+        cv2.setNumThreads(n)
+
+
 def run_calibration(trial_dir: str | Path, calib_dir: str | Path | None, campaign, out_json: str | Path,
                     n_median: int = 5, config: dict | None = None) -> Calibration:
-    """Calibrate one trial and write ``calibration.json``.
+    """Calibrate one trial and write ``calibration.json`` (reproducibly: :func:`single_threaded_opencv`).
 
     Intrinsics from ``calib_dir`` (if given), then the plane homography from the median of
     the first ``n_median`` trial frames (the arm and string hang still before the motion).
@@ -267,7 +285,11 @@ def run_calibration(trial_dir: str | Path, calib_dir: str | Path | None, campaig
         DataError: no board / too few corners in the trial frames or the calibration views,
             or mismatched image sizes (the file is named).
     """
-    trial_dir = Path(trial_dir)
+    with single_threaded_opencv():
+        return _run_calibration(Path(trial_dir), calib_dir, campaign, out_json, n_median, config)
+
+
+def _run_calibration(trial_dir: Path, calib_dir, campaign, out_json, n_median: int, config) -> Calibration:
     setup = campaign.setup
     board = setup.board.make()
     warnings: list[str] = []
