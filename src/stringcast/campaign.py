@@ -67,8 +67,9 @@ def run_campaign(name: str, string: str, target: str, config_path: str | Path | 
     root = Path(root).resolve()
     # the lab reads the config the workflow's jobs read: the project's, then the given files over it
     given = [] if config_path is None else [config_path] if isinstance(config_path, (str, Path)) else config_path
-    given = [Path(p).resolve() for p in given]
     base = root / "config" / "config.yaml"
+    # the project's own file is read anyway; passed again it would change every job's command line
+    given = [q for q in (Path(p).resolve() for p in given) if not (base.exists() and q == base.resolve())]
     config = load_config(([base] if base.exists() else []) + given or None)
     data = root / "data" / name
     camp_yaml = data / "campaign.yaml"
