@@ -70,7 +70,7 @@ def run_campaign(name: str, string: str, target: str, config_path: str | Path | 
     base = root / "config" / "config.yaml"
     # the project's own file is read anyway; passed again it would change every job's command line
     given = [q for q in (Path(p).resolve() for p in given) if not (base.exists() and q == base.resolve())]
-    config = load_config(([base] if base.exists() else []) + given or None)
+    config = load_config(([base] if base.exists() else []) + given)
     data = root / "data" / name
     camp_yaml = data / "campaign.yaml"
     doc = {"string": _id(string), "target": _id(target), "setup": "default", "seed": int(seed)}

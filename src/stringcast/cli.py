@@ -27,7 +27,7 @@ def _config(args):
 
     key = str(args.config)
     if key not in _CONFIG_CACHE:
-        _CONFIG_CACHE[key] = load_config(args.config or None)
+        _CONFIG_CACHE[key] = load_config(args.config)
     return _CONFIG_CACHE[key]
 
 

@@ -289,7 +289,7 @@ def estimate(problem: EstimationProblem, config: Mapping, chi_start: np.ndarray,
         raise ValueError(f"chi_start: expected ({d},), got {chi_start.shape}")
     custom = objective is not None
     if not custom:
-        objective = make_joint_objective((*earlier, problem), config) if earlier else make_objective(problem, config)
+        objective = make_joint_objective((*earlier, problem), config)   # E itself for one trial
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
     rec = Recorder(objective, budget, f"estimate ({name})")
