@@ -24,10 +24,10 @@ trial's motion pins down, :mod:`stringcast.diagnostics`).
 
 Choices where the paper is silent: the rest state p_init is the median of the
 valid tracked positions over the last ``tracking.rest_frames`` frames before the
-motion starts (:func:`stringcast.arm.motion_start`); a point never valid there
-falls back to hanging straight down from the point above (reported in
-``Estimate.message``). The simulation starts at the first of those frames and is
-compared at every later frame up to the end of the joint log.
+motion starts (:func:`stringcast.arm.motion_start`); points never valid there are
+filled with l0 segments between the known points around them
+(:func:`stringcast.rest_state.fill_rest_pose`, reported in ``Estimate.message``).
+The simulation starts at the first of those frames and is compared at every later frame up to the end of the joint log.
 """
 from __future__ import annotations
 
@@ -47,6 +47,7 @@ from .files import (TRACK_COLUMNS, DataError, read_joint_table, read_json, read_
                     write_parquet)
 from .optimizers import OPTIMIZERS, Recorder
 from .parameters import decode, start_chi
+from .rest_state import fill_rest_pose
 
 MIN_REST_FRAMES = 3
 
@@ -66,7 +67,7 @@ class EstimationProblem:
         l0: rest segment length, m. psi0: rest direction in the hand frame, rad.
         dt: integration step, s. mass_groups: (n,) int (0 = mu_others).
         w: tip weighting of eq. (6).
-        fallback_points: points (1..n) never valid at rest (straight-down p_init).
+        fallback_points: points (1..n) never valid at rest (p_init filled by ``fill_rest_pose``).
         t_motion_start: s, when the joint log starts to move.
     """
 
@@ -190,23 +191,19 @@ def build_problem(tracks_df: pd.DataFrame, t_joints: np.ndarray, q_joints: np.nd
     hand_t = np.concatenate([[t0], t_joints[after]])
     hand = hand_pose(arm, np.vstack([q0, q_joints[after]]))
 
-    p_init = np.zeros((n, 2))
-    fallback = []
-    above = hand[0, :2]
+    known = np.full((n, 2), np.nan)
     for i in range(1, n + 1):
         ok = valid[rest, i]
         if ok.any():
-            p_init[i - 1] = np.median(xy[rest[ok], i], axis=0)
-        else:
-            p_init[i - 1] = above + (0.0, -s.l0)
-            fallback.append(i)
-        above = p_init[i - 1]
+            known[i - 1] = np.median(xy[rest[ok], i], axis=0)
+    psi0 = np.radians(float(config["model"].get("psi0_deg", 0.0)))
+    p_init, fallback = fill_rest_pose(hand[0, :2], hand[0, 2] + psi0, known, s.l0)
     if not valid[use, 1:].any():
         raise DataError(f"{source}: no valid tracked point 1..{n} in the frames to compare")
     tracked = np.where(valid[use, 1:, None], xy[use, 1:], 0.0)
     return EstimationProblem(
         hand_t=hand_t, hand=hand, p_init=p_init, frame_t=t[use], frames=frames[use], tracked=tracked,
-        valid=valid[use, 1:], l0=s.l0, psi0=np.radians(float(config["model"].get("psi0_deg", 0.0))),
+        valid=valid[use, 1:], l0=s.l0, psi0=psi0,
         dt=float(config["model"]["dt_s"]), mass_groups=s.mass_groups(),
         w=float(config.get("evaluation", {}).get("w", 0.1)), fallback_points=tuple(fallback),
         t_motion_start=t_move)
@@ -316,7 +313,7 @@ def estimate(problem: EstimationProblem, config: Mapping, chi_start: np.ndarray,
         msgs.append(f"{blown} of {len(all_E)} candidates blew up (E = inf); the estimate is the best finite one")
     if problem.fallback_points:
         msgs.append(f"points {list(problem.fallback_points)} were never tracked at rest: their initial state "
-                    "hangs straight down")
+                    "is filled with rest-length segments between the tracked points around them")
     return Estimate(coeffs=coeffs, mu=mu, chi=best_chi, E_m=float(top_E[0]), E_i=E_i,
                     history=rec.history, optimizer=name, seed=int(seed), n_evaluations=len(all_E),
                     n_blown_up=blown, seconds=time.perf_counter() - t0,

@@ -1,0 +1,86 @@
+"""The model's initial state for estimation: the tracked rest pose with its gaps filled.
+
+STRING_MODEL.md ("Initial state", estimation) starts the model at the tracked
+positions of the frames before the motion. Points never tracked there (hidden by the
+gripper, the arm, a weight) need a guess, and the guess must keep the model's segments
+at their rest length l0: the model's axial spring is stiff (k_s up to 1e6 N/m/kg), so a
+segment started 15 mm short kicks the chain at ~1e4 m/s^2, and the simulation, and E,
+then depend on the parameters to the 6th digit (measured on a lab trial of string
+type 2 whose points 1-3 were hidden at rest: a chi step of 1e-6 moved the simulated
+points by 30 mm within 0.2 s; E is then too rugged to search).
+
+Our choice: a run of hidden points between two known ones (the grasp point counts as
+known) is filled with the regular polygon of l0 segments that joins them (points on a
+circular arc), bent to the side that continues the segment above (at the grasp: the
+string's rest direction in the hand, phi_h + psi0). Where the two known points are
+l0 x (segments) apart or more, the points are spaced evenly on the straight line. Hidden
+points below the last known one hang straight down, l0 apart.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.optimize import brentq
+
+
+def fill_rest_pose(grasp: np.ndarray, direction0: float, known: np.ndarray, l0: float) -> tuple[np.ndarray, tuple]:
+    """Rest positions of points 1..n with the untracked ones filled (module doc).
+
+    Args:
+        grasp: (2,) m, the grasp point p_0.
+        direction0: rad, world angle of the string's rest direction at the grasp (phi_h + psi0).
+        known: (n, 2) m, tracked rest positions, NaN where a point was never tracked at rest.
+        l0: m, rest segment length.
+
+    Returns:
+        (p (n, 2) m, filled: the 1-based numbers of the points filled).
+
+    Raises:
+        ValueError: bad shapes or l0 <= 0.
+    """
+    known = np.asarray(known, float)
+    if known.ndim != 2 or known.shape[1] != 2 or np.shape(grasp) != (2,) or not l0 > 0:
+        raise ValueError(f"fill_rest_pose: expected grasp (2,), known (n, 2), l0 > 0; got {np.shape(grasp)}, "
+                         f"{known.shape}, {l0}")
+    n = len(known)
+    ok = np.all(np.isfinite(known), axis=1)
+    p = np.vstack([np.asarray(grasp, float), np.where(ok[:, None], known, np.nan)])   # row i = point i
+    above_dir = float(direction0)
+    i = 1
+    while i <= n:
+        if ok[i - 1]:
+            d = p[i] - p[i - 1]
+            above_dir = math.atan2(d[1], d[0]) if np.hypot(*d) > 0 else above_dir
+            i += 1
+            continue
+        below = next((j for j in range(i, n + 1) if ok[j - 1]), None)
+        if below is None:                                  # nothing known below: hang straight down
+            for j in range(i, n + 1):
+                p[j] = p[j - 1] + (0.0, -l0)
+            break
+        p[i:below] = _polygon(p[i - 1], p[below], below - i + 1, l0, above_dir)[1:-1]
+        i = below
+    return p[1:], tuple(int(j) for j in np.nonzero(~ok)[0] + 1)
+
+
+def _polygon(a: np.ndarray, b: np.ndarray, m: int, l0: float, above_dir: float) -> np.ndarray:
+    """(m + 1, 2): a, m - 1 points, b, joined by m equal segments: l0 on a circular arc where |b - a| < m l0
+    (bulging to the side whose first segment is nearer ``above_dir``), else |b - a| / m on the line."""
+    chord = b - a
+    c = float(np.hypot(*chord))
+    s = np.arange(m + 1)[:, None] / m
+    if c >= m * l0 * (1 - 1e-12) or m == 1 or c == 0.0:
+        return a + s * chord
+    # m chords of l0 turning by alpha each span sin(m alpha / 2) / sin(alpha / 2) l0: equal to c on (0, 2 pi / m)
+    ratio = c / l0
+    alpha = brentq(lambda x: math.sin(m * x / 2) / math.sin(x / 2) - ratio, 1e-12, 2 * math.pi / m - 1e-12)
+    beta = math.atan2(chord[1], chord[0])
+    options = [beta + sign * (m - 1) * alpha / 2 for sign in (1.0, -1.0)]
+    turn = [-1.0, 1.0]   # the first segment leans +(m-1) alpha / 2 from the chord: later ones turn back
+    k = int(np.argmax([math.cos(o - above_dir) for o in options]))
+    angles = options[k] + turn[k] * alpha * np.arange(m)
+    steps = l0 * np.column_stack([np.cos(angles), np.sin(angles)])
+    pts = a + np.vstack([np.zeros(2), np.cumsum(steps, axis=0)])
+    pts[-1] = b                                            # equal to b to rounding
+    return pts
