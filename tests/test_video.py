@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from stringcast.files import DataError
-from stringcast.video import ContainerReader, FrameFolderReader, open_video
+from stringcast.video import ContainerReader, open_video
+from stringcast.video_images import FrameFolderReader
 
 from conftest import SHARED_REAL
 
