@@ -29,7 +29,8 @@ from ..arm import forward_kinematics
 from ..config import Campaign, ConfigError
 from ..files import DataError, atomic_path, write_json, write_joint_table, write_parquet, write_yaml
 from .camera import CameraModel, IdealCanvas, Sensor, camera_settings
-from .physics import StringPhysics, simulate
+from .mjcf import StringPhysics
+from .physics import simulate
 from .scene import (FrameRenderer, StringLook, gain_map, render_background, supersample_homography,
                     warp_board)
 
