@@ -153,6 +153,25 @@ def test_trace_path_prefers_straight_and_bridges_gaps():
     assert pts[-1].tolist() == [20, 35]  # gap wider than max_gap: stops
 
 
+def test_centreline_walks_the_string_not_a_hook_at_the_fingertips(campaign, config):
+    """A lab string at rest (type 2) left the gripper in a short hook: the walk from the skeleton pixel
+    nearest the grasp went into the hook (2 px) and the whole string was lost in every rest frame.
+    A walk from a pixel just outside the clear zone must win when it is much longer."""
+    from stringcast.tracking import FrameTracker, settings
+
+    tracker = FrameTracker(np.full((SIZE, SIZE), 100, np.float32), (1.0, 0.0), _calibration(), campaign,
+                           settings(config))
+    fg = np.zeros((200, 100), np.uint8)
+    cv2.line(fg, (52, 22), (52, 170), 1, 3)                          # the string, below the grasp
+    cv2.polylines(fg, [np.array([[52, 22], [47, 17], [42, 18], [41, 22]], np.int32)], False, 1, 2)  # the hook
+    pts = tracker._centreline(fg.astype(bool), np.array([20.0, 50.0]), 33.0, 8.3)[0]
+    assert np.hypot(*np.diff(pts, axis=0).T).sum() > 130 and pts[-1].tolist() == [169, 52]
+    fg[:] = 0
+    cv2.line(fg, (52, 22), (52, 170), 1, 3)                          # no hook: the nearest pixel's walk, as before
+    pts = tracker._centreline(fg.astype(bool), np.array([20.0, 50.0]), 33.0, 8.3)[0]
+    assert pts[-1].tolist() == [169, 52] and not tracker._fallback
+
+
 def test_resample_by_arc_marks_gaps_and_ends():
     xy = np.array([[0, 0], [0.1, 0], [0.2, 0], [0.3, 0]], float)
     targets = np.array([0.05, 0.15, 0.25, 0.303, 0.35])

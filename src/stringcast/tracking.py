@@ -17,8 +17,9 @@ Settings: ``config['tracking']`` over :data:`DEFAULTS`.
    threshold in units of the *local* noise sigma (``threshold_low/high``); polarity free.
 3. **Arm mask** from the *measured* joints at the start, middle and end of each frame period
    (:func:`~stringcast.arm_mask.draw_arm_mask`), plus a guard band of ``arm_guard_px``.
-4. **Centreline** (:mod:`stringcast.centreline`): skeleton of the foreground; a walk
-   (:func:`~stringcast.junctions.walk_skeleton`) from near the grasp, through a crossing by
+4. **Centreline** (:mod:`stringcast.centreline`): skeleton of the foreground; the longest walk
+   (:func:`~stringcast.junctions.walk_skeleton`) from near the grasp (or from just outside its clear
+   zone, past a hook at the fingertips), through a crossing by
    the smoothest way on (a pass whose choice is a guess, or by an arm never walked, is an
    ambiguity), bridging gaps up to ``max_gap_px`` (bridged parts are never valid); the first
    ``grasp_clear_mm`` replaced by a circular arc from the grasp (:func:`hidden_arc`); sub-pixel
@@ -250,7 +251,9 @@ class FrameTracker:
         """Skeleton path from near the grasp g (row, col): (M, 2) (row, col), (M,) bridged; or None.
 
         Seeds: the skeleton pixel nearest the grasp in each skeleton component within r0 px
-        (at most 6); the longest walk wins. A walk is cut where it comes closest to the grasp
+        (at most 6), and up to 4 of the component's pixels just outside rho (a string that leaves
+        the fingers in a short hook: the nearest pixel's walk takes the hook); the longest walk
+        wins, a walk from outside rho only if it is longer by 2 rho than the nearest pixel's. A walk is cut where it comes closest to the grasp
         (dropping detours along slivers of the gripper's rim), then its vertices within rho
         px of the grasp are dropped (there the string mixes with the fingertips).
         """
@@ -275,16 +278,20 @@ class FrameTracker:
             return None
         _, comp = cv2.connectedComponents(skel.astype(np.uint8), connectivity=8)
         cid = comp[sy[idx], sx[idx]]
-        seeds = []  # per component: its pixel nearest the grasp; if the walk from it ends in a spur of the
-        for c in np.unique(cid):  # tangle at the fingertips, its nearest pixel outside the clear zone
+        seeds = []  # per component: its pixel nearest the grasp, then (if the walk from it ends in a spur of
+        for c in np.unique(cid):  # the tangle at the fingertips) its pixels just outside the clear zone
             own = idx[cid == c]
-            out = own[dist[own] >= rho]
-            seeds.append((own[np.argmin(dist[own])], out[np.argmin(dist[out])] if len(out) else None))
+            ring = own[(dist[own] >= rho) & (dist[own] < rho + 3)]
+            ring = ring[np.argsort(dist[ring])]
+            picked = []   # ring pixels >= 3 px apart: one per way out of the tangle (string, hook, finger rim)
+            for r in ring:
+                if all(np.hypot(sy[r] - sy[q], sx[r] - sx[q]) >= 3 for q in picked) and len(picked) < 4:
+                    picked.append(r)
+            seeds.append((own[np.argmin(dist[own])], *picked))
         best, zones = None, Zones(skel, self._width, int(self.st["branch_min_px"]))
         for pair in sorted(seeds, key=lambda p: dist[p[0]])[:6]:
-            for fallback, c in enumerate(pair):
-                if c is None:
-                    break
+            penalty = 0.0   # once the nearest pixel's walk leaves the clear zone, a ring pixel's must beat it
+            for fallback, c in enumerate(pair):   # by 2 rho (a hook at the fingertips caught the first walk)
                 d0 = np.array([sy[c], sx[c]], float) - g
                 pts, bridged, amb, fold, passed = walk_skeleton(
                     skel, (sy[c], sx[c]), self.st["max_gap_px"], d0 if np.hypot(*d0) >= 1 else None, zones=zones)
@@ -295,11 +302,13 @@ class FrameTracker:
                 if len(far) == 0:
                     continue
                 j1 = j0 + int(far[0])
-                if best is None or cum[-1] - cum[j1] > best[2]:
+                score = cum[-1] - cum[j1] - (penalty if fallback else 0.0)
+                if best is None or score > best[2]:
                     b = bridged[j1:].copy()
                     b[0] = False
-                    best = (pts[j1:], b, cum[-1] - cum[j1], pts, fallback, amb, passed, fold)
-                break
+                    best = (pts[j1:], b, score, pts, fallback, amb, passed, fold)
+                if not fallback:
+                    penalty = 2 * rho
         if best is None:
             return None
         walk = best[3].astype(int)
