@@ -27,7 +27,8 @@ valid tracked positions over the last ``tracking.rest_frames`` frames before the
 motion starts (:func:`stringcast.arm.motion_start`); points never valid there are
 filled with l0 segments between the known points around them
 (:func:`stringcast.rest_state.fill_rest_pose`, reported in ``Estimate.message``).
-The simulation starts at the first of those frames and is compared at every later frame up to the end of the joint log.
+The simulation starts at the first of those frames and is compared at every later
+frame up to the end of the joint log.
 """
 from __future__ import annotations
 

@@ -76,10 +76,9 @@ def _polygon(a: np.ndarray, b: np.ndarray, m: int, l0: float, above_dir: float) 
     ratio = c / l0
     alpha = brentq(lambda x: math.sin(m * x / 2) / math.sin(x / 2) - ratio, 1e-12, 2 * math.pi / m - 1e-12)
     beta = math.atan2(chord[1], chord[0])
-    options = [beta + sign * (m - 1) * alpha / 2 for sign in (1.0, -1.0)]
-    turn = [-1.0, 1.0]   # the first segment leans +(m-1) alpha / 2 from the chord: later ones turn back
-    k = int(np.argmax([math.cos(o - above_dir) for o in options]))
-    angles = options[k] + turn[k] * alpha * np.arange(m)
+    # segment j leans sign ((m - 1) / 2 - j) alpha from the chord; the side whose first segment is nearer above_dir
+    sign = max((1.0, -1.0), key=lambda sg: math.cos(beta + sg * (m - 1) * alpha / 2 - above_dir))
+    angles = beta + sign * ((m - 1) / 2 - np.arange(m)) * alpha
     steps = l0 * np.column_stack([np.cos(angles), np.sin(angles)])
     pts = a + np.vstack([np.zeros(2), np.cumsum(steps, axis=0)])
     pts[-1] = b                                            # equal to b to rounding
