@@ -59,7 +59,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.common import BENCH_DIR, ROOT, header, write
+from benchmarks.common import BENCH_DIR, ROOT, git_commit, header, write
 
 CAP = 8
 PAPER_TABLE3 = {1: 2, 2: 2, 3: 2, 4: 2, 5: 3, 6: 2, 7: 2}          # executions, paper Table 3
@@ -112,7 +112,9 @@ def run_one(string_type: int, seed: int, method: str, config: dict, work: Path, 
     executions. Reuses ``work/<name>/run.json`` when a previous run finished.
 
     Returns a dict: executions, hit, closest_approach_mm (per execution, lab truth), E_mm (per
-    trial, params.json), wall_s, s_per_execution, timings_s, error (None, or the failure)."""
+    trial, params.json), wall_s, s_per_execution, timings_s, git_commit (the code that ran it: a
+    table may gather campaigns run at different commits, ``--finished-only``), error (None, or the
+    failure)."""
     from stringcast.campaign import run_campaign
     from stringcast.files import DataError, read_json, write_json
 
@@ -123,7 +125,7 @@ def run_one(string_type: int, seed: int, method: str, config: dict, work: Path, 
         return read_json(done)
     cfg_path = project_root(root, method_config(config, method, seed))
     rec = {"string": string_type, "target": PAPER_TARGET[string_type], "seed": seed, "method": method,
-           "campaign": name, "error": None}
+           "campaign": name, "git_commit": git_commit(), "error": None}
     t0 = time.perf_counter()
     try:
         summary = run_campaign(name, str(string_type), str(PAPER_TARGET[string_type]),
@@ -238,6 +240,10 @@ def _table(doc: dict, methods: list[str]) -> str:
         paired = [f"{doc[f'paired_mean_{LABELS[m]}']:.2f}" for m in methods]
         lines.append(f"| mean over the {doc['paired_campaigns']} campaigns both methods finished | | | "
                      + " | ".join(paired) + " |")
+    names, by_method = {"paper": "the paper's method", "ours": "ours"}, doc.get("git_commits", {})
+    commits = "; ".join(f"{names[m]} at " + ", ".join(c[:7] if len(c) == 40 else c for c in by_method[m])
+                        for m in methods if by_method.get(m))
+    lines.append(f"\nCode that ran the campaigns: {commits}." if commits else "")
     total = len(doc["types"]) * len(doc["seeds"]) * len(methods)
     partial = "" if doc["complete"] else f" Partial run: {len(doc['runs'])} of {total} campaigns so far."
     return (f"Executions until the lab's tip hits (cap {CAP}; * = no hit, counted as {CAP}).{partial}\n\n"
@@ -289,6 +295,8 @@ def run(quick: bool = False, types: list[int] | None = None, seeds: list[int] | 
                 "goals": {"all_hit_ours": True, "max_ours": CAP, "mean_ours": 2.0},
                 "lab": "full-size (config/config.yaml as is, plus the method overlay)",
                 "runs": runs, "seconds_per_execution_mean": _mean_s(runs),
+                "git_commits": {m: sorted({r.get("git_commit") or "unrecorded" for r in runs if r["method"] == m})
+                                for m in methods},
                 "figure": "loop.png", "table": "loop.md",
             }
             write("loop", doc)
