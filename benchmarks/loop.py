@@ -201,7 +201,7 @@ def _figure(per: dict, methods: list[str], path: Path) -> None:
                                                                         "ours": "ours"}[m], c)
                                                            for m, c in zip(methods, ("C1", "C0"))]
     w = 0.8 / len(series)
-    fig, ax = plt.subplots(figsize=(1.2 * len(keys) + 3, 3.2))
+    fig, ax = plt.subplots(figsize=(1.2 * len(keys) + 3, 3.6))   # the legend under the axes hides no dot
     for i, (key, label, colour) in enumerate(series):
         xs = x - 0.4 + w * (i + 0.5)
         if key == "paper_table3":
@@ -215,7 +215,7 @@ def _figure(per: dict, methods: list[str], path: Path) -> None:
     ax.set_xticks(x, [f"type {k}" for k in keys])
     ax.set_ylabel("executions to a hit")
     ax.set_ylim(0, CAP + 0.5)
-    ax.legend(fontsize=8, loc="upper left")
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=len(series), frameon=False)
     ax.set_title("dots: one seed each (red: no hit within the cap)", fontsize=8)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
