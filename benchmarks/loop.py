@@ -16,12 +16,12 @@ Methods are config overlays:
   (Section V), the paper's method as the config describes it.
 * ``ours``: ``estimation.optimizer: cmaes`` (two runs), ``motion.planner: robust`` (the motion
   that hits under the most of the estimate's best K sets, then by margin), a new motion after a
-  tracked miss over 45 mm (``motion.replan_miss_mm``; README says why 45) and
-  ``motion.residual_correction`` (each
-  set aimed at the target minus the model's error on the played motion's tracked tip,
-  :mod:`stringcast.residual`), and E's tip weighting ``evaluation.w: 1.0`` (eq. (6); the paper's
-  0.1): point i counts i times as much as point 1 (README says why). Not in ours: ``motion.first_ensemble`` (the first plan scored
-  under random Table 2 sets). With it (16 sets, 2000 extra candidates) the seed-0 campaigns of
+  tracked miss over 45 mm (``motion.replan_miss_mm``; README says why 45),
+  ``motion.residual_correction`` (each set aimed at the target minus the model's error on the
+  played motion's tracked tip, :mod:`stringcast.residual`), and E's tip weighting
+  ``evaluation.w: 1.0`` (eq. (6); the paper's 0.1): point i counts i times as much as point 1
+  (README says why). Not in ours: ``motion.first_ensemble`` (the first plan scored under
+  random Table 2 sets). With it (16 sets, 2000 extra candidates) the seed-0 campaigns of
   types 1-6 took 2, 3, 1, 2, 4, 7 executions, against 2, 2, 3, 1, 2, 2 without it: the later
   plans, which perturb the first motion, then kept missing by 20-25 mm.
 
@@ -243,7 +243,8 @@ def _table(doc: dict, methods: list[str]) -> str:
     names, by_method = {"paper": "the paper's method", "ours": "ours"}, doc.get("git_commits", {})
     commits = "; ".join(f"{names[m]} at " + ", ".join(c[:7] if len(c) == 40 else c for c in by_method[m])
                         for m in methods if by_method.get(m))
-    lines.append(f"\nCode that ran the campaigns: {commits}." if commits else "")
+    if commits:
+        lines.append(f"\nCode that ran the campaigns: {commits}.")
     total = len(doc["types"]) * len(doc["seeds"]) * len(methods)
     partial = "" if doc["complete"] else f" Partial run: {len(doc['runs'])} of {total} campaigns so far."
     return (f"Executions until the lab's tip hits (cap {CAP}; * = no hit, counted as {CAP}).{partial}\n\n"
