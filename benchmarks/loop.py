@@ -67,7 +67,8 @@ PAPER_TARGET = {1: 1, 2: 1, 3: 2, 4: 3, 5: 3, 6: 3, 7: 4}          # DESIGN.md, 
 METHODS = {
     "paper": {"estimation": {"optimizer": "random_search"}, "motion": {"planner": "paper"}},
     "ours": {"estimation": {"optimizer": "cmaes", "cmaes_runs": 2}, "evaluation": {"w": 1.0},
-             "motion": {"planner": "robust", "residual_correction": True, "replan_miss_mm": 45.0},
+             "motion": {"planner": "robust", "residual_correction": True, "replan_miss_mm": 45.0,
+                        "replan_perturb_rad_s": 1.0},
              "model": {"ranges": {"k_ph": [1.0e-3, 1.0], "c_ph": [1.0e-3, 1.0]}}},
 }
 LABELS = {"paper": "paper_method", "ours": "ours"}
