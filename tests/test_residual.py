@@ -1,5 +1,6 @@
 """Residual correction of the plan (stringcast.residual): delay, residual, and the planner aiming with it."""
 import copy
+import dataclasses
 
 import numpy as np
 import pandas as pd
@@ -135,6 +136,29 @@ def test_planner_aims_the_model_at_the_corrected_target(tmp_path, config, campai
                       joints_csv=tmp_path / "joints.csv")
     assert "replan_miss_mm" in res.message and res.residual is None
     assert res.motion.T != m1.T or not np.allclose(res.motion.q0, m1.q0)
+    # replan_perturb_rad_s: first a wider, corrected perturbation of the played motion (its posture and T)
+    cfg["motion"]["replan_perturb_rad_s"] = 1.0
+    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, cfg, tmp_path / "m5.csv",
+                      tmp_path / "m5.json", seed=1, tracks_parquet=tmp_path / "tracks.parquet",
+                      joints_csv=tmp_path / "joints.csv")
+    assert res.hit and "perturbed by +-1 rad/s" in res.message and res.residual is not None
+    assert res.motion.T == m1.T and np.allclose(res.motion.q0, m1.q0)
+    # ... and the new motion when that perturbation cannot hit (too small to bridge the tracked 17 mm
+    # to a 5 mm target)
+    cfg["motion"].update(replan_perturb_rad_s=1e-6, max_candidates=256)
+    small_target = dataclasses.replace(campaign, target=dataclasses.replace(campaign.target, radius=0.005))
+    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", small_target, cfg, tmp_path / "m6.csv",
+                      tmp_path / "m6.json", seed=1, tracks_parquet=tmp_path / "tracks.parquet",
+                      joints_csv=tmp_path / "joints.csv")
+    assert "hits under 0% of the sets (< 90%)" in res.message and "a new motion" in res.message
+    assert res.residual is None and (res.motion.T != m1.T or not np.allclose(res.motion.q0, m1.q0))
+    # a model further off the played tip (41 mm) than replan_residual_mm: no perturbation, a new motion
+    cfg["motion"].update(replan_miss_mm=0.0, replan_residual_mm=30.0)
+    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, cfg, tmp_path / "m7.csv",
+                      tmp_path / "m7.json", seed=1, tracks_parquet=tmp_path / "tracks.parquet",
+                      joints_csv=tmp_path / "joints.csv")
+    assert "relies on a model 41 mm off" in res.message and "a new motion" in res.message
+    assert res.residual is None and (res.motion.T != m1.T or not np.allclose(res.motion.q0, m1.q0))
     # without the trial's files the correction cannot be made, and says so
     with pytest.raises(pn.ConfigError, match="residual_correction"):
         pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, cfg, tmp_path / "m3.csv",
