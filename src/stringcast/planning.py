@@ -34,33 +34,21 @@ from an initial posture q0):
   estimate yet, is scored the same way under K random sets over Table 2's box
   (:func:`stringcast.parameters.prior_ensemble`), searching ``motion.first_extra_after_hit``
   candidates past the first hit: a motion that hits under many arbitrary strings is one
-  whose tip path depends little on the string. Measured offline on the loop benchmark's 21
-  campaigns (K = 16, 2000 extra, the lab's physics as judge): the first execution hit on 8
-  (closest approach <= 20 mm) in one draw of the sets and 4 of 15 in another, against 4 of 21
-  (2 of 15) with the paper's first plan; in the loop, though, the later plans that perturb
-  such a motion kept missing by 20-25 mm (types 5, 6: 4 and 7 executions against 2), and again
-  at ae309c9 (28 executions against 22 over 10 campaigns), so ours leaves it off.
+  whose tip path depends little on the string. Its first executions came closer, but in two
+  loop runs the later plans took more executions (README, "The paper's method and ours").
 * Residual correction (``motion.residual_correction``, later motions, with either
   planner; ours): every set aims at the target minus the model's error on the played
   motion's tracked tip (:mod:`stringcast.residual`), so d_min is the corrected one.
-* Replan (``motion.replan_miss_mm`` > 0; ours): when the played motion's tracked tip missed
+* Replan (``motion.replan_miss_mm`` > 0; ours 45): when the played motion's tracked tip missed
   the target by more than that, the next motion is searched afresh (random posture and T,
-  as the first) with the estimate, not as a perturbation: a small change cannot bridge a
-  large miss, and the residual is a first-order correction. Ours uses 45 mm: re-planning the
-  loop benchmark's steps offline (the lab's physics as judge), after misses over 45 mm the
-  played perturbations hit 2 of 11 and fresh plans 17 of 33 (3 seeds each); after misses
-  under 45 mm the perturbations hit 9 of 11 and fresh plans 5 of 9. With
+  as the first) with the estimate, not as a perturbation: a +-0.5 rad/s change cannot bridge a
+  large miss, and the residual is a first-order correction. With
   ``motion.replan_perturb_rad_s`` > 0 (ours: 1.0) a *wider* perturbation of the played motion
   (residual-corrected) is searched first and kept when its best candidate hits under at least
-  ``motion.replan_min_share`` (0.9) of the ensemble; else the fresh plan. At the 14 steps after
-  a miss over 45 mm in the loop run at 35c1af3 (4 planner seeds each, the lab's physics as
-  judge): fresh plans hit 26 of 56, +-1 rad/s perturbations 34 of 56 (+-2: 25), and the rule
-  38 of 56. The perturbations missed by 100-400 mm exactly where the ensemble disagreed
-  (share 0.2-0.55 at 2 steps): the first-order correction does not stretch that far there.
-  With ``motion.replan_residual_mm`` > 0 (ours: 50) no perturbation, narrow or wide, is played
-  when the model's tip error on the played motion (median over the motion) exceeds it; the
-  next motion is then the fresh plan. Over four loop runs of ours, the residual-corrected
-  perturbations hit in 21 of 25 steps with that error under 50 mm and 3 of 13 above it.
+  ``motion.replan_min_share`` (0.9) of the ensemble. With ``motion.replan_residual_mm`` > 0
+  (ours: 50) no perturbation, narrow or wide, is played when the model's tip error on the
+  played motion (median over the motion) exceeds it. The offline and loop measurements behind
+  the three numbers are in the README ("Replan after a miss over 45 mm").
 
 The model's predictions (equilibrium, closest approach, tip path) are
 :class:`stringcast.prediction.Predictor`'s. Stage entry points: :func:`run_first_plan`
@@ -382,7 +370,8 @@ def run_plan(params_json: Path, played_motion_json: Path, campaign: Campaign, co
     ``motion.replan_miss_mm`` > 0 and a tracked miss beyond it, the next motion is a wider
     perturbation (``motion.replan_perturb_rad_s``) if the ensemble agrees on it, else a new
     search (:func:`search` without ``previous``); motion.json's ``played_observed_miss_mm``
-    is that miss.
+    is that miss. With ``motion.replan_residual_mm`` > 0 no perturbation is played on a model
+    further than that off the played motion's tracked tip (the new search instead).
 
     Raises:
         DataError: unreadable params.json (or, robust, one without ``top``), a played
