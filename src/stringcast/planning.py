@@ -332,19 +332,21 @@ def _replan(campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndar
         cfg = {**config, "motion": {**mcfg, "perturb_rad_s": wide}}
         result = search(campaign, cfg, coeffs, mu, _rng(config, seed), previous=previous, ensemble=ensemble,
                         observed=observed)
-        share = result.hit_share if ensemble is not None else float(result.hit)
+        share = result.hit_share if ensemble is not None else float(result.hit)   # search sets it with an ensemble
         need = float(mcfg.get("replan_min_share", 0.9))
         too_far = _residual_too_large(result, mcfg)
-        if share is not None and share >= need and not too_far:
-            return replace(result, message="; ".join(
-                [f"{why}: the played motion perturbed by +-{wide:g} rad/s (hits under {share:.0%} of the sets)"]
-                + [result.message] * bool(result.message)))
-        why += f"; its +-{wide:g} rad/s perturbation " + (too_far or f"hits under {share or 0:.0%} of the sets "
+        if share >= need and not too_far:
+            return _with_message(result, f"{why}: the played motion perturbed by +-{wide:g} rad/s "
+                                         f"(hits under {share:.0%} of the sets)")
+        why += f"; its +-{wide:g} rad/s perturbation " + (too_far or f"hits under {share:.0%} of the sets "
                                                            f"(< {need:.0%})")
     result = search(campaign, config, coeffs, mu, _rng(config, seed), ensemble=ensemble)
-    return replace(result, message="; ".join(
-        [f"{why}: a new motion (random posture and T), not a perturbation of the played one"]
-        + [result.message] * bool(result.message)))
+    return _with_message(result, f"{why}: a new motion (random posture and T), not a perturbation of the played one")
+
+
+def _with_message(result: PlanResult, text: str) -> PlanResult:
+    """``result`` with ``text`` put before its own message."""
+    return replace(result, message="; ".join([text] + [result.message] * bool(result.message)))
 
 
 def _residual_too_large(result: PlanResult, mcfg: Mapping) -> str:
@@ -409,9 +411,10 @@ def run_plan(params_json: Path, played_motion_json: Path, campaign: Campaign, co
     else:
         result = search(campaign, config, coeffs, mu, _rng(config, seed), previous=previous, ensemble=ensemble,
                         observed=observed)
-        if _residual_too_large(result, mcfg):
+        too_far = _residual_too_large(result, mcfg)
+        if too_far:
             result = _replan(campaign, config, coeffs, mu, seed, previous, ensemble, observed,
-                             "the perturbation " + _residual_too_large(result, mcfg))
+                             "the perturbation " + too_far)
     write_motion(result, campaign, config, coeffs, mu, seed, out_csv, out_json, "next",
                  observed_miss_mm=miss * 1000 if np.isfinite(miss) else None)
     return result
