@@ -18,7 +18,8 @@ Methods are config overlays:
   that hits under the most of the estimate's best K sets, then by margin), after a tracked
   miss over 45 mm (``motion.replan_miss_mm``; README says why 45) a +-1 rad/s perturbation of
   the played motion if at least 90 % of the sets agree it hits, else a new motion
-  (``motion.replan_perturb_rad_s``, ``replan_min_share``), no perturbation at all when the
+  (``motion.replan_perturb_rad_s``, ``replan_min_share``; a new motion too when the played one
+  was such a perturbation and also missed by over 45 mm), no perturbation at all when the
   model's tip error on the played motion exceeds 50 mm (``motion.replan_residual_mm``),
   ``motion.residual_correction`` (each set aimed at the target minus the model's error on the
   played motion's tracked tip, :mod:`stringcast.residual`), and E's tip weighting

@@ -60,7 +60,7 @@ def test_first_plan_with_prior_ensemble(tmp_path, campaign, small):
     assert res.planner == "robust" and res.ensemble_d_min.shape == (6,)
     assert res.hit_share == pytest.approx(np.mean(res.ensemble_d_min <= campaign.target.radius))
     doc = read_json(tmp_path / "motion.json")
-    assert doc["kind"] == "first" and doc["ensemble_size"] == 6
+    assert doc["kind"] == doc["origin"] == "first" and doc["ensemble_size"] == 6
     # the search went on past the first hit by first_extra_after_hit, not extra_after_hit
     assert res.candidates <= small["motion"]["max_candidates"]
     base = pn.run_first_plan(campaign, small, tmp_path / "m0.csv", tmp_path / "m0.json", seed=0)

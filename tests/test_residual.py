@@ -143,6 +143,15 @@ def test_planner_aims_the_model_at_the_corrected_target(tmp_path, config, campai
                       joints_csv=tmp_path / "joints.csv")
     assert res.hit and "perturbed by +-1 rad/s" in res.message and res.residual is not None
     assert res.motion.T == m1.T and np.allclose(res.motion.q0, m1.q0)
+    assert [pn.read_json(tmp_path / f"m{k}.json")["origin"] for k in (2, 4, 5)] == \
+        ["perturbation", "new", "wide_perturbation"]
+    # ... but not twice in a row: a played wide perturbation that missed so gets the new motion
+    write_json(tmp_path / "m1w.json", {**pn.read_json(tmp_path / "m1.json"), "origin": "wide_perturbation"})
+    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1w.json", campaign, cfg, tmp_path / "m5w.csv",
+                      tmp_path / "m5w.json", seed=1, tracks_parquet=tmp_path / "tracks.parquet",
+                      joints_csv=tmp_path / "joints.csv")
+    assert "after a wide perturbation: a new motion" in res.message and res.origin == "new"
+    assert res.residual is None and (res.motion.T != m1.T or not np.allclose(res.motion.q0, m1.q0))
     # ... and the new motion when that perturbation cannot hit (too small to bridge the tracked 17 mm
     # to a 5 mm target)
     cfg["motion"].update(replan_perturb_rad_s=1e-6, max_candidates=256)

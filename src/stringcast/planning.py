@@ -30,12 +30,9 @@ from an initial posture q0):
   within ``motion.robust_screen_mm`` (default 20) of the target's edge. The chosen
   motion has the largest hit share (members for which it hits), then the largest
   margin (radius - median d_min over the members); the stopping rule is the paper's.
-* First-plan ensemble (``motion.first_ensemble`` = K > 0; tried, off in ours): the first plan, with no
-  estimate yet, is scored the same way under K random sets over Table 2's box
-  (:func:`stringcast.parameters.prior_ensemble`), searching ``motion.first_extra_after_hit``
-  candidates past the first hit: a motion that hits under many arbitrary strings is one
-  whose tip path depends little on the string. Its first executions came closer, but in two
-  loop runs the later plans took more executions (README, "The paper's method and ours").
+* First-plan ensemble (``motion.first_ensemble`` = K > 0; tried, off in ours): the first plan is
+  scored the same way under K random sets over Table 2's box (:func:`stringcast.parameters.prior_ensemble`),
+  ``motion.first_extra_after_hit`` candidates past the first hit (README says why it is off).
 * Residual correction (``motion.residual_correction``, later motions, with either
   planner; ours): every set aims at the target minus the model's error on the played
   motion's tracked tip (:mod:`stringcast.residual`), so d_min is the corrected one.
@@ -45,7 +42,9 @@ from an initial posture q0):
   large miss, and the residual is a first-order correction. With
   ``motion.replan_perturb_rad_s`` > 0 (ours: 1.0) a *wider* perturbation of the played motion
   (residual-corrected) is searched first and kept when its best candidate hits under at least
-  ``motion.replan_min_share`` (0.9) of the ensemble. With ``motion.replan_residual_mm`` > 0
+  ``motion.replan_min_share`` (0.9) of the ensemble; not twice in a row: after a wide
+  perturbation that missed by more than ``replan_miss_mm`` the next motion is the fresh one
+  (README: at d25a73b, type 5 seed 5, five in a row missed by 77-129 mm). With ``motion.replan_residual_mm`` > 0
   (ours: 50) no perturbation, narrow or wide, is played when the model's tip error on the
   played motion (median over the motion) exceeds it. The offline and loop measurements behind
   the three numbers are in the README ("Replan after a miss over 45 mm").
@@ -97,6 +96,8 @@ class PlanResult:
     """Target radius - median ensemble d_min, m (robust planner only; > 0: the median member hits)."""
     residual: dict | None = None
     """Residual correction (:meth:`stringcast.residual.TipResidual.summary`); d_min is then corrected."""
+    origin: str = ""
+    """How the motion was made (motion.json ``origin``): first, perturbation, wide_perturbation, new."""
 
 
 # ---------------------------------------------------------------------------
@@ -297,7 +298,7 @@ def write_motion(result: PlanResult, campaign: Campaign, config: Mapping, coeffs
         "ensemble_margin_mm": None if result.margin is None else result.margin * 1000,
         "ensemble_d_min_mm": None if result.ensemble_d_min is None else np.asarray(result.ensemble_d_min) * 1000,
         "residual_correction": result.residual, "played_observed_miss_mm": observed_miss_mm,
-        "message": result.message})
+        "origin": result.origin, "message": result.message})
 
 
 def _rng(config: Mapping, seed: int) -> np.random.Generator:
@@ -315,7 +316,7 @@ def run_first_plan(campaign: Campaign, config: Mapping, out_csv: Path, out_json:
         ensemble = prior_ensemble(config, campaign.string, k, rng)
         extra = mcfg.get("first_extra_after_hit", mcfg.get("extra_after_hit", 200))
         config = {**config, "motion": {**mcfg, "extra_after_hit": int(extra)}}
-    result = search(campaign, config, coeffs, mu, rng, ensemble=ensemble)
+    result = replace(search(campaign, config, coeffs, mu, rng, ensemble=ensemble), origin="first")
     write_motion(result, campaign, config, coeffs, mu, seed, out_csv, out_json, "first")
     return result
 
@@ -336,11 +337,12 @@ def _replan(campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndar
         need = float(mcfg.get("replan_min_share", 0.9))
         too_far = _residual_too_large(result, mcfg)
         if share >= need and not too_far:
-            return _with_message(result, f"{why}: the played motion perturbed by +-{wide:g} rad/s "
-                                         f"(hits under {share:.0%} of the sets)")
+            return _with_message(replace(result, origin="wide_perturbation"),
+                                 f"{why}: the played motion perturbed by +-{wide:g} rad/s "
+                                 f"(hits under {share:.0%} of the sets)")
         why += f"; its +-{wide:g} rad/s perturbation " + (too_far or f"hits under {share:.0%} of the sets "
                                                            f"(< {need:.0%})")
-    result = search(campaign, config, coeffs, mu, _rng(config, seed), ensemble=ensemble)
+    result = replace(search(campaign, config, coeffs, mu, _rng(config, seed), ensemble=ensemble), origin="new")
     return _with_message(result, f"{why}: a new motion (random posture and T), not a perturbation of the played one")
 
 
@@ -372,7 +374,8 @@ def run_plan(params_json: Path, played_motion_json: Path, campaign: Campaign, co
     ``motion.replan_miss_mm`` > 0 and a tracked miss beyond it, the next motion is a wider
     perturbation (``motion.replan_perturb_rad_s``) if the ensemble agrees on it, else a new
     search (:func:`search` without ``previous``); motion.json's ``played_observed_miss_mm``
-    is that miss. With ``motion.replan_residual_mm`` > 0 no perturbation is played on a model
+    is that miss; a played wide perturbation (motion.json ``origin``) that missed so is not
+    perturbed again. With ``motion.replan_residual_mm`` > 0 no perturbation is played on a model
     further than that off the played motion's tracked tip (the new search instead).
 
     Raises:
@@ -405,12 +408,14 @@ def run_plan(params_json: Path, played_motion_json: Path, campaign: Campaign, co
         miss = observed_miss(*observed[:3], campaign.target.xy, previous.T + float(mcfg.get("flight_window_s", 0.5)))
     observed = observed if residual else None
     if replan_mm > 0 and miss * 1000 > replan_mm:
-        result = _replan(campaign, config, coeffs, mu, seed, previous, ensemble, observed,
-                         f"the tracked tip missed by {miss * 1000:.0f} mm (> replan_miss_mm {replan_mm:.0f})",
-                         float(mcfg.get("replan_perturb_rad_s", 0.0)))
+        why = f"the tracked tip missed by {miss * 1000:.0f} mm (> replan_miss_mm {replan_mm:.0f})"
+        wide = float(mcfg.get("replan_perturb_rad_s", 0.0))
+        if wide > 0 and read_json(played_motion_json).get("origin") == "wide_perturbation":
+            wide, why = 0.0, why + " after a wide perturbation"
+        result = _replan(campaign, config, coeffs, mu, seed, previous, ensemble, observed, why, wide)
     else:
-        result = search(campaign, config, coeffs, mu, _rng(config, seed), previous=previous, ensemble=ensemble,
-                        observed=observed)
+        result = replace(search(campaign, config, coeffs, mu, _rng(config, seed), previous=previous,
+                                ensemble=ensemble, observed=observed), origin="perturbation")
         too_far = _residual_too_large(result, mcfg)
         if too_far:
             result = _replan(campaign, config, coeffs, mu, seed, previous, ensemble, observed,
