@@ -33,7 +33,7 @@ match it. ``dt_halved_mm``: the largest point distance between the model at chi*
 dt and with dt / 2 at 25/50/75/100 % of the compared window; where it grows to tens of mm
 late in the window, E there compares the film with the integrator's chaos (the whip after
 the arm stops), which is why the surface is rugged (the stiffness switch k_sh / k_h is not the
-cause: E is as rugged with it removed, measured once by hand).
+cause: E is nearly as rugged with it removed, measured once by hand on type 7).
 Figure: best E against evaluations per type, the three optimizers
 (results/bench/estimation.png).
 
@@ -102,7 +102,8 @@ def evals_to_reach(trace: np.ndarray, level: float) -> int | None:
 
 
 def ruggedness(campaign, d: Path, config: dict, chi_star: np.ndarray, seed: int = 0) -> dict:
-    """E along random directions from ``chi_star`` (module doc): {"steps", "E_ratio" (dirs, steps), "basin_radius_chi"}."""
+    """E around ``chi_star`` (module doc): {"steps", "E_ratio" (dirs, steps), "basin_radius_chi",
+    "pocket" (per radius), "dt_halved_mm"}."""
     from stringcast.estimation import build_problem, make_objective
     from stringcast.files import TRACK_COLUMNS, read_joint_table, read_parquet
 

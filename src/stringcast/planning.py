@@ -47,8 +47,8 @@ from an initial posture q0):
   perturbation that missed by more than ``replan_miss_mm`` the next motion is the fresh one
   (README: at d25a73b, type 5 seed 5, five in a row missed by 77-129 mm). With
   ``motion.replan_residual_mm`` > 0 (ours: 50) no perturbation, narrow or wide, is played when
-  the model's tip error on the played motion (median over the motion) exceeds it. The offline and loop measurements behind
-  the three numbers are in the README ("Replan after a miss over 45 mm").
+  the model's tip error on the played motion (median over the motion) exceeds it. The offline
+  and loop measurements behind the numbers are in the README ("Replan after a miss over 45 mm").
 
 The model's predictions (equilibrium, closest approach, tip path) are
 :class:`stringcast.prediction.Predictor`'s. Stage entry points: :func:`run_first_plan`
