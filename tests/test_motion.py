@@ -75,3 +75,28 @@ def test_hanging_string_clear_of_the_arm(config):
     down = np.array([0.5, -1.0, -0.3])  # gripper pointing down and out: the string hangs free
     assert mo.postures_ok(camp, up, 0.05) and not mo.postures_ok(camp, up, 0.05, clearance=0.06)
     assert mo.postures_ok(camp, down, 0.05, clearance=0.06)
+
+
+def test_valid_curves_keep_the_arm_inside_its_limits(campaign):
+    """Every kept curve is inside the position, speed and acceleration limits from its posture (checked
+    by arm.check_limits, independently of the fast pre-test); curves too fast for the arm are dropped;
+    a posture no curve fits from gives nothing."""
+    from stringcast.arm import check_limits
+
+    arm, rate, T = campaign.arm, campaign.arm.controller_rate, 0.6
+    rng = np.random.default_rng(4)
+    postures = mo.sample_postures(campaign, rng, 8, 0.05)
+    cps = mo.sample_control_points(rng, T, arm.n_joints, 6, 40.0, 200)
+    kept = mo.valid_curves(arm, cps, T, rate, postures, rng)
+    assert 0 < len(kept) <= 200
+    for cp, q0, q, i in kept:
+        np.testing.assert_array_equal(q0, postures[i])
+        np.testing.assert_allclose(q[0], q0)
+        rep = check_limits(arm, q, 1.0 / rate)
+        assert rep.ok and rep.velocity.max() <= 1.0 - mo.LIMIT_MARGIN and rep.acceleration.max() <= 1.0
+    _, qd = mo.joint_paths(cps, T, rate)
+    too_fast = cps * (2 * np.max(arm.qd_max) / np.abs(qd).max(axis=(1, 2)))[:, None, None]   # peak 2x the limit
+    assert mo.valid_curves(arm, too_fast, T, rate, postures, rng) == []
+    at_the_limit = np.repeat(arm.q_max[None], 2, axis=0)       # any positive swing leaves the box
+    up = np.abs(cps[:20])
+    assert mo.valid_curves(arm, up, T, rate, at_the_limit, rng) == []

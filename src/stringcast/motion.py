@@ -15,6 +15,8 @@ A motion is one joint-velocity Bezier curve per joint over [0, T]:
   or hanging string (length L straight down) would come within
   ``motion.floor_margin_m`` of the floor.
 
+Limits: :func:`valid_curves` keeps the curves the arm can play from a given posture.
+
 Files: ``motion.csv`` (t_s, q1_rad..) and its ``motion.json`` sidecar, read here
 (:func:`read_motion`, :func:`read_motion_json`) and written by
 :func:`stringcast.planning.write_motion`. The search for a motion that hits the
@@ -30,7 +32,7 @@ import numpy as np
 from scipy.integrate import cumulative_trapezoid
 from scipy.special import comb
 
-from .arm import forward_kinematics
+from .arm import check_limits, forward_kinematics
 from .config import Campaign, ConfigError
 from .files import DataError, read_joint_table, read_json
 
@@ -97,6 +99,52 @@ def joint_paths(control_points: np.ndarray, T: float, rate: float) -> tuple[np.n
     t, _ = time_grid(T, rate)
     qd = bezier_velocity(control_points, T, t)
     return cumulative_trapezoid(qd, t, axis=-2, initial=0.0), qd
+
+
+LIMIT_MARGIN = 1e-3
+"""Planned motions use at most (1 - LIMIT_MARGIN) of the speed and acceleration limits: the executor
+re-checks the file after its 9-digit CSV rounding, which moves finite-difference accelerations."""
+
+
+def valid_curves(arm, control_points: np.ndarray, T: float, rate: float, postures: np.ndarray,
+                 rng: np.random.Generator) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, int]]:
+    """The control-point sets whose motion fits the arm's limits from one of the given postures.
+
+    A fast vectorised test first (speed and acceleration of every curve, and the box of
+    initial postures that keeps the angle change inside the position limits); each survivor
+    then takes a random posture inside its box and is checked in full by
+    :func:`stringcast.arm.check_limits` (positions, speed and acceleration at
+    (1 - :data:`LIMIT_MARGIN`) of the limits, floor).
+
+    Args:
+        arm: :class:`stringcast.config.ArmSpec`.
+        control_points: (B, J, N) rad/s, V_1..V_N per joint (eq. (1)).
+        T: duration, s (on the controller grid, :func:`time_grid`).
+        rate: controller rate, Hz.
+        postures: (P, J) rad, candidate initial postures q0.
+        rng: picks the posture among those that fit.
+
+    Returns:
+        A list of (control_points (J, N), q0 (J,), q (K, J) rad, posture index) for the sets that fit;
+        empty when none does.
+    """
+    dq, qd = joint_paths(control_points, T, rate)
+    qdd = np.gradient(qd, 1.0 / rate, axis=-2)
+    ok = np.all(np.max(np.abs(qd), axis=-2) <= arm.qd_max, axis=-1)
+    ok &= np.all(np.max(np.abs(qdd), axis=-2) <= arm.qdd_max, axis=-1)
+    lo, hi = arm.q_min - dq.min(axis=-2), arm.q_max - dq.max(axis=-2)     # (B, J) the q0 that keep q inside
+    ok &= np.all(lo <= hi, axis=-1)
+    out = []
+    for b in np.nonzero(ok)[0]:
+        fits = np.nonzero(np.all((postures >= lo[b] - 1e-12) & (postures <= hi[b] + 1e-12), axis=1))[0]
+        if len(fits) == 0:
+            continue
+        i = int(rng.choice(fits))
+        q = postures[i] + dq[b]
+        rep = check_limits(arm, q, 1.0 / rate)
+        if rep.ok and max(rep.velocity.max(), rep.acceleration.max()) <= 1.0 - LIMIT_MARGIN:
+            out.append((control_points[b], postures[i], q, i))
+    return out
 
 
 # ---------------------------------------------------------------------------

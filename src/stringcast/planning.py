@@ -63,17 +63,11 @@ from typing import Mapping
 
 import numpy as np
 
-from .arm import check_limits
 from .config import PARAM_NAMES, Campaign, ConfigError
 from .files import read_json, write_joint_table, write_json
 from .parameters import ensemble_parameters, first_parameters, planned_parameters, prior_ensemble
-from .motion import (Motion, joint_paths, read_motion_json, sample_control_points, sample_postures, start_box,
-                     time_grid)
+from .motion import Motion, read_motion_json, sample_control_points, sample_postures, start_box, time_grid, valid_curves
 from .prediction import Predictor
-
-
-LIMIT_MARGIN = 1e-3
-"""Planned motions use at most (1 - LIMIT_MARGIN) of the speed and acceleration limits."""
 
 
 @dataclass(frozen=True)
@@ -104,35 +98,6 @@ class PlanResult:
 # ---------------------------------------------------------------------------
 # Candidate search
 # ---------------------------------------------------------------------------
-def _fast_limits(arm, dq: np.ndarray, qd: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Speed/acceleration test and the feasible q0 box per candidate: ok (B,), lo (B, J), hi (B, J)."""
-    qdd = np.gradient(qd, 1.0 / rate, axis=-2)
-    ok = np.all(np.max(np.abs(qd), axis=-2) <= arm.qd_max, axis=-1)
-    ok &= np.all(np.max(np.abs(qdd), axis=-2) <= arm.qdd_max, axis=-1)
-    lo = arm.q_min - dq.min(axis=-2)
-    hi = arm.q_max - dq.max(axis=-2)
-    return ok & np.all(lo <= hi, axis=-1), lo, hi
-
-
-def _valid_curves(arm, cps: np.ndarray, T: float, rate: float, postures: np.ndarray, rng: np.random.Generator):
-    """Keep the control-point sets (B, J, N) whose curve fits a posture: list of (cp, q0, q, posture index)."""
-    dq, qd = joint_paths(cps, T, rate)
-    ok, lo, hi = _fast_limits(arm, dq, qd, rate)
-    out = []
-    for b in np.nonzero(ok)[0]:
-        fits = np.nonzero(np.all((postures >= lo[b] - 1e-12) & (postures <= hi[b] + 1e-12), axis=1))[0]
-        if len(fits) == 0:
-            continue
-        i = int(rng.choice(fits))
-        q = postures[i] + dq[b]
-        rep = check_limits(arm, q, 1.0 / rate)
-        # keep LIMIT_MARGIN below the speed/acceleration limits: the executor re-checks the
-        # file after its 9-digit CSV rounding, which moves finite-difference accelerations
-        if rep.ok and max(rep.velocity.max(), rep.acceleration.max()) <= 1.0 - LIMIT_MARGIN:
-            out.append((cps[b], postures[i], q, i))
-    return out
-
-
 def search(campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarray, rng: np.random.Generator,
            previous: Motion | None = None, ensemble: tuple[np.ndarray, np.ndarray] | None = None,
            observed: tuple | None = None) -> PlanResult:
@@ -200,7 +165,7 @@ def search(campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarr
                 cps[..., -1] = previous.control_points[:, -1]
             else:
                 cps = sample_control_points(rng, T, arm.n_joints, n_cp, alpha, 4 * want)
-            cands += _valid_curves(arm, cps, T, pl.rate, postures, rng)
+            cands += valid_curves(arm, cps, T, pl.rate, postures, rng)
             if len(cands) >= want:
                 break
         cands = cands[:want]
