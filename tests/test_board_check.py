@@ -99,7 +99,7 @@ def test_calibration_stage_records_the_check_and_warns(still_arm, tmp_path):
     x0, y0 = cfg["setups"]["default"]["board_origin_mm"]
     bad_cfg["setups"]["default"]["board_origin_mm"] = [x0 + 30.0, y0]
     run_calibration(trial, calib, resolve_campaign({"string": 1, "target": 1}, bad_cfg, "bc"),
-                          tmp_path / "bad.json", config=bad_cfg)
+                    tmp_path / "bad.json", config=bad_cfg)
     doc = read_json(tmp_path / "bad.json")
     assert doc["board_check"]["dx_mm"] - ok.board_check["dx_mm"] == pytest.approx(30.0, abs=2.0)
     assert any("board-to-robot check" in w and "board_origin_mm" in w for w in doc["warnings"])
