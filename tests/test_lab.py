@@ -384,6 +384,27 @@ def test_lab_shares_no_code_with_the_model():
                 assert not (parts & banned), f"{f.name} imports {mod}"
 
 
+def test_pipeline_never_reads_the_lab_truth():
+    """Only the lab (which writes them) and the campaign driver (the experimenter's stand-in) name the
+    lab's truth files; no workflow rule, stage module or report does, and only the executor's virtual
+    backend and the driver (calibration clip, CLI) use the lab at all."""
+    import ast
+
+    import stringcast
+
+    pkg = Path(stringcast.__file__).parent
+    root = pkg.parents[1]
+    sources = [f for f in pkg.glob("*.py")] + sorted((root / "workflow").rglob("*.smk")) + [root / "Snakefile"]
+    naming = {f.name for f in sources if "ground_truth" in f.read_text()}
+    assert naming == {"campaign.py"}, naming
+    users = set()
+    for f in pkg.glob("*.py"):
+        for node in ast.walk(ast.parse(f.read_text())):
+            if isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == "lab":
+                users.add(f.name)
+    assert users <= {"campaign.py", "cli.py", "executor.py"}, users
+
+
 # ---------------------------------------------------------------------------- harder footage
 def test_apply_preset(config):
     from stringcast.lab import PRESETS, apply_preset

@@ -25,7 +25,8 @@ import pytest
 import yaml
 
 import browser
-from stringcast.campaign import run_campaign
+from stringcast.campaign import run_campaign, tracking_error_mm
+from stringcast.files import DataError
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -58,6 +59,21 @@ def planned_rules(dry_run_output: str) -> set[str]:
     return set(re.findall(r"^rule (\w+):", dry_run_output, flags=re.M))
 
 
+def test_tracking_error_against_truth(tmp_path):
+    """Only valid tracked points count, matched by frame and point: errors 3, 4 (a 3-4-5 move) and 0 mm."""
+    tracks = pd.DataFrame({"frame": [0, 0, 1, 1], "point": [1, 2, 1, 2], "x_m": [0.003, 0.5, 0.0, 0.1],
+                           "y_m": [0.0, 0.5, 0.004, 0.2], "valid": [True, False, True, True]})
+    truth = pd.DataFrame({"frame": [0, 0, 1, 1], "point": [1, 2, 1, 2], "x_m": [0.0, 0.0, 0.0, 0.1],
+                          "y_m": [0.0, 0.0, 0.0, 0.2]})
+    tracks.to_parquet(tmp_path / "tracks.parquet")
+    truth.to_parquet(tmp_path / "truth.parquet")
+    med, p95 = tracking_error_mm(tmp_path / "tracks.parquet", tmp_path / "truth.parquet")
+    assert med == pytest.approx(3.0) and p95 == pytest.approx(np.percentile([3.0, 4.0, 0.0], 95))
+    truth.drop(columns="y_m").to_parquet(tmp_path / "bad.parquet")
+    with pytest.raises(DataError, match=r"bad\.parquet.*y_m"):
+        tracking_error_mm(tmp_path / "tracks.parquet", tmp_path / "bad.parquet")
+
+
 @pytest.mark.slow
 def test_campaign_end_to_end(tmp_path, config):
     root = tmp_path / "project"
@@ -82,7 +98,10 @@ def test_campaign_end_to_end(tmp_path, config):
     html = (res / "report.html").read_text()
     assert "trial_1/report.html" in html and "<table" in html
     trial_html = (res / "trial_1" / "report.html").read_text()
-    assert "tracking error vs lab ground truth" in trial_html
+    assert 'id="fig-valid"' in trial_html and "ground truth" not in trial_html.lower()
+    # the lab's truth is the driver's (the experimenter's), not the workflow's: summary, not report
+    row = summary["trials"][0]
+    assert 0 < row["tracking_error_median_mm"] < row["tracking_error_p95_mm"] < 30
     # the pages as a person sees them: every figure decodes in Chromium, and the page is drawn
     if browser.chromium():
         for page in (res / "trial_1" / "report.html", res / "report.html"):

@@ -7,9 +7,12 @@ virtual lab, asks the workflow to process the trial (calibrate, sync, track,
 estimate, plan, report), plays the next motion, and so on until the lab says the
 tip hit the target or ``max_executions`` is reached.
 
-Only this loop, standing where the experimenter stands, reads the lab's verdict
-(``ground_truth.json``: did the real tip hit?) to decide when to stop; the
-workflow's stages never read it.
+Only this loop, standing where the experimenter stands, reads the lab's ground
+truth: its verdict (``ground_truth.json``: did the real tip hit?) to decide when
+to stop, and, once a trial is processed, the tracked points' error against the
+lab's true points (``ground_truth.parquet``), which it prints and keeps in
+``campaign_summary.json``. The workflow's stages, reports included, never read
+either: footage from a real camera has no ground truth.
 """
 from __future__ import annotations
 
@@ -21,8 +24,10 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 from .config import ConfigError, load_config, load_yaml, resolve_campaign
-from .files import write_yaml
+from .files import read_parquet, write_yaml
 
 
 def _snakemake(root: Path, targets: list[str], cores: int, config_files: list[Path]) -> float:
@@ -55,7 +60,8 @@ def run_campaign(name: str, string: str, target: str, config_path: str | Path | 
             not processed); the loop benchmark's setting, about a third faster.
 
     Returns:
-        dict with per-trial rows (lab hit, closest approach mm) and the report path.
+        dict with per-trial rows (lab hit, closest approach mm; for processed trials the tracking
+        error against the lab's truth, :func:`tracking_error_mm`) and the report path.
 
     Raises:
         ConfigError: bad ids, or an existing campaign.yaml for another string/target.
@@ -115,6 +121,11 @@ def run_campaign(name: str, string: str, target: str, config_path: str | Path | 
         timings[f"process_{k}_s"] = _snakemake(
             root, [f"results/{name}/trial_{k}/motion.csv"] + [f"results/{name}/trial_{k}/report.html"] * reports,
             cores, given)
+        err = tracking_error_mm(root / "results" / name / f"trial_{k}" / "tracks.parquet",
+                                trial / "ground_truth.parquet")
+        rows[-1].update(tracking_error_median_mm=err[0], tracking_error_p95_mm=err[1])
+        print(f"[campaign {name}] execution {k}: tracked points vs the lab's truth: median {err[0]:.2f} mm, "
+              f"95th percentile {err[1]:.2f} mm", flush=True)
         if truth["hit"]:
             break
         motion = root / "results" / name / f"trial_{k}" / "motion.csv"
@@ -130,6 +141,23 @@ def run_campaign(name: str, string: str, target: str, config_path: str | Path | 
     if reports:
         print(f"report: {report}")
     return summary
+
+
+def tracking_error_mm(tracks_parquet: Path, truth_parquet: Path) -> tuple[float, float]:
+    """Median and 95th percentile (mm) of the distance between the valid tracked points and the lab's
+    true points of the same frame and point (``tracks.parquet`` against ``ground_truth.parquet``, both
+    ``frame, point, x_m, y_m``); (nan, nan) when no valid point has a true one.
+
+    Raises:
+        DataError: a file is missing or lacks those columns (named).
+    """
+    cols = ["frame", "point", "x_m", "y_m"]
+    tracks = read_parquet(tracks_parquet, cols + ["valid"])
+    m = tracks[tracks["valid"]].merge(read_parquet(truth_parquet, cols), on=["frame", "point"], suffixes=("", "_true"))
+    if m.empty:
+        return float("nan"), float("nan")
+    e = np.hypot(m["x_m"] - m["x_m_true"], m["y_m"] - m["y_m_true"]).to_numpy() * 1000
+    return float(np.median(e)), float(np.percentile(e, 95))
 
 
 def _id(x):

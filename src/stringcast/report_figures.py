@@ -142,15 +142,21 @@ def joint_curves(t, q, qd=None, title="Next motion: joint angles and velocities"
     return to_data_uri(fig)
 
 
-def per_point_error(points, median_mm, p95_mm, title="Tracking error against the lab's ground truth"):
+def valid_per_point(points, share_all, share_motion=None, title="Tracked points: share of frames valid"):
+    """Bars: share (0-1) of frames in which each point 1..n was tracked, over the clip and (optional) the motion."""
     fig, ax = plt.subplots(figsize=(6, 3))
-    ax.plot(points, median_mm, "o-", label="median")
-    ax.plot(points, p95_mm, "s--", label="95th percentile")
-    ax.set_xlabel("point (0 = grasp)")
-    ax.set_ylabel("error [mm]")
+    points = np.asarray(points)
+    w = 0.4 if share_motion is not None else 0.8
+    ax.bar(points - (w / 2 if share_motion is not None else 0), np.asarray(share_all) * 100, w, label="whole clip")
+    if share_motion is not None:
+        ax.bar(points + w / 2, np.asarray(share_motion) * 100, w, label="motion and flight window")
+    ax.set_xlabel("point (1 = next to the grasp, n = tip)")
+    ax.set_ylabel("frames valid [%]")
+    ax.set_ylim(0, 130)                                   # room for the legend above the bars
+    ax.set_yticks(range(0, 101, 20))
     ax.set_title(title)
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="upper left", ncol=2)
+    ax.grid(alpha=0.3, axis="y")
     return to_data_uri(fig)
 
 
