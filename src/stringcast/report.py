@@ -3,13 +3,14 @@
 Figures are inlined as PNG data URIs (``report_figures``), the page is rendered
 with Jinja2 from ``templates/``. The trial page shows the paper's figures for the
 trial (Fig. 8a tip paths, Fig. 8b arm paths, Fig. 11 parameters, Table 4 masses),
-E over the search, a frame strip with tracked and simulated points, calibration and sync, and the next motion.
+E over the search, a frame strip with tracked and simulated points, how often each
+point was tracked, calibration and sync, and the next motion.
 
 The pages show only what the pipeline measured and computed. The virtual lab's
 ground truth files are never read here, as in every other stage: footage from a
-real camera has none. The lab's verdict and the
-tracking error against its truth are in the campaign driver's
-``campaign_summary.json`` (:mod:`stringcast.campaign`) and in ``benchmarks/``.
+real camera has none. The lab's verdict and the tracking error against its truth
+are in the campaign driver's ``campaign_summary.json`` (:mod:`stringcast.campaign`)
+and in ``benchmarks/``.
 """
 from __future__ import annotations
 
