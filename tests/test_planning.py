@@ -29,6 +29,21 @@ def test_first_parameters_carry_their_weight(config, campaign):
     assert top_stretch == pytest.approx(config["motion"].get("first_max_strain", 0.05) * campaign.string.l0)
 
 
+def test_first_k_s_max_and_bad_mode(config, campaign):
+    """motion.first_k_s: max takes Table 2's largest k_s and leaves the rest of the set as it was;
+    an unknown mode is a ConfigError naming the key."""
+    cfg = copy.deepcopy(config)
+    cfg["motion"]["first_k_s"] = "max"
+    carrying, mu_c = pn.first_parameters(config, campaign.string)
+    stiff, mu_s = pn.first_parameters(cfg, campaign.string)
+    assert stiff[0] == config["model"]["ranges"]["k_s"][1] > carrying[0]
+    np.testing.assert_array_equal(stiff[1:], carrying[1:])
+    np.testing.assert_array_equal(mu_s, mu_c)
+    cfg["motion"]["first_k_s"] = "stiff"
+    with pytest.raises(pn.ConfigError, match="motion.first_k_s"):
+        pn.first_parameters(cfg, campaign.string)
+
+
 def test_prior_ensemble_spans_table2_and_carries_its_weight(config, campaign):
     from stringcast.parameters import encode, prior_ensemble
 

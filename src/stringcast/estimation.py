@@ -15,8 +15,9 @@ paper's eq. 3 ``random_search``, ``cmaes``, ``de``), all evaluating candidates i
 numba batches of ``config.estimation.batch``, start from chi_best = the previous
 trial's estimate. With no previous estimate (trial 1) chi_best is the set the
 first motion was planned with (:func:`stringcast.parameters.first_parameters`):
-chi = 0 for the coefficients (Table 2 minima) except k_s, lifted so the model
-carries its own weight, and chi of ``model.first_mu`` for the masses.
+chi = 0 for the coefficients (Table 2 minima) except k_s (lifted so the model
+carries its own weight, or Table 2's maximum: ``motion.first_k_s``), and chi of
+``model.first_mu`` for the masses.
 
 params.json also holds ``top`` (the best ``estimation.top_k`` sets, best first, with
 chi: the robust planner's ensemble) and ``diagnostics`` (which parameters this

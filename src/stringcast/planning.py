@@ -272,7 +272,8 @@ def _rng(config: Mapping, seed: int) -> np.random.Generator:
 
 
 def run_first_plan(campaign: Campaign, config: Mapping, out_csv: Path, out_json: Path, seed: int = 0) -> PlanResult:
-    """First motion of a campaign, planned with :func:`first_parameters` (Table 2 minima, lifted k_s);
+    """First motion of a campaign, planned with :func:`first_parameters` (Table 2 minima, k_s per
+    ``motion.first_k_s``);
     with ``motion.first_ensemble`` = K > 0 also scored under K random sets (module doc)."""
     coeffs, mu = first_parameters(config, campaign.string)
     rng, mcfg = _rng(config, seed), config.get("motion", {})
