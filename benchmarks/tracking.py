@@ -37,14 +37,6 @@ from benchmarks.common import (
 )
 
 
-def _errors(tracks: pd.DataFrame, truth: pd.DataFrame) -> tuple[np.ndarray, float]:
-    m = tracks.merge(truth, on=["frame", "point"], suffixes=("", "_true"))
-    pts = m[m["point"] > 0]
-    ok = pts["valid"].to_numpy()
-    e = np.hypot(pts["x_m"] - pts["x_m_true"], pts["y_m"] - pts["y_m_true"]).to_numpy()[ok] * 1000
-    return e, float(ok.mean())
-
-
 def _decode_fps(video: Path) -> float:
     from stringcast.video import open_video
 
@@ -55,10 +47,10 @@ def _decode_fps(video: Path) -> float:
 
 def track_string(string_type: int, config: dict, calib_dir: Path, work: Path, seed: int) -> dict:
     """Film, calibrate, sync and track one string type's first motion; errors and timings."""
+    from stringcast.campaign import tracking_errors
+    from stringcast.config import resolve_campaign
     from stringcast.sync import run_sync
     from stringcast.tracking import run_tracking
-
-    from stringcast.config import resolve_campaign
 
     d = work / f"string_{string_type}"
     trial = d / "trial_1"
@@ -72,7 +64,7 @@ def track_string(string_type: int, config: dict, calib_dir: Path, work: Path, se
     tracks = run_tracking(trial, d / "calibration.json", d / "sync.json", campaign, config, d / "tracks.parquet")
     seconds = time.perf_counter() - t0
     frames = int(tracks["frame"].nunique())
-    e, valid = _errors(tracks, pd.read_parquet(trial / "ground_truth.parquet"))
+    e, valid = tracking_errors(tracks, pd.read_parquet(trial / "ground_truth.parquet"))
     return {"errors_mm": e, "valid_share": valid, "frames": frames, "track_s": seconds,
             "fps": frames / seconds, "decode_fps": decode}
 

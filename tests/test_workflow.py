@@ -25,7 +25,7 @@ import pytest
 import yaml
 
 import browser
-from stringcast.campaign import run_campaign, tracking_error_mm
+from stringcast.campaign import run_campaign, tracking_error_mm, tracking_errors
 from stringcast.files import DataError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -60,11 +60,15 @@ def planned_rules(dry_run_output: str) -> set[str]:
 
 
 def test_tracking_error_against_truth(tmp_path):
-    """Only valid tracked points count, matched by frame and point: errors 3, 4 (a 3-4-5 move) and 0 mm."""
-    tracks = pd.DataFrame({"frame": [0, 0, 1, 1], "point": [1, 2, 1, 2], "x_m": [0.003, 0.5, 0.0, 0.1],
-                           "y_m": [0.0, 0.5, 0.004, 0.2], "valid": [True, False, True, True]})
-    truth = pd.DataFrame({"frame": [0, 0, 1, 1], "point": [1, 2, 1, 2], "x_m": [0.0, 0.0, 0.0, 0.1],
-                          "y_m": [0.0, 0.0, 0.0, 0.2]})
+    """Only valid tracked points 1..n count (the grasp, point 0, is forward kinematics), matched by
+    frame and point: errors 3, 4 and 0 mm, 3 of the 4 tracked points valid."""
+    tracks = pd.DataFrame({"frame": [0, 0, 0, 1, 1], "point": [0, 1, 2, 1, 2], "x_m": [0.9, 0.003, 0.5, 0.0, 0.1],
+                           "y_m": [0.0, 0.0, 0.5, 0.004, 0.2], "valid": [True, True, False, True, True]})
+    truth = pd.DataFrame({"frame": [0, 0, 0, 1, 1], "point": [0, 1, 2, 1, 2], "x_m": [0.0, 0.0, 0.0, 0.0, 0.1],
+                          "y_m": [0.0, 0.0, 0.0, 0.0, 0.2]})
+    e, share = tracking_errors(tracks, truth)
+    np.testing.assert_allclose(e, [3.0, 4.0, 0.0], atol=1e-9)
+    assert share == pytest.approx(0.75)
     tracks.to_parquet(tmp_path / "tracks.parquet")
     truth.to_parquet(tmp_path / "truth.parquet")
     med, p95 = tracking_error_mm(tmp_path / "tracks.parquet", tmp_path / "truth.parquet")

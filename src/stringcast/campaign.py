@@ -25,6 +25,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
 from .config import ConfigError, load_config, load_yaml, resolve_campaign
 from .files import read_parquet, write_yaml
@@ -143,20 +144,29 @@ def run_campaign(name: str, string: str, target: str, config_path: str | Path | 
     return summary
 
 
+def tracking_errors(tracks: pd.DataFrame, truth: pd.DataFrame) -> tuple[np.ndarray, float]:
+    """Distances (mm) between the valid tracked points 1..n and the lab's true points of the same
+    frame and point (the grasp, point 0, comes from forward kinematics, not from tracking), and
+    the share of tracked points 1..n that are valid. Tables: ``frame, point, x_m, y_m`` (tracks
+    also ``valid``). Used here and by ``benchmarks/tracking.py``."""
+    m = tracks.merge(truth, on=["frame", "point"], suffixes=("", "_true"))
+    pts = m[m["point"] > 0]
+    ok = pts["valid"].to_numpy(bool)
+    e = np.hypot(pts["x_m"] - pts["x_m_true"], pts["y_m"] - pts["y_m_true"]).to_numpy()[ok] * 1000
+    return e, float(ok.mean()) if len(ok) else float("nan")
+
+
 def tracking_error_mm(tracks_parquet: Path, truth_parquet: Path) -> tuple[float, float]:
-    """Median and 95th percentile (mm) of the distance between the valid tracked points and the lab's
-    true points of the same frame and point (``tracks.parquet`` against ``ground_truth.parquet``, both
-    ``frame, point, x_m, y_m``); (nan, nan) when no valid point has a true one.
+    """Median and 95th percentile (mm) of :func:`tracking_errors` for ``tracks.parquet`` against
+    ``ground_truth.parquet``; (nan, nan) when no valid point has a true one.
 
     Raises:
-        DataError: a file is missing or lacks those columns (named).
+        DataError: a file is missing or lacks ``frame, point, x_m, y_m`` (tracks: and ``valid``), named.
     """
     cols = ["frame", "point", "x_m", "y_m"]
-    tracks = read_parquet(tracks_parquet, cols + ["valid"])
-    m = tracks[tracks["valid"]].merge(read_parquet(truth_parquet, cols), on=["frame", "point"], suffixes=("", "_true"))
-    if m.empty:
+    e, _ = tracking_errors(read_parquet(tracks_parquet, cols + ["valid"]), read_parquet(truth_parquet, cols))
+    if not len(e):
         return float("nan"), float("nan")
-    e = np.hypot(m["x_m"] - m["x_m_true"], m["y_m"] - m["y_m_true"]).to_numpy() * 1000
     return float(np.median(e)), float(np.percentile(e, 95))
 
 
