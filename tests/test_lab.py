@@ -394,7 +394,7 @@ def test_pipeline_never_reads_the_lab_truth():
 
     pkg = Path(stringcast.__file__).parent
     root = pkg.parents[1]
-    sources = [f for f in pkg.glob("*.py")] + sorted((root / "workflow").rglob("*.smk")) + [root / "Snakefile"]
+    sources = list(pkg.glob("*.py")) + sorted((root / "workflow").rglob("*.smk")) + [root / "Snakefile"]
     naming = {f.name for f in sources if "ground_truth" in f.read_text()}
     assert naming == {"campaign.py"}, naming
     users = set()

@@ -49,7 +49,9 @@ def first_parameters(config: Mapping, string) -> tuple[np.ndarray, np.ndarray]:
     mode = str(config.get("motion", {}).get("first_k_s", "carrying"))
     if mode not in ("carrying", "max"):
         raise ConfigError(f"motion.first_k_s: unknown {mode!r} (known: carrying, max)")
-    coeffs[0] = max(lo[0], _k_s_carrying(config, string, mu), hi[0] if mode == "max" else lo[0])
+    coeffs[0] = max(lo[0], _k_s_carrying(config, string, mu))
+    if mode == "max":
+        coeffs[0] = max(coeffs[0], hi[0])
     return coeffs, mu
 
 

@@ -216,13 +216,14 @@ def write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign,
         params = read_json(rd / "params.json")
         tracks = read_parquet(rd / "tracks.parquet")
         t0, t1, played = _motion_window(dd, config)
-        t, xy, _ = _tracked(tracks, n)
+        t, xy, valid = _tracked(tracks, n)
         d, _ = closest_approach(t, xy[:, n], campaign.target.xy, t0, t1)
-        tips[f"execution {k}"] = xy[(t >= t0) & (t <= t1), n]
+        window = (t >= t0) & (t <= t1)
+        tips[f"execution {k}"] = xy[window, n]
         row = {"trial": k, "E_mm": _fmt(params.get("E_mm")), "measured_mm": _fmt(d * 1000, ".1f"),
                "predicted_mm": _fmt(played.get("closest_approach_mm"), ".1f"),
                "hit_measured": bool(d <= campaign.target.radius),
-               "tip_valid_pct": _fmt(float(np.mean(np.isfinite(xy[(t >= t0) & (t <= t1), n, 0]))) * 100, ".0f")}
+               "tip_valid_pct": _fmt(float(valid[window, n].mean()) * 100 if window.any() else None, ".0f")}
         rows.append(row)
     figures = []
     if tips:
