@@ -16,7 +16,7 @@ Methods are config overlays:
   (Section V), the paper's method as the config describes it.
 * ``ours``: ``estimation.optimizer: cmaes`` (two runs), ``motion.planner: robust`` (the motion
   that hits under the most of the estimate's best K sets, then by margin), after a tracked
-  miss over 45 mm (``motion.replan_miss_mm``; README says why 45) a +-1 rad/s perturbation of
+  miss over 45 mm (``motion.replan_miss_mm``; docs/method.md says why 45) a +-1 rad/s perturbation of
   the played motion if at least 90 % of the sets agree it hits, else a new motion
   (``motion.replan_perturb_rad_s``, ``replan_min_share``; a new motion too when the played one
   was such a perturbation and also missed by over 45 mm), no perturbation at all when the
@@ -24,8 +24,8 @@ Methods are config overlays:
   ``motion.residual_correction`` (each set aimed at the target minus the model's error on the
   played motion's tracked tip, :mod:`stringcast.residual`), and E's tip weighting
   ``evaluation.w: 1.0`` (eq. (6); the paper's 0.1): point i counts i times as much as point 1
-  (README says why), and the first plan's set with Table 2's largest k_s
-  (``motion.first_k_s: max``: strings barely stretch; README, "First set"). Not in ours: ``motion.first_ensemble`` (the first plan scored under
+  (docs/method.md says why), and the first plan's set with Table 2's largest k_s
+  (``motion.first_k_s: max``: strings barely stretch; docs/method.md, "First set"). Not in ours: ``motion.first_ensemble`` (the first plan scored under
   random Table 2 sets). With it (16 sets, 2000 extra candidates) the seed-0 campaigns of
   types 1-6 took 2, 3, 1, 2, 4, 7 executions, against 2, 2, 3, 1, 2, 2 without it: the later
   plans, which perturb the first motion, then kept missing by 20-25 mm. Tried again at

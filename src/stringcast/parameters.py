@@ -38,7 +38,7 @@ def first_parameters(config: Mapping, string) -> tuple[np.ndarray, np.ndarray]:
     ``max`` (ours): Table 2's maximum k_s (but at least the carrying value): strings barely
     stretch. Re-planned offline over 28 first motions (types 1-7, motion seeds 0-3, the lab's
     physics as judge) the lab's tip missed by a median of 28 mm (8 hits, 20 within 45 mm)
-    against 52 mm (6 hits, 12 within 45 mm) with ``carrying`` (README, "First set").
+    against 52 mm (6 hits, 12 within 45 mm) with ``carrying`` (docs/method.md, "First set").
 
     Raises:
         ConfigError: ``motion.first_k_s`` is neither ``carrying`` nor ``max``.
