@@ -236,6 +236,24 @@ def test_build_problem(config, campaign, chi_true, tmp_path):
         es.build_problem(df.drop(columns="valid"), t, q, campaign, config)
 
 
+def test_compare_after_motion_cuts_the_window(config, campaign, chi_true, tmp_path):
+    """estimation.compare_after_motion_s: frames compared up to that long after the arm stops
+    (the log holds the end posture 0.3 s), the start unchanged; null keeps the whole log."""
+    c, mu = prm.decode(chi_true, config, campaign.string.mass_groups())
+    df, t, q, _ = make_trial(campaign, c, mu, tmp_path)
+    whole = es.build_problem(df, t, q, campaign, config)
+    cfg = copy.deepcopy(config)
+    cfg["estimation"]["compare_after_motion_s"] = 0.1
+    cut = es.build_problem(df, t, q, campaign, cfg)
+    t_stop = t[0] + 0.3 + 0.5          # make_trial: 0.3 s at rest, a 0.5 s motion, 0.3 s still
+    assert cut.frame_t[0] == whole.frame_t[0]
+    assert t_stop + 0.1 - 0.01 < cut.frame_t[-1] <= t_stop + 0.1 + 0.01
+    assert whole.frame_t[-1] > t_stop + 0.25
+    np.testing.assert_array_equal(cut.tracked, whole.tracked[:len(cut.frame_t)])
+    cfg["estimation"]["compare_after_motion_s"] = None
+    assert len(es.build_problem(df, t, q, campaign, cfg).frame_t) == len(whole.frame_t)
+
+
 def test_hidden_rest_points_start_the_model_at_rest(config, campaign, chi_true, tmp_path):
     """Points 1-3 never tracked (a gripper hides them): the filled rest state keeps the hidden segments
     at (at least) l0, so the model starts at rest and, while the arm is still, stays near the true pose."""

@@ -29,7 +29,8 @@ motion starts (:func:`stringcast.arm.motion_start`); points never valid there ar
 filled with l0 segments between the known points around them
 (:func:`stringcast.rest_state.fill_rest_pose`, reported in ``Estimate.message``).
 The simulation starts at the first of those frames and is compared at every later
-frame up to the end of the joint log.
+frame up to the end of the joint log, or (``estimation.compare_after_motion_s``, our
+option) up to that long after the arm stops (:func:`stringcast.arm.motion_window`).
 """
 from __future__ import annotations
 
@@ -41,7 +42,7 @@ from typing import Callable, Mapping
 import numpy as np
 import pandas as pd
 
-from .arm import hand_pose, motion_start
+from .arm import hand_pose, motion_start, motion_window
 from .config import PARAM_NAMES, Campaign, ConfigError, model_ranges
 from .diagnostics import best_k, diagnostics
 from .diagnostics import settings as diagnostics_settings
@@ -185,6 +186,9 @@ def build_problem(tracks_df: pd.DataFrame, t_joints: np.ndarray, q_joints: np.nd
                         f"(need {MIN_REST_FRAMES}) within the joint log")
     use = np.arange(rest[0], len(t))
     use = use[t[use] <= t_joints[-1]]
+    after = config.get("estimation", {}).get("compare_after_motion_s")
+    if after is not None:
+        use = use[t[use] <= motion_window(t_joints, q_joints)[1] + float(after)]
     if len(use) < 2:
         raise DataError(f"{source}: fewer than two frames overlap the joint log")
     t0 = t[use[0]]
