@@ -33,7 +33,7 @@ from an initial posture q0):
 * First-plan ensemble (``motion.first_ensemble`` = K > 0; tried, off in ours): the first plan
   is scored the same way under K random sets over Table 2's box
   (:func:`stringcast.parameters.prior_ensemble`), ``motion.first_extra_after_hit`` candidates
-  past the first hit (README says why it is off).
+  past the first hit (docs/method.md says why it is off).
 * Residual correction (``motion.residual_correction``, later motions, with either
   planner; ours): every set aims at the target minus the model's error on the played
   motion's tracked tip (:mod:`stringcast.residual`), so d_min is the corrected one.
@@ -45,10 +45,10 @@ from an initial posture q0):
   (residual-corrected) is searched first and kept when its best candidate hits under at least
   ``motion.replan_min_share`` (0.9) of the ensemble; not twice in a row: after a wide
   perturbation that missed by more than ``replan_miss_mm`` the next motion is the fresh one
-  (README: at d25a73b, type 5 seed 5, five in a row missed by 77-129 mm). With
+  (docs/method.md: at d25a73b, type 5 seed 5, five in a row missed by 77-129 mm). With
   ``motion.replan_residual_mm`` > 0 (ours: 50) no perturbation, narrow or wide, is played when
   the model's tip error on the played motion (median over the motion) exceeds it. The offline
-  and loop measurements behind the numbers are in the README ("Replan after a miss over 45 mm").
+  and loop measurements behind the numbers are in docs/method.md ("Replan after a miss over 45 mm").
 
 The model's predictions (equilibrium, closest approach, tip path) are
 :class:`stringcast.prediction.Predictor`'s. Stage entry points: :func:`run_first_plan`
