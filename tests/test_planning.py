@@ -276,6 +276,38 @@ def test_robust_prefers_hit_share_then_margin(monkeypatch, campaign, small):
     assert "no candidate hit" not in res.message
 
 
+def test_robust_min_share_keeps_searching_until_the_sets_agree(monkeypatch, campaign, small):
+    """motion.robust_min_share: a hit under the planning set that only 1 of 4 members shares does not
+    start the count of extra candidates; the search goes on to one they all share (candidate 130)."""
+    state = {"k": 0}
+    d_best = {5: 0.001, 130: 0.010}
+    members = {5: [0.001, 0.5, 0.5, 0.5], 130: [0.010, 0.012, 0.008, 0.011]}
+
+    def fake_evaluate(self, q, T, p_init):
+        b = len(q)
+        state["ids"] = np.arange(state["k"], state["k"] + b)
+        state["k"] += b
+        return np.array([d_best.get(int(i), 1.0) for i in state["ids"]]), np.zeros(b), np.zeros(b), np.ones(b, bool)
+
+    def fake_ensemble(self, q, T, p_init, coeffs, mu):
+        d = np.array([members[int(i)] for i in state["ids"] if int(i) in members])
+        return d, np.zeros_like(d), np.ones(d.shape, bool)
+
+    monkeypatch.setattr(pn.Predictor, "evaluate", fake_evaluate)
+    monkeypatch.setattr(pn.Predictor, "evaluate_ensemble", fake_ensemble)
+    monkeypatch.setattr(pn.Predictor, "equilibrium", lambda self, q0, c=None, m=None: np.zeros((self.n, 2)))
+    monkeypatch.setattr(pn.Predictor, "tip_path", lambda self, m, p: np.zeros((0, 3)))
+    cfg = copy.deepcopy(small)
+    cfg["motion"].update(max_candidates=400, extra_after_hit=20, batch=50)
+    coeffs, mu = pn.first_parameters(cfg, campaign.string)
+    res = pn.search(campaign, cfg, coeffs, mu, np.random.default_rng(0), ensemble=_ensemble(cfg, campaign))
+    assert res.hit_share == 0.25 and res.candidates == 100          # first hit in 0-49, then 20 more: 50-99
+    cfg["motion"]["robust_min_share"] = 0.9
+    state["k"] = 0
+    res = pn.search(campaign, cfg, coeffs, mu, np.random.default_rng(0), ensemble=_ensemble(cfg, campaign))
+    assert res.hit_share == 1.0 and res.d_min == pytest.approx(0.010) and res.candidates == 200
+
+
 def test_robust_all_miss_and_all_blown_up(monkeypatch, config, small):
     """No candidate near the target, or every simulation blowing up: the closest found, a message, no crash."""
     camp = resolve_campaign({"string": 1, "target": {"x_mm": 3000, "y_mm": 300, "radius_mm": 20}}, config, "far")

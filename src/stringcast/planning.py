@@ -29,7 +29,9 @@ from an initial posture q0):
   equilibrium), when under the best set it stays valid and above the floor and comes
   within ``motion.robust_screen_mm`` (default 20) of the target's edge. The chosen
   motion has the largest hit share (members for which it hits), then the largest
-  margin (radius - median d_min over the members); the stopping rule is the paper's.
+  margin (radius - median d_min over the members); the stopping rule is the paper's, or
+  with ``motion.robust_min_share`` > 0 (tried, off in ours) the first hit that starts the
+  count of ``extra_after_hit`` candidates must hit under at least that share of the members.
 * First-plan ensemble (``motion.first_ensemble`` = K > 0; tried, off in ours): the first plan
   is scored the same way under K random sets over Table 2's box
   (:func:`stringcast.parameters.prior_ensemble`), ``motion.first_extra_after_hit`` candidates
@@ -125,6 +127,7 @@ def search(campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarr
     pl = Predictor(campaign, config, coeffs, mu)
     batch, max_cand = int(mcfg.get("batch", 64)), int(mcfg.get("max_candidates", 20000))
     extra = int(mcfg.get("extra_after_hit", 200))
+    min_share = float(mcfg.get("robust_min_share", 0.0)) if ensemble is not None else 0.0
     t_lo, t_hi = (float(x) for x in mcfg.get("T_range_s", [0.2, 1.2]))
     n_cp, alpha = int(mcfg.get("n_control_points", 6)), float(mcfg.get("alpha_max_rad_s2", 40.0))
     perturb = float(mcfg.get("perturb_rad_s", 0.5))
@@ -195,7 +198,8 @@ def search(campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarr
                 best = (c, T, bool(hit[b]), float(d[b]), float(tm[b]), float(my[b]), share, margin, d_k)
         tried += len(cands)
         bar.update(len(cands))
-        if first_hit is None and hit.any():
+        agreed = [hit[b] and scores.get(b, (0.0,))[0] >= min_share for b in range(len(cands))]
+        if first_hit is None and any(agreed):
             first_hit = tried
     bar.close()
     (cp, q0, q, i), T, hit, d, tm, my, share, margin, d_k = best
