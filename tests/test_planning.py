@@ -234,21 +234,21 @@ def test_robust_plan_scores_the_ensemble(tmp_path, campaign, small):
     assert read_json(tmp_path / "m3.json")["ensemble_hit_share"] is None
 
 
-def test_robust_prefers_hit_share_then_margin(monkeypatch, campaign, small):
-    """Fake model: candidate 3 hits under every member, 7 under most with a larger margin, 5 only under the best."""
+def _fake_model(monkeypatch, d_best: dict, members: dict, screened: int | None = None) -> dict:
+    """Fake Predictor: candidate i (counted over the search's batches) passes d_best[i] m from the
+    target under the planning set (1 m if absent) and members[i] under the 4 ensemble members;
+    ``screened``: how many candidates each call must hand the ensemble. Returns the counter
+    (set state["k"] = 0 to search again)."""
     state = {"k": 0}
-    d_best = {3: 0.015, 5: 0.001, 7: 0.010}
-    members = {3: [0.015, 0.019, 0.018, 0.017], 5: [0.001, 0.5, 0.5, 0.5], 7: [0.010, 0.001, 0.002, 0.5]}
 
     def fake_evaluate(self, q, T, p_init):
         b = len(q)
-        ids = np.arange(state["k"], state["k"] + b)
+        state["ids"] = np.arange(state["k"], state["k"] + b)
         state["k"] += b
-        state["ids"] = ids
-        return np.array([d_best.get(int(i), 1.0) for i in ids]), np.zeros(b), np.zeros(b), np.ones(b, bool)
+        return np.array([d_best.get(int(i), 1.0) for i in state["ids"]]), np.zeros(b), np.zeros(b), np.ones(b, bool)
 
     def fake_ensemble(self, q, T, p_init, coeffs, mu):
-        assert len(q) == 3 and p_init.shape[:2] == (3, 4)  # only the screened ones, each under all members
+        assert screened is None or (len(q) == screened and p_init.shape[:2] == (screened, 4))
         d = np.array([members[int(i)] for i in state["ids"] if int(i) in members])
         return d, np.zeros_like(d), np.ones(d.shape, bool)
 
@@ -256,6 +256,14 @@ def test_robust_prefers_hit_share_then_margin(monkeypatch, campaign, small):
     monkeypatch.setattr(pn.Predictor, "evaluate_ensemble", fake_ensemble)
     monkeypatch.setattr(pn.Predictor, "equilibrium", lambda self, q0, c=None, m=None: np.zeros((self.n, 2)))
     monkeypatch.setattr(pn.Predictor, "tip_path", lambda self, m, p: np.zeros((0, 3)))
+    return state
+
+
+def test_robust_prefers_hit_share_then_margin(monkeypatch, campaign, small):
+    """Fake model: candidate 3 hits under every member, 7 under most with a larger margin, 5 only under the best."""
+    d_best = {3: 0.015, 5: 0.001, 7: 0.010}
+    members = {3: [0.015, 0.019, 0.018, 0.017], 5: [0.001, 0.5, 0.5, 0.5], 7: [0.010, 0.001, 0.002, 0.5]}
+    state = _fake_model(monkeypatch, d_best, members, screened=3)   # only the screened ones go to the ensemble
     cfg = copy.deepcopy(small)
     cfg["motion"].update(max_candidates=20, extra_after_hit=100, batch=20)
     coeffs, mu = pn.first_parameters(cfg, campaign.string)
@@ -279,24 +287,8 @@ def test_robust_prefers_hit_share_then_margin(monkeypatch, campaign, small):
 def test_robust_min_share_keeps_searching_until_the_sets_agree(monkeypatch, campaign, small):
     """motion.robust_min_share: a hit under the planning set that only 1 of 4 members shares does not
     start the count of extra candidates; the search goes on to one they all share (candidate 130)."""
-    state = {"k": 0}
-    d_best = {5: 0.001, 130: 0.010}
-    members = {5: [0.001, 0.5, 0.5, 0.5], 130: [0.010, 0.012, 0.008, 0.011]}
-
-    def fake_evaluate(self, q, T, p_init):
-        b = len(q)
-        state["ids"] = np.arange(state["k"], state["k"] + b)
-        state["k"] += b
-        return np.array([d_best.get(int(i), 1.0) for i in state["ids"]]), np.zeros(b), np.zeros(b), np.ones(b, bool)
-
-    def fake_ensemble(self, q, T, p_init, coeffs, mu):
-        d = np.array([members[int(i)] for i in state["ids"] if int(i) in members])
-        return d, np.zeros_like(d), np.ones(d.shape, bool)
-
-    monkeypatch.setattr(pn.Predictor, "evaluate", fake_evaluate)
-    monkeypatch.setattr(pn.Predictor, "evaluate_ensemble", fake_ensemble)
-    monkeypatch.setattr(pn.Predictor, "equilibrium", lambda self, q0, c=None, m=None: np.zeros((self.n, 2)))
-    monkeypatch.setattr(pn.Predictor, "tip_path", lambda self, m, p: np.zeros((0, 3)))
+    state = _fake_model(monkeypatch, {5: 0.001, 130: 0.010},
+                        {5: [0.001, 0.5, 0.5, 0.5], 130: [0.010, 0.012, 0.008, 0.011]})
     cfg = copy.deepcopy(small)
     cfg["motion"].update(max_candidates=400, extra_after_hit=20, batch=50)
     coeffs, mu = pn.first_parameters(cfg, campaign.string)
