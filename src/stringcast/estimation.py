@@ -186,9 +186,9 @@ def build_problem(tracks_df: pd.DataFrame, t_joints: np.ndarray, q_joints: np.nd
                         f"(need {MIN_REST_FRAMES}) within the joint log")
     use = np.arange(rest[0], len(t))
     use = use[t[use] <= t_joints[-1]]
-    after = config.get("estimation", {}).get("compare_after_motion_s")
-    if after is not None:
-        use = use[t[use] <= motion_window(t_joints, q_joints)[1] + float(after)]
+    window_s = config.get("estimation", {}).get("compare_after_motion_s")
+    if window_s is not None:
+        use = use[t[use] <= motion_window(t_joints, q_joints)[1] + float(window_s)]
     if len(use) < 2:
         raise DataError(f"{source}: fewer than two frames overlap the joint log")
     t0 = t[use[0]]

@@ -198,8 +198,7 @@ def search(campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarr
                 best = (c, T, bool(hit[b]), float(d[b]), float(tm[b]), float(my[b]), share, margin, d_k)
         tried += len(cands)
         bar.update(len(cands))
-        agreed = [hit[b] and scores.get(b, (0.0,))[0] >= min_share for b in range(len(cands))]
-        if first_hit is None and any(agreed):
+        if first_hit is None and any(hit[b] and scores.get(b, (0.0,))[0] >= min_share for b in range(len(cands))):
             first_hit = tried
     bar.close()
     (cp, q0, q, i), T, hit, d, tm, my, share, margin, d_k = best
