@@ -1,4 +1,4 @@
-"""What every benchmark JSON carries (DESIGN.md, Benchmarks): name, cores, time, commit."""
+"""What every benchmark JSON carries (DESIGN.md, Benchmarks): name, cores, time, commit, library versions."""
 from __future__ import annotations
 
 import os
@@ -26,10 +26,28 @@ def git_commit() -> str | None:
         return None
 
 
+# The libraries a benchmark's figures depend on: the loop's outcome on seeds 0-2 moved from 43
+# to 47 executions with their versions alone (docs/method.md, "Library versions"), so each JSON records them.
+LIBRARIES = ("numpy", "numba", "scipy", "opencv-contrib-python-headless", "mujoco", "cma", "scikit-image")
+
+
+def library_versions() -> dict[str, str | None]:
+    """Installed versions of ``LIBRARIES`` (None for one not installed)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {}
+    for lib in LIBRARIES:
+        try:
+            out[lib] = version(lib)
+        except PackageNotFoundError:
+            out[lib] = None
+    return out
+
+
 def header(name: str, quick: bool) -> dict:
     """The keys every benchmark JSON starts with."""
     return {"benchmark": name, "cores": cores(), "created": datetime.now(timezone.utc).isoformat(),
-            "git_commit": git_commit(), "quick": bool(quick)}
+            "git_commit": git_commit(), "libraries": library_versions(), "quick": bool(quick)}
 
 
 def write(name: str, doc: dict) -> Path:

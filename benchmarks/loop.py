@@ -69,7 +69,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.common import BENCH_DIR, ROOT, git_commit, header, write
+from benchmarks.common import BENCH_DIR, ROOT, git_commit, header, library_versions, write
 
 CAP = 8
 PAPER_TABLE3 = {1: 2, 2: 2, 3: 2, 4: 2, 5: 3, 6: 2, 7: 2}          # executions, paper Table 3
@@ -123,9 +123,9 @@ def run_one(string_type: int, seed: int, method: str, config: dict, work: Path, 
     executions. Reuses ``work/<name>/run.json`` when a previous run finished.
 
     Returns a dict: executions, hit, closest_approach_mm (per execution, lab truth), E_mm (per
-    trial, params.json), wall_s, s_per_execution, timings_s, git_commit (the code that ran it: a
-    table may gather campaigns run at different commits, ``--finished-only``), error (None, or the
-    failure)."""
+    trial, params.json), wall_s, s_per_execution, timings_s, git_commit and libraries (the code
+    and library versions that ran it: a table may gather campaigns run at different commits,
+    ``--finished-only``), error (None, or the failure)."""
     from stringcast.campaign import run_campaign
     from stringcast.files import DataError, read_json, write_json
 
@@ -136,7 +136,7 @@ def run_one(string_type: int, seed: int, method: str, config: dict, work: Path, 
         return read_json(done)
     cfg_path = project_root(root, method_config(config, method, seed))
     rec = {"string": string_type, "target": PAPER_TARGET[string_type], "seed": seed, "method": method,
-           "campaign": name, "git_commit": git_commit(), "error": None}
+           "campaign": name, "git_commit": git_commit(), "libraries": library_versions(), "error": None}
     t0 = time.perf_counter()
     try:
         summary = run_campaign(name, str(string_type), str(PAPER_TARGET[string_type]),
