@@ -104,7 +104,7 @@ def evals_to_reach(trace: np.ndarray, level: float) -> int | None:
 def ruggedness(campaign, d: Path, config: dict, chi_star: np.ndarray, seed: int = 0) -> dict:
     """E around ``chi_star`` (module doc): {"steps", "E_ratio" (dirs, steps), "basin_radius_chi",
     "pocket" (per radius), "dt_halved_mm"}."""
-    from stringcast.estimation import build_problem, make_objective
+    from stringcast.estimation_problem import build_problem, make_objective
     from stringcast.files import TRACK_COLUMNS, read_joint_table, read_parquet
 
     t_j, q_j, _ = read_joint_table(d / "trial_1" / "joints.csv")
@@ -135,7 +135,7 @@ def dt_halved(problem, config: dict, chi_star: np.ndarray) -> dict:
     Large late values say the late frames compare the film with the integrator's chaos, not physics."""
     import dataclasses
 
-    from stringcast.estimation import simulate_fit
+    from stringcast.estimation_problem import simulate_fit
 
     p1, _ = simulate_fit(problem, config, chi_star)
     p2, _ = simulate_fit(dataclasses.replace(problem, dt=problem.dt / 2), config, chi_star)
