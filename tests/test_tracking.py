@@ -157,7 +157,8 @@ def test_centreline_walks_the_string_not_a_hook_at_the_fingertips(campaign, conf
     """A lab string at rest (type 2) left the gripper in a short hook: the walk from the skeleton pixel
     nearest the grasp went into the hook (2 px) and the whole string was lost in every rest frame.
     A walk from a pixel just outside the clear zone must win when it is much longer."""
-    from stringcast.tracking import FrameTracker, settings
+    from stringcast.frame_tracker import FrameTracker
+    from stringcast.tracking import settings
 
     tracker = FrameTracker(np.full((SIZE, SIZE), 100, np.float32), (1.0, 0.0), _calibration(), campaign,
                            settings(config))
