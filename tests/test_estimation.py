@@ -386,3 +386,42 @@ def test_cmaes_first_look_samples_eq3_and_starts_at_its_best(config):
     best = look[np.argmin(np.sum((look - corner) ** 2, axis=1))]
     assert np.abs(cand[L:L + pop].mean(axis=0) - best).mean() < 0.15   # CMA-ES starts at the look's best
     assert np.sum((cand - corner) ** 2, axis=1).min() < 1e-3
+
+
+def test_cmaes_stall_generations_restart_at_the_best_point(config, monkeypatch):
+    """cmaes_stall_generations = G: after G generations without a new best, CMA-ES restarts at its best
+    point with the step it had reached. The objective is a smooth bowl whose only deep pocket is the
+    first generation's first candidate: the mean drifts to the bowl, and only the restart goes back."""
+    import cma
+
+    starts = []
+    real = cma.CMAEvolutionStrategy
+
+    def spy(x0, sigma0, opts):   # each start, and the step the run before it had reached
+        starts.append((np.array(x0, float), float(sigma0), float(spy.last.sigma) if starts else None))
+        spy.last = real(x0, sigma0, opts)
+        return spy.last
+
+    monkeypatch.setattr(cma, "CMAEvolutionStrategy", spy)
+    centre = np.full(12, 0.9)
+    pocket = []
+
+    def objective(c):
+        E = 1.0 + np.sum((c - centre) ** 2, axis=1)
+        if not pocket:
+            pocket.append(c[0].copy())
+        return np.where(np.all(c == pocket[0], axis=1), 0.0, E)
+
+    pop = 4 + int(3 * np.log(12))
+    for stall, restarts in ((5, True), (0, False)):
+        starts.clear()
+        pocket.clear()
+        cfg = _cfg(config, optimizer="cmaes", iterations=40 * pop, batch=32, cmaes_first_look=0,
+                   cmaes_first_start="best", cmaes_stall_generations=stall)
+        est = es.estimate(_problem_stub(), cfg, np.full(12, 0.2), 2, seed=0, objective=objective)
+        assert est.E_m == 0.0 and np.array_equal(est.chi, pocket[0])
+        later = starts[1:]
+        assert bool(later) == restarts
+        for x0, sigma0, reached in later:     # every restart at the pocket, with the step reached (>= 1e-3)
+            assert np.array_equal(x0, pocket[0]) and sigma0 == max(reached, 1e-3)
+    assert len(later) == 0
