@@ -424,4 +424,3 @@ def test_cmaes_stall_generations_restart_at_the_best_point(config, monkeypatch):
         assert bool(later) == restarts
         for x0, sigma0, reached in later:     # every restart at the pocket, with the step reached (>= 1e-3)
             assert np.array_equal(x0, pocket[0]) and sigma0 == max(reached, 1e-3)
-    assert len(later) == 0
