@@ -132,6 +132,7 @@ def cmaes_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: n
     sigma0 = float(settings.get("cmaes_sigma0", 0.3 * float(settings.get("chi0", 1.0))))
     popsize = int(settings.get("cmaes_popsize", 0)) or 4 + int(3 * np.log(d))
     runs = max(1, int(settings.get("cmaes_runs", 1)))
+    stall = int(settings.get("cmaes_stall_generations", 0))
     first = np.asarray(chi_best, float)
     look = min(int(settings.get("cmaes_first_look", 0)), rec.remaining)
     if look > 0:  # eq. (3) at m = 0 around chi_best: clipped steps put many samples on the box's faces
@@ -145,8 +146,7 @@ def cmaes_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: n
     results = []
     for r, (x0, s0) in enumerate(starts):
         keep = rec.remaining - rec.remaining // (runs - r)      # budget left for the later runs
-        results.append((*_cma_run(rec, x0, s0, popsize, batch, rng, keep, options,
-                                  int(settings.get("cmaes_stall_generations", 0))), s0))
+        results.append((*_cma_run(rec, x0, s0, popsize, batch, rng, keep, options, stall), s0))
     _, best, s0 = min(results, key=lambda x: x[0])
     while rec.remaining > 0:  # spend the rest (< popsize, or after a stop) around the best run's best point
         rec(np.clip(best + (s0 / 4) * rng.standard_normal((min(batch, rec.remaining), d)), 0.0, 1.0))
