@@ -52,7 +52,7 @@ def header(name: str, quick: bool) -> dict:
 
 def write(name: str, doc: dict) -> Path:
     """Write results/bench/<name>.json atomically and return its path."""
-    from stringcast.files import write_json
+    from stringcast.core.files import write_json
 
     path = BENCH_DIR / f"{name}.json"
     write_json(path, doc)
@@ -62,10 +62,10 @@ def write(name: str, doc: dict) -> Path:
 def film_first_motion(string_type: int, config: dict, work: Path, seed: int, calib_dir: Path | None = None):
     """Plan a campaign's first motion for ``string_type`` (target 1), play it on the lab and
     calibrate the trial: returns (campaign, d, trial) with ``d/calibration.json`` written."""
-    from stringcast.calibration import run_calibration
-    from stringcast.config import resolve_campaign
-    from stringcast.executor import execute
-    from stringcast.planning import run_first_plan
+    from stringcast.calibrate.calibration import run_calibration
+    from stringcast.core.config import resolve_campaign
+    from stringcast.execute.executor import execute
+    from stringcast.plan.planning import run_first_plan
 
     campaign = resolve_campaign({"string": string_type, "target": 1}, config, f"bench_{string_type}")
     d = work / f"string_{string_type}"
@@ -78,7 +78,7 @@ def film_first_motion(string_type: int, config: dict, work: Path, seed: int, cal
 
 def lab_calibration_clip(config: dict, work: Path) -> Path:
     """The lab's ChArUco clip (seed 11) that every benchmark calibrates its trials with: ``work/calib``."""
-    from stringcast.config import resolve_campaign
+    from stringcast.core.config import resolve_campaign
     from stringcast.lab import write_calibration_clip
 
     return write_calibration_clip(resolve_campaign({"string": 1, "target": 1}, config, "bench"), config,

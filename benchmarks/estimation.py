@@ -71,9 +71,9 @@ def prepare(string_type: int, config: dict, calib_dir: Path, work: Path, seed: i
     """Film, calibrate, sync and track one string type's first motion (reused if ``work`` has it).
 
     Returns (campaign, d): ``d`` holds tracks.parquet and trial_1/joints.csv."""
-    from stringcast.config import resolve_campaign
-    from stringcast.sync import run_sync
-    from stringcast.tracking import run_tracking
+    from stringcast.core.config import resolve_campaign
+    from stringcast.sync.offset import run_sync
+    from stringcast.track.tracking import run_tracking
 
     d = work / f"string_{string_type}"
     if (d / "tracks.parquet").exists() and (d / "trial_1" / "joints.csv").exists():
@@ -85,7 +85,7 @@ def prepare(string_type: int, config: dict, calib_dir: Path, work: Path, seed: i
 
 
 def _estimate(campaign, d: Path, config: dict, optimizer: str | None, tag: str, seed_offset: int = 0):
-    from stringcast.estimation import run_estimation
+    from stringcast.estimate.estimation import run_estimation
 
     cfg = copy.deepcopy(config)
     if optimizer is not None:
@@ -104,8 +104,8 @@ def evals_to_reach(trace: np.ndarray, level: float) -> int | None:
 def ruggedness(campaign, d: Path, config: dict, chi_star: np.ndarray, seed: int = 0) -> dict:
     """E around ``chi_star`` (module doc): {"steps", "E_ratio" (dirs, steps), "basin_radius_chi",
     "pocket" (per radius), "dt_halved_mm"}."""
-    from stringcast.estimation_problem import build_problem, make_objective
-    from stringcast.files import TRACK_COLUMNS, read_joint_table, read_parquet
+    from stringcast.estimate.problem import build_problem, make_objective
+    from stringcast.core.files import TRACK_COLUMNS, read_joint_table, read_parquet
 
     t_j, q_j, _ = read_joint_table(d / "trial_1" / "joints.csv")
     problem = build_problem(read_parquet(d / "tracks.parquet", TRACK_COLUMNS), t_j, q_j, campaign, config)
@@ -135,7 +135,7 @@ def dt_halved(problem, config: dict, chi_star: np.ndarray) -> dict:
     Large late values say the late frames compare the film with the integrator's chaos, not physics."""
     import dataclasses
 
-    from stringcast.estimation_problem import simulate_fit
+    from stringcast.estimate.problem import simulate_fit
 
     p1, _ = simulate_fit(problem, config, chi_star)
     p2, _ = simulate_fit(dataclasses.replace(problem, dt=problem.dt / 2), config, chi_star)
@@ -181,7 +181,7 @@ def one_string(campaign, d: Path, config: dict, cmaes_seeds: int = 1) -> dict:
     out["cmaes_evals_to_paper_E"] = int(med) if np.isfinite(med) else None
     out["cmaes_eval_ratio"] = med / len(paper) if np.isfinite(med) else None
     out["cmaes_seeds"] = {"evals_to_paper_E": cma_reach, "final_E_mm": [float(tr[-1]) for tr in cma_runs]}
-    from stringcast.files import read_json
+    from stringcast.core.files import read_json
 
     out["frames_compared"] = read_json(d / f"params_{default}.json")["frames_compared"]
     out["ruggedness"] = ruggedness(campaign, d, config, np.asarray(runs["random_search"].chi, float))
@@ -222,7 +222,7 @@ def _figure(per: dict, path: Path) -> None:
 
 
 def run(quick: bool = False, work: Path | None = None, cmaes_seeds: int = 3) -> dict:
-    from stringcast.config import load_config
+    from stringcast.core.config import load_config
 
     config = load_config()
     types = [1, 5] if quick else sorted(int(k) for k in config["strings"])

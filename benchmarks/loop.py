@@ -22,7 +22,7 @@ Methods are config overlays:
   was such a perturbation and also missed by over 45 mm), no perturbation at all when the
   model's tip error on the played motion exceeds 50 mm (``motion.replan_residual_mm``),
   ``motion.residual_correction`` (each set aimed at the target minus the model's error on the
-  played motion's tracked tip, :mod:`stringcast.residual`), and E's tip weighting
+  played motion's tracked tip, :mod:`stringcast.plan.residual`), and E's tip weighting
   ``evaluation.w: 1.0`` (eq. (6); the paper's 0.1): point i counts i times as much as point 1
   (docs/method.md says why), and the first plan's set with Table 2's largest k_s
   (``motion.first_k_s: max``: strings barely stretch; docs/method.md, "First set"). Not in ours: ``motion.first_ensemble`` (the first plan scored under
@@ -90,7 +90,7 @@ def method_config(config: dict, method: str, seed: int) -> dict:
     Raises:
         KeyError: unknown method (not in ``METHODS``).
     """
-    from stringcast.config import merge_config
+    from stringcast.core.config import merge_config
 
     cfg = merge_config(copy.deepcopy({k: v for k, v in config.items() if k != "_path"}), METHODS[method])
     cfg["estimation"]["seed"] = int(seed)
@@ -101,7 +101,7 @@ def method_config(config: dict, method: str, seed: int) -> dict:
 def project_root(path: Path, cfg: dict) -> Path:
     """A project root at ``path``: the repo's Snakefile and workflow/ linked, ``cfg`` as
     config/config.yaml (written atomically). Returns the config file's path."""
-    from stringcast.files import write_yaml
+    from stringcast.core.files import write_yaml
 
     (path / "config").mkdir(parents=True, exist_ok=True)
     for name in ("Snakefile", "workflow"):
@@ -127,7 +127,7 @@ def run_one(string_type: int, seed: int, method: str, config: dict, work: Path, 
     and library versions that ran it: a table may gather campaigns run at different commits,
     ``--finished-only``), error (None, or the failure)."""
     from stringcast.campaign import run_campaign
-    from stringcast.files import DataError, read_json, write_json
+    from stringcast.core.files import DataError, read_json, write_json
 
     root = run_dir(work, string_type, seed, method)
     name = root.name
@@ -272,8 +272,8 @@ def run(quick: bool = False, types: list[int] | None = None, seeds: list[int] | 
 
     Raises:
         ValueError: a type outside 1-7, or ``finished_only`` without ``work``."""
-    from stringcast.config import load_config
-    from stringcast.files import write_text
+    from stringcast.core.config import load_config
+    from stringcast.core.files import write_text
 
     config = load_config()
     types = types or ([1, 5] if quick else sorted(PAPER_TABLE3))

@@ -25,8 +25,8 @@ N_POINTS, L0, DT = 15, 0.034, 1e-4
 
 def _case(duration: float):
     """Mid-range Table 2 coefficients, a 2 Hz swinging hand, the hanging start."""
-    from stringcast.config import load_config, model_ranges
-    from stringcast.model import hanging_equilibrium
+    from stringcast.core.config import load_config, model_ranges
+    from stringcast.model.string_model import hanging_equilibrium
 
     lo, hi, _ = model_ranges(load_config())
     coeffs = np.sqrt(lo * hi)
@@ -51,7 +51,7 @@ def _best_of(fn, repeats: int) -> float:
 def model_rates(duration: float, batch: int, repeats: int) -> dict:
     import numba
 
-    from stringcast.model import closest_approach_batch, simulate_batch
+    from stringcast.model.string_model import closest_approach_batch, simulate_batch
 
     coeffs, mu, hand_t, hand, p0 = _case(duration)
     sample_t = np.arange(0.0, duration, 0.002)

@@ -4,7 +4,7 @@ For several string types (full: 1, 4, 5, 7; quick: 1, 5) the lab films the campa
 first planned motion with the default camera (1024 x 1024 at 500 fps); the trial is
 calibrated as the workflow does with a ``calib/`` clip (intrinsics from one lab board clip,
 then the plane homography); ``video.yaml``'s trigger time is removed and
-:func:`stringcast.sync.run_sync` (method ``video``) estimates the offset from the arm in
+:func:`stringcast.sync.offset.run_sync` (method ``video``) estimates the offset from the arm in
 the video. Two more runs on string 1's trial: the trigger time set 25 ms WRONG (the
 estimate must overrule it and warn), and a homography-only calibration (no ``calib/``:
 lens distortion uncorrected; reported, not part of the 0.5 ms criterion).
@@ -35,8 +35,8 @@ WRONG_TRIGGER_MS = 25.0
 
 def _sync_case(trial: Path, calibration_json: Path, campaign, config: dict, out: Path, truth: dict,
                trigger_s: float | None) -> dict:
-    from stringcast.files import DataError
-    from stringcast.sync import run_sync
+    from stringcast.core.files import DataError
+    from stringcast.sync.offset import run_sync
 
     meta = yaml.safe_load((trial / "video.yaml").read_text())
     meta.pop("trigger_time_s", None)
@@ -59,9 +59,9 @@ def _sync_case(trial: Path, calibration_json: Path, campaign, config: dict, out:
 
 
 def run(quick: bool = False) -> dict:
-    from stringcast.calibration import run_calibration
-    from stringcast.config import load_config
-    from stringcast.files import read_json
+    from stringcast.calibrate.calibration import run_calibration
+    from stringcast.core.config import load_config
+    from stringcast.core.files import read_json
 
     config = load_config()
     config["sync"] = dict(config.get("sync", {}), method="video")

@@ -38,7 +38,7 @@ from benchmarks.common import (
 
 
 def _decode_fps(video: Path) -> float:
-    from stringcast.video import open_video
+    from stringcast.video.container import open_video
 
     t0 = time.perf_counter()
     n = sum(1 for _ in open_video(video))
@@ -48,9 +48,9 @@ def _decode_fps(video: Path) -> float:
 def track_string(string_type: int, config: dict, calib_dir: Path, work: Path, seed: int) -> dict:
     """Film, calibrate, sync and track one string type's first motion; errors and timings."""
     from stringcast.campaign import tracking_errors
-    from stringcast.config import resolve_campaign
-    from stringcast.sync import run_sync
-    from stringcast.tracking import run_tracking
+    from stringcast.core.config import resolve_campaign
+    from stringcast.sync.offset import run_sync
+    from stringcast.track.tracking import run_tracking
 
     d = work / f"string_{string_type}"
     trial = d / "trial_1"
@@ -91,7 +91,7 @@ def _figure(per: dict, path: Path) -> None:
 
 
 def run(quick: bool = False, types: list[int] | None = None, work: Path | None = None) -> dict:
-    from stringcast.config import load_config
+    from stringcast.core.config import load_config
 
     config = load_config()
     name = "tracking_partial" if types else "tracking"

@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from stringcast.config import load_config, resolve_campaign
+from stringcast.core.config import load_config, resolve_campaign
 
 ROOT = Path(__file__).resolve().parents[1]
 # the real camera data: $STRINGCAST_REAL_DATA, else ../shared/real beside the clone
@@ -29,10 +29,10 @@ def tiny_lab_trial(tmp_path, config, bands=None):
     import copy
 
     lab = pytest.importorskip("stringcast.lab")
-    from stringcast.arm import hand_pose
-    from stringcast.calibration import run_calibration
-    from stringcast.config import resolve_campaign
-    from stringcast.sync import run_sync
+    from stringcast.core.arm import hand_pose
+    from stringcast.calibrate.calibration import run_calibration
+    from stringcast.core.config import resolve_campaign
+    from stringcast.sync.offset import run_sync
 
     cfg = copy.deepcopy(config)
     q0 = np.array([0.2, -0.4, -0.3])

@@ -27,8 +27,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .config import ConfigError, load_config, load_yaml, resolve_campaign
-from .files import read_parquet, write_yaml
+from stringcast.core import ConfigError, load_config, load_yaml, resolve_campaign
+from stringcast.core import read_parquet, write_yaml
+from stringcast.execute import execute
+from stringcast.lab import write_calibration_clip
 
 
 def _snakemake(root: Path, targets: list[str], cores: int, config_files: list[Path]) -> float:
@@ -68,8 +70,6 @@ def run_campaign(name: str, string: str, target: str, config_path: str | Path | 
         ConfigError: bad ids, or an existing campaign.yaml for another string/target.
         RuntimeError: a workflow step failed (its log path is named).
     """
-    from .executor import execute
-    from .lab import write_calibration_clip
 
     root = Path(root).resolve()
     # the lab reads the config the workflow's jobs read: the project's, then the given files over it

@@ -2,8 +2,8 @@
 call these) plus ``execute`` (play a motion file on an arm) and ``campaign`` (the
 whole loop on the virtual lab).
 
-Errors in the input (:class:`~stringcast.files.DataError`,
-:class:`~stringcast.config.ConfigError`, :class:`~stringcast.arm.JointLimitError`)
+Errors in the input (:class:`~stringcast.core.files.DataError`,
+:class:`~stringcast.core.config.ConfigError`, :class:`~stringcast.core.arm.JointLimitError`)
 print one line naming the file and the problem and exit with status 2.
 """
 from __future__ import annotations
@@ -14,7 +14,7 @@ from pathlib import Path
 
 
 def _campaign(args):
-    from .config import load_campaign
+    from stringcast.core import load_campaign
 
     return load_campaign(args.campaign, _config(args))
 
@@ -23,7 +23,7 @@ _CONFIG_CACHE: dict = {}
 
 
 def _config(args):
-    from .config import load_config
+    from stringcast.core import load_config
 
     key = str(args.config)
     if key not in _CONFIG_CACHE:
@@ -32,7 +32,7 @@ def _config(args):
 
 
 def cmd_calibrate(args):
-    from .calibration import run_calibration
+    from stringcast.calibrate import run_calibration
 
     calib_dir = Path(args.calib_dir) if args.calib_dir and Path(args.calib_dir).is_dir() else None
     cal = run_calibration(Path(args.trial_dir), calib_dir, _campaign(args), Path(args.out), config=_config(args))
@@ -42,7 +42,7 @@ def cmd_calibrate(args):
 
 
 def cmd_sync(args):
-    from .sync import run_sync
+    from stringcast.sync import run_sync
 
     doc = run_sync(Path(args.trial_dir), Path(args.calibration), _campaign(args), _config(args), Path(args.out))
     extra = "" if doc.get("time_residual_ms") is None else \
@@ -51,7 +51,7 @@ def cmd_sync(args):
 
 
 def cmd_track(args):
-    from .tracking import run_tracking
+    from stringcast.track import run_tracking
 
     df = run_tracking(Path(args.trial_dir), Path(args.calibration), Path(args.sync), _campaign(args),
                       _config(args), Path(args.out), Path(args.overlay) if args.overlay else None)
@@ -67,7 +67,7 @@ def _earlier(args) -> tuple:
 
 
 def cmd_estimate(args):
-    from .estimation import run_estimation
+    from stringcast.estimate import run_estimation
 
     est = run_estimation(Path(args.tracks), Path(args.joints), _campaign(args), _config(args),
                          Path(args.prev) if args.prev else None, int(args.trial),
@@ -76,7 +76,7 @@ def cmd_estimate(args):
 
 
 def cmd_plan_first(args):
-    from .planning import run_first_plan
+    from stringcast.plan import run_first_plan
 
     out = Path(args.out_dir)
     run_first_plan(_campaign(args), _config(args), out / "motion.csv", out / "motion.json", int(args.seed))
@@ -84,7 +84,7 @@ def cmd_plan_first(args):
 
 
 def cmd_plan(args):
-    from .planning import run_plan
+    from stringcast.plan import run_plan
 
     out = Path(args.out_dir)
     run_plan(Path(args.params), Path(args.played_motion), _campaign(args), _config(args),
@@ -94,21 +94,21 @@ def cmd_plan(args):
 
 
 def cmd_report_trial(args):
-    from .report import write_trial_report
+    from stringcast.report import write_trial_report
 
     write_trial_report(Path(args.data_dir), Path(args.results_dir), _campaign(args), _config(args), Path(args.out))
     print(f"trial report -> {args.out}")
 
 
 def cmd_report_campaign(args):
-    from .report import write_campaign_report
+    from stringcast.report import write_campaign_report
 
     write_campaign_report(Path(args.data_dir), Path(args.results_dir), _campaign(args), _config(args), Path(args.out))
     print(f"campaign report -> {args.out}")
 
 
 def cmd_execute(args):
-    from .executor import execute
+    from stringcast.execute import execute
 
     execute(Path(args.motion), args.backend, Path(args.out), Path(args.campaign), _config(args),
             seed=int(args.seed), dry_run=bool(args.dry_run), robot_ip=args.robot_ip,
@@ -116,14 +116,14 @@ def cmd_execute(args):
 
 
 def cmd_calib_clip(args):
-    from .lab import write_calibration_clip
+    from stringcast.lab import write_calibration_clip
 
     path = write_calibration_clip(_campaign(args), _config(args), Path(args.out), int(args.seed))
     print(f"calibration clip -> {path}")
 
 
 def cmd_campaign(args):
-    from .campaign import run_campaign
+    from stringcast.campaign import run_campaign
 
     run_campaign(args.name, args.string, args.target, config_path=args.config,
                  max_executions=int(args.max_executions), cores=int(args.cores), seed=int(args.seed),
@@ -227,9 +227,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from .arm import JointLimitError
-    from .config import ConfigError
-    from .files import DataError
+    from stringcast.core import JointLimitError
+    from stringcast.core import ConfigError
+    from stringcast.core import DataError
 
     args = build_parser().parse_args(argv)
     try:

@@ -1,6 +1,6 @@
 """The virtual lab: a stand-in for the arm, the string and the high-speed camera.
 
-It shares no code with the string model (``stringcast.model``): the string is a
+It shares no code with the string model (``stringcast.model.string_model``): the string is a
 MuJoCo capsule chain (:mod:`.mjcf`, :mod:`.physics`) in air (:mod:`.air`), held by an arm with
 servo lag (:mod:`.servo`), filmed by a simulated pinhole camera with OpenCV lens
 distortion, motion blur and sensor noise (:mod:`.camera`, :mod:`.scene`).

@@ -33,7 +33,7 @@ from typing import Mapping
 import cv2
 import numpy as np
 
-from ..config import ConfigError
+from stringcast.core import ConfigError
 
 CAMERA_DEFAULTS = {
     "distance_mm": 2500.0,

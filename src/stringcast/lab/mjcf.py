@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass
 from typing import Mapping
 
-from ..config import Campaign, ConfigError
+from stringcast.core import Campaign, ConfigError
 
 #: Defaults for ``lab.strings.<type>`` keys (SI after conversion).
 STRING_DEFAULTS = {

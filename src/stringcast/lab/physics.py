@@ -49,7 +49,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import ArmSpec
+from stringcast.core import ArmSpec
 from .air import C_FRICTION, drag_kernel
 from .mjcf import DRIVER_ARMATURE, StringPhysics, build_mjcf, link_diameter, weight_link
 from .servo import hand_trajectory, servo_lag

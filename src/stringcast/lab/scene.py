@@ -25,8 +25,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..arm import forward_kinematics
-from ..config import ArmSpec, BoardSpec, Campaign
+from stringcast.core import forward_kinematics
+from stringcast.core import ArmSpec, BoardSpec, Campaign
 from .camera import CameraModel, IdealCanvas, Sensor, apply_homography
 
 SHIFT = 4                      # sub-pixel bits for cv2 drawing

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..arm import hand_pose
-from ..config import ArmSpec
+from stringcast.core import hand_pose
+from stringcast.core import ArmSpec
 
 
 def servo_lag(t_cmd: np.ndarray, q_cmd: np.ndarray, lag_s: float,

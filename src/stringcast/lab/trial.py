@@ -25,9 +25,9 @@ import cv2
 import numpy as np
 import pandas as pd
 
-from ..arm import forward_kinematics
-from ..config import Campaign, ConfigError
-from ..files import DataError, atomic_path, write_json, write_joint_table, write_parquet, write_yaml
+from stringcast.core import forward_kinematics
+from stringcast.core import Campaign, ConfigError
+from stringcast.core import DataError, atomic_path, write_json, write_joint_table, write_parquet, write_yaml
 from .camera import CameraModel, IdealCanvas, Sensor, camera_settings
 from .mjcf import StringPhysics
 from .physics import simulate

@@ -1,0 +1,312 @@
+"""Board-to-robot check: where the still arm is seen vs where config's board pose and the FK put it.
+
+The calibration maps pixels to the robot frame through the ChArUco board, whose pose in
+the robot frame comes from config (``setup.board_to_robot``). If that pose is wrong (the
+board moved, a typo in ``board_origin_mm``), every tracked point is off by as much. The
+arm itself is the check: before the motion it stands still at the joint log's first row
+q_rest, so the forward kinematics (:func:`stringcast.core.arm.forward_kinematics`) say where it
+is in the robot frame; :func:`check_board_to_robot` measures where the calibration sees
+it, from the rest image alone, with two kinds of feature (no model of the arm's colours):
+
+* **link and gripper edges**: across each link (and the gripper) the image is sampled on
+  rows normal to its FK axis, over the arm outline's width (tracking settings
+  ``arm_link_widths_mm``, ``gripper_widths_mm``) plus ``margin_mm`` each side, clear of the
+  joint discs. On each row the strongest pair of edges whose spacing fits
+  the outline (``width_range`` of it) is the segment as seen; the median of their
+  midpoints over the rows (the largest group within ``max_spread_mm`` of each other, at
+  least ``min_share`` of the rows: rows where clutter behind the arm won drop out) is the
+  segment's offset o_s along its normal n_s: one equation ``n_s . d = o_s``.
+* **joint discs** (if ``use_discs``): around each joint but the base, rays from the FK
+  centre find the disc's rim (the strongest edge from 0.3 outline radii,
+  ``arm_joint_radii_mm``, to the radius + ``disc_reach_mm``); a circle fit (Huber-reweighted) gives the centre's
+  2-D offset: two equations, which a posture with all links nearly parallel needs.
+* **the hanging string** (if ``use_string``): at rest the string hangs straight down from
+  the grasp point (gravity), so its centreline x is the grasp point's x. On rows
+  ``string_rows_mm`` below the grasp point (clear of the arm's outline) the darkest or
+  lightest thin line within ``string_search_mm`` of the grasp x is found (a ridge of the
+  second derivative); the median offset gives ``(1, 0) . d = o_x``. Off by default: the
+  lab's string leaves a horizontal gripper sideways and bends down 5-16 mm away from the
+  grasp x (the grasp's bending stiffness), so the assumption is only good for a gripper
+  pointing down.
+
+d = (dx, dy) is the least-squares (Huber-reweighted) translation between where the arm is
+seen and where config's board pose puts it; ``residual_mm`` = |d|. A board pose shifted by
+20 mm in x makes d ~ (20, 0) mm. With the true pose d is the calibration's own error near
+the arm (about 1-2 mm with intrinsics; lens distortion uncorrected, 10-20 mm).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.ndimage import gaussian_filter1d, map_coordinates
+
+from stringcast.core import forward_kinematics
+from stringcast.core import tracking_settings
+
+DEFAULTS = {"margin_mm": 30.0, "step_mm": 0.5, "rows": 24, "width_range": [0.6, 1.1], "clear_mm": 10.0,
+            "min_rows": 6, "min_share": 0.4, "max_spread_mm": 2.0, "use_discs": True, "disc_rays": 48, "disc_reach_mm": 35.0, "use_string": False, "string_rows_mm": [20.0, 140.0],
+            "string_search_mm": 40.0, "warn_mm": 5.0}
+METHOD = "rest image: link/gripper edge pairs across their FK axes, joint-disc rims"
+
+
+def settings(config: dict | None) -> dict:
+    """Board-check settings: ``config['board_check']`` over :data:`DEFAULTS`."""
+    st = dict(DEFAULTS)
+    st.update((config or {}).get("board_check", {}) or {})
+    return st
+
+
+def _sample(image: np.ndarray, calibration, pts: np.ndarray) -> np.ndarray:
+    uv = calibration.robot_to_pixel(pts.reshape(-1, 2))
+    h, w = image.shape
+    vals = map_coordinates(image, [uv[:, 1], uv[:, 0]], order=1, mode="nearest")
+    inside = (uv[:, 0] >= 0) & (uv[:, 0] <= w - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= h - 1)
+    vals = np.where(inside, vals, np.nan)
+    return vals.reshape(pts.shape[:-1])
+
+
+def _refine(g: np.ndarray, i: int) -> float:
+    """Sub-sample position of the |g| extremum at index i (parabola)."""
+    if 0 < i < len(g) - 1:
+        y0, y1, y2 = np.abs(g[i - 1:i + 2])
+        den = y0 - 2 * y1 + y2
+        if den < 0:
+            return i + 0.5 * (y0 - y2) / den
+    return float(i)
+
+
+def edge_pair_centre(profile: np.ndarray, step: float, v0: float, width_lo: float, width_hi: float) -> float | None:
+    """Centre (m, in the profile's coordinate v = v0 + i step) of the strongest pair of
+    edges spaced within [width_lo, width_hi] m; None if there is none.
+
+    Edges are local maxima of |gradient|, of either sign (a link in front of a darker
+    region on one side and a lighter one on the other has two rising edges). Pair
+    strength = the weaker edge's |gradient|, so one strong clutter edge cannot win with a
+    faint partner.
+    """
+    if not np.all(np.isfinite(profile)):
+        return None
+    g = np.gradient(profile)
+    a = np.abs(g)
+    peaks = np.nonzero((a[1:-1] >= a[:-2]) & (a[1:-1] > a[2:]))[0] + 1
+    if len(peaks) < 2:
+        return None
+    peaks = peaks[np.argsort(a[peaks])[::-1][:12]]
+    best, centre = 0.0, None
+    for i in peaks:
+        for j in peaks:
+            if j <= i:
+                continue
+            sep = (j - i) * step
+            if width_lo <= sep <= width_hi:
+                s = min(a[i], a[j])
+                if s > best:
+                    best, centre = s, v0 + step * 0.5 * (_refine(g, i) + _refine(g, j))
+    return centre
+
+
+def _segment_offsets(image, calibration, arm, q_rest, st, tst) -> list[tuple[np.ndarray, float, float]]:
+    """[(normal (2,), offset m, spread m)] for each link/gripper whose edges were found."""
+    pts = forward_kinematics(arm, np.asarray(q_rest, float))
+    J = arm.n_joints
+    links, radii = tst["arm_link_widths_mm"], tst["arm_joint_radii_mm"]
+    out = []
+    for s in range(J + 1):
+        a, b = pts[s], pts[s + 1]
+        L = float(np.hypot(*(b - a)))
+        if s < J:
+            w0 = w1 = links[min(s, len(links) - 1)] / 1000
+            r_a, r_b = radii[min(s, len(radii) - 1)] / 1000, radii[min(s + 1, len(radii) - 1)] / 1000
+        else:
+            w0, w1 = (w / 1000 for w in tst["gripper_widths_mm"])
+            r_a, r_b = radii[min(J, len(radii) - 1)] / 1000, 0.0
+        clear = st["clear_mm"] / 1000
+        u0, u1 = (r_a + clear) / L, 1 - (r_b + clear) / L
+        if s == J:
+            u1 = min(u1, 0.9)
+        if L <= 0 or (u1 - u0) * L < 0.02:
+            continue  # too short to show its sides clear of the joint discs
+        e = (b - a) / L
+        nrm = np.array([-e[1], e[0]])
+        step = st["step_mm"] / 1000
+        us = np.linspace(u0, u1, int(st["rows"]))
+        centres = []
+        for u in us:
+            w = w0 + (w1 - w0) * u
+            half = w / 2 + st["margin_mm"] / 1000
+            v = np.arange(-half, half + step / 2, step)
+            prof = _sample(image, calibration, a + u * (b - a) + v[:, None] * nrm)
+            prof = gaussian_filter1d(prof, 1.0 / st["step_mm"]) if np.all(np.isfinite(prof)) else prof
+            c = edge_pair_centre(prof, step, v[0], st["width_range"][0] * w, st["width_range"][1] * w)
+            if c is not None:
+                centres.append(c)
+        c = _consensus(np.asarray(centres), st["max_spread_mm"] / 1000,
+                       max(int(st["min_rows"]), int(np.ceil(st["min_share"] * len(us)))))
+        if c is not None:
+            out.append((nrm, *c))
+    return out
+
+
+def _consensus(values: np.ndarray, tol: float, min_count: int) -> tuple[float, float] | None:
+    """(median, MAD spread) of the largest group of values within +-tol of one of them
+    (rows where clutter behind the arm won the edge pair fall out); None if it has fewer
+    than min_count members."""
+    if len(values) < min_count:
+        return None
+    near = np.abs(values[:, None] - values[None, :]) <= tol
+    group = values[near[int(np.argmax(near.sum(axis=1)))]]
+    if len(group) < min_count:
+        return None
+    med = float(np.median(group))
+    return med, float(np.median(np.abs(group - med)) * 1.4826)
+
+
+def _disc_offsets(image, calibration, arm, q_rest, st, tst) -> list[np.ndarray]:
+    """[(2,) centre offset m] of the joint discs (base excluded) whose rim was found.
+
+    Rays from the FK joint centre at ``disc_rays`` angles; on each, the strongest edge
+    between 0.3 outline radii (``arm_joint_radii_mm``) and the radius + ``disc_reach_mm``
+    (a board pose that far off is still found); the rim
+    r(theta) = r0 + (cos theta, sin theta) . c is fitted by Huber-reweighted least squares
+    for (r0, c), kept if r0 fits the outline, most rays agree and the rim is round.
+    """
+    pts = forward_kinematics(arm, np.asarray(q_rest, float))
+    radii = tst["arm_joint_radii_mm"]
+    step = st["step_mm"] / 1000
+    th = np.linspace(0, 2 * np.pi, int(st["disc_rays"]), endpoint=False)
+    ray = np.stack([np.cos(th), np.sin(th)], axis=1)
+    out = []
+    for j in range(1, arm.n_joints + 1):
+        R = radii[min(j, len(radii) - 1)] / 1000
+        r = np.arange(0.3 * R, R + st["disc_reach_mm"] / 1000, step)
+        centre, ok = np.zeros(2), False
+        for _ in range(3):  # re-centre: the rim model is linear in the offset only for small ones
+            fit = _rim_fit(image, calibration, pts[j] + centre, r, ray, step, st)
+            if fit is None:
+                break
+            r0, c, inl = fit
+            centre = centre + c
+            ok = inl >= st["min_share"] * 1.5 and 0.7 * R <= r0 <= 1.1 * R
+            if np.hypot(*c) < 0.001:
+                break
+        if ok:
+            out.append(centre)
+    return out
+
+
+def _huber_lstsq(A: np.ndarray, y: np.ndarray, scale: float = 0.002, iters: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    """Huber least squares by iteratively reweighted least squares: A (N, P), y (N,) (m) ->
+    (solution (P,), residuals A x - y (N,)); residuals beyond ``scale`` (2 mm) weigh as |r|, not r^2."""
+    w = np.ones(len(y))
+    for _ in range(iters):
+        x = np.linalg.lstsq(A * w[:, None], y * w, rcond=None)[0]
+        r = A @ x - y
+        w = np.sqrt(np.minimum(1.0, scale / np.maximum(np.abs(r), 1e-12)))
+    return x, r
+
+
+def _rim_fit(image, calibration, centre, r, ray, step, st):
+    """(r0 m, centre correction (2,) m, inlier share) of a disc rim seen on rays from centre; None off-image."""
+    prof = _sample(image, calibration, centre + r[None, :, None] * ray[:, None, :])  # (rays, r)
+    if not np.all(np.isfinite(prof)):
+        return None
+    g = np.abs(np.gradient(gaussian_filter1d(prof, 1.0 / st["step_mm"], axis=1), axis=1))
+    idx = np.argmax(g, axis=1)
+    r_obs = r[0] + step * np.array([_refine(g[i], int(idx[i])) for i in range(len(ray))])
+    A = np.column_stack([np.ones(len(ray)), ray])
+    sol, res = _huber_lstsq(A, r_obs)
+    inl = np.abs(res) <= st["max_spread_mm"] / 1000
+    if inl.sum() >= 3:
+        sol = np.linalg.lstsq(A[inl], r_obs[inl], rcond=None)[0]
+    return float(sol[0]), sol[1:], float(inl.mean())
+
+
+def _string_offset(image, calibration, arm, q_rest, st, tst) -> float | None:
+    """x offset (m) of the hanging string below the grasp point, seen minus FK; None if unclear."""
+    pts = forward_kinematics(arm, np.asarray(q_rest, float))
+    grasp = pts[-1]
+    step = st["step_mm"] / 1000
+    half = st["string_search_mm"] / 1000
+    x = np.arange(-half, half + step / 2, step)
+    # clear of the arm: farther than the outline's half-width (+ clear_mm) from every segment
+    widths = list(tst["arm_link_widths_mm"][:arm.n_joints]) + [max(tst["gripper_widths_mm"])]
+    widths += [tst["arm_link_widths_mm"][-1]] * (arm.n_joints + 1 - len(widths))
+    offs = []
+    for dy in np.arange(st["string_rows_mm"][0], st["string_rows_mm"][1], 5.0) / 1000:
+        row = np.column_stack([grasp[0] + x, np.full_like(x, grasp[1] - dy)])
+        near = False
+        for s in range(len(pts) - 1):
+            a, b = pts[s], pts[s + 1]
+            d = b - a
+            t = np.clip(((row - a) @ d) / max(d @ d, 1e-12), 0, 1)
+            dist = np.linalg.norm(row - (a + t[:, None] * d), axis=1)
+            if np.any(dist < widths[min(s, len(widths) - 1)] / 2000 + st["clear_mm"] / 1000):
+                near = True
+                break
+        if near:
+            continue
+        prof = _sample(image, calibration, row)
+        if not np.all(np.isfinite(prof)):
+            continue
+        ridge = gaussian_filter1d(prof, 1.5 / st["step_mm"], order=2)  # a thin line: |2nd derivative| peak
+        i = int(np.argmax(np.abs(ridge)))
+        if 0 < i < len(x) - 1:
+            offs.append(x[0] + step * _refine(ridge, i))
+    c = _consensus(np.asarray(offs), st["max_spread_mm"] / 1000, int(st["min_rows"]))
+    return None if c is None else c[0]
+
+
+def check_board_to_robot(rest_image: np.ndarray, calibration, arm, q_rest: np.ndarray, config: dict | None) -> dict:
+    """Translation between where the still arm is seen and where config's board pose + the FK put it.
+
+    Args:
+        rest_image: (H, W) grey image (any dtype) of the arm still at ``q_rest``, e.g. the
+            median of the frames before the motion.
+        calibration: :class:`~stringcast.calibrate.calibration.Calibration` (robot_to_pixel).
+        arm: :class:`~stringcast.core.config.ArmSpec`. q_rest: (J,) rad, ``joints.csv``'s first row.
+        config: the project config (``board_check`` and ``tracking`` sections; defaults
+            :data:`DEFAULTS`).
+
+    Returns:
+        ``{"residual_mm": |d| or None, "dx_mm", "dy_mm" (seen minus FK, robot frame),
+        "method", "n_used" (features used), "segment_offsets_mm", "string_offset_mm",
+        "fit_rms_mm", "warn_mm"}``; residual_mm None when fewer than two independent
+        features were found (no warning then, only the note in ``method``).
+
+    Raises:
+        ValueError: rest_image not 2-D, or q_rest not (J,).
+    """
+
+    img = np.asarray(rest_image, np.float32)
+    if img.ndim != 2:
+        raise ValueError(f"check_board_to_robot: rest_image must be (H, W), got {img.shape}")
+    q_rest = np.asarray(q_rest, float)
+    if q_rest.shape != (arm.n_joints,):
+        raise ValueError(f"check_board_to_robot: q_rest must be ({arm.n_joints},), got {q_rest.shape}")
+    st, tst = settings(config), tracking_settings(config)
+    segs = _segment_offsets(img, calibration, arm, q_rest, st, tst)
+    rows = [n for n, _, _ in segs]
+    rhs = [o for _, o, _ in segs]
+    discs: list = []
+    if st["use_discs"]:
+        for c in _disc_offsets(img, calibration, arm, q_rest, st, tst):
+            rows += [np.array([1.0, 0.0]), np.array([0.0, 1.0])]
+            rhs += [float(c[0]), float(c[1])]
+            discs.append([float(c[0] * 1000), float(c[1] * 1000)])
+    x_str = _string_offset(img, calibration, arm, q_rest, st, tst) if st["use_string"] else None
+    if x_str is not None:
+        rows.append(np.array([1.0, 0.0]))
+        rhs.append(x_str)
+    doc = {"method": METHOD, "n_used": len(segs) + len(discs) + (x_str is not None), "warn_mm": float(st["warn_mm"]),
+           "segment_offsets_mm": [float(o * 1000) for _, o, _ in segs],
+           "disc_offsets_mm": discs, "string_offset_mm": None if x_str is None else float(x_str * 1000),
+           "residual_mm": None, "dx_mm": None, "dy_mm": None, "fit_rms_mm": None}
+    A, y = np.asarray(rows, float).reshape(-1, 2), np.asarray(rhs, float)
+    if len(rows) < 2 or np.linalg.svd(A, compute_uv=False)[-1] < 0.3:
+        doc["method"] += " (too few independent features: not checked)"
+        return doc
+    d, r = _huber_lstsq(A, y)
+    doc.update(dx_mm=float(d[0] * 1000), dy_mm=float(d[1] * 1000), residual_mm=float(math.hypot(*d) * 1000),
+               fit_rms_mm=float(np.sqrt(np.mean(r ** 2)) * 1000))
+    return doc

@@ -1,0 +1,249 @@
+"""Reading and writing the data contract's files (DESIGN.md, "Data contract").
+
+Every writer writes to a temporary name in the same folder and renames, so a
+failed or interrupted step never leaves a half-written file that looks finished.
+Every reader raises :class:`DataError` naming the file and what is wrong.
+"""
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+import pandas as pd
+import yaml
+from .config import ConfigError, load_yaml, validate
+
+
+TRACK_COLUMNS = ["frame", "t_s", "point", "x_m", "y_m", "valid"]
+"""Columns of ``tracks.parquet`` (point 0 = grasp, 1..n the model's points)."""
+
+
+class DataError(ValueError):
+    """An input file is missing or malformed; the message names the file."""
+
+
+@contextmanager
+def atomic_path(path: str | Path, suffix: str | None = None) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; rename it onto ``path`` on success.
+
+    On an exception the temporary file is removed and ``path`` is left untouched.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix or path.suffix or ".tmp",
+                               dir=path.parent)
+    os.close(fd)
+    tmp = Path(tmp)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; finished files get the usual mode
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def write_text(path: str | Path, text: str) -> None:
+    with atomic_path(path) as tmp:
+        tmp.write_text(text)
+
+
+def _jsonable(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _jsonable(x.tolist())
+    if isinstance(x, (np.floating, float)):
+        x = float(x)
+        return x if np.isfinite(x) else None
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, np.bool_):
+        return bool(x)
+    if isinstance(x, Path):
+        return str(x)
+    return x
+
+
+def write_json(path: str | Path, doc: Any) -> None:
+    """Write JSON atomically (NumPy values converted; non-finite floats become null)."""
+    write_text(path, json.dumps(_jsonable(doc), indent=2) + "\n")
+
+
+def read_json(path: str | Path) -> Any:
+    path = Path(path)
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError as exc:
+        raise DataError(f"{path}: file not found") from exc
+    except json.JSONDecodeError as exc:
+        raise DataError(f"{path}: not valid JSON: {exc}") from exc
+
+
+def write_yaml(path: str | Path, doc: Any) -> None:
+    write_text(path, yaml.safe_dump(_jsonable(doc), sort_keys=False))
+
+
+def write_parquet(path: str | Path, df: pd.DataFrame) -> None:
+    """Write a DataFrame to Parquet with pyarrow, atomically."""
+    with atomic_path(path) as tmp:
+        df.to_parquet(tmp, engine="pyarrow", index=False)
+
+
+def write_csv(path: str | Path, df: pd.DataFrame, float_format: str = "%.9g") -> None:
+    with atomic_path(path) as tmp:
+        df.to_csv(tmp, index=False, float_format=float_format)
+
+
+def read_parquet(path: str | Path, columns: list[str] | None = None) -> pd.DataFrame:
+    path = Path(path)
+    if not path.exists():
+        raise DataError(f"{path}: file not found")
+    try:
+        df = pd.read_parquet(path, engine="pyarrow")
+    except Exception as exc:  # pyarrow raises several types for corrupt files
+        raise DataError(f"{path}: not a readable Parquet file: {exc}") from exc
+    if columns:
+        missing = [c for c in columns if c not in df.columns]
+        if missing:
+            raise DataError(f"{path}: missing columns {missing}")
+    return df
+
+
+def _joint_columns(df: pd.DataFrame, path: Path) -> list[str]:
+    cols = []
+    j = 1
+    while f"q{j}_rad" in df.columns:
+        cols.append(f"q{j}_rad")
+        j += 1
+    if not cols:
+        raise DataError(f"{path}: no joint columns q1_rad, q2_rad, ... in header {list(df.columns)}")
+    return cols
+
+
+def read_joint_table(path: str | Path, kind: str = "joints.csv") -> tuple[np.ndarray, np.ndarray, pd.DataFrame]:
+    """Read ``joints.csv`` or ``motion.csv``.
+
+    Returns:
+        t: (K,) seconds on the controller clock; q: (K, J) rad; and the whole table.
+
+    Raises:
+        DataError: missing file or columns, NaN values, or ``t_s`` not strictly increasing.
+    """
+    path = Path(path)
+    try:
+        df = pd.read_csv(path)
+    except FileNotFoundError as exc:
+        raise DataError(f"{path}: file not found") from exc
+    except Exception as exc:
+        raise DataError(f"{path}: not a readable CSV file: {exc}") from exc
+    if "t_s" not in df.columns:
+        raise DataError(f"{path}: no 't_s' column in header {list(df.columns)}")
+    cols = _joint_columns(df, path)
+    data = df[["t_s"] + cols].to_numpy(dtype=float)
+    if len(data) < 2:
+        raise DataError(f"{path}: fewer than two rows")
+    bad = ~np.isfinite(data).all(axis=1)
+    if bad.any():
+        raise DataError(f"{path}: NaN or infinite values in {int(bad.sum())} rows (first at row {int(np.argmax(bad)) + 2})")
+    t = data[:, 0]
+    dt = np.diff(t)
+    if np.any(dt <= 0):
+        i = int(np.argmax(dt <= 0))
+        raise DataError(f"{path}: t_s is not strictly increasing at row {i + 3} ({t[i]} then {t[i + 1]})")
+    return t, data[:, 1:], df
+
+
+def check_joint_coverage(t_joints: np.ndarray, t_frames: np.ndarray, joints_path: str | Path,
+                         tol_s: float | None = None) -> None:
+    """Check that the joint log covers every video frame's time.
+
+    Args:
+        t_joints: (K,) joint-log times, s, controller clock (increasing).
+        t_frames: (F,) frame times, s, on the same clock (after sync).
+        joints_path: the joint log, named in the error.
+        tol_s: slack at each end, s; default one median joint-log period.
+
+    Raises:
+        DataError: the frames start before or end after the log (both spans in the message).
+    """
+    t_joints = np.asarray(t_joints, float)
+    t_frames = np.asarray(t_frames, float)
+    if t_joints.size < 2 or t_frames.size < 1:
+        raise DataError(f"{joints_path}: cannot check coverage of {t_frames.size} frames by {t_joints.size} joint samples")
+    tol = float(np.median(np.diff(t_joints))) if tol_s is None else float(tol_s)
+    j0, j1, f0, f1 = t_joints[0], t_joints[-1], float(np.min(t_frames)), float(np.max(t_frames))
+    before, after = j0 - f0, f1 - j1
+    if before > tol or after > tol:
+        gaps = [f"{before:.4f} s before it" if before > tol else "", f"{after:.4f} s after it" if after > tol else ""]
+        raise DataError(f"{joints_path}: the joint log spans {j0:.4f} .. {j1:.4f} s but the video frames span "
+                        f"{f0:.4f} .. {f1:.4f} s (controller clock); frames "
+                        f"{' and '.join(g for g in gaps if g)} have no joint data")
+
+
+def write_joint_table(path: str | Path, t: np.ndarray, q: np.ndarray,
+                      extra: dict[str, np.ndarray] | None = None) -> None:
+    """Write ``joints.csv``/``motion.csv``: ``t_s, q1_rad..qJ_rad`` (+ extra columns)."""
+    q = np.asarray(q, float)
+    df = pd.DataFrame({"t_s": np.asarray(t, float)})
+    for j in range(q.shape[1]):
+        df[f"q{j + 1}_rad"] = q[:, j]
+    for k, v in (extra or {}).items():
+        df[k] = v
+    write_csv(path, df)
+
+
+def read_video_meta(path: str | Path) -> dict:
+    """Read and check ``video.yaml`` (fps, frames, optional trigger_time_s)."""
+
+    path = Path(path)
+    try:
+        doc = load_yaml(path)
+        if not isinstance(doc, dict):
+            raise DataError(f"{path}: expected a mapping with fps and frames")
+        validate(doc, "video.schema.json", path)
+    except ConfigError as exc:
+        raise DataError(str(exc)) from exc
+    return doc
+
+
+def find_video(trial_dir: str | Path) -> Path:
+    """The trial's video: ``video.<ext>`` file, a ``video/`` frame folder, or a ``.cihx``."""
+    trial_dir = Path(trial_dir)
+    cands = sorted(p for p in trial_dir.glob("video*") if p.name != "video.yaml")
+    if not cands:
+        raise DataError(f"{trial_dir}: no video (expected video.mkv/.avi/.mp4, a video/ folder of frames, or video.cihx)")
+    return cands[0]
+
+
+def tracks_arrays(tracks: pd.DataFrame, n: int, source="tracks") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Long ``tracks.parquet`` table -> frames (F,), t (F,) s, xy (F, n+1, 2) m (NaN if absent), valid (F, n+1)."""
+    missing = [c for c in TRACK_COLUMNS if c not in tracks.columns]
+    if missing:
+        raise DataError(f"{source}: missing columns {missing}")
+    if len(tracks) == 0:
+        raise DataError(f"{source}: no rows")
+    pts = tracks["point"].to_numpy(dtype=np.int64)
+    if pts.min() < 0 or pts.max() > n:
+        raise DataError(f"{source}: point ids must be 0..{n} for this string (n = {n}), got {pts.min()}..{pts.max()}")
+    frames, fi = np.unique(tracks["frame"].to_numpy(dtype=np.int64), return_inverse=True)
+    t = np.full(len(frames), np.nan)
+    t[fi] = tracks["t_s"].to_numpy(dtype=float)
+    xy = np.full((len(frames), n + 1, 2), np.nan)
+    xy[fi, pts, 0] = tracks["x_m"].to_numpy(dtype=float)
+    xy[fi, pts, 1] = tracks["y_m"].to_numpy(dtype=float)
+    valid = np.zeros((len(frames), n + 1), bool)
+    valid[fi, pts] = tracks["valid"].to_numpy(dtype=bool)
+    valid &= np.all(np.isfinite(xy), axis=-1)
+    if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
+        raise DataError(f"{source}: frame times t_s must be finite and increase with the frame number")
+    return frames, t, xy, valid

@@ -1,0 +1,236 @@
+"""Parameter estimation (paper Section VI, eqs. 2-3).
+
+The string model (:mod:`stringcast.model.string_model`) is driven by the *measured* joint log
+(forward kinematics -> grasp point and hand angle) from the tracked rest state,
+and its 10 coefficients plus relative masses are searched so that the simulated
+mass points match the tracked ones (evaluation value E, eqs. 4-6,
+:func:`stringcast.estimate.evaluation.evaluation_value`).
+
+Search space (eq. 2): x = chi in [0, 1]^(10 + 1 + G): the ten coefficients in
+``config.PARAM_NAMES`` order, then mu_others (shared by the plain points), then
+one mu per special point (``StringSpec.mass_groups``); P = P_min (P_max/P_min)^chi.
+
+Optimizers (``config.estimation.optimizer``; :mod:`stringcast.estimate.optimizers`: the
+paper's eq. 3 ``random_search``, ``cmaes``, ``de``), all evaluating candidates in
+numba batches of ``config.estimation.batch``, start from chi_best = the previous
+trial's estimate. With no previous estimate (trial 1) chi_best is the set the
+first motion was planned with (:func:`stringcast.model.parameters.first_parameters`):
+chi = 0 for the coefficients (Table 2 minima) except k_s (lifted so the model
+carries its own weight, or Table 2's maximum: ``motion.first_k_s``), and chi of
+``model.first_mu`` for the masses.
+
+params.json also holds ``top`` (the best ``estimation.top_k`` sets, best first, with
+chi: the robust planner's ensemble) and ``diagnostics`` (which parameters this
+trial's motion pins down, :mod:`stringcast.estimate.diagnostics`).
+
+The trial's problem and E as a function of chi (the rest state, the frames compared) are
+:mod:`stringcast.estimate.problem`'s.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Mapping
+
+import numpy as np
+import pandas as pd
+
+from stringcast.core import PARAM_NAMES, Campaign, ConfigError, model_ranges
+from .diagnostics import best_k, diagnostics
+from .diagnostics import settings as diagnostics_settings
+from .problem import (EstimationProblem, build_problem, make_joint_objective, make_objective,
+                                 point_errors, simulate_fit)
+from stringcast.core import TRACK_COLUMNS, read_joint_table, read_json, read_parquet, tracks_arrays, write_json, write_parquet
+from .optimizers import OPTIMIZERS, Recorder
+from stringcast.model import decode, start_chi
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """The estimated parameter set and how the search went.
+
+    Attributes:
+        coeffs: (10,) in ``PARAM_NAMES`` order. mu: (n,) relative mass per point.
+        chi: (10 + G + 1,) the exponents of eq. (2) (coefficients, mu_others, specials).
+        E_m: evaluation value (m; inf if every candidate blew up). E_i: (n,) per point, m.
+        history: {"evaluations": [...], "best_E_m": [...]} after each batch.
+        top_chi: (<=K, D) best candidates, top_E: (<=K,) their E (m), K = ``estimation.top_k``.
+        message: empty, or what went wrong (all candidates invalid, rest fallback).
+        chi_evaluated: (N, D) every candidate in evaluation order; E_evaluated: (N,) its E (m).
+    """
+
+    coeffs: np.ndarray
+    mu: np.ndarray
+    chi: np.ndarray
+    E_m: float
+    E_i: np.ndarray
+    history: dict
+    optimizer: str
+    seed: int
+    n_evaluations: int
+    n_blown_up: int
+    seconds: float
+    top_chi: np.ndarray
+    top_E: np.ndarray
+    message: str = ""
+    chi_evaluated: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    E_evaluated: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    def __post_init__(self):
+        n = len(self.mu)
+        if np.shape(self.coeffs) != (len(PARAM_NAMES),):
+            raise ValueError(f"Estimate.coeffs: expected ({len(PARAM_NAMES)},), got {np.shape(self.coeffs)}")
+        if np.shape(self.E_i) != (n,):
+            raise ValueError(f"Estimate.E_i: expected ({n},), got {np.shape(self.E_i)}")
+        if np.ndim(self.top_chi) != 2 or np.shape(self.top_chi)[:1] != np.shape(self.top_E):
+            raise ValueError("Estimate.top_chi/top_E: shapes (k, D) and (k,) expected")
+        if len(self.E_evaluated) and np.shape(self.chi_evaluated) != (len(self.E_evaluated), np.shape(self.top_chi)[1]):
+            raise ValueError("Estimate.chi_evaluated/E_evaluated: shapes (N, D) and (N,) expected")
+
+
+# ---------------------------------------------------------------------------
+# Search
+# ---------------------------------------------------------------------------
+def estimate(problem: EstimationProblem, config: Mapping, chi_start: np.ndarray, M: int, seed: int,
+             objective: Callable | None = None, earlier: tuple = ()) -> Estimate:
+    """Run the configured optimizer on ``problem``.
+
+    Args:
+        chi_start: (10 + G,) chi_best at m = 0. M: executions so far (>= 1, eq. 3).
+        objective: batch objective chi (B, D) -> E (B,); default :func:`make_objective`
+            (with a custom objective ``E_i`` is NaN).
+        earlier: problems of earlier trials of the same string, fitted together with
+            ``problem`` (:func:`make_joint_objective`; E_m is then the mean over the
+            trials, E_i stays ``problem``'s).
+
+    Returns:
+        The :class:`Estimate` (never raises on blown-up candidates: E = inf and a message).
+
+    Raises:
+        ConfigError: unknown optimizer name or a bad budget.
+    """
+    est_cfg = config.get("estimation", {})
+    name = str(est_cfg.get("optimizer", "random_search"))
+    if name not in OPTIMIZERS:
+        raise ConfigError(f"estimation.optimizer: unknown {name!r} (known: {', '.join(OPTIMIZERS)})")
+    budget, batch = int(est_cfg.get("iterations", 3000)), int(est_cfg.get("batch", 64))
+    if budget < 1 or batch < 1:
+        raise ConfigError("estimation.iterations and estimation.batch must be >= 1")
+    d = len(PARAM_NAMES) + problem.n_groups
+    chi_start = np.asarray(chi_start, float)
+    if chi_start.shape != (d,):
+        raise ValueError(f"chi_start: expected ({d},), got {chi_start.shape}")
+    custom = objective is not None
+    if not custom:
+        objective = make_joint_objective((*earlier, problem), config)   # E itself for one trial
+    rng = np.random.default_rng(seed)
+    t0 = time.perf_counter()
+    rec = Recorder(objective, budget, f"estimate ({name})")
+    try:
+        OPTIMIZERS[name](rec, chi_start, batch, max(1, int(M)), rng, est_cfg)
+    finally:
+        rec.bar.close()
+    all_chi, all_E = np.concatenate(rec.chi), np.concatenate(rec.E)
+    top_chi, top_E = best_k(all_chi, all_E, diagnostics_settings(config)[0])
+    best_chi = top_chi[0]
+    coeffs, mu = decode(best_chi, config, problem.mass_groups)
+    if custom:  # E_i needs the model; a custom objective defines no points
+        E_i = np.full(problem.n_points, np.nan)
+    elif np.isfinite(top_E[0]):
+        E_i = point_errors(problem, config, best_chi)
+    else:
+        E_i = np.full(problem.n_points, np.inf)
+    msgs = []
+    blown = int(np.sum(~np.isfinite(all_E)))
+    if not np.isfinite(top_E[0]):
+        msgs.append(f"every one of {len(all_E)} candidates blew up or was invalid; the parameters are the best "
+                    "it had (E = inf)")
+    elif blown > len(all_E) // 2:
+        msgs.append(f"{blown} of {len(all_E)} candidates blew up (E = inf); the estimate is the best finite one")
+    if problem.fallback_points:
+        msgs.append(f"points {list(problem.fallback_points)} were never tracked at rest: their initial state "
+                    "is filled with rest-length segments between the tracked points around them")
+    return Estimate(coeffs=coeffs, mu=mu, chi=best_chi, E_m=float(top_E[0]), E_i=E_i,
+                    history=rec.history, optimizer=name, seed=int(seed), n_evaluations=len(all_E),
+                    n_blown_up=blown, seconds=time.perf_counter() - t0,
+                    top_chi=top_chi, top_E=top_E, message="; ".join(msgs),
+                    chi_evaluated=all_chi, E_evaluated=all_E)
+
+# ---------------------------------------------------------------------------
+# Stage entry point
+# ---------------------------------------------------------------------------
+def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign, config: Mapping,
+                   prev_params_json: Path | None, trial_index: int, out_params_json: Path,
+                   out_fit_parquet: Path, earlier: tuple = ()) -> Estimate:
+    """Estimate the parameters of one trial and write ``params.json`` and ``fit.parquet``.
+
+    Args:
+        tracks_parquet, joints_csv: the trial's tracked points and measured joint log.
+        prev_params_json: the previous trial's ``params.json`` (chi_best of eq. 3) or None.
+        trial_index: k >= 1, the number of executions so far (M of eq. 3); seed = estimation.seed + k.
+        earlier: (tracks_parquet, joints_csv) pairs of earlier trials of the campaign, fitted
+            together with this one (``estimation.joint_trials``; :func:`make_joint_objective`).
+            params.json's ``E_mm`` is then the mean over the trials, ``E_trials_mm`` each one's.
+
+    Raises:
+        DataError: unreadable or inconsistent inputs (named). ConfigError: bad optimizer settings.
+    """
+    tracks = read_parquet(tracks_parquet, TRACK_COLUMNS)
+    t_j, q_j, _ = read_joint_table(joints_csv)
+    problem = build_problem(tracks, t_j, q_j, campaign, config, source=str(tracks_parquet))
+    prev = read_json(prev_params_json) if prev_params_json else None
+    chi0 = start_chi(prev, campaign.string, config, str(prev_params_json))
+    k = max(1, int(trial_index))
+    seed = int(config.get("estimation", {}).get("seed", 0)) + k
+    earlier_problems = []
+    for tr, jo in earlier:
+        t_e, q_e, _ = read_joint_table(jo)
+        earlier_problems.append(build_problem(read_parquet(tr, TRACK_COLUMNS), t_e, q_e, campaign, config,
+                                              source=str(tr)))
+    est = estimate(problem, config, chi0, k, seed, earlier=tuple(earlier_problems))
+    E_trials = [float(make_objective(p, config)(est.chi[None])[0]) * 1000 for p in (*earlier_problems, problem)]
+
+    _, mu_groups_all = decode(est.top_chi, config, np.arange(problem.n_groups))
+    top = [{"E_mm": e * 1000, "coefficients": dict(zip(PARAM_NAMES, c)), "mu_groups": m, "chi": x}
+           for e, c, m, x in zip(est.top_E, decode(est.top_chi, config, problem.mass_groups)[0], mu_groups_all,
+                                 est.top_chi)]
+    names = list(PARAM_NAMES) + ["mu_others"] + [f"mu_{i}" for i in campaign.string.special_points()]
+    lo, hi, (mlo, mhi) = model_ranges(config)
+    log_lo = np.log10(np.concatenate([lo, np.full(problem.n_groups, mlo)]))
+    log_hi = np.log10(np.concatenate([hi, np.full(problem.n_groups, mhi)]))
+    diag = diagnostics(est.chi_evaluated, est.E_evaluated, log_lo, log_hi, names, config)
+    write_json(out_params_json, {
+        "coefficients": dict(zip(PARAM_NAMES, est.coeffs)), "mu": est.mu, "mu_groups": mu_groups_all[0],
+        "mass_groups": problem.mass_groups, "special_points": campaign.string.special_points(),
+        "E_mm": est.E_m * 1000, "E_i_mm": est.E_i * 1000, "E_trials_mm": E_trials,
+        "trials_fitted": [str(tr) for tr, _ in earlier] + [str(tracks_parquet)],
+        "history": {"evaluations": est.history["evaluations"],
+                    "best_E_mm": [e * 1000 for e in est.history["best_E_m"]]},
+        "optimizer": est.optimizer, "seed": est.seed, "evaluations": est.n_evaluations,
+        "blown_up": est.n_blown_up, "seconds": est.seconds, "M": k, "chi": est.chi,
+        "chi_start": chi0, "chi_names": names, "top": top, "diagnostics": diag, "message": est.message,
+        "t_motion_start_s": problem.t_motion_start,
+        "t_sim_start_s": problem.frame_t[0], "frames_compared": len(problem.frame_t),
+        "rest_fallback_points": list(problem.fallback_points), "dt_s": problem.dt})
+    write_parquet(out_fit_parquet, fit_table(tracks, problem, config, est.chi, campaign.string.n_points))
+    return est
+
+
+def fit_table(tracks: pd.DataFrame, problem: EstimationProblem, config: Mapping, chi: np.ndarray,
+              n: int) -> pd.DataFrame:
+    """``fit.parquet``: ``frame, t_s, point, x_tracked_m, y_tracked_m, valid, x_sim_m, y_sim_m``.
+
+    Every tracked frame and point 1..n; simulated values NaN outside the compared frames
+    (or everywhere if the simulation blew up).
+    """
+    frames, t, xy, valid = tracks_arrays(tracks, n)
+    sim = np.full_like(xy[:, 1:], np.nan)
+    pos, ok = simulate_fit(problem, config, chi)
+    idx = np.searchsorted(frames, problem.frames)
+    sim[idx] = pos if ok else np.nan
+    f, nn = len(frames), n
+    return pd.DataFrame({
+        "frame": np.repeat(frames, nn), "t_s": np.repeat(t, nn), "point": np.tile(np.arange(1, n + 1), f),
+        "x_tracked_m": xy[:, 1:, 0].ravel(), "y_tracked_m": xy[:, 1:, 1].ravel(),
+        "valid": valid[:, 1:].ravel(), "x_sim_m": sim[..., 0].ravel(), "y_sim_m": sim[..., 1].ravel()})

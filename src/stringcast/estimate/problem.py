@@ -1,0 +1,206 @@
+"""The estimation problem of one trial (paper Section VI): what the fit compares, and E as a function of chi.
+
+:func:`build_problem` turns the pipeline's files (``tracks.parquet`` and the measured joint
+log, never the lab's ground truth) into an :class:`EstimationProblem`: the hand's path from
+the forward kinematics of the measured joints, the rest state, and the tracked points 1..n
+of the frames to compare. :func:`make_objective` is E (eqs. 4-6,
+:func:`stringcast.estimate.evaluation.evaluation_value`) of the string model
+(:func:`stringcast.model.string_model.simulate_batch`) driven along that path, for a batch of chi (eq. 2).
+
+Choices where the paper is silent: the rest state p_init is the median of the
+valid tracked positions over the last ``tracking.rest_frames`` frames before the
+motion starts (:func:`stringcast.core.arm.motion_start`); points never valid there are
+filled with l0 segments between the known points around them
+(:func:`stringcast.model.rest_state.fill_rest_pose`, reported in ``Estimate.message``).
+The simulation starts at the first of those frames and is compared at every later
+frame up to the end of the joint log, or (``estimation.compare_after_motion_s``, our
+option) up to that long after the arm stops (:func:`stringcast.core.arm.motion_window`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Mapping
+
+import numpy as np
+import pandas as pd
+
+from stringcast.core import hand_pose, motion_start, motion_window
+from stringcast.core import Campaign
+from stringcast.core import DataError, tracks_arrays
+from stringcast.model import decode
+from stringcast.model import fill_rest_pose
+from stringcast.model import simulate_batch
+from .evaluation import evaluation_value, per_point_errors
+
+MIN_REST_FRAMES = 3
+
+
+@dataclass(frozen=True)
+class EstimationProblem:
+    """Everything the search needs, from the pipeline's files (never ground truth).
+
+    Attributes:
+        hand_t: (K,) s, controller clock; hand_t[0] == frame_t[0].
+        hand: (K, 3) grasp point x, y (m) and hand angle phi_h (rad) from FK.
+        p_init: (n, 2) m, the rest state at frame_t[0].
+        frame_t: (F,) s, frame times compared (frame_t[0] = simulation start).
+        frames: (F,) int, the frame numbers of ``frame_t``.
+        tracked: (F, n, 2) m, tracked points 1..n (0 where not valid).
+        valid: (F, n) bool.
+        l0: rest segment length, m. psi0: rest direction in the hand frame, rad.
+        dt: integration step, s. mass_groups: (n,) int (0 = mu_others).
+        w: tip weighting of eq. (6).
+        fallback_points: points (1..n) never valid at rest (p_init filled by ``fill_rest_pose``).
+        t_motion_start: s, when the joint log starts to move.
+    """
+
+    hand_t: np.ndarray
+    hand: np.ndarray
+    p_init: np.ndarray
+    frame_t: np.ndarray
+    frames: np.ndarray
+    tracked: np.ndarray
+    valid: np.ndarray
+    l0: float
+    psi0: float
+    dt: float
+    mass_groups: np.ndarray
+    w: float
+    fallback_points: tuple = ()
+    t_motion_start: float = 0.0
+
+    def __post_init__(self):
+        k, f, n = len(self.hand_t), len(self.frame_t), len(self.p_init)
+        shapes = {"hand_t": (k,), "hand": (k, 3), "p_init": (n, 2), "frame_t": (f,), "frames": (f,),
+                  "tracked": (f, n, 2), "valid": (f, n), "mass_groups": (n,)}
+        for name, shape in shapes.items():
+            if np.shape(getattr(self, name)) != shape:
+                raise ValueError(f"EstimationProblem.{name}: expected shape {shape}, got {np.shape(getattr(self, name))}")
+        if k < 2 or f < 2:
+            raise ValueError("EstimationProblem: needs at least two joint samples and two frames")
+        if not np.all(np.isfinite(self.p_init)) or not np.all(np.isfinite(self.hand)):
+            raise ValueError("EstimationProblem: p_init and hand must be finite")
+
+    @property
+    def n_points(self) -> int:
+        return len(self.p_init)
+
+    @property
+    def n_groups(self) -> int:
+        return int(self.mass_groups.max()) + 1
+
+
+
+def build_problem(tracks_df: pd.DataFrame, t_joints: np.ndarray, q_joints: np.ndarray,
+                  campaign: Campaign, config: Mapping, source: str = "tracks.parquet") -> EstimationProblem:
+    """Assemble the estimation problem from tracked points and the measured joint log.
+
+    Args:
+        tracks_df: long table ``frame, t_s, point, x_m, y_m, valid`` (t_s on the controller clock).
+        t_joints: (K,) s; q_joints: (K, J) rad, the measured joint log.
+
+    Raises:
+        DataError: missing columns, a log that never moves, fewer than 3 frames at
+            rest before the motion, fewer than 2 frames overlapping the joint log, or
+            no valid tracked point to compare.
+    """
+    s, arm = campaign.string, campaign.arm
+    n = s.n_points
+    frames, t, xy, valid = tracks_arrays(tracks_df, n, source)
+    t_joints = np.asarray(t_joints, float)
+    q_joints = np.asarray(q_joints, float)
+    try:
+        t_move = motion_start(t_joints, q_joints)
+    except ValueError as exc:
+        raise DataError(f"joints.csv: {exc}") from exc
+    rest = np.nonzero((t >= t_joints[0]) & (t < t_move))[0]
+    n_rest = int(config.get("tracking", {}).get("rest_frames", 40))
+    rest = rest[-max(n_rest, MIN_REST_FRAMES):]
+    if len(rest) < MIN_REST_FRAMES:
+        raise DataError(f"{source}: only {len(rest)} frames before the motion starts at t = {t_move:.3f} s "
+                        f"(need {MIN_REST_FRAMES}) within the joint log")
+    use = np.arange(rest[0], len(t))
+    use = use[t[use] <= t_joints[-1]]
+    window_s = config.get("estimation", {}).get("compare_after_motion_s")
+    if window_s is not None:
+        use = use[t[use] <= motion_window(t_joints, q_joints)[1] + float(window_s)]
+    if len(use) < 2:
+        raise DataError(f"{source}: fewer than two frames overlap the joint log")
+    t0 = t[use[0]]
+    q0 = np.array([np.interp(t0, t_joints, q_joints[:, j]) for j in range(q_joints.shape[1])])
+    after = t_joints > t0
+    hand_t = np.concatenate([[t0], t_joints[after]])
+    hand = hand_pose(arm, np.vstack([q0, q_joints[after]]))
+
+    known = np.full((n, 2), np.nan)
+    for i in range(1, n + 1):
+        ok = valid[rest, i]
+        if ok.any():
+            known[i - 1] = np.median(xy[rest[ok], i], axis=0)
+    psi0 = np.radians(float(config["model"].get("psi0_deg", 0.0)))
+    p_init, fallback = fill_rest_pose(hand[0, :2], hand[0, 2] + psi0, known, s.l0)
+    if not valid[use, 1:].any():
+        raise DataError(f"{source}: no valid tracked point 1..{n} in the frames to compare")
+    tracked = np.where(valid[use, 1:, None], xy[use, 1:], 0.0)
+    return EstimationProblem(
+        hand_t=hand_t, hand=hand, p_init=p_init, frame_t=t[use], frames=frames[use], tracked=tracked,
+        valid=valid[use, 1:], l0=s.l0, psi0=psi0,
+        dt=float(config["model"]["dt_s"]), mass_groups=s.mass_groups(),
+        w=float(config.get("evaluation", {}).get("w", 0.1)), fallback_points=tuple(fallback),
+        t_motion_start=t_move)
+
+
+def make_objective(problem: EstimationProblem, config: Mapping) -> Callable[[np.ndarray], np.ndarray]:
+    """E (eqs. 4-6) of a batch: chi (B, D) -> E (B,) in m, +inf where the simulation blew up."""
+
+    hand = problem.hand[None]
+    p_init = problem.p_init[None]
+
+    def objective(chi: np.ndarray) -> np.ndarray:
+        coeffs, mu = decode(chi, config, problem.mass_groups)
+        b = len(chi)
+        pos, ok = simulate_batch(np.ascontiguousarray(coeffs), np.ascontiguousarray(mu), problem.hand_t, hand,
+                                 np.zeros(b, np.int64), p_init, problem.l0, problem.psi0, problem.dt,
+                                 problem.frame_t)
+        E = np.asarray(evaluation_value(problem.tracked, problem.valid, pos, problem.w), float).reshape(b)
+        return np.where(np.asarray(ok, bool) & np.isfinite(E), E, np.inf)
+
+    return objective
+
+
+def make_joint_objective(problems, config: Mapping) -> Callable[[np.ndarray], np.ndarray]:
+    """E over several trials of one string: chi (B, D) -> mean over ``problems`` of E (B,), m.
+
+    The issue's "fit all of a campaign's trials at once": a set must reproduce every
+    motion played so far, not only the last (our choice: each trial weighs the same,
+    whatever its number of frames). +inf where any trial's simulation blew up.
+
+    Raises:
+        ValueError: no problems, or problems of different strings (points, mass groups).
+    """
+    problems = list(problems)
+    if not problems:
+        raise ValueError("make_joint_objective: no problems")
+    if len({(p.n_points, p.n_groups) for p in problems}) != 1:
+        raise ValueError("make_joint_objective: the trials disagree on the string's points or mass groups")
+    objectives = [make_objective(p, config) for p in problems]
+
+    def objective(chi: np.ndarray) -> np.ndarray:
+        return np.mean([f(chi) for f in objectives], axis=0)
+
+    return objective
+
+def simulate_fit(problem: EstimationProblem, config: Mapping, chi: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Simulated points (F, n, 2) at ``problem.frame_t`` for one chi, and whether the run stayed valid."""
+
+    coeffs, mu = decode(np.atleast_2d(chi), config, problem.mass_groups)
+    pos, ok = simulate_batch(coeffs, mu, problem.hand_t, problem.hand[None], np.zeros(1, np.int64),
+                             problem.p_init[None], problem.l0, problem.psi0, problem.dt, problem.frame_t)
+    return np.asarray(pos)[0], bool(np.asarray(ok)[0])
+
+
+def point_errors(problem: EstimationProblem, config: Mapping, chi: np.ndarray) -> np.ndarray:
+    """E_i of eq. (5) for one chi: (n,) m (:func:`stringcast.estimate.evaluation.per_point_errors`)."""
+
+    pos, _ = simulate_fit(problem, config, chi)
+    return np.asarray(per_point_errors(problem.tracked, problem.valid, pos), float)

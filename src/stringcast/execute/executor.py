@@ -1,0 +1,132 @@
+"""The executor: play a motion file on an arm and record the trial's raw files.
+
+It touches hardware and is run by a person (or the campaign loop on the virtual
+lab), never by Snakemake. Before anything moves it checks the motion file: t
+starts at 0 and steps by the controller period, and the trajectory stays within
+the arm's position, speed, acceleration and floor limits
+(:func:`stringcast.core.arm.assert_within_limits`). The command sent is: hold q0 for
+``executor.pre_roll_s`` (filmed at rest: the estimation's initial state), the
+motion, then hold the end posture for ``executor.post_roll_s`` (covers the
+flight window).
+
+Backends:
+
+* ``virtual``: :func:`stringcast.lab.run_trial` (MuJoCo string, simulated arm and
+  camera) writes video.mkv, video.yaml, joints.csv and the ground truth.
+* ``ur-rtde``: a Universal Robots arm through ``ur_rtde`` servoJ
+  (:func:`stringcast.execute.ur_rtde.play_ur`): checks the arm's current posture
+  against the start, writes joints.csv and executor.json (a stopped trial:
+  joints.partial.csv, ``partial: true``). The video comes from the lab's camera.
+"""
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+
+from stringcast.core import assert_within_limits
+from stringcast.core import Campaign, ConfigError, load_campaign
+from stringcast.core import DataError, atomic_path, read_joint_table
+from stringcast.lab import run_trial
+from .ur_rtde import UR_JOINTS, URSettings, play_ur
+
+BACKENDS = ("virtual", "ur-rtde")
+
+
+def check_timing(t: np.ndarray, rate: float, source: str) -> None:
+    """Raise DataError naming ``source`` unless t (K,) starts at 0 and steps by 1/rate (s)."""
+    period = 1.0 / rate
+    if abs(t[0]) > 1e-9:
+        raise DataError(f"{source}: a motion file starts at t_s = 0, got {t[0]:.6g} s")
+    dev = np.max(np.abs(np.diff(t) - period))
+    if dev > 1e-6:
+        raise DataError(f"{source}: t_s must step by the controller period {period * 1000:.3f} ms "
+                        f"({rate:g} Hz); deviates by up to {dev * 1000:.3f} ms")
+
+
+def _copy(src: Path, dst: Path) -> None:
+    with atomic_path(dst) as tmp:
+        shutil.copyfile(src, tmp)
+
+
+def build_command(q: np.ndarray, rate: float, pre_roll_s: float, post_roll_s: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """The command stream: q0 held for the pre-roll, the motion, the end held for the post-roll.
+
+    Args:
+        q: (K, J) rad, the motion at the controller rate.
+
+    Returns:
+        t_cmd (K',) s from 0, q_cmd (K', J) rad, and the time the motion starts (s).
+    """
+    pre = int(round(pre_roll_s * rate))
+    post = int(round(post_roll_s * rate))
+    q_cmd = np.concatenate([np.repeat(q[:1], pre, axis=0), q, np.repeat(q[-1:], post, axis=0)])
+    return np.arange(len(q_cmd)) / rate, q_cmd, pre / rate
+
+
+def execute(motion_csv: Path, backend: str, out_dir: Path, campaign_yaml: Path | Campaign, config: Mapping,
+            seed: int = 0, dry_run: bool = False, robot_ip: str | None = None, move_to_start: bool = False,
+            interfaces=None) -> dict:
+    """Check a motion file, play it on ``backend`` and record the trial into ``out_dir``.
+
+    Args:
+        motion_csv: ``t_s, q1_rad..qJ_rad`` from t = 0 at the controller rate
+            (its ``motion.json``, if beside it, is copied along).
+        backend: ``"virtual"`` or ``"ur-rtde"``.
+        out_dir: the trial folder to create (``data/<campaign>/trial_<k>``).
+        campaign_yaml: ``campaign.yaml`` (or an already resolved :class:`Campaign`).
+        dry_run: check and describe the command, move nothing, write nothing.
+        robot_ip, move_to_start, interfaces: ``ur-rtde`` only (see
+            :func:`stringcast.execute.ur_rtde.play_ur`; ``interfaces`` replaces ur_rtde in tests).
+
+    Returns:
+        dict: backend, samples, duration_s, motion_start_s, dry_run, plus what the backend returned.
+
+    Raises:
+        JointLimitError: the motion breaks a limit (before anything moves); for ``ur-rtde``
+            also :class:`~stringcast.execute.ur_rtde.StartPostureError` (arm not at the start).
+        DataError: unreadable motion file, bad timing, or ``out_dir`` already holds a joints.csv.
+        ConfigError: unknown backend; ``ur-rtde`` without robot_ip, without ur_rtde, or bad ``executor.ur``.
+    """
+    motion_csv, out_dir = Path(motion_csv), Path(out_dir)
+    if backend not in BACKENDS:
+        raise ConfigError(f"executor: unknown backend {backend!r} (known: {', '.join(BACKENDS)})")
+    campaign = campaign_yaml if isinstance(campaign_yaml, Campaign) else load_campaign(campaign_yaml, config)
+    arm = campaign.arm
+    t, q, _ = read_joint_table(motion_csv, "motion.csv")
+    if q.shape[1] != arm.n_joints:
+        raise DataError(f"{motion_csv}: {q.shape[1]} joint columns, arm {arm.name} has {arm.n_joints}")
+    check_timing(t, arm.controller_rate, str(motion_csv))
+    assert_within_limits(arm, q, 1.0 / arm.controller_rate, source=str(motion_csv))
+    if (out_dir / "joints.csv").exists():
+        raise DataError(f"{out_dir}: already holds a joints.csv; refusing to overwrite a recorded trial")
+    ecfg = config.get("executor", {})
+    t_cmd, q_cmd, t_move = build_command(q, arm.controller_rate, float(ecfg.get("pre_roll_s", 0.3)),
+                                         float(ecfg.get("post_roll_s", 0.6)))
+    where = ""
+    if backend == "ur-rtde":
+        m = URSettings.from_config(config, arm).mapping  # bad settings fail before anything connects
+        if not robot_ip and not dry_run:
+            raise ConfigError("executor: the ur-rtde backend needs the arm's address (--robot-ip)")
+        q0 = m.to_ur(q[0], np.zeros(6))
+        where = f" at {robot_ip or '(no --robot-ip)'}, start " + ", ".join(
+            f"{UR_JOINTS[i]} {np.degrees(q0[i]):.1f} deg" for i in m.joint_map) + " (others held)"
+    info = {"backend": backend, "motion": str(motion_csv), "samples": len(t_cmd), "duration_s": float(t_cmd[-1]),
+            "motion_start_s": t_move, "dry_run": bool(dry_run)}
+    if dry_run:
+        print(f"executor (dry run): {motion_csv} is within the limits of arm {arm.name}; would play "
+              f"{len(t_cmd)} samples ({t_cmd[-1]:.3f} s, motion from {t_move:.3f} s) on {backend}{where} into {out_dir}")
+        return info
+    if backend == "ur-rtde":
+        result = play_ur(t_cmd, q_cmd, arm, config, out_dir, robot_ip, move_to_start, interfaces)
+    else:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        result = run_trial(t_cmd, q_cmd, campaign, config, out_dir, seed, t_move)
+    _copy(motion_csv, out_dir / "motion.csv")
+    sidecar = motion_csv.with_suffix(".json")
+    if sidecar.exists():
+        _copy(sidecar, out_dir / "motion.json")
+    info.update(result or {})
+    return info

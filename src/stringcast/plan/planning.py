@@ -1,0 +1,395 @@
+"""Motion planning (paper Section V): the search for a motion that hits the target.
+
+Candidates are motions of :mod:`stringcast.plan.motion` (eq. (1) Bezier velocity curves
+from an initial posture q0):
+
+* T is drawn in ``motion.T_range_s`` and snapped to the controller period.
+* Curves breaking position, speed, acceleration or floor limits
+  (:func:`stringcast.core.arm.check_limits`) are regenerated.
+* First motion: random initial postures (:func:`stringcast.plan.motion.sample_postures`).
+  Our choice: a pool of ``motion.posture_pool`` postures is drawn once and each
+  candidate takes a pool posture its curve fits, so that the hanging equilibrium
+  (the model's initial state) is computed once per posture. All candidates of one
+  batch share one T. The parameter set is :func:`first_parameters`.
+* Later motions (Section V.B): the previous motion's q0 and T are kept and each
+  control point V_1..V_{N-1} is moved by U(-perturb, +perturb) rad/s (V_N stays 0).
+  The parameter set is the last estimate (:func:`planned_parameters`).
+* Hit test: :func:`stringcast.model.string_model.closest_approach_batch` over [0, T + flight
+  window] from the hanging equilibrium with the planned parameters; a hit is
+  d_min <= target radius, min_y >= floor and a valid simulation. After the first
+  hit the search goes on for ``motion.extra_after_hit`` candidates and returns the
+  hit with the smallest d_min; without a hit it returns the closest candidate with
+  ``hit=False`` and a message.
+
+* Planner (``motion.planner``): ``paper`` (default) is the above. ``robust`` (later
+  motions) also scores candidates under an ensemble: the best K parameter sets of the
+  last estimate (params.json ``top``, :mod:`stringcast.estimate.diagnostics`). Our choice, to keep
+  the cost near the paper's: a candidate is scored under the ensemble, all members in one numba batch
+  (:func:`stringcast.model.string_model.closest_approach_batch`, each member from its own hanging
+  equilibrium), when under the best set it stays valid and above the floor and comes
+  within ``motion.robust_screen_mm`` (default 20) of the target's edge. The chosen
+  motion has the largest hit share (members for which it hits), then the largest
+  margin (radius - median d_min over the members); the stopping rule is the paper's, or
+  with ``motion.robust_min_share`` > 0 (tried, off in ours) the first hit that starts the
+  count of ``extra_after_hit`` candidates must hit under at least that share of the members.
+* First-plan ensemble (``motion.first_ensemble`` = K > 0; tried, off in ours): the first plan
+  is scored the same way under K random sets over Table 2's box
+  (:func:`stringcast.model.parameters.prior_ensemble`), ``motion.first_extra_after_hit`` candidates
+  past the first hit (docs/method.md says why it is off).
+* Residual correction (``motion.residual_correction``, later motions, with either
+  planner; ours): every set aims at the target minus the model's error on the played
+  motion's tracked tip (:mod:`stringcast.plan.residual`), so d_min is the corrected one.
+* Replan (``motion.replan_miss_mm`` > 0; ours 45): when the played motion's tracked tip missed
+  the target by more than that, the next motion is searched afresh (random posture and T,
+  as the first) with the estimate, not as a perturbation: a +-0.5 rad/s change cannot bridge a
+  large miss, and the residual is a first-order correction. With
+  ``motion.replan_perturb_rad_s`` > 0 (ours: 1.0) a *wider* perturbation of the played motion
+  (residual-corrected) is searched first and kept when its best candidate hits under at least
+  ``motion.replan_min_share`` (0.9) of the ensemble; not twice in a row: after a wide
+  perturbation that missed by more than ``replan_miss_mm`` the next motion is the fresh one
+  (docs/method.md: at d25a73b, type 5 seed 5, five in a row missed by 77-129 mm). With
+  ``motion.replan_residual_mm`` > 0 (ours: 50) no perturbation, narrow or wide, is played when
+  the model's tip error on the played motion (median over the motion) exceeds it. The offline
+  and loop measurements behind the numbers are in docs/method.md ("Replan after a miss over 45 mm").
+
+The model's predictions (equilibrium, closest approach, tip path) are
+:class:`stringcast.plan.prediction.Predictor`'s. Stage entry points: :func:`run_first_plan`
+and :func:`run_plan` write ``motion.csv`` and its ``motion.json`` sidecar
+(:func:`write_motion`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+
+from stringcast.core import PARAM_NAMES, Campaign, ConfigError
+from stringcast.core import read_json, write_joint_table, write_json
+from stringcast.model import ensemble_parameters, first_parameters, planned_parameters, prior_ensemble
+from .motion import Motion, read_motion_json, sample_control_points, sample_postures, start_box, time_grid, valid_curves
+from .prediction import Predictor
+from stringcast.core import TRACK_COLUMNS, read_joint_table, read_parquet
+from .residual import observed_miss, observed_tip
+
+
+@dataclass(frozen=True)
+class PlanResult:
+    """The chosen motion and its predicted outcome (d_min m at t_min s, lowest string point min_y m)."""
+
+    motion: Motion
+    hit: bool
+    d_min: float
+    t_min: float
+    min_y: float
+    candidates: int
+    message: str = ""
+    tip_path: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    planner: str = "paper"
+    ensemble_d_min: np.ndarray | None = None
+    """(K,) m, the chosen motion's closest approach under each ensemble member (robust planner only)."""
+    hit_share: float | None = None
+    """Share of the ensemble for which the chosen motion hits (robust planner only)."""
+    margin: float | None = None
+    """Target radius - median ensemble d_min, m (robust planner only; > 0: the median member hits)."""
+    residual: dict | None = None
+    """Residual correction (:meth:`stringcast.plan.residual.TipResidual.summary`); d_min is then corrected."""
+    origin: str = ""
+    """How the motion was made (motion.json ``origin``): first, perturbation, wide_perturbation, new."""
+
+
+# ---------------------------------------------------------------------------
+# Candidate search
+# ---------------------------------------------------------------------------
+def search(campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarray, rng: np.random.Generator,
+           previous: Motion | None = None, ensemble: tuple[np.ndarray, np.ndarray] | None = None,
+           observed: tuple | None = None) -> PlanResult:
+    """Search random motions (first plan) or perturbations of ``previous`` (later plans) for a hit.
+
+    Args:
+        coeffs (10,), mu (n,): the parameter set the model is simulated with.
+        previous: the motion just played (its q0, T and control points are kept / perturbed).
+        ensemble: robust planner (module doc): coeffs (K, 10), mu (K, n), the sets that
+            screened candidates are scored under; None for the paper's planner.
+        observed: residual correction (with ``previous``): the played motion's tracked tip
+            (:func:`stringcast.plan.residual.observed_tip`); every set then aims at its own
+            corrected target (:mod:`stringcast.plan.residual`).
+
+    Returns:
+        :class:`PlanResult` (hit=False with a message when no candidate hits; with an
+        ensemble, its hit share and margin, and a message when no member is hit).
+
+    Raises:
+        ConfigError: when no motion within the arm's limits can be generated at all.
+    """
+    from tqdm.auto import tqdm
+
+    arm, mcfg = campaign.arm, config.get("motion", {})
+    pl = Predictor(campaign, config, coeffs, mu)
+    batch, max_cand = int(mcfg.get("batch", 64)), int(mcfg.get("max_candidates", 20000))
+    extra = int(mcfg.get("extra_after_hit", 200))
+    min_share = float(mcfg.get("robust_min_share", 0.0)) if ensemble is not None else 0.0
+    t_lo, t_hi = (float(x) for x in mcfg.get("T_range_s", [0.2, 1.2]))
+    n_cp, alpha = int(mcfg.get("n_control_points", 6)), float(mcfg.get("alpha_max_rad_s2", 40.0))
+    perturb = float(mcfg.get("perturb_rad_s", 0.5))
+    if previous is not None:
+        if previous.control_points.shape[1] < 1:
+            raise ValueError("search: the previous motion has no control points to perturb")
+        postures = previous.q0[None]
+        fixed_T = previous.T
+    else:
+        margin = float(mcfg.get("floor_margin_m", 0.05))
+        postures = sample_postures(campaign, rng, int(mcfg.get("posture_pool", 32)), margin, box=start_box(config),
+                                   clearance=float(mcfg.get("hang_clearance_mm", 0.0)) / 1000)
+    equilibria: dict[int, np.ndarray] = {}
+    member_eq: dict[int, np.ndarray] = {}    # posture -> (K, n, 2), robust planner
+    screen = float(mcfg.get("robust_screen_mm", 20.0)) / 1000
+    radius = campaign.target.radius
+    why_not = ""
+    if observed is not None and previous is not None:
+        equilibria[0] = pl.equilibrium(previous.q0)
+        sets_c, sets_mu, eq = coeffs[None], mu[None], equilibria[0][None]
+        if ensemble is not None:
+            member_eq[0] = np.stack([pl.equilibrium(previous.q0, c, m) for c, m in zip(*ensemble)])
+            sets_c, sets_mu, eq = (np.concatenate(a) for a in ((sets_c, ensemble[0]), (sets_mu, ensemble[1]),
+                                                               (eq, member_eq[0])))
+        why_not = pl.set_residual(previous, observed, eq, sets_c, sets_mu)
+    best, best_key, tried, first_hit, fails = None, None, 0, None, 0
+    bar = tqdm(total=max_cand, desc="plan", unit="cand", disable=None)
+    while tried < max_cand and (first_hit is None or tried < first_hit + extra):
+        if previous is not None:
+            T = fixed_T
+        else:
+            T = time_grid(rng.uniform(t_lo, t_hi), pl.rate)[1]
+        want = min(batch, max_cand - tried)
+        cands = []
+        for _ in range(50):
+            if previous is not None:
+                cps = previous.control_points[None] + rng.uniform(-perturb, perturb, (4 * want,) + previous.control_points.shape)
+                cps[..., -1] = previous.control_points[:, -1]
+            else:
+                cps = sample_control_points(rng, T, arm.n_joints, n_cp, alpha, 4 * want)
+            cands += valid_curves(arm, cps, T, pl.rate, postures, rng)
+            if len(cands) >= want:
+                break
+        cands = cands[:want]
+        if not cands:
+            fails += 1
+            if fails >= 20 or previous is not None:
+                raise ConfigError(f"arm {arm.name}: no motion within the joint limits could be generated "
+                                  f"({'perturbing the played motion' if previous is not None else 'random curves'}); "
+                                  "check motion.alpha_max_rad_s2, T_range_s and the arm limits")
+            continue
+        fails = 0
+        for _, _, _, i in cands:
+            if i not in equilibria:
+                equilibria[i] = pl.equilibrium(postures[i])
+        q = np.stack([c[2] for c in cands])
+        p_init = np.stack([equilibria[c[3]] for c in cands])
+        d, tm, my, ok = pl.evaluate(q, T, p_init)
+        hit = ok & (d <= radius) & (my >= arm.floor_y)
+        scores = _ensemble_scores(pl, cands, q, T, ok & (my >= arm.floor_y) & (d <= radius + screen), ensemble,
+                                  postures, member_eq) if ensemble is not None else {}
+        for b, c in enumerate(cands):
+            share, margin, d_k = scores.get(b, (0.0, -np.inf, None))
+            key = (-share, -margin if share > 0 else np.inf, not hit[b], not (ok[b] and my[b] >= arm.floor_y), not ok[b],
+                   d[b] if np.isfinite(d[b]) else np.inf)
+            if best_key is None or key < best_key:
+                best_key = key
+                best = (c, T, bool(hit[b]), float(d[b]), float(tm[b]), float(my[b]), share, margin, d_k)
+        tried += len(cands)
+        bar.update(len(cands))
+        if first_hit is None and any(hit[b] and scores.get(b, (0.0,))[0] >= min_share for b in range(len(cands))):
+            first_hit = tried
+    bar.close()
+    (cp, q0, q, i), T, hit, d, tm, my, share, margin, d_k = best
+    t, _ = time_grid(T, pl.rate)
+    motion = Motion(t=t, q=q, T=T, control_points=cp, q0=q0)
+    msgs = [] if hit else [f"no candidate hit in {tried} tried; returning the closest "
+                           f"({d * 1000:.1f} mm from the target, radius {radius * 1000:.0f} mm)"]
+    if not hit and ensemble is not None and share > 0:  # chosen for the ensemble, not for the planning set
+        msgs = [f"chosen for the ensemble (hits under {share:.0%} of its {len(ensemble[0])} sets); under the "
+                f"planning set it passes {d * 1000:.1f} mm from the target (radius {radius * 1000:.0f} mm)"]
+    robust = {}
+    if ensemble is not None:
+        robust = {"planner": "robust", "ensemble_d_min": d_k, "hit_share": share if d_k is not None else 0.0,
+                  "margin": margin if d_k is not None else None}
+        if d_k is None or share == 0:
+            msgs.append(f"no candidate hit under any of the {len(ensemble[0])} ensemble sets; returning the "
+                        "best under the estimate")
+    msgs += sorted(set(pl.warnings))[:1] + [why_not] * bool(why_not)
+    residual = None if pl.residual is None else pl.residual.summary()
+    return PlanResult(motion, hit, d, tm, my, tried, "; ".join(msgs), pl.tip_path(motion, equilibria[i]),
+                      residual=residual, **robust)
+
+
+def _ensemble_scores(pl: Predictor, cands: list, q: np.ndarray, T: float, screened: np.ndarray,
+                     ensemble: tuple[np.ndarray, np.ndarray], postures: np.ndarray,
+                     member_eq: dict) -> dict[int, tuple[float, float, np.ndarray]]:
+    """Robust planner: {candidate index: (hit share, margin m, d_min (K,) m)} for the screened candidates."""
+    idx = np.nonzero(screened)[0]
+    if len(idx) == 0:
+        return {}
+    coeffs, mu = ensemble
+    for b in idx:
+        i = cands[b][3]
+        if i not in member_eq:
+            member_eq[i] = np.stack([pl.equilibrium(postures[i], c, m) for c, m in zip(coeffs, mu)])
+    p_init = np.stack([member_eq[cands[b][3]] for b in idx])              # (S, K, n, 2)
+    d, my, ok = pl.evaluate_ensemble(q[idx], T, p_init, coeffs, mu)
+    radius = pl.campaign.target.radius
+    hits = ok & (d <= radius) & (my >= pl.arm.floor_y)
+    d = np.where(ok, d, np.inf)
+    return {int(b): (float(hits[s].mean()), radius - float(np.median(d[s])), d[s]) for s, b in enumerate(idx)}
+
+
+# ---------------------------------------------------------------------------
+# Files and stage entry points
+# ---------------------------------------------------------------------------
+def write_motion(result: PlanResult, campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarray,
+                 seed: int, out_csv: Path, out_json: Path, kind: str, observed_miss_mm: float | None = None) -> None:
+    """Write ``motion.csv`` (t_s, q1_rad..) and its ``motion.json`` sidecar (``observed_miss_mm``: the
+    played motion's tracked tip's closest approach, when the plan read it)."""
+    m = result.motion
+    write_joint_table(out_csv, m.t, m.q)
+    step = max(1, len(result.tip_path) // 400)
+    write_json(out_json, {
+        "kind": kind, "T_s": m.T, "control_points_rad_s": m.control_points, "q0_rad": m.q0,
+        "controller_rate_hz": campaign.arm.controller_rate, "arm": campaign.arm.name,
+        "params": dict(zip(PARAM_NAMES, coeffs)), "mu": mu,
+        "predicted_tip_path": result.tip_path[::step], "closest_approach_mm": result.d_min * 1000,
+        "closest_approach_t_s": result.t_min, "min_y_mm": result.min_y * 1000,
+        "hit_predicted": result.hit, "candidates": result.candidates, "seed": seed,
+        "flight_window_s": float(config.get("motion", {}).get("flight_window_s", 0.5)),
+        "target": {"x_mm": campaign.target.x * 1000, "y_mm": campaign.target.y * 1000,
+                   "radius_mm": campaign.target.radius * 1000},
+        "planner": result.planner, "ensemble_size": None if result.ensemble_d_min is None else len(result.ensemble_d_min),
+        "ensemble_hit_share": result.hit_share,
+        "ensemble_margin_mm": None if result.margin is None else result.margin * 1000,
+        "ensemble_d_min_mm": None if result.ensemble_d_min is None else np.asarray(result.ensemble_d_min) * 1000,
+        "residual_correction": result.residual, "played_observed_miss_mm": observed_miss_mm,
+        "origin": result.origin, "message": result.message})
+
+
+def _rng(config: Mapping, seed: int) -> np.random.Generator:
+    return np.random.default_rng([int(config.get("motion", {}).get("seed", 0)), int(seed)])
+
+
+def run_first_plan(campaign: Campaign, config: Mapping, out_csv: Path, out_json: Path, seed: int = 0) -> PlanResult:
+    """First motion of a campaign, planned with :func:`first_parameters` (Table 2 minima, k_s per
+    ``motion.first_k_s``);
+    with ``motion.first_ensemble`` = K > 0 also scored under K random sets (module doc)."""
+    coeffs, mu = first_parameters(config, campaign.string)
+    rng, mcfg = _rng(config, seed), config.get("motion", {})
+    k = int(mcfg.get("first_ensemble", 0))
+    ensemble = None
+    if k > 0:
+        ensemble = prior_ensemble(config, campaign.string, k, rng)
+        extra = mcfg.get("first_extra_after_hit", mcfg.get("extra_after_hit", 200))
+        config = {**config, "motion": {**mcfg, "extra_after_hit": int(extra)}}
+    result = replace(search(campaign, config, coeffs, mu, rng, ensemble=ensemble), origin="first")
+    write_motion(result, campaign, config, coeffs, mu, seed, out_csv, out_json, "first")
+    return result
+
+
+def _replan(campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarray, seed: int, previous: Motion,
+            ensemble: tuple[np.ndarray, np.ndarray] | None, observed: tuple | None, why: str,
+            wide: float = 0.0) -> PlanResult:
+    """A new motion instead of the perturbation (module doc, "Replan"), after ``why``; first, when
+    ``wide`` > 0, the played motion perturbed by up to ``wide`` rad/s, kept when its best candidate hits
+    under at least ``motion.replan_min_share`` of the ensemble (the planning set alone without one) and
+    the model's error on the played motion is within ``motion.replan_residual_mm``."""
+    mcfg = config.get("motion", {})
+    if wide > 0:
+        cfg = {**config, "motion": {**mcfg, "perturb_rad_s": wide}}
+        result = search(campaign, cfg, coeffs, mu, _rng(config, seed), previous=previous, ensemble=ensemble,
+                        observed=observed)
+        share = result.hit_share if ensemble is not None else float(result.hit)   # search sets it with an ensemble
+        need = float(mcfg.get("replan_min_share", 0.9))
+        too_far = _residual_too_large(result, mcfg)
+        if share >= need and not too_far:
+            return _with_message(replace(result, origin="wide_perturbation"),
+                                 f"{why}: the played motion perturbed by +-{wide:g} rad/s "
+                                 f"(hits under {share:.0%} of the sets)")
+        why += f"; its +-{wide:g} rad/s perturbation " + (too_far or f"hits under {share:.0%} of the sets "
+                                                           f"(< {need:.0%})")
+    result = replace(search(campaign, config, coeffs, mu, _rng(config, seed), ensemble=ensemble), origin="new")
+    return _with_message(result, f"{why}: a new motion (random posture and T), not a perturbation of the played one")
+
+
+def _with_message(result: PlanResult, text: str) -> PlanResult:
+    """``result`` with ``text`` put before its own message."""
+    return replace(result, message="; ".join([text] + [result.message] * bool(result.message)))
+
+
+def _residual_too_large(result: PlanResult, mcfg: Mapping) -> str:
+    """Why the residual correction is not to be trusted ("" when it is, or there is none): the model's
+    tip error on the played motion (median over the motion) beyond ``motion.replan_residual_mm`` (> 0)."""
+    limit = float(mcfg.get("replan_residual_mm", 0.0))
+    size = None if result.residual is None else result.residual["median_mm"]
+    if limit > 0 and size is not None and size > limit:
+        return f"relies on a model {size:.0f} mm off the played motion's tip (median; > replan_residual_mm {limit:.0f})"
+    return ""
+
+
+def run_plan(params_json: Path, played_motion_json: Path, campaign: Campaign, config: Mapping, out_csv: Path,
+             out_json: Path, seed: int = 0, tracks_parquet: Path | None = None,
+             joints_csv: Path | None = None) -> PlanResult:
+    """Next motion (Section V.B): the played motion's posture and T, perturbed control points, estimated parameters.
+
+    With ``motion.planner: robust`` the candidates are also scored under params.json's
+    ``top`` ensemble (module doc); motion.json then carries ``ensemble_hit_share``,
+    ``ensemble_margin_mm`` and ``ensemble_d_min_mm``. With ``motion.residual_correction``
+    the played trial's ``tracks_parquet`` and ``joints_csv`` correct every prediction
+    (:mod:`stringcast.plan.residual`); motion.json's ``residual_correction`` says how. With
+    ``motion.replan_miss_mm`` > 0 and a tracked miss beyond it, the next motion is a wider
+    perturbation (``motion.replan_perturb_rad_s``) if the ensemble agrees on it, else a new
+    search (:func:`search` without ``previous``); motion.json's ``played_observed_miss_mm``
+    is that miss; a played wide perturbation (motion.json ``origin``) that missed so is not
+    perturbed again. With ``motion.replan_residual_mm`` > 0 no perturbation is played on a model
+    further than that off the played motion's tracked tip (the new search instead).
+
+    Raises:
+        DataError: unreadable params.json (or, robust, one without ``top``), a played
+            motion.json without q0_rad, T_s, control_points_rad_s, or (residual correction)
+            unreadable tracks or a joint log that is not the played motion.
+        ConfigError: an unknown ``motion.planner``; residual correction without the trial's files.
+    """
+    params = read_json(params_json)
+    coeffs, mu = planned_parameters(config, campaign.string.n_points, params, str(params_json))
+    previous = read_motion_json(played_motion_json, campaign.arm.n_joints, campaign.arm.controller_rate)
+    planner = str(config.get("motion", {}).get("planner", "paper"))
+    if planner not in ("paper", "robust"):
+        raise ConfigError(f"motion.planner: unknown {planner!r} (known: paper, robust)")
+    ensemble = ensemble_parameters(config, campaign.string.n_points, params, str(params_json)) \
+        if planner == "robust" else None
+    mcfg = config.get("motion", {})
+    residual, replan_mm = bool(mcfg.get("residual_correction", False)), float(mcfg.get("replan_miss_mm", 0.0))
+    observed, miss = None, float("nan")
+    if residual or replan_mm > 0:
+
+        if tracks_parquet is None or joints_csv is None:
+            raise ConfigError("motion.residual_correction and motion.replan_miss_mm need the played trial's "
+                              "tracks.parquet and joints.csv")
+        t_j, q_j, _ = read_joint_table(joints_csv)
+        observed = observed_tip(read_parquet(tracks_parquet, TRACK_COLUMNS), t_j, q_j, previous.q,
+                                campaign.string.n_points, campaign.arm.controller_rate, str(tracks_parquet))
+        miss = observed_miss(*observed[:3], campaign.target.xy, previous.T + float(mcfg.get("flight_window_s", 0.5)))
+    observed = observed if residual else None
+    if replan_mm > 0 and miss * 1000 > replan_mm:
+        why = f"the tracked tip missed by {miss * 1000:.0f} mm (> replan_miss_mm {replan_mm:.0f})"
+        wide = float(mcfg.get("replan_perturb_rad_s", 0.0))
+        if wide > 0 and read_json(played_motion_json).get("origin") == "wide_perturbation":
+            wide, why = 0.0, why + " after a wide perturbation"
+        result = _replan(campaign, config, coeffs, mu, seed, previous, ensemble, observed, why, wide)
+    else:
+        result = replace(search(campaign, config, coeffs, mu, _rng(config, seed), previous=previous,
+                                ensemble=ensemble, observed=observed), origin="perturbation")
+        too_far = _residual_too_large(result, mcfg)
+        if too_far:
+            result = _replan(campaign, config, coeffs, mu, seed, previous, ensemble, observed,
+                             "the perturbation " + too_far)
+    write_motion(result, campaign, config, coeffs, mu, seed, out_csv, out_json, "next",
+                 observed_miss_mm=miss * 1000 if np.isfinite(miss) else None)
+    return result

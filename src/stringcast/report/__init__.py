@@ -1,0 +1,5 @@
+"""Self-contained HTML reports per trial and per campaign, with their figures.
+"""
+from .pages import write_campaign_report, write_trial_report
+
+__all__ = ["write_campaign_report", "write_trial_report"]

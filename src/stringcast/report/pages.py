@@ -1,0 +1,236 @@
+"""Self-contained HTML reports: one page per trial, one per campaign.
+
+Figures are inlined as PNG data URIs (``report_figures``), the page is rendered
+with Jinja2 from ``templates/``. The trial page shows the paper's figures for the
+trial (Fig. 8a tip paths, Fig. 8b arm paths, Fig. 11 parameters, Table 4 masses),
+E over the search, a frame strip with tracked and simulated points, how often each
+point was tracked, calibration and sync, and the next motion.
+
+The pages show only what the pipeline measured and computed. The virtual lab's
+ground truth files are never read here, as in every other stage: footage from a
+real camera has none. The lab's verdict and the tracking error against its truth
+are in the campaign driver's ``campaign_summary.json`` (:mod:`stringcast.campaign`)
+and in ``benchmarks/``.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+from pathlib import Path
+
+import jinja2
+import numpy as np
+import pandas as pd
+
+from stringcast import __version__
+from . import figures as figs
+from stringcast.core import hand_pose, motion_start
+from stringcast.core import PARAM_NAMES, Campaign, model_ranges
+from .strip import frame_strip, strip_data_uri
+from stringcast.calibrate import Calibration
+from stringcast.core import TRACK_COLUMNS, find_video, read_joint_table, read_json, read_parquet, tracks_arrays, write_text
+
+
+def _env() -> jinja2.Environment:
+    return jinja2.Environment(loader=jinja2.PackageLoader("stringcast.report", "templates"),
+                              autoescape=jinja2.select_autoescape(["html", "j2"]))
+
+
+def _common(campaign: Campaign, title: str) -> dict:
+    return {"title": title, "version": __version__,
+            "created": _dt.datetime.now().isoformat(timespec="seconds"),
+            "string": campaign.string_id or campaign.string.name,
+            "length_mm": f"{campaign.string.length * 1000:.0f}", "n_points": campaign.string.n_points,
+            "target_mm": (f"{campaign.target.x * 1000:.0f}", f"{campaign.target.y * 1000:.0f}"),
+            "radius_mm": f"{campaign.target.radius * 1000:.0f}"}
+
+
+def _tracked(tracks: pd.DataFrame, n_points: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """t (F,), xy (F, n+1, 2) m with NaN where not valid, valid (F, n+1)."""
+    _, t, xy, valid = tracks_arrays(tracks, n_points)
+    xy[~valid] = np.nan
+    return t, xy, valid
+
+
+def closest_approach(t: np.ndarray, tip: np.ndarray, target_xy: np.ndarray, t0: float, t1: float):
+    """Smallest distance (m) of a tip path (F,2) to the target within [t0, t1]; (d, t) or (nan, nan)."""
+    sel = (t >= t0) & (t <= t1) & np.isfinite(tip).all(axis=1)
+    if not sel.any():
+        return float("nan"), float("nan")
+    d = np.hypot(tip[sel, 0] - target_xy[0], tip[sel, 1] - target_xy[1])
+    i = int(np.argmin(d))
+    return float(d[i]), float(t[sel][i])
+
+
+def _fmt(x, spec=".2f", unit=""):
+    if x is None or (isinstance(x, float) and not np.isfinite(x)):
+        return "n/a"
+    return f"{x:{spec}}{unit}"
+
+
+def _motion_window(data_dir: Path, config: dict) -> tuple[float, float, dict]:
+    t, q, _ = read_joint_table(data_dir / "joints.csv")
+    played = read_json(data_dir / "motion.json") if (data_dir / "motion.json").exists() else {}
+    t0 = motion_start(t, q)
+    T = float(played.get("T_s", t[-1] - t0))
+    return t0, t0 + T + float(config["motion"]["flight_window_s"]), played
+
+
+def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, config: dict, out: Path) -> None:
+    """Write ``results/<campaign>/trial_<k>/report.html`` from that trial's outputs.
+
+    Raises:
+        DataError: a required result file is missing or malformed (named).
+    """
+    n = campaign.string.n_points
+    params = read_json(results_dir / "params.json")
+    calib = read_json(results_dir / "calibration.json")
+    sync = read_json(results_dir / "sync.json")
+    nxt = read_json(results_dir / "motion.json")
+    tracks = read_parquet(results_dir / "tracks.parquet", TRACK_COLUMNS)
+    fit = read_parquet(results_dir / "fit.parquet")
+    t_j, q_j, _ = read_joint_table(data_dir / "joints.csv")
+    t0, t1, played = _motion_window(data_dir, config)
+    tgt = campaign.target.xy
+    t_tr, xy_tr, valid = _tracked(tracks, n)
+    d_meas, _ = closest_approach(t_tr, xy_tr[:, n], tgt, t0, t1)
+
+    tip_fit = fit[fit["point"] == n].sort_values("frame")
+    figures = [{"id": "fig-tip-paths", "caption": "Tracked tip vs the model's tip driven by the measured joints, "
+                "with the estimated parameters (paper Fig. 8a).",
+                "src": figs.tip_paths(tip_fit["t_s"].to_numpy(), tip_fit[["x_tracked_m", "y_tracked_m"]].to_numpy(),
+                                      tip_fit["t_s"].to_numpy(), tip_fit[["x_sim_m", "y_sim_m"]].to_numpy(),
+                                      tgt, campaign.target.radius)}]
+    t_n, q_n, _ = read_joint_table(results_dir / "motion.csv")
+    figures.append({"id": "fig-arm-paths", "caption": "Grasp-point paths of the motion played in this trial "
+                    "(measured joints) and of the next motion (paper Fig. 8b).",
+                    "src": figs.arm_paths({"played (measured)": hand_pose(campaign.arm, q_j)[:, :2],
+                                           "next motion": hand_pose(campaign.arm, q_n)[:, :2]},
+                                          tgt, campaign.target.radius)})
+    lo, hi, (mu_lo, mu_hi) = model_ranges(config)
+    coeffs = params["coefficients"]
+    values = [coeffs[k] for k in PARAM_NAMES]
+    diagnostics = params.get("diagnostics") or {}
+    diag = {d["name"]: (10 ** d["log10_min"], 10 ** d["log10_max"], d["status"])
+            for d in diagnostics.get("parameters", []) if d.get("name") in PARAM_NAMES}
+    figures.append({"id": "fig-params", "caption": "Estimated coefficients on log axes within Table 2's ranges "
+                    "(paper Fig. 11), with the range of the parameter sets whose E is within "
+                    f"{diagnostics.get('near_best_tol', 0.05) * 100:.0f} % of the best: a short "
+                    "(green) bar means this motion pins the parameter down, a long (orange) one that it does not.",
+                    "src": figs.parameters(list(PARAM_NAMES), values, lo, hi, diag)})
+    mu = np.asarray(params["mu"], float)
+    figures.append({"id": "fig-masses", "caption": "Estimated relative mass per point (paper Table 4); orange: "
+                    "points where a weight or stiff section is known to sit.",
+                    "src": figs.masses(mu, params.get("special_points", []))})
+    hist = params.get("history", {})
+    if hist.get("evaluations"):
+        figures.append({"id": "fig-search", "caption": f"Best E over the search ({params.get('optimizer')}).",
+                        "src": figs.search_history(hist["evaluations"], np.asarray(hist["best_E_mm"], dtype=float) / 1000)})
+    strip = frame_strip(find_video(data_dir), Calibration.from_json(results_dir / "calibration.json"), tracks, fit,
+                        campaign.string.length)
+    figures.append({"id": "fig-overlay", "caption": "Frames of the motion with the tracked points (green circles; "
+                    "red: the grasp from forward kinematics) and the model's points simulated with the estimate "
+                    "(orange crosses and line) overlaid.", "src": strip_data_uri(strip)})
+    in_motion = (t_tr >= t0) & (t_tr <= t1)
+    figures.append({"id": "fig-valid", "caption": "Share of the frames in which each point was tracked (valid), "
+                    "over the whole clip and over the motion and flight window: the points E (eqs. 4-6) and the "
+                    "measured closest approach rest on.",
+                    "src": figs.valid_per_point(np.arange(1, n + 1), valid[:, 1:].mean(axis=0),
+                                                valid[in_motion, 1:].mean(axis=0) if in_motion.any() else None)})
+    figures.append({"id": "fig-next-motion", "caption": "Next motion: joint angles and velocities "
+                    f"(T = {nxt.get('T_s', float('nan')):.3f} s).", "src": figs.joint_curves(t_n, q_n)})
+
+    summary = [("E (eqs. 4-6)", _fmt(params.get("E_mm"), ".2f", " mm")),
+               ("optimizer, evaluations", f"{params.get('optimizer')}, {params.get('evaluations')}"),
+               ("estimation time", _fmt(params.get("seconds"), ".1f", " s")),
+               ("pinned down by this motion / loose", " / ".join(
+                   ", ".join(diagnostics.get(k) or ["-"]) for k in ("pinned", "loose"))),
+               ("tracked points valid", f"{valid[:, 1:].mean() * 100:.1f} %"),
+               ("measured closest approach of the tip", _fmt(d_meas * 1000, ".1f", " mm")),
+               ("measured hit", "yes" if d_meas <= campaign.target.radius else "no"),
+               ("played motion: predicted closest approach", _fmt(played.get("closest_approach_mm"), ".1f", " mm")),
+               ("next motion: predicted closest approach", _fmt(nxt.get("closest_approach_mm"), ".1f", " mm")),
+               ("next motion: predicted hit", str(nxt.get("hit_predicted")))]
+    if nxt.get("message"):
+        summary.append(("next motion: planner's note", str(nxt["message"])))
+    res = nxt.get("residual_correction")
+    if res:
+        summary.append(("next motion: residual correction (tip error of the played motion, median / max)",
+                        f"{res['median_mm']:.1f} / {res['max_mm']:.1f} mm, tip tracked in "
+                        f"{res['valid_share'] * 100:.0f} % of its frames"))
+    warnings = [str(w) for w in calib.get("warnings", [])] + [str(w) for w in [params.get("message")] if w]
+    cal_rows = [("reprojection error (board, homography)", _fmt(calib.get("reprojection_error_px"), ".3f", " px")),
+                ("intrinsics", "from calib/ clip" if calib.get("K") else "none (homography only)"),
+                ("intrinsics rms", _fmt(calib.get("intrinsics_rms_px"), ".3f", " px")),
+                ("intrinsics views (used / board found; chosen for pose diversity)",
+                 f"{calib.get('intrinsics_views')} / {calib.get('intrinsics_views_found')}" if calib.get("K") else "-"),
+                ("board corners used", str(calib.get("n_corners"))),
+                ("sync offset (controller time of frame 0)", _fmt(sync.get("offset_s"), ".5f", " s")),
+                ("sync method", str(sync.get("method"))),
+                ("sync time residual (spread of the frames' own best offsets)",
+                 _fmt(sync.get("time_residual_ms"), ".2f", " ms")),
+                ("trigger time minus estimate", _fmt(sync.get("trigger_minus_estimate_ms"), ".2f", " ms")),
+                ("sync: arm seen vs forward kinematics, after the offset (match residual)",
+                 _fmt(sync.get("residual_mm"), ".2f", " mm")),
+                ("board-to-robot check: still arm seen vs where the board pose puts it",
+                 "not checked" if not calib.get("board_check") else
+                 f"{_fmt(calib['board_check'].get('residual_mm'), '.1f', ' mm')} (dx "
+                 f"{_fmt(calib['board_check'].get('dx_mm'), '+.1f')}, dy {_fmt(calib['board_check'].get('dy_mm'), '+.1f')} mm)")]
+    for w in sync.get("warnings") or []:
+        cal_rows.append(("sync warning", w))
+    if sync.get("note"):
+        cal_rows.append(("sync note", sync["note"]))
+    ctx = _common(campaign, f"Campaign {campaign.name}, trial {results_dir.name.split('_')[-1]}")
+    ctx.update(summary=summary, warnings=warnings, figures=figures, calib=cal_rows,
+               params=[(k, v, a, b) for k, v, a, b in zip(PARAM_NAMES, values, lo, hi)])
+    write_text(out, _env().get_template("trial.html.j2").render(**ctx))
+
+
+def _stage_times(results: Path) -> tuple[list, list]:
+    """Wall seconds per rule from Snakemake's ``benchmark:`` files, per trial."""
+    rows: dict[str, dict] = {}
+    stages: list[str] = []
+    for f in sorted((results / "benchmarks").glob("*.tsv")):
+        stem = f.stem
+        stage, _, k = stem.rpartition("_")
+        if not k.isdigit():
+            stage, k = stem, "-"
+        try:
+            s = float(pd.read_csv(f, sep="\t")["s"].iloc[0])
+        except Exception:  # a benchmark file being written by a running job
+            continue
+        if stage not in stages:
+            stages.append(stage)
+        rows.setdefault(k, {})[stage] = f"{s:.1f}"
+    return sorted(rows.items(), key=lambda kv: (not kv[0].isdigit(), int(kv[0]) if kv[0].isdigit() else 0)), stages
+
+
+def write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign, config: dict, out: Path) -> None:
+    """Write ``results/<campaign>/report.html``: one row per execution (paper Table 3)."""
+    rows, tips = [], {}
+    n = campaign.string.n_points
+    trials = sorted((int(p.name.split("_")[1]) for p in data_dir.glob("trial_*") if p.name.split("_")[1].isdigit()))
+    for k in trials:
+        dd, rd = data_dir / f"trial_{k}", results_dir / f"trial_{k}"
+        if not (rd / "params.json").exists():
+            continue
+        params = read_json(rd / "params.json")
+        tracks = read_parquet(rd / "tracks.parquet")
+        t0, t1, played = _motion_window(dd, config)
+        t, xy, valid = _tracked(tracks, n)
+        d, _ = closest_approach(t, xy[:, n], campaign.target.xy, t0, t1)
+        window = (t >= t0) & (t <= t1)
+        tips[f"execution {k}"] = xy[window, n]
+        row = {"trial": k, "E_mm": _fmt(params.get("E_mm")), "measured_mm": _fmt(d * 1000, ".1f"),
+               "predicted_mm": _fmt(played.get("closest_approach_mm"), ".1f"),
+               "hit_measured": bool(d <= campaign.target.radius),
+               "tip_valid_pct": _fmt(float(valid[window, n].mean()) * 100 if window.any() else None, ".0f")}
+        rows.append(row)
+    figures = []
+    if tips:
+        figures.append({"id": "fig-campaign-tips", "caption": "Tracked tip path of each execution during the "
+                        "motion and flight window.", "src": figs.campaign_tips(tips, campaign.target.xy,
+                                                                                 campaign.target.radius)})
+    timings, stages = _stage_times(results_dir)
+    ctx = _common(campaign, f"Campaign {campaign.name}")
+    ctx.update(rows=rows, figures=figures, timings=timings, stages=stages)
+    write_text(out, _env().get_template("campaign.html.j2").render(**ctx))

@@ -1,0 +1,292 @@
+"""Video-to-controller clock synchronisation: ``sync.json`` (the offset of frame 0 on the controller clock).
+
+**Frame-time convention.** ``offset_s`` is the controller-clock time (the clock of
+``joints.csv``) of the *middle of frame 0's exposure*; frame k's exposure is centred on
+``t_k = offset_s + k / fps`` (:func:`frame_times`). That is DESIGN.md's ``trigger_time_s``
+("controller-clock time of frame 0") read as the exposure centre, as the virtual lab
+writes it; a camera whose trigger marks the *start* of the exposure has a trigger time
+half an exposure earlier than ``offset_s``. With motion blur the arm seen in a frame is
+its mean over the exposure, i.e. (to first order) its pose at the exposure centre, so
+the video estimate measures the centre whatever the exposure.
+
+:func:`run_sync` with ``config["sync"]["method"]: video`` (the default) estimates the
+offset from the video: the arm seen in the frames is matched with the forward kinematics
+of the joint log (:mod:`stringcast.sync.arm_match`; the arm rather than the tracked grasp point,
+because the links are large, sharp-edged and seen in every frame, whereas the grasp point
+hides behind the gripper and blurs), sub-frame, with or without the recording's
+``trigger_time_s`` (used only as a starting guess; a wrong one is overruled and
+warned about when it disagrees by more than a frame). ``method: trigger`` takes the
+offset from ``video.yaml`` as it is.
+
+``sync.json`` holds: offset_s, fps, frames, method, residual_mm (robust spread, over the
+arm's segments and frames, of the distance across each segment between where the frame
+shows it and where the forward kinematics put it at the estimated offset:
+:func:`stringcast.sync.arm_match.match_residual`), residual_matches, arm_shift_mm (the board
+check's translation, by which the predicted arm is moved), time_residual_ms (spread of
+the frames' own best offsets), segment_offsets_s and segments_used (each arm segment's
+own peak; those that agree are used), trigger_time_s, trigger_minus_estimate_ms and
+trigger_disagrees (by more than a frame; also a warning), frames_used, dropped_frames (where the
+file has timestamps), board_check (:func:`stringcast.calibrate.board_check.check_board_to_robot`
+on the rest frames), score_curve, warnings, note.
+"""
+from __future__ import annotations
+
+import math
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from . import arm_match as sync_arm
+from stringcast.core import motion_window
+from stringcast.calibrate import check_board_to_robot
+from stringcast.core import (
+    DataError,
+    check_joint_coverage,
+    find_video,
+    read_joint_table,
+    read_video_meta,
+    write_json,
+)
+from stringcast.calibrate import Calibration
+from stringcast.core import tracking_settings
+from stringcast.video import check_frame_count, dropped_frames, open_video
+
+METHOD_TRIGGER = "video.yaml trigger_time_s"
+METHOD_VIDEO = "video: arm vs forward kinematics of joints.csv"
+
+
+def _trigger_doc(meta: dict, video_yaml: Path) -> dict:
+    trig = meta.get("trigger_time_s")
+    if trig is None:
+        raise DataError(f"{video_yaml}: no trigger_time_s, and config sync.method is 'trigger'; give the "
+                        "controller-clock time of frame 0, or use sync.method: video")
+    return {"offset_s": float(trig), "method": METHOD_TRIGGER, "residual_mm": None,
+            "note": "offset taken from the recording's trigger time, not estimated from the video"}
+
+
+def estimate_offset(video, calibration, arm, t_j: np.ndarray, q_j: np.ndarray, tracking_st: dict, st: dict,
+                    trigger_s: float | None = None, config: dict | None = None) -> dict:
+    """Offset of frame 0 on the controller clock, from the arm seen in the video.
+
+    Args:
+        video: a :class:`~stringcast.video.container.VideoReader` (fps known). calibration:
+            :class:`~stringcast.calibrate.calibration.Calibration`. t_j (K,) s, q_j (K, J) rad: the
+            joint log. tracking_st: tracking settings (the arm's outline). st: sync settings.
+        trigger_s: the recording's trigger time, a starting guess only.
+        config: the project config, for the board check's settings (defaults if None).
+
+    Steps: the board check on the median of the rest frames gives the translation d
+    between where the still arm is seen and its FK position; the strips are moved by d
+    (so a board pose or calibration error does not bias the timing); coarse and fine
+    search as in :mod:`stringcast.sync.arm_match`, the search window re-centred on the peak
+    until it sits within ``recentre_ms`` of the centre (on a fixed grid of candidate
+    offsets, so the result does not depend on the starting guess); each segment's NCC is
+    summed over the frames (a few bad frames only flatten their own curve), a segment
+    whose own peak is more than ``segment_agree_ms`` from the median of the segments'
+    peaks is left out (a static feature such as a cable behind it in the rest template
+    pulls its match towards the rest posture), and the peak of the others' sum is the
+    offset; the residual in mm is :func:`~stringcast.sync.arm_match.match_residual` over every
+    frame's and segment's own best offset.
+
+    Returns:
+        dict with offset_s (s, exposure centre of frame 0), residual_mm (None if too few
+        matches), residual_matches, arm_shift_mm (the board check's translation applied
+        to the strips), time_residual_ms, frames_used, board_check, coarse_offset_s (None
+        if the coarse search was not needed), segment_offsets_s, segments_used, score_curve.
+
+    Raises:
+        DataError: the video has no still frames of the arm before the motion, or no
+            frame in the motion.
+    """
+    fps = float(video.fps)
+    hw = sync_arm.segment_half_widths(arm, tracking_st, st["strip_margin_mm"] / 1000)
+    n_u, n_v, sig = int(st["strip_samples"]), int(st["strip_width_samples"]), float(st["smooth_px"])
+    rest_pts = sync_arm.strip_points(arm, q_j[0], hw, n_u, n_v)
+    uv = calibration.robot_to_pixel(rest_pts.reshape(-1, 2)).reshape(rest_pts.shape)
+    seen = np.all((uv >= 0) & (uv <= np.array([video.width - 1, video.height - 1])), axis=(1, 2, 3))
+    if not seen.any():
+        raise DataError(f"{video.path}: no segment of the arm is wholly in view at the start posture; sync "
+                        "from the video needs one (or set sync.method: trigger)")
+    hw = hw[seen]
+    segments = np.nonzero(seen)[0]
+
+    n_rest = max(1, min(int(st["rest_frames"]), video.n_frames))
+    rest = np.median(np.stack([video.read(k).astype(np.float32) for k in range(n_rest)]), axis=0)
+    board = calibration.board_check or check_board_to_robot(rest, calibration, arm, q_j[0], config)  # calibrate's, if it ran
+    shift = np.zeros(2) if board["residual_mm"] is None else np.array([board["dx_mm"], board["dy_mm"]]) / 1000
+
+    def strips(q):
+        return sync_arm.strip_points(arm, q, hw, n_u, n_v, segments) + shift
+
+    rest_pts = strips(q_j[0])
+    rest_s = sync_arm.smooth(rest, sig)
+    template = sync_arm.sample(rest_s, calibration, rest_pts)
+    try:
+        t_on, t_off = motion_window(t_j, q_j)
+    except ValueError as exc:
+        raise DataError(f"{video.path}: sync from the video needs the arm to move: {exc}") from exc
+    search, step = st["search_ms"] / 1000, st["step_ms"] / 1000
+
+    def coarse() -> float:
+        rest_ncc = np.array([sync_arm.ncc(sync_arm.sample(sync_arm.smooth(f, sig), calibration, rest_pts), template)
+                             for _, f in video])
+        if np.mean(rest_ncc[:n_rest]) < 0.9:
+            raise DataError(f"{video.path}: the first frames do not show the arm still at the joint log's first "
+                            "posture; sync needs the video to start before the motion")
+        tp = np.arange(t_j[0], t_j[-1], 1e-3)
+        pred = sync_arm.ncc(sync_arm.sample(rest_s, calibration,
+                                            strips(sync_arm.joints_at(tp, t_j, q_j))),
+                            template)
+        return sync_arm.coarse_offset(rest_ncc, fps, tp, pred, st["coarse_step_ms"] / 1000)
+
+    def fine(tau0: float) -> tuple[np.ndarray, np.ndarray, list, np.ndarray, np.ndarray, np.ndarray]:
+        taus = tau0 + np.arange(-search, search + step / 2, step)
+        k_t = np.arange(video.n_frames) / fps
+        # frames in the motion for every candidate offset: one near the motion's start or end
+        # matches the still arm equally well for all earlier (or later) offsets, a one-sided
+        # score that pulls the peak towards the rest posture (the overlapping ones if too few)
+        frames = np.nonzero((k_t + tau0 - search >= t_on) & (k_t + tau0 + search <= t_off))[0]
+        if len(frames) < st["min_frames"]:
+            frames = np.nonzero((k_t + tau0 + search >= t_on) & (k_t + tau0 - search <= t_off))[0]
+        if len(frames) == 0:
+            raise DataError(f"{video.path}: no frame falls in the arm's motion ({t_on:.3f}-{t_off:.3f} s on the "
+                            f"controller clock) for an offset near {tau0:.4f} s")
+        total, best = np.zeros(len(taus)), []
+        tau_ks = np.full((len(frames), len(segments)), np.nan)
+        total_seg = np.zeros((len(taus), len(segments)))
+        for i, k in enumerate(frames):
+            f = sync_arm.smooth(video.read(int(k)), sig)
+            q = sync_arm.joints_at(taus + k / fps, t_j, q_j)
+            per_seg = sync_arm.ncc_segments(sync_arm.sample(f, calibration, strips(q)), template)  # (T, S)
+            score = per_seg.mean(axis=1)
+            if np.ptp(score) >= st["min_frame_contrast"]:
+                total += score
+                total_seg += per_seg
+                best.append(taus[int(np.argmax(score))])
+            for s_ in range(per_seg.shape[1]):
+                c = per_seg[:, s_]
+                j = int(np.argmax(c))
+                if np.ptp(c) >= st["min_frame_contrast"] and 1 <= j <= len(c) - 2:
+                    tau_ks[i, s_] = sync_arm.parabola_peak(taus[j - 1:j + 2], c[j - 1:j + 2])
+        return taus, total, best, frames, tau_ks, total_seg
+
+    def on_grid(t: float) -> float:  # the same candidate offsets whatever the start
+        return float(np.round(t / step) * step)
+
+    coarse_s = None if trigger_s is not None else coarse()
+    tau0 = on_grid(trigger_s if trigger_s is not None else coarse_s)
+    for attempt in range(5):  # re-centre the search window on the peak (and follow it off an edge)
+        taus, total, best, frames, tau_ks, total_seg = fine(tau0)
+        i = int(np.argmax(total))
+        if best and 2 <= i <= len(taus) - 3 and abs(taus[i] - tau0) <= st["recentre_ms"] / 1000:
+            break
+        if attempt == 0 and coarse_s is None and not (best and 2 <= i <= len(taus) - 3):
+            coarse_s = coarse()  # the trigger time was off by more than the search
+            tau0 = on_grid(coarse_s)
+        else:
+            tau0 = on_grid(float(taus[i]))
+    if not best:
+        raise DataError(f"{video.path}: the arm's motion is not visible in the frames (no frame's match with the "
+                        "forward kinematics depends on the offset)")
+    # each segment's own summed match; a segment whose peak disagrees with the others (a static
+    # feature such as a cable behind it in the rest template, the string across it) is left out
+    seg_peaks = np.array([sync_arm.parabola_peak(taus, total_seg[:, j]) for j in range(len(segments))])
+    keep = np.abs(seg_peaks - np.median(seg_peaks)) <= st["segment_agree_ms"] / 1000
+    offset = sync_arm.parabola_peak(taus, total_seg[:, keep].sum(axis=1)) if keep.any() else \
+        sync_arm.parabola_peak(taus, total)
+    t_k = offset + frames / fps
+    dt = 1e-3
+    a, _, _ = sync_arm.normal_speeds(arm, sync_arm.joints_at(t_k - dt, t_j, q_j), sync_arm.joints_at(t_k, t_j, q_j),
+                                     sync_arm.joints_at(t_k + dt, t_j, q_j), dt, segments, n_u)
+    residual_mm, n_eq = sync_arm.match_residual(tau_ks, a, offset)
+    mad = float(np.median(np.abs(np.asarray(best) - offset))) * 1.4826
+    return {"offset_s": offset, "time_residual_ms": mad * 1000, "frames_used": len(best), "board_check": board,
+            "coarse_offset_s": coarse_s, "residual_mm": residual_mm,
+            "residual_matches": n_eq, "arm_shift_mm": (shift * 1000).tolist(),
+            "segment_offsets_s": seg_peaks.tolist(), "segments_used": [int(j) for j in segments[keep]],
+            "score_curve": {"offset_s": taus.tolist(), "ncc_sum": total.tolist()}}
+
+
+def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaign, config: dict | None,
+             out_json: str | Path | None = None) -> dict:
+    """Write ``sync.json`` for one trial (see the module docstring for its keys).
+
+    Args:
+        trial_dir: ``data/<campaign>/trial_<k>`` with ``video.yaml``, the video and ``joints.csv``.
+        calibration_json: the trial's ``calibration.json`` (needed by ``method: video``).
+        campaign: :class:`~stringcast.core.config.Campaign` (the arm). config: the project config.
+
+    Raises:
+        DataError: missing/malformed inputs (the file is named), no trigger time with
+            ``method: trigger``, or a video in which the arm's motion cannot be found.
+    """
+
+    trial_dir = Path(trial_dir)
+    video_yaml = trial_dir / "video.yaml"
+    meta = read_video_meta(video_yaml)
+    st = sync_arm.settings(config)
+    doc = {"fps": float(meta["fps"]), "frames": int(meta["frames"]), "trigger_time_s": meta.get("trigger_time_s")}
+    if st["method"] == "trigger":
+        doc.update(_trigger_doc(meta, video_yaml))
+    else:
+        if calibration_json is None:
+            raise DataError(f"{trial_dir}: sync.method 'video' needs the trial's calibration.json")
+        t_j, q_j, _ = read_joint_table(trial_dir / "joints.csv")
+        cal = Calibration.from_json(calibration_json)
+        with open_video(find_video(trial_dir), fps=doc["fps"]) as video:
+            warns = check_frame_count(video, meta, video_yaml)
+            est = estimate_offset(video, cal, campaign.arm, t_j, q_j, tracking_settings(config), st,
+                                  doc["trigger_time_s"], config)
+            # the file's own frame times, where a full pass (the coarse search) has read them already
+            stamps = video.timestamps_s if est["coarse_offset_s"] is not None else None
+        check_joint_coverage(t_j, est["offset_s"] + np.arange(doc["frames"]) / doc["fps"], trial_dir / "joints.csv")
+        bc = est["board_check"]
+        doc.update(est, method=METHOD_VIDEO,
+                   note="offset estimated from the video; the trigger time was only a starting guess"
+                   if doc["trigger_time_s"] is not None else "offset estimated from the video (no trigger time)")
+        doc["trigger_minus_estimate_ms"], doc["trigger_disagrees"] = None, None
+        if doc["trigger_time_s"] is not None:
+            gap_ms = (float(doc["trigger_time_s"]) - est["offset_s"]) * 1000
+            doc["trigger_minus_estimate_ms"] = gap_ms
+            doc["trigger_disagrees"] = bool(abs(gap_ms) > 1000 / doc["fps"])
+            if doc["trigger_disagrees"]:
+                warns.append(f"video.yaml's trigger_time_s is {gap_ms:+.2f} ms from the offset the video shows "
+                             f"(more than a frame, {1000 / doc['fps']:.2f} ms): the video's estimate is used")
+        doc["dropped_frames"] = None if stamps is None else [list(g) for g in dropped_frames(stamps, doc["fps"])]
+        if bc["residual_mm"] is not None and bc["residual_mm"] > st["board_check_warn_mm"]:
+            warns.append(f"the still arm is seen {bc['residual_mm']:.1f} mm from where the forward kinematics and "
+                         f"the board-to-robot transform put it (> {st['board_check_warn_mm']} mm): check the "
+                         "board pose in config")
+        if doc["dropped_frames"]:
+            warns.append(f"{len(doc['dropped_frames'])} dropped frame(s) by the file's timestamps")
+        for w in warns:
+            warnings.warn(f"{trial_dir}: {w}", stacklevel=2)
+            print(f"sync warning: {trial_dir}: {w}", file=sys.stderr)
+        doc["warnings"] = warns
+    if not math.isfinite(doc["offset_s"]):
+        raise DataError(f"{trial_dir}: sync produced a non-finite offset")
+    if out_json is not None:
+        write_json(out_json, doc)
+    return doc
+
+
+def frame_times(sync: dict, n: int | None = None) -> np.ndarray:
+    """Controller-clock times of frames 0..n-1: ``offset_s + k / fps`` -> (n,) s.
+
+    Args:
+        sync: the ``sync.json`` mapping (offset_s, fps, frames).
+        n: frame count (default ``sync["frames"]``).
+
+    Raises:
+        DataError: missing or non-positive fps, or missing offset.
+    """
+    try:
+        offset, fps = float(sync["offset_s"]), float(sync["fps"])
+        n = int(sync["frames"]) if n is None else int(n)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise DataError(f"sync: needs offset_s, fps and frames, got {sync!r}") from exc
+    if not (np.isfinite(fps) and fps > 0) or not np.isfinite(offset):
+        raise DataError(f"sync: fps must be > 0 and offset finite, got fps={fps}, offset_s={offset}")
+    return offset + np.arange(n) / fps

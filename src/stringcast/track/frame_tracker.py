@@ -1,0 +1,249 @@
+"""One frame of markerless tracking: segmentation, centreline and metric points (steps 2-6 of
+:mod:`stringcast.track.tracking`, whose module doc describes them; :func:`stringcast.track.tracking.run_tracking`
+streams the video through a :class:`FrameTracker`)."""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from skimage.morphology import skeletonize
+
+from .arm_mask import draw_arm_mask
+from stringcast.calibrate import Calibration
+from .centreline import (
+    arc_length,
+    branch_vertices,
+    clean_end,
+    decimate_path,
+    free_end_extension,
+    hidden_arc,
+    mismatch_split,
+    odd_smooth,
+    refine_centreline,
+    resample_by_arc,
+)
+from .junctions import Zones, walk_skeleton
+from .markers import band_points, path_contrast
+
+
+@dataclass(frozen=True)
+class FrameTrack:
+    """One frame's result: positions (n, 2) m of points 1..n (NaN where invalid), valid (n,),
+    and the centreline in image px (M, 2) (x, y), grasp first (empty if none was found)."""
+
+    positions: np.ndarray
+    valid: np.ndarray
+    path_px: np.ndarray
+
+    def __post_init__(self):
+        n = len(self.valid)
+        if np.shape(self.positions) != (n, 2) or np.ndim(self.path_px) != 2 or np.shape(self.path_px)[1] != 2:
+            raise ValueError(f"FrameTrack: positions {np.shape(self.positions)}, valid {np.shape(self.valid)}, "
+                             f"path_px {np.shape(self.path_px)}")
+        if np.any(np.isnan(self.positions[self.valid])) or not np.all(np.isnan(self.positions[~self.valid])):
+            raise ValueError("FrameTrack: valid points need positions and invalid ones NaN")
+
+
+class FrameTracker:
+    """Segmentation and centreline of single frames, given the background and calibration.
+
+    Args:
+        bg: (H, W) background; noise: (a, b) of sigma^2 = a + b B (:func:`build_background`).
+        cal: the trial's :class:`Calibration`. campaign: gives L and n. st: :func:`settings`.
+    """
+
+    def __init__(self, bg: np.ndarray, noise: tuple[float, float], cal: Calibration, campaign, st: dict):
+        self.bg, self.cal, self.st = bg, cal, st
+        # noise sigma of the smoothed difference, per pixel (white noise through the Gaussian)
+        k = 1.0 / (2 * math.sqrt(math.pi) * st["smooth_px"]) if st["smooth_px"] > 0.3 else 1.0
+        self.sigma = (np.sqrt(noise[0] + noise[1] * np.clip(bg, 0, None)) * k).astype(np.float32)
+        self.L, self.n = campaign.string.length, campaign.string.n_points
+        self.s_targets = np.arange(1, self.n + 1) * self.L / self.n
+
+    def track(self, frame: np.ndarray, poses_px: np.ndarray) -> FrameTrack:
+        """Track one frame (H, W); poses_px (P, J + 2, 2): the arm in px at P instants of the
+        frame period, the middle one at the frame's time (its last row is the grasp)."""
+        st, cal, n = self.st, self.cal, self.n
+        gpx = poses_px[len(poses_px) // 2][-1]
+        scale = float(cal.m_per_px(gpx[None])[0])  # m per px near the grasp
+        R = (self.L + st["roi_margin_mm"] / 1000) / scale
+        H, W = frame.shape
+        x0, y0 = int(max(0, gpx[0] - R)), int(max(0, gpx[1] - R))
+        x1, y1 = int(min(W, gpx[0] + R + 1)), int(min(H, gpx[1] + R + 1))
+        def none(path=None):  # no points (NaN), with the centreline found (if any)
+            return FrameTrack(np.full((n, 2), np.nan), np.zeros(n, bool), np.zeros((0, 2)) if path is None else path)
+        if x1 - x0 < 8 or y1 - y0 < 8:
+            return none()
+        arm = draw_arm_mask((y1 - y0, x1 - x0), poses_px, st, scale, (x0, y0))
+        absd, fg = self._segment(frame[y0:y1, x0:x1].astype(np.float32), self.bg[y0:y1, x0:x1],
+                                 self.sigma[y0:y1, x0:x1], arm)
+        absd[arm] = 0.0  # the arm's own contrast must not pull the centreline
+        if st["arm_guard_px"] >= 1:  # the arm's rim (blur, anti-aliasing) leaves slivers by the mask
+            k = 2 * round(st["arm_guard_px"]) + 1
+            arm = cv2.dilate(arm.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))) > 0
+            fg &= ~arm
+        g = np.array([gpx[1] - y0, gpx[0] - x0])  # grasp (row, col) in the ROI
+        self._bg = self.bg[y0:y1, x0:x1]
+        rho = st["grasp_clear_mm"] / 1000 / scale
+        found = self._centreline(fg, g, st["grasp_search_mm"] / 1000 / scale, rho)
+        if found is None:
+            return none()
+        pts, bridged, branch = found
+        end = pts[-1].astype(int)
+        e0, e1 = np.maximum(end - 3, 0), end + 4
+        free_end = bool(3 <= end[0] + y0 < H - 3 and 3 <= end[1] + x0 < W - 3
+                        and not arm[e0[0]:e1[0], e0[1]:e1[1]].any() and np.hypot(*(end - g)) > 2 * rho
+                        and clean_end(pts, self._skel, self._skel_at, absd, self._bg, st,
+                                      st["end_touch_mm"] / 1000 / scale))
+        hidden_start = np.hypot(*(pts[0] - g)) > rho + 3 or self._fallback
+        loop_back = np.hypot(*(end - g)) <= 2 * rho  # the walk came back to the grasp
+        pts = odd_smooth(refine_centreline(absd, pts), 1.5, twice=True)
+        if free_end:  # the skeleton stops short of a free end: move the end to the string's end
+            ext = free_end_extension(absd, pts)
+            if ext > 0.05:
+                t = pts[-1] - pts[-2]
+                pts = np.vstack([pts, pts[-1] + ext * t / max(float(np.hypot(*t)), 1e-9)])
+                bridged = np.r_[bridged, False]
+                branch = np.r_[branch, False]
+        cum_px = arc_length(pts)
+        gap = np.nonzero(bridged & (np.r_[0.0, np.diff(cum_px)] > 2.5))[0]
+        ev_px = np.sort(np.concatenate([cum_px[branch], cum_px[gap - 1], cum_px[gap]]))
+        pts, obs = decimate_path(pts, ~bridged[1:], st["arc_step_px"], sub=4)
+        head = hidden_arc(g, pts)  # grasp -> first visible vertex, under the gripper's mask
+        px = np.vstack([head, pts])[:, ::-1] + [x0, y0]  # (x, y) image px, grasp first
+        obs = np.concatenate([np.full(len(head), not hidden_start), obs])
+        xy = cal.pixel_to_robot(px)
+        s_poly = arc_length(xy)
+        L_head = float(s_poly[len(head)])
+        s_dec = np.linspace(0.0, cum_px[-1], len(pts))
+        events = np.interp(ev_px, s_dec, s_poly[len(head):])  # ambiguities, polyline arc (m)
+        if hidden_start:
+            events = np.r_[L_head, events]
+        D = self.L - st["tip_shortfall_mm"] / 1000 - float(s_poly[-1])  # missing length if the end is the tip
+        tol = max(st["anchor_tol_mm"] / 1000, 0.01 * self.L, st["anchor_tol_px"] * scale)  # both ends +-1 px
+        slack = L_head - float(np.linalg.norm(xy[len(head)] - xy[0]))  # the head may be shorter, not below its chord
+        lo, hi, shift, split = -np.inf, np.inf, 0.0, None
+        if free_end and len(events) and float(s_poly[-1]) - events[-1] < self.L / n:
+            free_end = False  # a branch joins within a point spacing of the end: is the tip this end or the branch's?
+        if free_end and abs(D) <= tol:  # both anchors agree: share the mismatch (head, visible arc, free end)
+            split = mismatch_split(D, np.array([scale * st["end_sigma_px"] + slack, st["scale_sigma"] * (float(
+                s_poly[-1]) - L_head), scale * st["end_sigma_px"]]))
+        elif free_end and -tol - slack < D <= st["max_missing_frac"] * self.L:  # anchored at the tip: valid after the last ambiguity
+            shift, lo = D, (events[-1] if len(events) else (L_head if hidden_start else -np.inf))
+            if D > tol:  # the missing length hides by the grasp (a loop at the fingers, under the arm's mask):
+                lo = max(lo, L_head + D)  # the visible path's first D past the head may be that loop's
+        elif not hidden_start and not self._head_clutter and not ((loop_back or free_end) and D > tol):  # anchored at the grasp: valid before the first ambiguity
+            hi = events[0] if len(events) else np.inf
+            if free_end:
+                hi = min(hi, float(s_poly[-1]))
+        else:
+            return none(px)
+        s_t = self.s_targets - shift  # the targets' polyline arc
+        if split is not None:  # model arc -> polyline arc: knots at the head's end and at the free end
+            end = self.L - st["tip_shortfall_mm"] / 1000 - split[2]
+            s_t = np.interp(self.s_targets, [0.0, L_head + split[0], end], [0.0, L_head, float(s_poly[-1])])
+            s_t = np.where(self.s_targets > end, float(s_poly[-1]) + self.s_targets - end, s_t)
+        pos, valid = resample_by_arc(xy, obs, s_t, st["end_tolerance_mm"] / 1000 if free_end else 0.0)
+        trusted = (s_t >= max(lo, 0.0)) & (s_t <= hi) & (self.s_targets >= 0)
+        valid &= trusted
+        if st["mode"] == "markers":  # the bands' centres, where the order along the path is trusted
+            pos, valid = band_points(frame, px, obs & (np.arange(len(obs)) >= len(head)), s_poly, s_t, trusted,
+                                     free_end, path_contrast(absd, pts), cal, st)
+        pos[~valid] = np.nan
+        return FrameTrack(pos, valid, px)
+
+    def _segment(self, img: np.ndarray, bg: np.ndarray, sigma: np.ndarray, arm: np.ndarray):
+        """Smoothed |I - g B| (gain g for flicker) and its hysteresis foreground outside the arm."""
+        st = self.st
+        sub = (slice(None, None, 3), slice(None, None, 3))
+        use = (bg[sub] > 10) & ~arm[sub]
+        gain = float(np.median(img[sub][use] / bg[sub][use])) if use.sum() > 100 else 1.0
+        diff = img - gain * bg
+        if st["smooth_px"] > 0:
+            diff = cv2.GaussianBlur(diff, (0, 0), st["smooth_px"])
+        absd = np.abs(diff)
+        z = absd / np.maximum(sigma * math.sqrt(max(gain, 1e-3)), 0.05)
+        weak = (z > st["threshold_low"]) & ~arm
+        nlab, lab = cv2.connectedComponents(weak.astype(np.uint8), connectivity=8)
+        keep = np.zeros(nlab, bool)
+        keep[lab[weak & (z > st["threshold_high"])]] = True
+        keep[0] = False
+        return absd, keep[lab]
+
+    def _centreline(self, fg: np.ndarray, g: np.ndarray, r0: float, rho: float):
+        """Skeleton path from near the grasp g (row, col): (M, 2) (row, col), (M,) bridged; or None.
+
+        Seeds: the skeleton pixel nearest the grasp in each skeleton component within r0 px
+        (at most 6), and up to 4 of the component's pixels just outside rho (a string that leaves
+        the fingers in a short hook: the nearest pixel's walk takes the hook); the longest walk
+        wins, a walk from outside rho only if it is longer by 2 rho than the nearest pixel's. A walk is cut where it comes closest to the grasp
+        (dropping detours along slivers of the gripper's rim), then its vertices within rho
+        px of the grasp are dropped (there the string mixes with the fingertips).
+        """
+        x, y, w, h = cv2.boundingRect(fg.astype(np.uint8))
+        if w == 0:
+            return None
+        b = np.array([max(0, y - 1), max(0, x - 1)])  # the foreground's box, 1 px margin: all work is in it
+        box = fg[b[0]:y + h + 1, b[1]:x + w + 1]
+        skel = skeletonize(box)
+        self._skel, self._skel_at = skel, b
+        dist = cv2.distanceTransform(box.astype(np.uint8), cv2.DIST_L2, 3)  # the string's width: twice the
+        self._width = 2.0 * float(np.median(dist[skel])) if skel.any() else 1.0  # skeleton's distance to the rim
+        found = self._walk(skel, g - b, r0, rho)
+        return None if found is None else (found[0] + b, found[1], found[2])
+
+    def _walk(self, skel: np.ndarray, g: np.ndarray, r0: float, rho: float):
+        """:meth:`_centreline` inside the foreground's box: skel (h, w) bool, g (row, col) in the box."""
+        sy, sx = np.nonzero(skel)
+        dist = np.hypot(sy - g[0], sx - g[1])
+        idx = np.nonzero(dist <= r0)[0]
+        if len(idx) == 0:
+            return None
+        _, comp = cv2.connectedComponents(skel.astype(np.uint8), connectivity=8)
+        cid = comp[sy[idx], sx[idx]]
+        seeds = []  # per component: its pixel nearest the grasp, then (if the walk from it ends in a spur of
+        for c in np.unique(cid):  # the tangle at the fingertips) its pixels just outside the clear zone
+            own = idx[cid == c]
+            ring = own[(dist[own] >= rho) & (dist[own] < rho + 3)]
+            ring = ring[np.argsort(dist[ring])]
+            picked = []   # ring pixels >= 3 px apart: one per way out of the tangle (string, hook, finger rim)
+            for r in ring:
+                if all(np.hypot(sy[r] - sy[q], sx[r] - sx[q]) >= 3 for q in picked) and len(picked) < 4:
+                    picked.append(r)
+            seeds.append((own[np.argmin(dist[own])], *picked))
+        best, zones = None, Zones(skel, self._width, int(self.st["branch_min_px"]))
+        for pair in sorted(seeds, key=lambda p: dist[p[0]])[:6]:
+            penalty = 0.0   # once the nearest pixel's walk leaves the clear zone, a ring pixel's must beat it
+            for fallback, c in enumerate(pair):   # by 2 rho (a hook at the fingertips caught the first walk)
+                d0 = np.array([sy[c], sx[c]], float) - g
+                pts, bridged, amb, fold, passed = walk_skeleton(
+                    skel, (sy[c], sx[c]), self.st["max_gap_px"], d0 if np.hypot(*d0) >= 1 else None, zones=zones)
+                cum = arc_length(pts)
+                head = np.nonzero(cum <= 2 * r0)[0]
+                j0 = int(head[np.argmin(np.hypot(*(pts[head] - g).T))])
+                far = np.nonzero(np.hypot(*(pts[j0:] - g).T) >= rho)[0]
+                if len(far) == 0:
+                    continue
+                j1 = j0 + int(far[0])
+                score = cum[-1] - cum[j1] - (penalty if fallback else 0.0)
+                if best is None or score > best[2]:
+                    b = bridged[j1:].copy()
+                    b[0] = False
+                    best = (pts[j1:], b, score, pts, fallback, amb, passed, fold)
+                if not fallback:
+                    penalty = 2 * rho
+        if best is None:
+            return None
+        walk = best[3].astype(int)
+        self._fallback = bool(best[4])  # the string's start is then not seen joining the grasp
+        if best[4]:  # the walk skipped a tangle at the fingertips: not a branch
+            skel = skel.astype(np.uint8)
+            cv2.circle(skel, (round(g[1]), round(g[0])), round(rho + 1), 0, -1)
+        ev = branch_vertices((skel > 0) & ~best[6], walk, int(self.st["branch_min_px"])) | best[5]
+        # a branch joining the walk near the grasp: a loop there, the ordering is ambiguous; a fold there
+        head = np.hypot(*(walk - g).T) <= 2 * rho  # (a spur) is the fingertips' tangle, or the loop at
+        self._head_clutter = bool(np.any(ev & head))  # the fingers that a missing length is anchored for
+        return best[0], best[1], (ev | (best[7] & ~head))[len(best[3]) - len(best[0]):]
+

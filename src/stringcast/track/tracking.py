@@ -1,0 +1,157 @@
+"""Markerless string tracking: video -> mass-point series in the robot frame.
+
+:func:`run_tracking` writes ``tracks.parquet`` (``frame, t_s, point, x_m, y_m, valid``;
+point 0 = grasp, 1..n = the model's points at arc length s_i = i L / n, n = tip).
+Settings: ``config['tracking']`` over :data:`DEFAULTS`.
+
+1. **Background** (:func:`~stringcast.track.background.build_background`): the arm-masked temporal
+   median of ``background_samples`` frames spread over the arm's motion in ``background_bursts``
+   short runs (:func:`~stringcast.track.background.background_samples`: only the runs are decoded; the
+   string and arm hang still before the motion, and again after it; ``background_window_s``
+   limits the samples to the motion's first seconds, for containers that cannot seek: but a string that leaves its rest
+   place late in that span becomes background there, and is lost at rest), pixels the arm
+   covers throughout taken from pre-motion frames; the same samples give the sensor's noise
+   model sigma^2 = a + b B. The main pass decodes ahead in a thread (:mod:`stringcast.video.decode_ahead`).
+2. **Segmentation** (per frame, within L + ``roi_margin_mm`` of the grasp): a gain for
+   flicker ``g = median(I / B)``, ``|I - g B|`` smoothed by a Gaussian, and a hysteresis
+   threshold in units of the *local* noise sigma (``threshold_low/high``); polarity free.
+3. **Arm mask** from the *measured* joints at the start, middle and end of each frame period
+   (:func:`~stringcast.track.arm_mask.draw_arm_mask`), plus a guard band of ``arm_guard_px``.
+4. **Centreline** (:mod:`stringcast.track.centreline`): skeleton of the foreground; the longest walk
+   (:func:`~stringcast.track.junctions.walk_skeleton`) from near the grasp (or from just outside its clear
+   zone, past a hook at the fingertips), through a crossing by
+   the smoothest way on (a pass whose choice is a guess, or by an arm never walked, is an
+   ambiguity), bridging gaps up to ``max_gap_px`` (bridged parts are never valid); the first
+   ``grasp_clear_mm`` replaced by a circular arc from the grasp (:func:`hidden_arc`); sub-pixel
+   refinement across the path, smoothing that keeps bends, chords of ``arc_step_px`` joined
+   by a spline; a free end (:func:`clean_end`: not fading, not at an occluder's rim, not
+   within ``end_touch_mm`` of the string's own earlier stretch, no branch within a point
+   spacing) is extended to where the contrast fades (:func:`free_end_extension`).
+5. **Metric resampling** (:func:`resample_by_arc`): :meth:`Calibration.pixel_to_robot`, arc
+   length from the grasp, points at s_i = i L / n. With a trusted free end whose length
+   agrees with L (within ``anchor_tol_mm`` / ``anchor_tol_px``), the mismatch is shared
+   among the hidden head, the visible arc and the free end by their uncertainties
+   (:func:`mismatch_split`); a longer mismatch (the start hidden or folded behind the
+   gripper) anchors the arc at the free end, valid after the last ambiguity (a branch
+   joining the walk, a guess at a crossing, a bridged gap) and, for a missing length D, not
+   within D past the hidden head (a loop at the fingers); without a free end, at the grasp, valid before the
+   first ambiguity. Invalid points keep NaN positions: never a guess.
+6. **Markers** (``mode: markers``, :mod:`stringcast.track.markers`): strings with a band at each mass
+   point; a point's position is its band's centre on the centreline, valid where step 5 trusts
+   the order along the path and the band is found whole and unambiguous.
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from stringcast.core import forward_kinematics, motion_window
+from .arm_mask import draw_arm_mask
+from .background import background_samples, build_background
+from stringcast.calibrate import Calibration
+from stringcast.core import DataError, find_video, read_joint_table, read_json, write_parquet
+from .frame_tracker import FrameTracker
+from .overlay import write_overlay
+from stringcast.video import prefetch
+from stringcast.sync import frame_times
+from stringcast.video import open_video
+from stringcast.core import tracking_settings as settings
+
+def _joint_px(cal: Calibration, arm, q: np.ndarray) -> np.ndarray:
+    pts = forward_kinematics(arm, q)  # (F, J + 2, 2)
+    return cal.robot_to_pixel(pts.reshape(-1, 2)).reshape(pts.shape)
+
+
+def _interp_joints(t: np.ndarray, t_j: np.ndarray, q_j: np.ndarray) -> np.ndarray:
+    return np.column_stack([np.interp(t, t_j, q_j[:, j]) for j in range(q_j.shape[1])])
+
+
+def run_tracking(trial_dir, calibration_json, sync_json, campaign, config, out_parquet,
+                 overlay_png=None) -> pd.DataFrame:
+    """Track the string in one trial; write ``tracks.parquet`` (and the overlay PNG).
+
+    Args:
+        trial_dir: holds the video (``files.find_video``) and ``joints.csv``.
+        calibration_json, sync_json: this trial's ``calibration.json`` and ``sync.json``.
+        campaign: the resolved campaign (arm, string length L and n). config: the config.
+        overlay_png: if given, a strip of ``overlay_frames`` frames with the tracked points.
+
+    Returns:
+        The long table ``frame, t_s, point, x_m, y_m, valid``, (n + 1) rows per frame, in m
+        in the robot frame; frames outside the joint log are all invalid.
+
+    Raises:
+        DataError: missing or malformed inputs (named), or a frame count or image size that
+            disagrees with ``sync.json`` / ``calibration.json``.
+    """
+    from tqdm import tqdm
+
+    trial_dir = Path(trial_dir)
+    st = settings(config)
+    cal = Calibration.from_json(calibration_json)
+    sync = read_json(sync_json)
+    t_j, q_j, _ = read_joint_table(trial_dir / "joints.csv")
+    arm, n = campaign.arm, campaign.string.n_points
+    vpath = find_video(trial_dir)
+    video = open_video(vpath)
+    if (video.width, video.height) != tuple(cal.image_size):
+        raise DataError(f"{video.path}: frames are {video.width}x{video.height}, {calibration_json} is for "
+                        f"{cal.image_size[0]}x{cal.image_size[1]}")
+    F = video.n_frames
+    if "frames" in sync and int(sync["frames"]) != F:
+        raise DataError(f"{video.path}: {F} frames, but {sync_json} (from video.yaml) says {sync['frames']}")
+    t = frame_times(sync, F)
+    in_log = (t >= t_j[0]) & (t <= t_j[-1])
+    half = 0.5 / float(sync["fps"])  # the arm at the start, middle and end of each frame period
+    jpx = np.stack([_joint_px(cal, arm, _interp_joints(t + dt, t_j, q_j)) for dt in (-half, 0.0, half)], axis=1)
+    scale = float(np.median(cal.m_per_px(jpx[:, 1, -1])))
+    try:
+        t_start, t_end = motion_window(t_j, q_j)
+    except ValueError:  # the arm never moves
+        t_start, t_end = t_j[0], t_j[-1]
+    win = np.nonzero((t >= t_start) & (t <= t_end + 0.1) & in_log)[0]
+    if len(win) < 9:
+        win = np.arange(F)
+    span = st["background_window_s"]   # None: the whole motion window (the string hangs still in a short one)
+    early = win if span is None else win[t[win] <= t[win[0]] + span]
+    bwin = early if len(early) >= 9 else win
+    samples = background_samples(bwin, int(st["background_samples"]), int(st["background_bursts"]))
+    pre = np.nonzero(t < t_start - 0.02)[0][-int(st["rest_frames"]):]
+    frames = prefetch(video, int(st["prefetch_frames"]))  # the main pass decodes while the background is built
+    second = open_video(vpath)
+    try:
+        bg, noise = build_background(second, samples.astype(int), pre, lambda k: draw_arm_mask(
+            (video.height, video.width), jpx[k], st, scale, grow_px=2.0))
+    finally:
+        second.close()
+    tracker = FrameTracker(bg, noise, cal, campaign, st)
+
+    xy = np.full((F, n + 1, 2), np.nan)
+    valid = np.zeros((F, n + 1), bool)
+    xy[:, 0] = forward_kinematics(arm, _interp_joints(t, t_j, q_j))[:, -1]  # point 0: the grasp
+    valid[:, 0] = in_log
+    xy[~in_log, 0] = np.nan
+    shows = set(np.round(np.linspace(win[0], win[-1], int(st["overlay_frames"]))).astype(int)) if overlay_png else set()
+    shown = []
+    for k, frame in tqdm(frames, total=F, desc="tracking", unit="frame", disable=not sys.stderr.isatty()):
+        if not in_log[k]:
+            continue
+        ft = tracker.track(frame, jpx[k])
+        xy[k, 1:], valid[k, 1:] = ft.positions, ft.valid
+        if k in shows:
+            shown.append((k, frame, ft.path_px, cal.robot_to_pixel(np.nan_to_num(xy[k])), valid[k].copy()))
+    video.close()
+    df = pd.DataFrame({
+        "frame": np.repeat(np.arange(F), n + 1).astype(np.int64),
+        "t_s": np.repeat(t, n + 1),
+        "point": np.tile(np.arange(n + 1), F).astype(np.int64),
+        "x_m": xy[..., 0].ravel(), "y_m": xy[..., 1].ravel(),
+        "valid": valid.ravel(),
+    })
+    write_parquet(out_parquet, df)
+    if overlay_png is not None:
+        write_overlay(overlay_png, shown, t, scale, campaign.string.length)
+    return df

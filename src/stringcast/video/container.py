@@ -1,0 +1,235 @@
+"""Video readers: one streaming, mono interface over containers, frame folders and Photron files.
+
+:func:`open_video` opens
+
+* a container OpenCV's FFmpeg backend reads (``.mkv``, ``.avi``, ``.mp4``, ...), through
+  ``cv2.VideoCapture``. A mono stream (FFV1 ``gray``/``gray16le``, as the virtual lab and
+  many high-speed cameras write) is read raw (``CAP_PROP_CONVERT_RGB = 0``), so 16-bit
+  depth is kept; a colour stream is decoded to BGR and converted to grey with
+  ``cv2.cvtColor(..., COLOR_BGR2GRAY)`` (ITU-R BT.601 luma, full range);
+* a folder of PNG/TIFF frames (natural sort of the file names, so ``f2`` comes before
+  ``f10``): PNG through ``cv2.imread(IMREAD_UNCHANGED)``, TIFF through ``tifffile`` (so
+  12-bit packed and 16-bit, mono and RGB, all read); colour frames become grey, and the
+  8/12/16-bit depth is kept (12-bit in ``uint16``);
+* a multi-page TIFF file (one page per frame) through ``tifffile.TiffFile``;
+* a Photron ``.cihx``/``.cih`` + ``.mraw`` pair (:mod:`stringcast.video.photron`).
+
+The frame-folder and TIFF-stack readers are in :mod:`stringcast.video.images`.
+
+Every reader yields ``(index, frame)`` once when iterated, holds one frame at a time, and
+reads single frames with :meth:`VideoReader.read`. It reports ``fps`` and per-frame
+``timestamps_s`` where the file has them, and the native ``bit_depth``. Errors are
+:class:`~stringcast.core.files.DataError` naming the file: unreadable, empty, frames of changing
+size, or a file that ends before its announced frame count (truncated).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Iterator
+
+import cv2
+import numpy as np
+
+from stringcast.core import DataError
+
+from .base import FRAME_SUFFIXES, PHOTRON_SUFFIXES, TIFF_SUFFIXES, VideoReader, to_grey
+from .images import FrameFolderReader, TiffStackReader
+from .photron import PhotronReader
+
+_SEEK_GAP = 40  # a seek costs about as much as decoding 10-30 frames: grab forward over shorter gaps
+_INTRA_CODECS = {"FFV1", "MJPG", "PNG ", "MPNG", "RAW ", "Y800", "GREY", "Y16 ", "HFYU", "FFVH", "ULRG", "ULY0"}
+_MS_CLOCK_SUFFIXES = (".mkv", ".webm", ".mka", ".mk3d")  # Matroska stores times in ms by default
+
+
+class ContainerReader(VideoReader):
+    """A video container read through ``cv2.VideoCapture`` (FFmpeg backend).
+
+    Random access (:meth:`read`) decodes forward from the current position over short
+    gaps (so reading frames in increasing order costs one decode each), and seeks with
+    ``CAP_PROP_POS_FRAMES`` over long gaps for intra-only codecs (FFV1, MJPEG, PNG, raw),
+    where it is exact; for inter-frame codecs (H.264, ...) it decodes forward from the
+    start (or the current position), which is exact but slow.
+
+    Matroska keeps times in ms, so above 1000 fps its announced frame count (duration x
+    fps) and frame seeks are ambiguous: the count is then found by decoding the file once
+    at opening, and :meth:`read` never seeks. ``timestamps_s`` are the frames'
+    presentation times (``CAP_PROP_POS_MSEC``), recorded while iterating or, if asked
+    for before a full pass, by one decoding pass; None if they do not increase strictly.
+    """
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise DataError(f"{self.path}: file not found")
+        if self.path.stat().st_size == 0:
+            raise DataError(f"{self.path}: empty file")
+        cap = self._open(raw=False)
+        ok, bgr = cap.read()
+        self.fourcc = int(cap.get(cv2.CAP_PROP_FOURCC)).to_bytes(4, "little").decode("latin-1").upper()
+        fps = float(cap.get(cv2.CAP_PROP_FPS))
+        count = int(round(cap.get(cv2.CAP_PROP_FRAME_COUNT)))
+        cap.release()
+        if not ok or bgr is None:
+            raise DataError(f"{self.path}: no frame could be decoded (empty or unreadable video)")
+        # Mono stream: the raw frame is 2-D and equals the BGR conversion (or is 16-bit).
+        cap = self._open(raw=True)
+        ok, raw = cap.read()
+        cap.release()
+        self._raw = bool(ok and raw is not None and raw.ndim == 2 and raw.shape == bgr.shape[:2]
+                         and (raw.dtype == np.uint16 or np.array_equal(raw, to_grey(bgr))))
+        first = raw if self._raw else to_grey(bgr)
+        self.height, self.width = first.shape
+        self.dtype = first.dtype
+        self.bit_depth = 8 * first.dtype.itemsize
+        self.fps = fps if np.isfinite(fps) and fps > 0 else None
+        self._pts_ms: list[float] | None = None
+        self._can_seek = self.fourcc in _INTRA_CODECS
+        if self.path.suffix.lower() in _MS_CLOCK_SUFFIXES and self.fps is not None and self.fps > 1000.0:
+            self._can_seek = False
+            count = -1  # duration (ms) x fps is not exact: count by decoding
+        if count <= 0:
+            self._pts_ms = self._decode_pass()
+            count = len(self._pts_ms)
+        self.n_frames = count
+        self._cap: cv2.VideoCapture | None = None
+        self._pos = 0  # index of the frame the next _cap.read() returns
+
+    def _open(self, raw: bool) -> cv2.VideoCapture:
+        cap = cv2.VideoCapture(str(self.path), cv2.CAP_FFMPEG)
+        if not cap.isOpened():
+            raise DataError(f"{self.path}: not a video OpenCV can open (unreadable or unknown container)")
+        if raw:
+            cap.set(cv2.CAP_PROP_CONVERT_RGB, 0)
+        return cap
+
+    def _decode_pass(self) -> list[float]:
+        """Grab every frame once; their presentation times in ms."""
+        cap = self._open(raw=True)
+        pts = []
+        while cap.grab():
+            pts.append(float(cap.get(cv2.CAP_PROP_POS_MSEC)))
+        cap.release()
+        return pts
+
+    @property
+    def timestamps_s(self) -> np.ndarray | None:
+        if self._pts_ms is None:
+            pts = self._decode_pass()
+            if len(pts) < self.n_frames:
+                raise DataError(f"{self.path}: truncated or corrupt: {len(pts)} of {self.n_frames} announced "
+                                "frames could be decoded")
+            self._pts_ms = pts[: self.n_frames]
+        t = np.asarray(self._pts_ms, float) * 1e-3
+        if len(t) != self.n_frames or not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
+            return None
+        return t
+
+    def _decode(self, cap: cv2.VideoCapture, index: int) -> np.ndarray:
+        ok, frame = cap.read()
+        if not ok or frame is None:
+            raise DataError(f"{self.path}: truncated or corrupt: frame {index} of {self.n_frames} "
+                            "announced could not be decoded")
+        frame = frame if self._raw else to_grey(frame)
+        return self._check_frame(frame, index)
+
+    def read(self, index: int) -> np.ndarray:
+        index = self._check_index(index)
+        if self._cap is None or index < self._pos:
+            if self._cap is not None:
+                self._cap.release()
+            self._cap = self._open(self._raw)
+            self._pos = 0
+        if index != self._pos:
+            if self._can_seek and index - self._pos > _SEEK_GAP:
+                self._cap.set(cv2.CAP_PROP_POS_FRAMES, index)
+            else:
+                while self._pos < index:
+                    if not self._cap.grab():
+                        raise DataError(f"{self.path}: truncated or corrupt: frame {self._pos} of "
+                                        f"{self.n_frames} announced could not be decoded")
+                    self._pos += 1
+            self._pos = index
+        frame = self._decode(self._cap, index)
+        self._pos = index + 1
+        return frame
+
+    def __iter__(self) -> Iterator[tuple[int, np.ndarray]]:
+        cap = self._open(self._raw)
+        pts = []
+        try:
+            for i in range(self.n_frames):
+                frame = self._decode(cap, i)
+                pts.append(float(cap.get(cv2.CAP_PROP_POS_MSEC)))
+                yield i, frame
+            if self._pts_ms is None:
+                self._pts_ms = pts
+        finally:
+            cap.release()
+
+    def close(self) -> None:
+        if self._cap is not None:
+            self._cap.release()
+            self._cap = None
+
+
+def dropped_frames(timestamps_s: np.ndarray, fps: float) -> list[tuple[int, int]]:
+    """Gaps in per-frame timestamps: ``[(index, n_missing), ...]``.
+
+    ``index`` is the frame after which ``n_missing = round(dt * fps) - 1 >= 1`` frames are
+    missing, ``dt`` the gap to the next frame (s). Empty list: no frame dropped.
+    """
+    dt = np.diff(np.asarray(timestamps_s, float))
+    missing = np.rint(dt * float(fps)).astype(int) - 1
+    return [(int(i), int(missing[i])) for i in np.flatnonzero(missing >= 1)]
+
+
+def check_frame_count(reader: VideoReader, meta: dict, video_yaml_path: str | Path) -> list[str]:
+    """Check a video against its ``video.yaml`` (read by :func:`files.read_video_meta`).
+
+    Raises:
+        DataError: ``frames`` (or ``width_px``/``height_px`` where given) disagree with
+            the video; the message names both files.
+
+    Returns:
+        warnings: fps or ``bit_depth`` that disagree (the yaml is used for time).
+    """
+    src = f"{video_yaml_path}"
+    if int(meta["frames"]) != reader.n_frames:
+        raise DataError(f"{src}: frames: {meta['frames']}, but the video {reader.path} has {reader.n_frames} "
+                        f"frames ({reader.n_frames - int(meta['frames']):+d})")
+    for key, got in (("width_px", reader.width), ("height_px", reader.height)):
+        if meta.get(key) is not None and int(meta[key]) != got:
+            raise DataError(f"{src}: {key}: {meta[key]}, but the video {reader.path} is "
+                            f"{reader.width}x{reader.height} px")
+    warnings = []
+    if reader.fps is not None and abs(reader.fps - float(meta["fps"])) > 1e-3 * float(meta["fps"]):
+        warnings.append(f"{src}: fps {meta['fps']} but {reader.path} says {reader.fps:g}; using {meta['fps']}")
+    if meta.get("bit_depth") is not None and int(meta["bit_depth"]) > reader.bit_depth:
+        warnings.append(f"{src}: bit_depth {meta['bit_depth']} but {reader.path} holds {reader.bit_depth}-bit frames")
+    return warnings
+
+
+def open_video(path: str | Path, fps: float | None = None) -> VideoReader:
+    """Open a video file or a folder of frames as a mono :class:`VideoReader`.
+
+    Args:
+        path: a container OpenCV reads (mkv/avi/mp4/...), a folder of PNG/TIFF frames, a
+            multi-page TIFF, or a Photron ``.cihx``/``.cih`` (or its ``.mraw``).
+        fps: frame rate to report for a frame folder or TIFF stack (the others report their own).
+
+    Raises:
+        DataError: missing, empty, unreadable or truncated source; a single image.
+    """
+    path = Path(path)
+    if path.is_dir():
+        return FrameFolderReader(path, fps)
+    if not path.exists():
+        raise DataError(f"{path}: file not found")
+    suffix = path.suffix.lower()
+    if suffix in PHOTRON_SUFFIXES:
+        return PhotronReader(path)
+    if suffix in TIFF_SUFFIXES:
+        return TiffStackReader(path, fps)
+    if suffix in FRAME_SUFFIXES:
+        raise DataError(f"{path}: a single image, not a video (put frames in a folder)")
+    return ContainerReader(path)

@@ -1,0 +1,105 @@
+"""Board-to-robot check: the still arm seen in a small lab clip vs the FK under config's board pose."""
+import copy
+
+import numpy as np
+import pytest
+
+from stringcast.calibrate.board_check import check_board_to_robot, edge_pair_centre
+from stringcast.core.files import read_joint_table, read_json
+
+POSTURES = {"reaching": [0.3, -1.5, -0.4], "folded": [2.0, -1.6, -1.5]}
+
+
+def _calibration(truth: dict, shift_m=(0.0, 0.0)):
+    """The lab camera's own calibration, with the board pose moved by shift_m (x, y) in the robot frame."""
+    from stringcast.calibrate.calibration import Calibration
+
+    cam = truth["camera"]
+    K, dist, R, t = (np.asarray(cam[k], float) for k in ("K", "dist", "R", "tvec"))
+    H = np.linalg.inv(K @ np.column_stack([R[:, 0], R[:, 1], t]))
+    H[:2] += np.outer(shift_m, H[2])
+    return Calibration(H, (int(cam["width_px"]), int(cam["height_px"])), K, dist)
+
+
+@pytest.fixture(scope="module", params=sorted(POSTURES))
+def still_arm(request, tmp_path_factory, config):
+    """A 768 x 768 clip of the arm holding still at one posture, string hanging: rest image, truth, campaign."""
+    from stringcast.calibrate.calibration import median_frame
+    from stringcast.core.config import resolve_campaign
+    from stringcast.lab import run_trial
+    from stringcast.video.container import open_video
+
+    root = tmp_path_factory.mktemp(f"board_{request.param}")
+    cfg = copy.deepcopy({k: v for k, v in config.items() if k != "_path"})
+    cfg["cameras"]["bc_small"] = {"width_px": 768, "height_px": 768, "fps": 500.0, "bit_depth": 8, "mono": True}
+    cfg["setups"]["default"]["camera"] = "bc_small"
+    cfg["lab"] = dict(cfg["lab"], links_per_point=2, settle_s=0.1)
+    cfg["lab"]["camera"] = dict(cfg["lab"]["camera"], focal_px=1390.0 * 768 / 1024)
+    campaign = resolve_campaign({"string": 1, "target": 1}, cfg, "bc")
+    rate = campaign.arm.controller_rate
+    q = np.repeat(np.asarray(POSTURES[request.param])[None], int(0.12 * rate), 0)
+    trial = root / "trial_1"
+    run_trial(np.arange(len(q)) / rate, q, campaign, cfg, trial, seed=3, motion_start_s=0.1)
+    with open_video(trial / "video.mkv") as v:
+        rest = median_frame(v, 5)
+    _, q_log, _ = read_joint_table(trial / "joints.csv")
+    return rest, read_json(trial / "ground_truth.json"), campaign, cfg, q_log[0], trial
+
+
+def test_true_board_pose_reads_near_zero(still_arm):
+    rest, truth, campaign, cfg, q0, _ = still_arm
+    r = check_board_to_robot(rest, _calibration(truth), campaign.arm, q0, cfg)
+    print(f"true board: residual {r['residual_mm']:.2f} mm from {r['n_used']} features {r['segment_offsets_mm']}")
+    assert r["n_used"] >= 2 and r["residual_mm"] < 3.0
+    assert set(r) >= {"residual_mm", "dx_mm", "dy_mm", "method", "n_used"}
+
+
+@pytest.mark.parametrize("shift_mm", [(25.0, 0.0), (0.0, -20.0), (-15.0, 20.0)])
+def test_a_shifted_board_pose_reads_as_the_shift(still_arm, shift_mm):
+    rest, truth, campaign, cfg, q0, _ = still_arm
+    r = check_board_to_robot(rest, _calibration(truth, np.asarray(shift_mm) / 1000), campaign.arm, q0, cfg)
+    print(f"board shifted {shift_mm} mm: reads dx {r['dx_mm']:.2f}, dy {r['dy_mm']:.2f} mm")
+    assert r["dx_mm"] == pytest.approx(shift_mm[0], abs=3.0)
+    assert r["dy_mm"] == pytest.approx(shift_mm[1], abs=3.0)
+    assert r["residual_mm"] == pytest.approx(np.hypot(*shift_mm), abs=3.0)
+
+
+def test_a_blank_image_is_not_checked_and_bad_shapes_raise(still_arm):
+    rest, truth, campaign, cfg, q0, _ = still_arm
+    r = check_board_to_robot(np.full_like(rest, 128), _calibration(truth), campaign.arm, q0, cfg)
+    assert r["residual_mm"] is None and r["n_used"] == 0 and "not checked" in r["method"]
+    with pytest.raises(ValueError, match="rest_image"):
+        check_board_to_robot(np.stack([rest, rest], -1), _calibration(truth), campaign.arm, q0, cfg)
+    with pytest.raises(ValueError, match="q_rest"):
+        check_board_to_robot(rest, _calibration(truth), campaign.arm, q0[:2], cfg)
+
+
+def test_edge_pair_centre_prefers_the_pair_of_the_right_width():
+    v = np.arange(-120, 120.5, 0.5) / 1000  # m
+    prof = np.full(len(v), 0.6)
+    prof[(v > 0.004) & (v < 0.094)] = 0.5        # the link: 90 mm wide, centred at +49 mm
+    prof[v < -0.03] = 0.95                       # a strong clutter edge on the left
+    c = edge_pair_centre(prof, 0.0005, v[0], 0.6 * 0.1, 1.1 * 0.1)
+    assert c == pytest.approx(0.049, abs=0.001)
+    assert edge_pair_centre(np.full(len(v), 0.6), 0.0005, v[0], 0.06, 0.11) is None
+
+
+def test_calibration_stage_records_the_check_and_warns(still_arm, tmp_path):
+    """run_calibration puts the check in calibration.json; a board pose 30 mm off in config is caught."""
+    from stringcast.calibrate.calibration import run_calibration
+    from stringcast.core.config import resolve_campaign
+    from stringcast.lab import write_calibration_clip
+
+    _, _, campaign, cfg, _, trial = still_arm
+    calib = write_calibration_clip(campaign, cfg, tmp_path / "calib", seed=5, n_frames=14)
+    ok = run_calibration(trial, calib, campaign, tmp_path / "ok.json", config=cfg)
+    assert ok.board_check["residual_mm"] < 5.0  # the intrinsics' own error near the arm: a few mm at most
+    assert not any("board-to-robot" in w for w in ok.warnings)
+    bad_cfg = copy.deepcopy(cfg)
+    x0, y0 = cfg["setups"]["default"]["board_origin_mm"]
+    bad_cfg["setups"]["default"]["board_origin_mm"] = [x0 + 30.0, y0]
+    run_calibration(trial, calib, resolve_campaign({"string": 1, "target": 1}, bad_cfg, "bc"),
+                    tmp_path / "bad.json", config=bad_cfg)
+    doc = read_json(tmp_path / "bad.json")
+    assert doc["board_check"]["dx_mm"] - ok.board_check["dx_mm"] == pytest.approx(30.0, abs=2.0)
+    assert any("board-to-robot check" in w and "board_origin_mm" in w for w in doc["warnings"])

@@ -1,0 +1,105 @@
+import copy
+
+import numpy as np
+import pytest
+import yaml
+
+from stringcast.core.config import (PARAM_NAMES, ConfigError, StringSpec, load_campaign, load_config,
+                               model_ranges, resolve_campaign)
+
+
+def test_default_config_resolves_every_string_and_target(config):
+    for s in config["strings"]:
+        spec = StringSpec.from_config(s, config["strings"][s])
+        assert 0.029 <= spec.l0 <= 0.035  # DESIGN.md: about 30-34 mm between mass points
+    for t in config["targets"]:
+        camp = resolve_campaign({"string": 1, "target": t}, config)
+        assert camp.target.x > camp.arm.reach + 0.05
+
+
+def test_special_points_match_paper_table4(config):
+    expected = {"1": [10], "2": [4], "3": [5], "4": [13, 15], "5": [6, 12, 13], "6": [13, 14, 15], "7": [9]}
+    for s, pts in expected.items():
+        assert StringSpec.from_config(s, config["strings"][s]).special_points() == pts
+
+
+def test_mass_groups_number_special_points():
+    spec = StringSpec("x", 0.3, 10, weights=((0.12, 0.01), (0.3, 0.01)))
+    g = spec.mass_groups()
+    assert g.tolist() == [0, 0, 0, 1, 0, 0, 0, 0, 0, 2]
+
+
+def test_wrong_key_is_named(tmp_path, config):
+    bad = copy.deepcopy({k: v for k, v in config.items() if k != "_path"})
+    bad["model"]["dt_ss"] = 1e-4
+    p = tmp_path / "c.yaml"
+    p.write_text(yaml.safe_dump(bad))
+    with pytest.raises(ConfigError, match=r"c.yaml.*model.*dt_ss"):
+        load_config(p)
+
+
+def test_wrong_value_is_named(tmp_path, config):
+    bad = copy.deepcopy({k: v for k, v in config.items() if k != "_path"})
+    bad["strings"]["1"]["n_points"] = 0
+    p = tmp_path / "c.yaml"
+    p.write_text(yaml.safe_dump(bad))
+    with pytest.raises(ConfigError, match="strings/1/n_points"):
+        load_config(p)
+
+
+def test_config_files_merge_in_order_as_snakemake_does(tmp_path, config):
+    """--configfile files over the project's: sections merge key by key, lists are replaced."""
+    base = config["_path"]
+    over = tmp_path / "over.yaml"
+    over.write_text("estimation: {optimizer: cmaes, joint_trials: 0}\nmotion: {T_range_s: [0.3, 0.9]}\n")
+    merged = load_config([base, over])
+    assert merged["estimation"]["optimizer"] == "cmaes" and merged["estimation"]["joint_trials"] == 0
+    assert merged["estimation"]["iterations"] == config["estimation"]["iterations"]   # kept from the base
+    assert merged["motion"]["T_range_s"] == [0.3, 0.9] and merged["strings"] == config["strings"]
+    assert str(over) in merged["_path"]
+    with pytest.raises(ConfigError, match=r"over.yaml.*required property"):   # a partial file alone is not a config
+        load_config(over)
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("estimation: {optimiser: cmaes}\n")
+    with pytest.raises(ConfigError, match=r"bad.yaml.*optimiser"):   # the merge is validated, naming the files
+        load_config([base, bad])
+    lst = tmp_path / "list.yaml"
+    lst.write_text("- 1\n")
+    with pytest.raises(ConfigError, match=r"list.yaml: a config file must be a mapping"):
+        load_config([base, lst])
+
+
+def test_reachable_target_is_refused(config):
+    with pytest.raises(ConfigError, match="within the grasp's reach"):
+        resolve_campaign({"string": 1, "target": {"x_mm": 900, "y_mm": 0}}, config)
+    camp = resolve_campaign({"string": 1, "target": {"x_mm": 900, "y_mm": 0}, "allow_reachable": True}, config)
+    assert camp.target.x == pytest.approx(0.9)
+
+
+def test_campaign_file_errors_name_the_file(tmp_path, config):
+    p = tmp_path / "campaign.yaml"
+    p.write_text("string: 99\ntarget: 1\n")
+    with pytest.raises(ConfigError, match=r"campaign.yaml.*unknown string"):
+        load_campaign(p, config)
+    p.write_text("string: 1\ntarget: 1\ncolour: red\n")
+    with pytest.raises(ConfigError, match="colour"):
+        load_campaign(p, config)
+    with pytest.raises(ConfigError, match="file not found"):
+        load_campaign(tmp_path / "nope.yaml", config)
+
+
+def test_inline_string_and_ranges(config):
+    camp = resolve_campaign({"string": {"length_mm": 400, "n_points": 12, "weights": [{"at_mm": 200}]},
+                             "target": 4}, config)
+    assert camp.string.n_points == 12 and camp.string.special_points() == [6]
+    lo, hi, mu = model_ranges(config)
+    assert lo.shape == (len(PARAM_NAMES),) and np.all(hi > lo) and mu == (0.1, 100.0)
+
+
+def test_board_to_robot_maps_board_origin(config, campaign):
+    T = campaign.setup.board_to_robot
+    o = T @ np.array([0, 0, 1.0])
+    ox, oy = np.asarray(config["setups"]["default"]["board_origin_mm"]) / 1000
+    assert o[:2] == pytest.approx([ox, oy])
+    down = T @ np.array([0, 0.1, 1.0])  # board y runs down the printed board
+    assert down[1] < o[1]

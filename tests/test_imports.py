@@ -1,0 +1,142 @@
+"""The package's import graph: no circles, function-level imports only for heavy or
+optional dependencies, and stages that use each other's public faces only.
+
+Every ``import`` and ``from ... import`` in ``src/stringcast`` is read with :mod:`ast`,
+top-level and inside functions alike, so an import moved into a function to hide a
+circle is still an edge of the graph.
+"""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PKG = Path(__file__).resolve().parents[1] / "src" / "stringcast"
+# The stage subpackages and the loop around them (the paper's Fig. 2), lowest first.
+SUBPACKAGES = ("core", "video", "model", "calibrate", "sync", "track", "estimate", "plan",
+               "execute", "report", "lab")
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(PKG.parent).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _modules() -> dict[str, Path]:
+    return {_module_name(p): p for p in PKG.rglob("*.py")}
+
+
+def _imports(path: Path, modules: dict[str, Path]):
+    """(target module, imported names, line, inside a function) for each stringcast import."""
+    name = _module_name(path)
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    tree = ast.parse(path.read_text())
+    funcs = [n for n in ast.walk(tree) if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))]
+    in_func = {id(n) for f in funcs for n in ast.walk(f) if n is not f}
+    for node in ast.walk(tree):
+        nested = id(node) in in_func
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name.split(".")[0] == "stringcast":
+                    yield a.name, (), node.lineno, nested
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")[: len(package.split(".")) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            if target.split(".")[0] != "stringcast":
+                continue
+            names = tuple(a.name for a in node.names)
+            subs = [f"{target}.{n}" for n in names if f"{target}.{n}" in modules]
+            for s in subs:
+                yield s, (), node.lineno, nested
+            rest = tuple(n for n in names if f"{target}.{n}" not in modules)
+            if rest or not subs:
+                yield target, rest, node.lineno, nested
+
+
+def import_graph() -> dict[str, set[str]]:
+    """Module -> the stringcast modules it imports (every import, wherever it stands)."""
+    modules = _modules()
+    return {m: {t for t, _, _, _ in _imports(p, modules) if t in modules and t != m}
+            for m, p in modules.items()}
+
+
+def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    """One import circle as a list of modules (first == last), or None (depth-first search)."""
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(m):
+        state[m] = 1
+        stack.append(m)
+        for t in sorted(graph.get(m, ())):
+            if state.get(t) == 1:
+                return stack[stack.index(t):] + [t]
+            if t not in state and (c := visit(t)):
+                return c
+        stack.pop()
+        state[m] = 2
+        return None
+
+    for m in sorted(graph):
+        if m not in state and (c := visit(m)):
+            return c
+    return None
+
+
+def test_find_cycle_finds_a_planted_circle():
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": set()}) is None
+
+
+def test_the_package_has_no_import_circle():
+    graph = import_graph()
+    assert len(graph) > 40
+    assert find_cycle(graph) is None, " -> ".join(find_cycle(graph))
+
+
+def test_the_top_level_reads_like_the_loop():
+    names = sorted(p.name for p in PKG.iterdir() if not p.name.startswith(("_", ".")) and p.name != "py.typed")
+    assert names == sorted([*SUBPACKAGES, "campaign.py", "cli.py"])
+
+
+def test_function_level_imports_only_in_the_cli():
+    """Inside functions the package imports itself only in ``cli`` (each subcommand loads
+    its own stage, so ``stringcast --help`` stays fast); elsewhere such an import hid a circle."""
+    modules = _modules()
+    late = [f"{_module_name(p)}:{line} imports {t}" for p in modules.values()
+            for t, _, line, nested in _imports(p, modules)
+            if nested and _module_name(p) != "stringcast.cli"]
+    assert late == []
+
+
+def test_stages_use_each_others_public_faces():
+    """A module imports another subpackage through its face (``stringcast.track``), never
+    one of its modules or a private name."""
+    modules = _modules()
+    bad = []
+    for m, p in modules.items():
+        own = m.split(".")[1] if m.count(".") else None
+        for t, names, line, _ in _imports(p, modules):
+            parts = t.split(".")
+            if len(parts) < 2 or parts[1] == own or parts[1] not in SUBPACKAGES:
+                continue
+            if len(parts) > 2 or any(n.startswith("_") for n in names):
+                bad.append(f"{m}:{line} imports {t} {names}")
+    assert bad == []
+
+
+@pytest.mark.parametrize("sub", SUBPACKAGES)
+def test_a_stage_imports_only_lower_layers(sub):
+    """Each subpackage imports only subpackages listed before it in SUBPACKAGES (lab and
+    execute stand beside the pipeline: the lab imports core only)."""
+    allowed = {"lab": {"core"}, "execute": {"core", "plan", "lab"}}.get(
+        sub, set(SUBPACKAGES[: SUBPACKAGES.index(sub)]))
+    graph = import_graph()
+    bad = sorted({f"{m} -> {t}" for m, ts in graph.items() if m.startswith(f"stringcast.{sub}")
+                  for t in ts if t.count(".") and t.split(".")[1] != sub
+                  and t.split(".")[1] in SUBPACKAGES and t.split(".")[1] not in allowed})
+    assert bad == []

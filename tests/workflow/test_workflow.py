@@ -1,0 +1,154 @@
+"""The whole loop end to end on a small virtual lab, through Snakemake (slow: run once in CI).
+
+A tmp project root links the repo's Snakefile and workflow/ and holds its own
+config: a 512 x 512 camera at 250 fps with a larger ChArUco board, and small
+search budgets, so that two executions finish in a few minutes on 2 cores. After the
+campaign it checks the workflow's bookkeeping: nothing to redo, a deleted product reruns
+only what depends on it, a run killed hard mid-trial and restarted gives the same
+results, and data/ is never written.
+"""
+import copy
+import hashlib
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+
+import browser
+from stringcast.campaign import run_campaign, tracking_error_mm, tracking_errors
+from stringcast.core.files import DataError
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def small_config(config: dict) -> dict:
+    cfg = copy.deepcopy({k: v for k, v in config.items() if k != "_path"})
+    cfg["cameras"]["small"] = {"width_px": 512, "height_px": 512, "fps": 250.0, "bit_depth": 8, "mono": True}
+    cfg["setups"]["default"].update(camera="small", board_origin_mm=[700.0, -250.0], board={
+        "squares_x": 6, "squares_y": 4, "square_mm": 100.0, "marker_mm": 75.0, "dictionary": "DICT_4X4_50"})
+    cfg["lab"]["camera"]["focal_px"] = 695.0
+    cfg["estimation"].update(iterations=256, batch=64)
+    cfg["motion"].update(max_candidates=4096, extra_after_hit=64)
+    return cfg
+
+
+def snakemake(root: Path, *args: str) -> str:
+    proc = subprocess.run([sys.executable, "-m", "snakemake", *args, "--cores", "2", "--directory", str(root)],
+                          cwd=root, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return proc.stdout + proc.stderr
+
+
+def snapshot(folder: Path) -> dict:
+    """Every file under ``folder``: (size, mtime, SHA-256)."""
+    return {str(p.relative_to(folder)): (p.stat().st_size, p.stat().st_mtime_ns, hashlib.sha256(p.read_bytes()).hexdigest())
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def planned_rules(dry_run_output: str) -> set[str]:
+    return set(re.findall(r"^rule (\w+):", dry_run_output, flags=re.M))
+
+
+def test_tracking_error_against_truth(tmp_path):
+    """Only valid tracked points 1..n count (the grasp, point 0, is forward kinematics), matched by
+    frame and point: errors 3, 4 and 0 mm, 3 of the 4 tracked points valid."""
+    tracks = pd.DataFrame({"frame": [0, 0, 0, 1, 1], "point": [0, 1, 2, 1, 2], "x_m": [0.9, 0.003, 0.5, 0.0, 0.1],
+                           "y_m": [0.0, 0.0, 0.5, 0.004, 0.2], "valid": [True, True, False, True, True]})
+    truth = pd.DataFrame({"frame": [0, 0, 0, 1, 1], "point": [0, 1, 2, 1, 2], "x_m": [0.0, 0.0, 0.0, 0.0, 0.1],
+                          "y_m": [0.0, 0.0, 0.0, 0.0, 0.2]})
+    e, share = tracking_errors(tracks, truth)
+    np.testing.assert_allclose(e, [3.0, 4.0, 0.0], atol=1e-9)
+    assert share == pytest.approx(0.75)
+    tracks.to_parquet(tmp_path / "tracks.parquet")
+    truth.to_parquet(tmp_path / "truth.parquet")
+    med, p95 = tracking_error_mm(tmp_path / "tracks.parquet", tmp_path / "truth.parquet")
+    assert med == pytest.approx(3.0) and p95 == pytest.approx(np.percentile([3.0, 4.0, 0.0], 95))
+    truth.drop(columns="y_m").to_parquet(tmp_path / "bad.parquet")
+    with pytest.raises(DataError, match=r"bad\.parquet.*y_m"):
+        tracking_error_mm(tmp_path / "tracks.parquet", tmp_path / "bad.parquet")
+
+
+@pytest.mark.slow
+def test_campaign_end_to_end(tmp_path, config):
+    root = tmp_path / "project"
+    (root / "config").mkdir(parents=True)
+    (root / "Snakefile").symlink_to(ROOT / "Snakefile")
+    (root / "workflow").symlink_to(ROOT / "workflow")
+    (root / "config" / "config.yaml").write_text(yaml.safe_dump(small_config(config)))
+
+    summary = run_campaign("e2e", "1", "1", config_path=str(root / "config" / "config.yaml"),
+                           max_executions=2, cores=2, seed=3, root=root)
+    k = summary["executions"]
+    assert 1 <= k <= 2
+    res = root / "results" / "e2e"
+    for name in ("calibration.json", "sync.json", "tracks.parquet", "params.json", "fit.parquet",
+                 "motion.csv", "motion.json", "report.html"):
+        assert (res / "trial_1" / name).stat().st_size > 0, name
+    tracks = pd.read_parquet(res / "trial_1" / "tracks.parquet")
+    assert list(tracks.columns) == ["frame", "t_s", "point", "x_m", "y_m", "valid"]
+    assert tracks["valid"].mean() > 0.5
+    params = json.loads((res / "trial_1" / "params.json").read_text())
+    assert params["E_mm"] is not None and params["E_mm"] > 0
+    html = (res / "report.html").read_text()
+    assert "trial_1/report.html" in html and "<table" in html
+    trial_html = (res / "trial_1" / "report.html").read_text()
+    assert 'id="fig-valid"' in trial_html and "ground truth" not in trial_html.lower()
+    # the lab's truth is the driver's (the experimenter's), not the workflow's: summary, not report
+    row = summary["trials"][0]
+    assert 0 < row["tracking_error_median_mm"] < row["tracking_error_p95_mm"] < 30
+    # the pages as a person sees them: every figure decodes in Chromium, and the page is drawn
+    if browser.chromium():
+        for page in (res / "trial_1" / "report.html", res / "report.html"):
+            loaded, n_img = browser.figures_loaded(page, tmp_path)
+            assert n_img == page.read_text().count("<img") and loaded == n_img, (page, loaded, n_img)
+        assert n_img >= 1 and browser.figures_loaded(res / "trial_1" / "report.html", tmp_path)[1] >= 8
+        shot = cv2.imread(str(browser.screenshot(res / "trial_1" / "report.html", tmp_path / "trial.png")))
+        assert shot is not None and shot.shape[1] == 1280 and len(np.unique(shot.reshape(-1, 3), axis=0)) > 50
+    elif os.environ.get("CI"):
+        pytest.fail("CI must have headless Chromium (make browser) to check the reports")
+    # the raw data are untouched by the workflow: only the lab/executor wrote there
+    assert not list((root / "data" / "e2e").rglob("*.parquet.*"))
+
+    # Snakemake's own report gathers the trial pages and overlays with their captions
+    snakemake(root, "--report", str(tmp_path / "snakemake_report.html"))
+    assert (tmp_path / "snakemake_report.html").stat().st_size > 10_000
+
+    # a finished campaign: nothing to do
+    t_done = time.time()
+    out = snakemake(root, "-n")
+    assert "Nothing to be done" in out or not planned_rules(out), out
+    # deleting one trial's tracks reruns what depends on it, not calibration or sync
+    before_data = snapshot(root / "data")
+    (res / "trial_1" / "tracks.parquet").unlink()
+    rules = planned_rules(snakemake(root, "-n"))
+    assert {"track", "estimate", "plan", "report_trial", "report_campaign"} <= rules
+    assert not rules & {"calibrate", "sync", "plan_first"}
+
+    # a run killed hard in the middle of tracking, then started again, ends with the same results
+    proc = subprocess.Popen([sys.executable, "-m", "snakemake", "--cores", "2", "--directory", str(root)],
+                            cwd=root, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    log = res / "logs" / "track_1.log"
+    deadline = time.monotonic() + 120
+    while not (log.exists() and log.stat().st_mtime > t_done) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    time.sleep(1.0)
+    os.killpg(proc.pid, signal.SIGKILL)   # snakemake and its job, as a power cut would
+    proc.wait()
+    assert not (res / "trial_1" / "tracks.parquet").exists()   # nothing half-written under the real name
+    snakemake(root, "--unlock")
+    snakemake(root, "--rerun-incomplete")
+    pd.testing.assert_frame_equal(pd.read_parquet(res / "trial_1" / "tracks.parquet"), tracks)
+    again = json.loads((res / "trial_1" / "params.json").read_text())
+    assert again["E_mm"] == pytest.approx(params["E_mm"], rel=1e-9)
+    # raw data under data/ were never written by the workflow
+    assert snapshot(root / "data") == before_data

@@ -1,0 +1,114 @@
+"""Workflow practice: lint, formatting, wildcard constraints, profiles (fast: dry runs only).
+
+The kill-and-restart and raw-data-untouched checks need real outputs and live in the slow
+end-to-end test (tests/test_workflow.py).
+"""
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+BIN = Path(sys.executable).parent
+
+
+def _run(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run(args, cwd=cwd, capture_output=True, text=True, timeout=300)
+
+
+@pytest.fixture(scope="module")
+def project(tmp_path_factory) -> Path:
+    """A project root with one campaign of one (empty) trial: enough for the DAG."""
+    root = tmp_path_factory.mktemp("wf")
+    (root / "Snakefile").symlink_to(ROOT / "Snakefile")
+    (root / "workflow").symlink_to(ROOT / "workflow")
+    (root / "config").mkdir()
+    (root / "config" / "config.yaml").write_text((ROOT / "config" / "config.yaml").read_text())
+    t = root / "data" / "c1" / "trial_1"
+    t.mkdir(parents=True)
+    (root / "data" / "c1" / "campaign.yaml").write_text("string: 1\ntarget: 1\n")
+    (t / "joints.csv").write_text("t_s,q1_rad,q2_rad,q3_rad\n0,0,0,0\n")
+    (t / "video.yaml").write_text("fps: 500\nframes: 1\n")
+    (t / "video.mkv").touch()
+    (t / "motion.json").touch()
+    return root
+
+
+def test_snakemake_lint_is_clean(project):
+    proc = _run([str(BIN / "snakemake"), "--lint"], project)
+    out = proc.stdout + proc.stderr
+    assert proc.returncode == 0 and "good condition" in out, out
+
+
+def test_rules_are_snakefmt_formatted():
+    proc = _run([str(BIN / "snakefmt"), "--check", "Snakefile", "workflow/"], ROOT)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_no_lambdas_and_every_rule_logs():
+    for path in [ROOT / "Snakefile", *(ROOT / "workflow" / "rules").glob("*.smk")]:
+        text = path.read_text()
+        code = [line.split("#", 1)[0] for line in text.splitlines()]
+        assert not any(re.search(r"\blambda\b", line) for line in code), path
+        for rule in re.split(r"\nrule ", text)[1:]:
+            name = rule.split(":", 1)[0]
+            if name != "all":
+                assert "\n    log:" in rule and "\n    benchmark:" in rule, f"{path}: rule {name}"
+
+
+@pytest.mark.parametrize("profile", ["local", "slurm"])
+def test_profiles_plan_every_stage(project, profile):
+    proc = _run([str(BIN / "snakemake"), "--profile", str(ROOT / "config" / "profiles" / profile), "-n",
+                 "--cores", "8"], project)
+    out = proc.stdout + proc.stderr
+    assert proc.returncode == 0, out
+    for rule in ("plan_first", "calibrate", "sync", "track", "estimate", "plan", "report_trial", "report_campaign"):
+        assert re.search(rf"^rule {rule}:", out, re.M), (rule, out[-2000:])
+    if profile == "slurm":  # per-rule resources from the profile reach the jobs
+        est = out[out.index("rule estimate:"):]
+        assert "mem_mb=4000" in est.split("rule ")[1] and "NUMBA_NUM_THREADS=8" in est
+
+
+def test_wildcard_constraints_refuse_odd_names(project):
+    proc = _run([str(BIN / "snakemake"), "-n", "--cores", "1", "results/c 1/trial_x/tracks.parquet"], project)
+    assert proc.returncode != 0
+    assert "MissingRuleException" in proc.stderr + proc.stdout or "No rule to produce" in proc.stderr + proc.stdout
+
+
+def test_config_typo_is_a_schema_error_naming_the_key(project, tmp_path):
+    bad = tmp_path / "typo.yaml"
+    bad.write_text((ROOT / "config" / "config.yaml").read_text().replace("\ntracking:", "\ntrackng:", 1))
+    proc = _run([str(BIN / "snakemake"), "-n", "--cores", "1", "--configfile", str(bad)], project)
+    out = proc.stdout + proc.stderr
+    assert proc.returncode != 0 and "'trackng' was unexpected" in out, out[-2000:]
+
+
+def test_joint_trials_hands_earlier_trials_to_estimate(project, tmp_path):
+    """estimation.joint_trials: trial 2's estimate reads trial 1's tracks and joints too (0: all so far)."""
+    t2 = project / "data" / "c1" / "trial_2"
+    t2.mkdir(exist_ok=True)
+    for name in ("joints.csv", "video.yaml", "video.mkv", "motion.json"):
+        (t2 / name).write_bytes((project / "data" / "c1" / "trial_1" / name).read_bytes())
+    try:
+        outputs = {}
+        for n in (1, 0):
+            cfg = tmp_path / f"joint{n}.yaml"
+            cfg.write_text((ROOT / "config" / "config.yaml").read_text().replace(
+                "  joint_trials: 1 ", f"  joint_trials: {n} ", 1))
+            proc = _run([str(BIN / "snakemake"), "results/c1/trial_2/params.json", "-n", "-p", "--cores", "1",
+                         "--configfile", str(cfg)], project)
+            out = proc.stdout + proc.stderr
+            assert proc.returncode == 0, out[-2000:]
+            line = next(x for x in out.splitlines() if 'estimate --tracks "results/c1/trial_2' in x)
+            outputs[n] = line[line.index("stringcast --config"):]
+            # the job reads the merged config: the project's, then the --configfile over it
+            assert outputs[n].startswith(f'stringcast --config "config/config.yaml" --config "{cfg}" estimate')
+        assert "--earlier-tracks" not in outputs[1]
+        assert ('--earlier-tracks "results/c1/trial_1/tracks.parquet" --earlier-joints '
+                '"data/c1/trial_1/joints.csv"') in outputs[0]
+    finally:
+        for p in t2.iterdir():
+            p.unlink()
+        t2.rmdir()
