@@ -1,1 +1,1 @@
-"""Speed and accuracy benchmarks; each writes results/bench/<name>.json (DESIGN.md)."""
+"""Speed and accuracy benchmarks; each writes results/bench/<name>.json (docs/results.md)."""

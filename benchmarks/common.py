@@ -1,4 +1,4 @@
-"""What every benchmark JSON carries (DESIGN.md, Benchmarks): name, cores, time, commit, library versions."""
+"""What every benchmark JSON carries (docs/results.md): name, cores, time, commit, library versions."""
 from __future__ import annotations
 
 import os

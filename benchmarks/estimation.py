@@ -1,4 +1,4 @@
-"""Benchmark ``estimation``: E reached against evaluations and seconds, per optimizer (DESIGN.md, "Benchmarks").
+"""Benchmark ``estimation``: E reached against evaluations and seconds, per optimizer (docs/results.md).
 
 For each string type (quick: types 1 and 5) the lab films the campaign's first planned
 motion (:func:`benchmarks.common.film_first_motion`) and the workflow's own stages

@@ -1,8 +1,8 @@
 """Benchmark ``loop``: executions until the lab's tip hits, per string type, next to the paper's Table 3.
 
-For every string type (1-7) with its paper target (DESIGN.md: types 1, 2 -> target 1;
-3 -> 2; 4, 5, 6 -> 3; 7 -> 4), every seed and every method, the whole loop runs as a
-person would run it: :func:`stringcast.campaign.run_campaign` in a project root of its own
+For every string type (1-7) with its paper target (docs/results.md, "String types": types 1,
+2 -> target 1; 3 -> 2; 4, 5, 6 -> 3; 7 -> 4), every seed and every method, the whole loop runs
+as a person would run it: :func:`stringcast.campaign.run_campaign` in a project root of its own
 (the repo's Snakefile and workflow/ linked, its own config/config.yaml carrying the
 method), at most ``CAP`` = 8 executions. Whether the tip hit is the *lab's* verdict
 (``ground_truth.json`` of the last trial, as the campaign loop reads it to stop); the
@@ -14,26 +14,12 @@ Methods are config overlays:
 
 * ``paper``: ``estimation.optimizer: random_search`` (eqs. 2-3) and ``motion.planner: paper``
   (Section V), the paper's method as the config describes it.
-* ``ours``: ``estimation.optimizer: cmaes`` (two runs), ``motion.planner: robust`` (the motion
-  that hits under the most of the estimate's best K sets, then by margin), after a tracked
-  miss over 45 mm (``motion.replan_miss_mm``; docs/method.md says why 45) a +-1 rad/s perturbation of
-  the played motion if at least 90 % of the sets agree it hits, else a new motion
-  (``motion.replan_perturb_rad_s``, ``replan_min_share``; a new motion too when the played one
-  was such a perturbation and also missed by over 45 mm), no perturbation at all when the
-  model's tip error on the played motion exceeds 50 mm (``motion.replan_residual_mm``),
-  ``motion.residual_correction`` (each set aimed at the target minus the model's error on the
-  played motion's tracked tip, :mod:`stringcast.plan.residual`), and E's tip weighting
-  ``evaluation.w: 1.0`` (eq. (6); the paper's 0.1): point i counts i times as much as point 1
-  (docs/method.md says why), and the first plan's set with Table 2's largest k_s
-  (``motion.first_k_s: max``: strings barely stretch; docs/method.md, "First set"). Not in ours: ``motion.first_ensemble`` (the first plan scored under
-  random Table 2 sets). With it (16 sets, 2000 extra candidates) the seed-0 campaigns of
-  types 1-6 took 2, 3, 1, 2, 4, 7 executions, against 2, 2, 3, 1, 2, 2 without it: the later
-  plans, which perturb the first motion, then kept missing by 20-25 mm. Tried again at
-  ae309c9: the first 10 campaigns took 28 executions against 22 at 35c1af3 (type 2 seed 0: 5,
-  type 6 seed 0: 6, two and four perturbations missing by 26-61 mm); there the model's tip
-  error on the played motions was 60-88 mm (median over the motion), against 11-47 mm at the
-  perturbations that hit at the second execution at 35c1af3: too large for a first-order
-  correction.
+* ``ours``: ``config/ours.yaml``, read at import (the file ``snakemake --configfile`` and
+  ``stringcast campaign --method ours`` use): CMA-ES (two runs), the robust planner with the
+  residual correction and the replan rules, tip weighting w = 1, the first plan with Table 2's
+  largest k_s, and the hand spring's range up to 1. Each line's reason is in the file; the
+  evidence, and what was tried and left out (``motion.first_ensemble``, ``robust_min_share``,
+  ``estimation.joint_trials``, ...), is in docs/method.md.
 
 A seed ``s`` sets the lab's noise (the campaign's seed: camera noise, joint noise, trigger
 error) and the pipeline's own searches (``estimation.seed`` and ``motion.seed`` = ``s``), so
@@ -68,18 +54,17 @@ import time
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from benchmarks.common import BENCH_DIR, ROOT, git_commit, header, library_versions, write
 
 CAP = 8
 PAPER_TABLE3 = {1: 2, 2: 2, 3: 2, 4: 2, 5: 3, 6: 2, 7: 2}          # executions, paper Table 3
-PAPER_TARGET = {1: 1, 2: 1, 3: 2, 4: 3, 5: 3, 6: 3, 7: 4}          # DESIGN.md, string types
+PAPER_TARGET = {1: 1, 2: 1, 3: 2, 4: 3, 5: 3, 6: 3, 7: 4}          # docs/results.md, string types
+OURS_CONFIG = ROOT / "config" / "ours.yaml"
 METHODS = {
     "paper": {"estimation": {"optimizer": "random_search"}, "motion": {"planner": "paper"}},
-    "ours": {"estimation": {"optimizer": "cmaes", "cmaes_runs": 2}, "evaluation": {"w": 1.0},
-             "motion": {"planner": "robust", "residual_correction": True, "replan_miss_mm": 45.0,
-                        "replan_perturb_rad_s": 1.0, "replan_residual_mm": 50.0, "first_k_s": "max"},
-             "model": {"ranges": {"k_ph": [1.0e-3, 1.0], "c_ph": [1.0e-3, 1.0]}}},
+    "ours": yaml.safe_load(OURS_CONFIG.read_text()),   # one place for ours' settings
 }
 LABELS = {"paper": "paper_method", "ours": "ours"}
 
@@ -171,8 +156,9 @@ def _executions(rec: dict) -> int:
 
 
 def summarize(runs: list[dict], types: list[int], methods: list[str]) -> dict:
-    """The DESIGN.md keys from the runs: per_string (executions per seed per method, Table 3),
-    means over every run (type means averaged over the types run), max and all-hit flags."""
+    """loop.json's summary keys (docs/results.md, "Benchmark records") from the runs: per_string
+    (executions per seed per method, Table 3), means over every run (type means averaged over the
+    types run), max and all-hit flags."""
     per, out = {}, {}
     for k in types:
         row = {"paper_table3": PAPER_TABLE3[k], "target": PAPER_TARGET[k]}

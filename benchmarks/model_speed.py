@@ -1,4 +1,4 @@
-"""Benchmark ``model_speed``: string-model throughput (DESIGN.md, "Benchmarks").
+"""Benchmark ``model_speed``: string-model throughput (docs/results.md, "Benchmark records").
 
 Figures, measured in this run:
 * point_steps_per_s_per_core: mass-point steps per second of ``model.simulate_batch``

@@ -1,4 +1,4 @@
-"""Benchmark ``sync``: video-to-controller offset error with the trigger time withheld (DESIGN.md, "Benchmarks").
+"""Benchmark ``sync``: video-to-controller offset error with the trigger time withheld (docs/results.md).
 
 For several string types (full: 1, 4, 5, 7; quick: 1, 5) the lab films the campaign's
 first planned motion with the default camera (1024 x 1024 at 500 fps); the trial is

@@ -1,4 +1,4 @@
-"""Benchmark ``tracking``: point error against the lab's ground truth, and speed (DESIGN.md, "Benchmarks").
+"""Benchmark ``tracking``: point error against the lab's ground truth, and speed (docs/results.md, "Benchmark records").
 
 For each string type (quick: types 1 and 5) the lab films the campaign's first planned
 motion (``planning.run_first_plan``, played through ``executor.execute``) with the
