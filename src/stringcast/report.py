@@ -67,8 +67,8 @@ def _fmt(x, spec=".2f", unit=""):
     return f"{x:{spec}}{unit}"
 
 
-def _motion_window(data_dir: Path, config: dict) -> tuple[float, float, dict]:
-    t, q, _ = read_joint_table(data_dir / "joints.csv")
+def _motion_window(data_dir: Path, config: dict, arm) -> tuple[float, float, dict]:
+    t, q, _ = read_joint_table(data_dir / "joints.csv", n_joints=arm.n_joints, arm_name=arm.name)
     played = read_json(data_dir / "motion.json") if (data_dir / "motion.json").exists() else {}
     t0 = motion_start(t, q)
     T = float(played.get("T_s", t[-1] - t0))
@@ -88,8 +88,8 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
     nxt = read_json(results_dir / "motion.json")
     tracks = read_parquet(results_dir / "tracks.parquet", TRACK_COLUMNS)
     fit = read_parquet(results_dir / "fit.parquet")
-    t_j, q_j, _ = read_joint_table(data_dir / "joints.csv")
-    t0, t1, played = _motion_window(data_dir, config)
+    t_j, q_j, _ = read_joint_table(data_dir / "joints.csv", n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
+    t0, t1, played = _motion_window(data_dir, config, campaign.arm)
     tgt = campaign.target.xy
     t_tr, xy_tr, valid = _tracked(tracks, n)
     d_meas, _ = closest_approach(t_tr, xy_tr[:, n], tgt, t0, t1)
@@ -100,7 +100,8 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
                 "src": figs.tip_paths(tip_fit["t_s"].to_numpy(), tip_fit[["x_tracked_m", "y_tracked_m"]].to_numpy(),
                                       tip_fit["t_s"].to_numpy(), tip_fit[["x_sim_m", "y_sim_m"]].to_numpy(),
                                       tgt, campaign.target.radius)}]
-    t_n, q_n, _ = read_joint_table(results_dir / "motion.csv")
+    t_n, q_n, _ = read_joint_table(results_dir / "motion.csv", n_joints=campaign.arm.n_joints,
+                                    arm_name=campaign.arm.name)
     figures.append({"id": "fig-arm-paths", "caption": "Grasp-point paths of the motion played in this trial "
                     "(measured joints) and of the next motion (paper Fig. 8b).",
                     "src": figs.arm_paths({"played (measured)": hand_pose(campaign.arm, q_j)[:, :2],
@@ -215,7 +216,7 @@ def write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign,
             continue
         params = read_json(rd / "params.json")
         tracks = read_parquet(rd / "tracks.parquet")
-        t0, t1, played = _motion_window(dd, config)
+        t0, t1, played = _motion_window(dd, config, campaign.arm)
         t, xy, valid = _tracked(tracks, n)
         d, _ = closest_approach(t, xy[:, n], campaign.target.xy, t0, t1)
         window = (t >= t0) & (t <= t1)
