@@ -88,7 +88,8 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
     nxt = read_json(results_dir / "motion.json")
     tracks = read_parquet(results_dir / "tracks.parquet", TRACK_COLUMNS)
     fit = read_parquet(results_dir / "fit.parquet")
-    t_j, q_j, _ = read_joint_table(data_dir / "joints.csv", n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
+    t_j, q_j, _ = read_joint_table(data_dir / "joints.csv", n_joints=campaign.arm.n_joints,
+                                    arm_name=campaign.arm.name)
     t0, t1, played = _motion_window(data_dir, config, campaign.arm)
     tgt = campaign.target.xy
     t_tr, xy_tr, valid = _tracked(tracks, n)
@@ -107,6 +108,36 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
                     "src": figs.arm_paths({"played (measured)": hand_pose(campaign.arm, q_j)[:, :2],
                                            "next motion": hand_pose(campaign.arm, q_n)[:, :2]},
                                           tgt, campaign.target.radius)})
+    model_figures, values, lo, hi, diagnostics = _parameter_figures(params, config)
+    figures += model_figures
+    strip = frame_strip(find_video(data_dir), Calibration.from_json(results_dir / "calibration.json"), tracks, fit,
+                        campaign.string.length)
+    figures.append({"id": "fig-overlay", "caption": "Frames of the motion with the tracked points (green circles; "
+                    "red: the grasp from forward kinematics) and the model's points simulated with the estimate "
+                    "(orange crosses and line) overlaid.", "src": strip_data_uri(strip)})
+    in_motion = (t_tr >= t0) & (t_tr <= t1)
+    figures.append({"id": "fig-valid", "caption": "Share of the frames in which each point was tracked (valid), "
+                    "over the whole clip and over the motion and flight window: the points E (eqs. 4-6) and the "
+                    "measured closest approach rest on.",
+                    "src": figs.valid_per_point(np.arange(1, n + 1), valid[:, 1:].mean(axis=0),
+                                                valid[in_motion, 1:].mean(axis=0) if in_motion.any() else None)})
+    figures.append({"id": "fig-next-motion", "caption": "Next motion: joint angles and velocities "
+                    f"(T = {nxt.get('T_s', float('nan')):.3f} s).", "src": figs.joint_curves(t_n, q_n)})
+
+    summary = _trial_summary(params, diagnostics, valid, d_meas, campaign, played, nxt)
+    warnings = [str(w) for w in calib.get("warnings", [])] + [str(w) for w in [params.get("message")] if w]
+    cal_rows = _calibration_rows(calib, sync)
+    ctx = _common(campaign, f"Campaign {campaign.name}, trial {results_dir.name.split('_')[-1]}")
+    ctx.update(summary=summary, warnings=warnings, figures=figures, calib=cal_rows,
+               params=[(k, v, a, b) for k, v, a, b in zip(PARAM_NAMES, values, lo, hi)])
+    write_text(out, _env().get_template("trial.html.j2").render(**ctx))
+
+
+def _parameter_figures(params: dict, config: dict) -> tuple[list, list, np.ndarray, np.ndarray, dict]:
+    """The estimate's figures: coefficients within Table 2's ranges (Fig. 11), masses (Table 4), E over
+    the search. Returns them, the coefficients in PARAM_NAMES order, the ranges (lo, hi) and the
+    estimate's diagnostics."""
+    figures = []
     lo, hi, (mu_lo, mu_hi) = model_ranges(config)
     coeffs = params["coefficients"]
     values = [coeffs[k] for k in PARAM_NAMES]
@@ -126,20 +157,12 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
     if hist.get("evaluations"):
         figures.append({"id": "fig-search", "caption": f"Best E over the search ({params.get('optimizer')}).",
                         "src": figs.search_history(hist["evaluations"], np.asarray(hist["best_E_mm"], dtype=float) / 1000)})
-    strip = frame_strip(find_video(data_dir), Calibration.from_json(results_dir / "calibration.json"), tracks, fit,
-                        campaign.string.length)
-    figures.append({"id": "fig-overlay", "caption": "Frames of the motion with the tracked points (green circles; "
-                    "red: the grasp from forward kinematics) and the model's points simulated with the estimate "
-                    "(orange crosses and line) overlaid.", "src": strip_data_uri(strip)})
-    in_motion = (t_tr >= t0) & (t_tr <= t1)
-    figures.append({"id": "fig-valid", "caption": "Share of the frames in which each point was tracked (valid), "
-                    "over the whole clip and over the motion and flight window: the points E (eqs. 4-6) and the "
-                    "measured closest approach rest on.",
-                    "src": figs.valid_per_point(np.arange(1, n + 1), valid[:, 1:].mean(axis=0),
-                                                valid[in_motion, 1:].mean(axis=0) if in_motion.any() else None)})
-    figures.append({"id": "fig-next-motion", "caption": "Next motion: joint angles and velocities "
-                    f"(T = {nxt.get('T_s', float('nan')):.3f} s).", "src": figs.joint_curves(t_n, q_n)})
+    return figures, values, lo, hi, diagnostics
 
+
+def _trial_summary(params: dict, diagnostics: dict, valid: np.ndarray, d_meas: float, campaign: Campaign,
+                   played: dict, nxt: dict) -> list[tuple[str, str]]:
+    """The trial page's summary rows: the estimate, the tracking, the measured and predicted approaches."""
     summary = [("E (eqs. 4-6)", _fmt(params.get("E_mm"), ".2f", " mm")),
                ("optimizer, evaluations", f"{params.get('optimizer')}, {params.get('evaluations')}"),
                ("estimation time", _fmt(params.get("seconds"), ".1f", " s")),
@@ -158,7 +181,11 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
         summary.append(("next motion: residual correction (tip error of the played motion, median / max)",
                         f"{res['median_mm']:.1f} / {res['max_mm']:.1f} mm, tip tracked in "
                         f"{res['valid_share'] * 100:.0f} % of its frames"))
-    warnings = [str(w) for w in calib.get("warnings", [])] + [str(w) for w in [params.get("message")] if w]
+    return summary
+
+
+def _calibration_rows(calib: dict, sync: dict) -> list[tuple[str, str]]:
+    """The trial page's calibration and sync rows (and the sync's warnings and note)."""
     cal_rows = [("reprojection error (board, homography)", _fmt(calib.get("reprojection_error_px"), ".3f", " px")),
                 ("intrinsics", "from calib/ clip" if calib.get("K") else "none (homography only)"),
                 ("intrinsics rms", _fmt(calib.get("intrinsics_rms_px"), ".3f", " px")),
@@ -180,10 +207,7 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
         cal_rows.append(("sync warning", w))
     if sync.get("note"):
         cal_rows.append(("sync note", sync["note"]))
-    ctx = _common(campaign, f"Campaign {campaign.name}, trial {results_dir.name.split('_')[-1]}")
-    ctx.update(summary=summary, warnings=warnings, figures=figures, calib=cal_rows,
-               params=[(k, v, a, b) for k, v, a, b in zip(PARAM_NAMES, values, lo, hi)])
-    write_text(out, _env().get_template("trial.html.j2").render(**ctx))
+    return cal_rows
 
 
 def _stage_times(results: Path) -> tuple[list, list]:
