@@ -4,7 +4,8 @@ Figures are inlined as PNG data URIs (``report_figures``), the page is rendered
 with Jinja2 from ``templates/``. The trial page shows the paper's figures for the
 trial (Fig. 8a tip paths, Fig. 8b arm paths, Fig. 11 parameters, Table 4 masses),
 E over the search, a frame strip with tracked and simulated points, how often each
-point was tracked, calibration and sync, and the next motion.
+point was tracked, calibration and sync, and the next motion. Every page ends with what
+produced it (:mod:`stringcast.provenance`: the method, the git commit, the library versions).
 
 The pages show only what the pipeline measured and computed. The virtual lab's
 ground truth files are never read here, as in every other stage: footage from a
@@ -28,6 +29,7 @@ from .config import PARAM_NAMES, Campaign, model_ranges
 from .report_strip import frame_strip, strip_data_uri
 from .calibration import Calibration
 from .files import TRACK_COLUMNS, find_video, read_joint_table, read_json, read_parquet, tracks_arrays, write_text
+from .provenance import provenance
 
 
 def _env() -> jinja2.Environment:
@@ -35,8 +37,8 @@ def _env() -> jinja2.Environment:
                               autoescape=jinja2.select_autoescape(["html", "j2"]))
 
 
-def _common(campaign: Campaign, title: str) -> dict:
-    return {"title": title, "version": __version__,
+def _common(campaign: Campaign, title: str, config: dict) -> dict:
+    return {"title": title, "version": __version__, "provenance": provenance(config),
             "created": _dt.datetime.now().isoformat(timespec="seconds"),
             "string": campaign.string_id or campaign.string.name,
             "length_mm": f"{campaign.string.length * 1000:.0f}", "n_points": campaign.string.n_points,
@@ -127,7 +129,7 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
     summary = _trial_summary(params, diagnostics, valid, d_meas, campaign, played, nxt)
     warnings = [str(w) for w in calib.get("warnings", [])] + [str(w) for w in [params.get("message")] if w]
     cal_rows = _calibration_rows(calib, sync)
-    ctx = _common(campaign, f"Campaign {campaign.name}, trial {results_dir.name.split('_')[-1]}")
+    ctx = _common(campaign, f"Campaign {campaign.name}, trial {results_dir.name.split('_')[-1]}", config)
     ctx.update(summary=summary, warnings=warnings, figures=figures, calib=cal_rows,
                params=[(k, v, a, b) for k, v, a, b in zip(PARAM_NAMES, values, lo, hi)])
     write_text(out, _env().get_template("trial.html.j2").render(**ctx))
@@ -256,6 +258,6 @@ def write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign,
                         "motion and flight window.", "src": figs.campaign_tips(tips, campaign.target.xy,
                                                                                  campaign.target.radius)})
     timings, stages = _stage_times(results_dir)
-    ctx = _common(campaign, f"Campaign {campaign.name}")
+    ctx = _common(campaign, f"Campaign {campaign.name}", config)
     ctx.update(rows=rows, figures=figures, timings=timings, stages=stages)
     write_text(out, _env().get_template("campaign.html.j2").render(**ctx))
