@@ -107,7 +107,8 @@ def ruggedness(campaign, d: Path, config: dict, chi_star: np.ndarray, seed: int 
     from stringcast.estimate.problem import build_problem, make_objective
     from stringcast.core.files import TRACK_COLUMNS, read_joint_table, read_parquet
 
-    t_j, q_j, _ = read_joint_table(d / "trial_1" / "joints.csv")
+    t_j, q_j, _ = read_joint_table(d / "trial_1" / "joints.csv", n_joints=campaign.arm.n_joints,
+                                    arm_name=campaign.arm.name)
     problem = build_problem(read_parquet(d / "tracks.parquet", TRACK_COLUMNS), t_j, q_j, campaign, config)
     objective = make_objective(problem, config)
     u = np.random.default_rng(seed).standard_normal((PROBE_DIRECTIONS, len(chi_star)))

@@ -48,6 +48,17 @@ def _snakemake(root: Path, targets: list[str], cores: int, config_files: list[Pa
     return time.perf_counter() - t0
 
 
+def campaign_config(root: Path, config_path: str | Path | list | None = None) -> tuple[dict, list[Path]]:
+    """The config a campaign under ``root`` runs with: ``root/config/config.yaml`` with the given
+    file(s) merged over it, in order, and those files (the workflow's ``--configfile`` list)."""
+    # the lab reads the config the workflow's jobs read: the project's, then the given files over it
+    given = [] if config_path is None else [config_path] if isinstance(config_path, (str, Path)) else config_path
+    base = Path(root).resolve() / "config" / "config.yaml"
+    # the project's own file is read anyway; passed again it would change every job's command line
+    given = [q for q in (Path(p).resolve() for p in given) if not (base.exists() and q == base.resolve())]
+    return load_config(([base] if base.exists() else []) + given), given
+
+
 def run_campaign(name: str, string: str, target: str, config_path: str | Path | list | None = None,
                  max_executions: int = 5, cores: int = 2, seed: int = 0,
                  root: Path = Path("."), reports: bool = True) -> dict:
@@ -72,12 +83,7 @@ def run_campaign(name: str, string: str, target: str, config_path: str | Path | 
     """
 
     root = Path(root).resolve()
-    # the lab reads the config the workflow's jobs read: the project's, then the given files over it
-    given = [] if config_path is None else [config_path] if isinstance(config_path, (str, Path)) else config_path
-    base = root / "config" / "config.yaml"
-    # the project's own file is read anyway; passed again it would change every job's command line
-    given = [q for q in (Path(p).resolve() for p in given) if not (base.exists() and q == base.resolve())]
-    config = load_config(([base] if base.exists() else []) + given)
+    config, given = campaign_config(root, config_path)
     data = root / "data" / name
     camp_yaml = data / "campaign.yaml"
     doc = {"string": _id(string), "target": _id(target), "setup": "default", "seed": int(seed)}

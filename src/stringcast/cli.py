@@ -12,6 +12,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from stringcast.core import METHOD_CONFIGS
+
 
 def _campaign(args):
     from stringcast.core import load_campaign
@@ -122,107 +124,138 @@ def cmd_calib_clip(args):
     print(f"calibration clip -> {path}")
 
 
+def campaign_config_paths(args) -> list[str]:
+    """The config files ``stringcast campaign`` merges over the project's config/config.yaml, in
+    order: each ``--config``, then ``--method``'s file (ours: config/ours.yaml) last."""
+    return [str(c) for c in (args.config or [])] + [str(c) for c in METHOD_CONFIGS[args.method]]
+
+
 def cmd_campaign(args):
     from stringcast.campaign import run_campaign
 
-    run_campaign(args.name, args.string, args.target, config_path=args.config,
+    run_campaign(args.name, args.string, args.target, config_path=campaign_config_paths(args),
                  max_executions=int(args.max_executions), cores=int(args.cores), seed=int(args.seed),
                  root=Path(args.root))
 
 
+class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Shows each option's default after its help, except where it has none (required, or None)."""
+
+    def _get_help_string(self, action):
+        if action.required or action.default is None:
+            return action.help
+        return super()._get_help_string(action)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="stringcast", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog="stringcast", description=__doc__.split("\n\n")[0],
+                                formatter_class=_HelpFormatter)
     p.add_argument("--config", action="append", default=None,
                    help="config YAML (default: config/config.yaml); given again, each file is merged over the ones "
                         "before it, as Snakemake merges --configfile over the Snakefile's configfile")
-    sub = p.add_subparsers(dest="command", required=True)
+    sub = p.add_subparsers(dest="command", required=True, help="the stage or tool to run")
 
     def add(name, func, help_):
-        sp = sub.add_parser(name, help=help_)
+        sp = sub.add_parser(name, help=help_, description=help_, formatter_class=_HelpFormatter)
         sp.set_defaults(func=func)
         return sp
 
+    campaign_help = "data/<campaign>/campaign.yaml: the campaign's string, target, arm and set-up"
+    trial_help = "data/<campaign>/trial_<k>: the trial's raw files (video, video.yaml, joints.csv, motion.json)"
+    seed_help = "random seed of {}"
+    plan_seed_help = seed_help.format("the planner's search (beside the config's motion.seed)")
+
     sp = add("calibrate", cmd_calibrate, "ChArUco calibration of one trial -> calibration.json")
-    sp.add_argument("--trial-dir", required=True)
-    sp.add_argument("--calib-dir")
-    sp.add_argument("--campaign", required=True, help="data/<campaign>/campaign.yaml")
-    sp.add_argument("--out", required=True)
+    sp.add_argument("--trial-dir", required=True, help=trial_help)
+    sp.add_argument("--calib-dir", help="data/<campaign>/calib/: ChArUco clip or views for the camera intrinsics; "
+                                        "if not given or not a folder, the board's homography only")
+    sp.add_argument("--campaign", required=True, help=campaign_help)
+    sp.add_argument("--out", required=True, help="calibration.json to write (intrinsics, board pose, px errors)")
 
     sp = add("sync", cmd_sync, "video-to-controller clock offset -> sync.json")
-    sp.add_argument("--trial-dir", required=True)
+    sp.add_argument("--trial-dir", required=True, help=trial_help)
     sp.add_argument("--calibration", required=True, help="the trial's calibration.json")
-    sp.add_argument("--campaign", required=True, help="data/<campaign>/campaign.yaml")
-    sp.add_argument("--out", required=True)
+    sp.add_argument("--campaign", required=True, help=campaign_help)
+    sp.add_argument("--out", required=True, help="sync.json to write (offset in s: controller time of frame 0)")
 
     sp = add("track", cmd_track, "markerless tracking -> tracks.parquet")
-    sp.add_argument("--trial-dir", required=True)
-    sp.add_argument("--calibration", required=True)
-    sp.add_argument("--sync", required=True)
-    sp.add_argument("--campaign", required=True)
-    sp.add_argument("--out", required=True)
-    sp.add_argument("--overlay")
+    sp.add_argument("--trial-dir", required=True, help=trial_help)
+    sp.add_argument("--calibration", required=True, help="the trial's calibration.json")
+    sp.add_argument("--sync", required=True, help="the trial's sync.json")
+    sp.add_argument("--campaign", required=True, help=campaign_help)
+    sp.add_argument("--out", required=True, help="tracks.parquet to write: frame, t_s, point, x_m, y_m, valid "
+                                                 "(m, robot frame; point 0 the grasp)")
+    sp.add_argument("--overlay", help="tracking_overlay.png to write (tracked points on frames); "
+                                      "if not given, none")
 
     sp = add("estimate", cmd_estimate, "fit the model's parameters -> params.json, fit.parquet")
-    sp.add_argument("--tracks", required=True)
-    sp.add_argument("--joints", required=True)
-    sp.add_argument("--campaign", required=True)
+    sp.add_argument("--tracks", required=True, help="the trial's tracks.parquet")
+    sp.add_argument("--joints", required=True, help="the trial's joints.csv (t_s, q1_rad .. qJ_rad)")
+    sp.add_argument("--campaign", required=True, help=campaign_help)
     sp.add_argument("--prev", help="previous trial's params.json (chi_best of eq. 3)")
     sp.add_argument("--trial", required=True, help="trial index k = executions so far (M of eq. 3)")
-    sp.add_argument("--out-params", required=True)
-    sp.add_argument("--out-fit", required=True)
+    sp.add_argument("--out-params", required=True, help="params.json to write: coefficients, masses, E in mm")
+    sp.add_argument("--out-fit", required=True, help="fit.parquet to write: tracked and simulated points per "
+                                                     "frame (m)")
     sp.add_argument("--earlier-tracks", nargs="*", help="earlier trials' tracks.parquet, fitted together")
     sp.add_argument("--earlier-joints", nargs="*", help="their joints.csv, in the same order")
 
     sp = add("plan-first", cmd_plan_first, "first motion with Table 2's minimum parameters")
-    sp.add_argument("--campaign", required=True)
-    sp.add_argument("--out-dir", required=True)
-    sp.add_argument("--seed", default=0)
+    sp.add_argument("--campaign", required=True, help=campaign_help)
+    sp.add_argument("--out-dir", required=True, help="folder for motion.csv (t_s, q1_rad ..) and motion.json")
+    sp.add_argument("--seed", default=0, help=plan_seed_help)
 
     sp = add("plan", cmd_plan, "next motion from estimated parameters")
-    sp.add_argument("--params", required=True)
+    sp.add_argument("--params", required=True, help="the trial's params.json (the estimate)")
     sp.add_argument("--played-motion", required=True, help="motion.json of the motion just played")
     sp.add_argument("--tracks", help="tracks.parquet of the played trial (motion.residual_correction)")
     sp.add_argument("--joints", help="joints.csv of the played trial (motion.residual_correction)")
-    sp.add_argument("--campaign", required=True)
-    sp.add_argument("--out-dir", required=True)
-    sp.add_argument("--seed", default=0)
+    sp.add_argument("--campaign", required=True, help=campaign_help)
+    sp.add_argument("--out-dir", required=True, help="folder for the next motion's motion.csv and motion.json")
+    sp.add_argument("--seed", default=0, help=plan_seed_help)
 
     sp = add("report-trial", cmd_report_trial, "self-contained HTML page for one trial")
     sp.add_argument("--data-dir", required=True, help="data/<campaign>/trial_<k>")
     sp.add_argument("--results-dir", required=True, help="results/<campaign>/trial_<k>")
-    sp.add_argument("--campaign", required=True)
-    sp.add_argument("--out", required=True)
+    sp.add_argument("--campaign", required=True, help=campaign_help)
+    sp.add_argument("--out", required=True, help="report.html to write")
 
     sp = add("report-campaign", cmd_report_campaign, "campaign page: one row per execution")
     sp.add_argument("--data-dir", required=True, help="data/<campaign>")
     sp.add_argument("--results-dir", required=True, help="results/<campaign>")
-    sp.add_argument("--campaign", required=True)
-    sp.add_argument("--out", required=True)
+    sp.add_argument("--campaign", required=True, help=campaign_help)
+    sp.add_argument("--out", required=True, help="report.html to write")
 
     sp = add("execute", cmd_execute, "play a motion file on an arm and record the next trial's raw files")
     sp.add_argument("motion", help="motion.csv (its motion.json beside it is copied along)")
-    sp.add_argument("--backend", choices=["virtual", "ur-rtde"], default="virtual")
+    sp.add_argument("--backend", choices=["virtual", "ur-rtde"], default="virtual",
+                    help="virtual: the simulated lab's arm and camera; ur-rtde: a UR arm over RTDE")
     sp.add_argument("--out", required=True, help="data/<campaign>/trial_<k> to create")
     sp.add_argument("--campaign", required=True, help="data/<campaign>/campaign.yaml")
-    sp.add_argument("--seed", default=0)
+    sp.add_argument("--seed", default=0,
+                    help=seed_help.format("the virtual lab's trial: joint and camera noise, trigger delay"))
     sp.add_argument("--dry-run", action="store_true", help="check and print the plan, move nothing")
     sp.add_argument("--robot-ip", help="ur-rtde: the UR controller's address")
     sp.add_argument("--move-to-start", action="store_true",
                     help="ur-rtde: moveJ slowly to the start posture if the arm is not there (else refuse)")
 
     sp = add("calib-clip", cmd_calib_clip, "virtual lab: film the ChArUco board for intrinsics -> calib/")
-    sp.add_argument("--campaign", required=True)
-    sp.add_argument("--out", required=True)
-    sp.add_argument("--seed", default=0)
+    sp.add_argument("--campaign", required=True, help=campaign_help)
+    sp.add_argument("--out", required=True, help="folder to write the board's frames to (data/<campaign>/calib)")
+    sp.add_argument("--seed", default=0, help=seed_help.format("the board's poses and the camera's noise"))
 
     sp = add("campaign", cmd_campaign, "the whole loop on the virtual lab until the tip hits")
-    sp.add_argument("name")
+    sp.add_argument("name", help="campaign name: data/<name>/ and results/<name>/")
     sp.add_argument("--string", default="1", help="string type id from the config")
     sp.add_argument("--target", default="1", help="target id from the config")
-    sp.add_argument("--max-executions", default=5)
-    sp.add_argument("--cores", default=2)
-    sp.add_argument("--seed", default=0)
+    sp.add_argument("--max-executions", default=5, help="stop after this many executions without a hit")
+    sp.add_argument("--cores", default=2, help="CPU cores Snakemake runs the jobs on")
+    sp.add_argument("--seed", default=0, help="seed of the campaign (campaign.yaml) and of the virtual lab's "
+                                              "noise in each execution")
     sp.add_argument("--root", default=".", help="project folder holding Snakefile, data/ and results/")
+    sp.add_argument("--method", choices=list(METHOD_CONFIGS), default="paper",
+                    help="paper: the config as given (config/config.yaml: the paper's method); ours: "
+                         "config/ours.yaml merged over it, after any --config")
     return p
 
 

@@ -4,6 +4,10 @@ Covers issue 3's list: unreadable or truncated video, no board / too few corners
 count that disagrees with video.yaml, non-monotonic or NaN joint times, a joint log that
 does not cover the video.
 """
+import subprocess
+import sys
+from pathlib import Path
+
 import cv2
 import numpy as np
 import pytest
@@ -12,6 +16,7 @@ from stringcast.calibrate.calibration import run_calibration
 from stringcast.core.files import (
     DataError,
     check_joint_coverage,
+    check_joint_header,
     read_joint_table,
     read_video_meta,
 )
@@ -155,3 +160,51 @@ def test_joint_log_must_cover_the_video(tmp_path):
         check_joint_coverage(t_j, -0.2 + np.arange(500) / 500.0, p)
     with pytest.raises(DataError, match=r"before it and .* after it"):
         check_joint_coverage(t_j[100:200], np.arange(500) / 500.0, p)
+
+
+def test_joint_log_missing_a_joint_column_names_file_and_columns(tmp_path, campaign):
+    """A joints.csv without q2_rad is the arm's missing column, not a one-joint arm that fails later."""
+    p = tmp_path / "joints.csv"
+    p.write_text("t_s,q1_rad,q3_rad,q1_cmd_rad\n0,0,0,0\n0.002,0,0,0\n")
+    arm = campaign.arm
+    msg = (f"{p}: missing columns q2_rad (the arm {arm.name} has 3 joints: q1_rad, q2_rad, q3_rad)")
+    with pytest.raises(DataError) as e:
+        read_joint_table(p, n_joints=arm.n_joints, arm_name=arm.name)
+    assert str(e.value) == msg
+    with pytest.raises(DataError) as e:   # the header alone, as the workflow checks it before any job
+        check_joint_header(p, arm.n_joints, arm.name)
+    assert str(e.value) == msg
+    p.write_text("t_s,q1_rad,q2_rad,q3_rad,q4_rad\n0,0,0,0,0\n0.002,0,0,0,0\n")
+    with pytest.raises(DataError, match=r"joints.csv: joint columns q4_rad beyond the arm's \(the arm "):
+        read_joint_table(p, n_joints=arm.n_joints, arm_name=arm.name)
+    p.write_text("t_s,q1_rad,q2_rad,q3_rad\n0,0,0,0\n0.002,0,0,0\n")
+    check_joint_header(p, arm.n_joints, arm.name)
+    assert read_joint_table(p, n_joints=arm.n_joints, arm_name=arm.name)[1].shape == (2, 3)
+
+
+def test_workflow_refuses_a_joint_log_missing_a_column_before_any_job(tmp_path):
+    """snakemake -n stops at the DAG, naming the trial's joints.csv and the missing column."""
+    root_repo = Path(__file__).resolve().parents[2]
+    (tmp_path / "Snakefile").symlink_to(root_repo / "Snakefile")
+    (tmp_path / "workflow").symlink_to(root_repo / "workflow")
+    (tmp_path / "config").mkdir()
+    (tmp_path / "config" / "config.yaml").write_text((root_repo / "config" / "config.yaml").read_text())
+    for k, header in ((1, "t_s,q1_rad,q2_rad,q3_rad"), (2, "t_s,q1_rad,q3_rad")):
+        t = tmp_path / "data" / "c" / f"trial_{k}"
+        t.mkdir(parents=True)
+        (t / "joints.csv").write_text(f"{header}\n" + ",".join(["0"] * (header.count(",") + 1)) + "\n")
+        (t / "video.yaml").write_text("fps: 500\nframes: 1\n")
+        (t / "video.mkv").touch()
+        (t / "motion.json").touch()
+    (tmp_path / "data" / "c" / "campaign.yaml").write_text("string: 1\ntarget: 1\n")
+    proc = subprocess.run([sys.executable, "-m", "snakemake", "-n", "--cores", "1"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=300)
+    out = proc.stdout + proc.stderr
+    assert proc.returncode != 0, out
+    assert ("data/c/trial_2/joints.csv: missing columns q2_rad (the arm ur5e_planar has 3 joints: "
+            "q1_rad, q2_rad, q3_rad)") in out, out[-2000:]
+    assert "trial_1/joints.csv" not in out
+    (tmp_path / "data" / "c" / "trial_2" / "joints.csv").write_text("t_s,q1_rad,q2_rad,q3_rad\n0,0,0,0\n")
+    proc = subprocess.run([sys.executable, "-m", "snakemake", "-n", "--cores", "1"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-2000:]

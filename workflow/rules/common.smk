@@ -42,13 +42,40 @@ def campaigns():
 
 
 def trials(campaign):
-    """Trial indices present under data/<campaign>/ (those with a joints.csv)."""
+    """Trial indices present under data/<campaign>/ (those with a joints.csv), each
+    joints.csv's header checked against the campaign's arm (check_joint_logs)."""
     ks = []
     for p in Path("data", campaign).glob("trial_*/joints.csv"):
         suffix = p.parent.name.split("_", 1)[1]
         if suffix.isdigit():
             ks.append(int(suffix))
+    check_joint_logs(campaign, sorted(ks))
     return sorted(ks)
+
+
+_CHECKED_JOINT_LOGS = set()
+
+
+def check_joint_logs(campaign, ks):
+    """Refuse, before any job runs, a trial whose joints.csv lacks one of the campaign's
+    arm's joint columns (or has more): each header's first line only, once per file."""
+    todo = [
+        Path("data", campaign, f"trial_{k}", "joints.csv")
+        for k in ks
+        if (campaign, k) not in _CHECKED_JOINT_LOGS
+    ]
+    if not todo:
+        return
+    from stringcast.core import ConfigError, load_campaign
+    from stringcast.core import DataError, check_joint_header
+
+    try:
+        arm = load_campaign(Path("data", campaign, "campaign.yaml"), config).arm
+        for path in todo:
+            check_joint_header(path, arm.n_joints, arm.name)
+    except (ConfigError, DataError) as exc:
+        raise WorkflowError(f"stringcast: {exc}") from exc
+    _CHECKED_JOINT_LOGS.update((campaign, k) for k in ks)
 
 
 def trial_video(wildcards):

@@ -27,6 +27,10 @@ PARAM_NAMES: tuple[str, ...] = (
 """The ten coefficients of the string model, in the paper's Table 2 order."""
 
 DEFAULT_CONFIG = Path(__file__).resolve().parents[3] / "config" / "config.yaml"
+OURS_CONFIG = DEFAULT_CONFIG.parent / "ours.yaml"
+"""Ours' settings, merged over the config (the paper's method) by ``--method ours``."""
+METHOD_CONFIGS: dict[str, tuple[Path, ...]] = {"paper": (), "ours": (OURS_CONFIG,)}
+"""The files each method merges over the config, after any others given."""
 
 
 class ConfigError(ValueError):

@@ -6,8 +6,10 @@ Every reader raises :class:`DataError` naming the file and what is wrong.
 """
 from __future__ import annotations
 
+import csv
 import json
 import os
+import re
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
@@ -130,14 +132,58 @@ def _joint_columns(df: pd.DataFrame, path: Path) -> list[str]:
     return cols
 
 
-def read_joint_table(path: str | Path, kind: str = "joints.csv") -> tuple[np.ndarray, np.ndarray, pd.DataFrame]:
+def joint_header_problem(columns, n_joints: int, arm_name: str | None = None) -> str | None:
+    """What is wrong with a joint log's header for an arm of ``n_joints`` joints, or None.
+
+    The log needs ``q1_rad .. q<n_joints>_rad``; a ``q<j>_rad`` beyond them is another arm's.
+    """
+    want = [f"q{j}_rad" for j in range(1, n_joints + 1)]
+    arm = f"the arm {arm_name}" if arm_name else "the arm"
+    has = f"{arm} has {n_joints} joint{'s' if n_joints != 1 else ''}: {', '.join(want)}"
+    missing = [c for c in want if c not in columns]
+    if missing:
+        return f"missing columns {', '.join(missing)} ({has})"
+    extra = sorted((c for c in columns if re.fullmatch(r"q\d+_rad", str(c)) and c not in want),
+                   key=lambda c: int(c[1:-4]))
+    if extra:
+        return f"joint columns {', '.join(extra)} beyond the arm's ({has})"
+    return None
+
+
+def check_joint_header(path: str | Path, n_joints: int, arm_name: str | None = None) -> None:
+    """Check a joint log's header (its first line only) against the arm's joint count.
+
+    Raises:
+        DataError: the file is missing, or lacks (or has more than) the arm's joint columns (named).
+    """
+    path = Path(path)
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as f:
+            header = next(csv.reader(f), [])
+    except FileNotFoundError as exc:
+        raise DataError(f"{path}: file not found") from exc
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise DataError(f"{path}: not a readable CSV file: {exc}") from exc
+    problem = joint_header_problem(header, n_joints, arm_name)
+    if problem:
+        raise DataError(f"{path}: {problem}")
+
+
+def read_joint_table(path: str | Path, kind: str = "joints.csv", *, n_joints: int | None = None,
+                     arm_name: str | None = None) -> tuple[np.ndarray, np.ndarray, pd.DataFrame]:
     """Read ``joints.csv`` or ``motion.csv``.
+
+    Args:
+        n_joints: the arm's joint count (``campaign.arm.n_joints``): the file must have exactly
+            ``q1_rad .. q<n_joints>_rad``; None takes whatever ``q<j>_rad`` columns it has.
+        arm_name: the arm, named in the error.
 
     Returns:
         t: (K,) seconds on the controller clock; q: (K, J) rad; and the whole table.
 
     Raises:
-        DataError: missing file or columns, NaN values, or ``t_s`` not strictly increasing.
+        DataError: missing file or columns (the arm's joint columns named), NaN values, or ``t_s``
+            not strictly increasing.
     """
     path = Path(path)
     try:
@@ -148,6 +194,10 @@ def read_joint_table(path: str | Path, kind: str = "joints.csv") -> tuple[np.nda
         raise DataError(f"{path}: not a readable CSV file: {exc}") from exc
     if "t_s" not in df.columns:
         raise DataError(f"{path}: no 't_s' column in header {list(df.columns)}")
+    if n_joints is not None:
+        problem = joint_header_problem(list(df.columns), n_joints, arm_name)
+        if problem:
+            raise DataError(f"{path}: {problem}")
     cols = _joint_columns(df, path)
     data = df[["t_s"] + cols].to_numpy(dtype=float)
     if len(data) < 2:

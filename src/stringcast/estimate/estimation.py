@@ -177,7 +177,7 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign, c
         DataError: unreadable or inconsistent inputs (named). ConfigError: bad optimizer settings.
     """
     tracks = read_parquet(tracks_parquet, TRACK_COLUMNS)
-    t_j, q_j, _ = read_joint_table(joints_csv)
+    t_j, q_j, _ = read_joint_table(joints_csv, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
     problem = build_problem(tracks, t_j, q_j, campaign, config, source=str(tracks_parquet))
     prev = read_json(prev_params_json) if prev_params_json else None
     chi0 = start_chi(prev, campaign.string, config, str(prev_params_json))
@@ -185,7 +185,7 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign, c
     seed = int(config.get("estimation", {}).get("seed", 0)) + k
     earlier_problems = []
     for tr, jo in earlier:
-        t_e, q_e, _ = read_joint_table(jo)
+        t_e, q_e, _ = read_joint_table(jo, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
         earlier_problems.append(build_problem(read_parquet(tr, TRACK_COLUMNS), t_e, q_e, campaign, config,
                                               source=str(tr)))
     est = estimate(problem, config, chi0, k, seed, earlier=tuple(earlier_problems))

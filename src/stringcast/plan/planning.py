@@ -372,7 +372,7 @@ def run_plan(params_json: Path, played_motion_json: Path, campaign: Campaign, co
         if tracks_parquet is None or joints_csv is None:
             raise ConfigError("motion.residual_correction and motion.replan_miss_mm need the played trial's "
                               "tracks.parquet and joints.csv")
-        t_j, q_j, _ = read_joint_table(joints_csv)
+        t_j, q_j, _ = read_joint_table(joints_csv, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
         observed = observed_tip(read_parquet(tracks_parquet, TRACK_COLUMNS), t_j, q_j, previous.q,
                                 campaign.string.n_points, campaign.arm.controller_rate, str(tracks_parquet))
         miss = observed_miss(*observed[:3], campaign.target.xy, previous.T + float(mcfg.get("flight_window_s", 0.5)))

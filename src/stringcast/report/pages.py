@@ -4,7 +4,8 @@ Figures are inlined as PNG data URIs (``report_figures``), the page is rendered
 with Jinja2 from ``templates/``. The trial page shows the paper's figures for the
 trial (Fig. 8a tip paths, Fig. 8b arm paths, Fig. 11 parameters, Table 4 masses),
 E over the search, a frame strip with tracked and simulated points, how often each
-point was tracked, calibration and sync, and the next motion.
+point was tracked, calibration and sync, and the next motion. Every page ends with what
+produced it (:mod:`stringcast.report.provenance`: the method, the git commit, the library versions).
 
 The pages show only what the pipeline measured and computed. The virtual lab's
 ground truth files are never read here, as in every other stage: footage from a
@@ -28,6 +29,7 @@ from stringcast.core import PARAM_NAMES, Campaign, model_ranges
 from .strip import frame_strip, strip_data_uri
 from stringcast.calibrate import Calibration
 from stringcast.core import TRACK_COLUMNS, find_video, read_joint_table, read_json, read_parquet, tracks_arrays, write_text
+from .provenance import provenance
 
 
 def _env() -> jinja2.Environment:
@@ -35,8 +37,8 @@ def _env() -> jinja2.Environment:
                               autoescape=jinja2.select_autoescape(["html", "j2"]))
 
 
-def _common(campaign: Campaign, title: str) -> dict:
-    return {"title": title, "version": __version__,
+def _common(campaign: Campaign, title: str, config: dict) -> dict:
+    return {"title": title, "version": __version__, "provenance": provenance(config),
             "created": _dt.datetime.now().isoformat(timespec="seconds"),
             "string": campaign.string_id or campaign.string.name,
             "length_mm": f"{campaign.string.length * 1000:.0f}", "n_points": campaign.string.n_points,
@@ -67,8 +69,8 @@ def _fmt(x, spec=".2f", unit=""):
     return f"{x:{spec}}{unit}"
 
 
-def _motion_window(data_dir: Path, config: dict) -> tuple[float, float, dict]:
-    t, q, _ = read_joint_table(data_dir / "joints.csv")
+def _motion_window(data_dir: Path, config: dict, arm) -> tuple[float, float, dict]:
+    t, q, _ = read_joint_table(data_dir / "joints.csv", n_joints=arm.n_joints, arm_name=arm.name)
     played = read_json(data_dir / "motion.json") if (data_dir / "motion.json").exists() else {}
     t0 = motion_start(t, q)
     T = float(played.get("T_s", t[-1] - t0))
@@ -88,8 +90,9 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
     nxt = read_json(results_dir / "motion.json")
     tracks = read_parquet(results_dir / "tracks.parquet", TRACK_COLUMNS)
     fit = read_parquet(results_dir / "fit.parquet")
-    t_j, q_j, _ = read_joint_table(data_dir / "joints.csv")
-    t0, t1, played = _motion_window(data_dir, config)
+    t_j, q_j, _ = read_joint_table(data_dir / "joints.csv", n_joints=campaign.arm.n_joints,
+                                    arm_name=campaign.arm.name)
+    t0, t1, played = _motion_window(data_dir, config, campaign.arm)
     tgt = campaign.target.xy
     t_tr, xy_tr, valid = _tracked(tracks, n)
     d_meas, _ = closest_approach(t_tr, xy_tr[:, n], tgt, t0, t1)
@@ -100,12 +103,43 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
                 "src": figs.tip_paths(tip_fit["t_s"].to_numpy(), tip_fit[["x_tracked_m", "y_tracked_m"]].to_numpy(),
                                       tip_fit["t_s"].to_numpy(), tip_fit[["x_sim_m", "y_sim_m"]].to_numpy(),
                                       tgt, campaign.target.radius)}]
-    t_n, q_n, _ = read_joint_table(results_dir / "motion.csv")
+    t_n, q_n, _ = read_joint_table(results_dir / "motion.csv", n_joints=campaign.arm.n_joints,
+                                    arm_name=campaign.arm.name)
     figures.append({"id": "fig-arm-paths", "caption": "Grasp-point paths of the motion played in this trial "
                     "(measured joints) and of the next motion (paper Fig. 8b).",
                     "src": figs.arm_paths({"played (measured)": hand_pose(campaign.arm, q_j)[:, :2],
                                            "next motion": hand_pose(campaign.arm, q_n)[:, :2]},
                                           tgt, campaign.target.radius)})
+    model_figures, values, lo, hi, diagnostics = _parameter_figures(params, config)
+    figures += model_figures
+    strip = frame_strip(find_video(data_dir), Calibration.from_json(results_dir / "calibration.json"), tracks, fit,
+                        campaign.string.length)
+    figures.append({"id": "fig-overlay", "caption": "Frames of the motion with the tracked points (green circles; "
+                    "red: the grasp from forward kinematics) and the model's points simulated with the estimate "
+                    "(orange crosses and line) overlaid.", "src": strip_data_uri(strip)})
+    in_motion = (t_tr >= t0) & (t_tr <= t1)
+    figures.append({"id": "fig-valid", "caption": "Share of the frames in which each point was tracked (valid), "
+                    "over the whole clip and over the motion and flight window: the points E (eqs. 4-6) and the "
+                    "measured closest approach rest on.",
+                    "src": figs.valid_per_point(np.arange(1, n + 1), valid[:, 1:].mean(axis=0),
+                                                valid[in_motion, 1:].mean(axis=0) if in_motion.any() else None)})
+    figures.append({"id": "fig-next-motion", "caption": "Next motion: joint angles and velocities "
+                    f"(T = {nxt.get('T_s', float('nan')):.3f} s).", "src": figs.joint_curves(t_n, q_n)})
+
+    summary = _trial_summary(params, diagnostics, valid, d_meas, campaign, played, nxt)
+    warnings = [str(w) for w in calib.get("warnings", [])] + [str(w) for w in [params.get("message")] if w]
+    cal_rows = _calibration_rows(calib, sync)
+    ctx = _common(campaign, f"Campaign {campaign.name}, trial {results_dir.name.split('_')[-1]}", config)
+    ctx.update(summary=summary, warnings=warnings, figures=figures, calib=cal_rows,
+               params=[(k, v, a, b) for k, v, a, b in zip(PARAM_NAMES, values, lo, hi)])
+    write_text(out, _env().get_template("trial.html.j2").render(**ctx))
+
+
+def _parameter_figures(params: dict, config: dict) -> tuple[list, list, np.ndarray, np.ndarray, dict]:
+    """The estimate's figures: coefficients within Table 2's ranges (Fig. 11), masses (Table 4), E over
+    the search. Returns them, the coefficients in PARAM_NAMES order, the ranges (lo, hi) and the
+    estimate's diagnostics."""
+    figures = []
     lo, hi, (mu_lo, mu_hi) = model_ranges(config)
     coeffs = params["coefficients"]
     values = [coeffs[k] for k in PARAM_NAMES]
@@ -125,20 +159,12 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
     if hist.get("evaluations"):
         figures.append({"id": "fig-search", "caption": f"Best E over the search ({params.get('optimizer')}).",
                         "src": figs.search_history(hist["evaluations"], np.asarray(hist["best_E_mm"], dtype=float) / 1000)})
-    strip = frame_strip(find_video(data_dir), Calibration.from_json(results_dir / "calibration.json"), tracks, fit,
-                        campaign.string.length)
-    figures.append({"id": "fig-overlay", "caption": "Frames of the motion with the tracked points (green circles; "
-                    "red: the grasp from forward kinematics) and the model's points simulated with the estimate "
-                    "(orange crosses and line) overlaid.", "src": strip_data_uri(strip)})
-    in_motion = (t_tr >= t0) & (t_tr <= t1)
-    figures.append({"id": "fig-valid", "caption": "Share of the frames in which each point was tracked (valid), "
-                    "over the whole clip and over the motion and flight window: the points E (eqs. 4-6) and the "
-                    "measured closest approach rest on.",
-                    "src": figs.valid_per_point(np.arange(1, n + 1), valid[:, 1:].mean(axis=0),
-                                                valid[in_motion, 1:].mean(axis=0) if in_motion.any() else None)})
-    figures.append({"id": "fig-next-motion", "caption": "Next motion: joint angles and velocities "
-                    f"(T = {nxt.get('T_s', float('nan')):.3f} s).", "src": figs.joint_curves(t_n, q_n)})
+    return figures, values, lo, hi, diagnostics
 
+
+def _trial_summary(params: dict, diagnostics: dict, valid: np.ndarray, d_meas: float, campaign: Campaign,
+                   played: dict, nxt: dict) -> list[tuple[str, str]]:
+    """The trial page's summary rows: the estimate, the tracking, the measured and predicted approaches."""
     summary = [("E (eqs. 4-6)", _fmt(params.get("E_mm"), ".2f", " mm")),
                ("optimizer, evaluations", f"{params.get('optimizer')}, {params.get('evaluations')}"),
                ("estimation time", _fmt(params.get("seconds"), ".1f", " s")),
@@ -157,7 +183,11 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
         summary.append(("next motion: residual correction (tip error of the played motion, median / max)",
                         f"{res['median_mm']:.1f} / {res['max_mm']:.1f} mm, tip tracked in "
                         f"{res['valid_share'] * 100:.0f} % of its frames"))
-    warnings = [str(w) for w in calib.get("warnings", [])] + [str(w) for w in [params.get("message")] if w]
+    return summary
+
+
+def _calibration_rows(calib: dict, sync: dict) -> list[tuple[str, str]]:
+    """The trial page's calibration and sync rows (and the sync's warnings and note)."""
     cal_rows = [("reprojection error (board, homography)", _fmt(calib.get("reprojection_error_px"), ".3f", " px")),
                 ("intrinsics", "from calib/ clip" if calib.get("K") else "none (homography only)"),
                 ("intrinsics rms", _fmt(calib.get("intrinsics_rms_px"), ".3f", " px")),
@@ -179,10 +209,7 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
         cal_rows.append(("sync warning", w))
     if sync.get("note"):
         cal_rows.append(("sync note", sync["note"]))
-    ctx = _common(campaign, f"Campaign {campaign.name}, trial {results_dir.name.split('_')[-1]}")
-    ctx.update(summary=summary, warnings=warnings, figures=figures, calib=cal_rows,
-               params=[(k, v, a, b) for k, v, a, b in zip(PARAM_NAMES, values, lo, hi)])
-    write_text(out, _env().get_template("trial.html.j2").render(**ctx))
+    return cal_rows
 
 
 def _stage_times(results: Path) -> tuple[list, list]:
@@ -215,7 +242,7 @@ def write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign,
             continue
         params = read_json(rd / "params.json")
         tracks = read_parquet(rd / "tracks.parquet")
-        t0, t1, played = _motion_window(dd, config)
+        t0, t1, played = _motion_window(dd, config, campaign.arm)
         t, xy, valid = _tracked(tracks, n)
         d, _ = closest_approach(t, xy[:, n], campaign.target.xy, t0, t1)
         window = (t >= t0) & (t <= t1)
@@ -231,6 +258,6 @@ def write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign,
                         "motion and flight window.", "src": figs.campaign_tips(tips, campaign.target.xy,
                                                                                  campaign.target.radius)})
     timings, stages = _stage_times(results_dir)
-    ctx = _common(campaign, f"Campaign {campaign.name}")
+    ctx = _common(campaign, f"Campaign {campaign.name}", config)
     ctx.update(rows=rows, figures=figures, timings=timings, stages=stages)
     write_text(out, _env().get_template("campaign.html.j2").render(**ctx))

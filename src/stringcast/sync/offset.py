@@ -233,7 +233,8 @@ def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaig
     else:
         if calibration_json is None:
             raise DataError(f"{trial_dir}: sync.method 'video' needs the trial's calibration.json")
-        t_j, q_j, _ = read_joint_table(trial_dir / "joints.csv")
+        t_j, q_j, _ = read_joint_table(trial_dir / "joints.csv", n_joints=campaign.arm.n_joints,
+                                        arm_name=campaign.arm.name)
         cal = Calibration.from_json(calibration_json)
         with open_video(find_video(trial_dir), fps=doc["fps"]) as video:
             warns = check_frame_count(video, meta, video_yaml)

@@ -93,7 +93,7 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, config, out_p
     st = settings(config)
     cal = Calibration.from_json(calibration_json)
     sync = read_json(sync_json)
-    t_j, q_j, _ = read_joint_table(trial_dir / "joints.csv")
+    t_j, q_j, _ = read_joint_table(trial_dir / "joints.csv", n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
     arm, n = campaign.arm, campaign.string.n_points
     vpath = find_video(trial_dir)
     video = open_video(vpath)

@@ -1,7 +1,8 @@
 """Video readers: one streaming, mono interface over containers (OpenCV/FFmpeg),
 frame folders, TIFF stacks and Photron files, and a decode-ahead thread.
 """
-from .container import FRAME_SUFFIXES, check_frame_count, dropped_frames, open_video
+from .base import FRAME_SUFFIXES
+from .container import check_frame_count, dropped_frames, open_video
 from .decode_ahead import prefetch
 
 __all__ = ["FRAME_SUFFIXES", "check_frame_count", "dropped_frames", "open_video", "prefetch"]

@@ -1,0 +1,68 @@
+"""Every report page says what produced it: the method, the code's commit, the library versions."""
+import copy
+import re
+import subprocess
+
+import pytest
+
+from stringcast.report import provenance as prov
+from stringcast.core.config import DEFAULT_CONFIG, OURS_CONFIG, load_config
+from stringcast.report import write_campaign_report
+
+
+def test_provenance_names_the_method_commit_and_versions():
+    paper = load_config(DEFAULT_CONFIG)
+    p = prov.provenance(paper)
+    assert set(p) == {"method", "config_digest", "commit", "versions"}
+    assert p["method"] == "the paper's method"
+    assert re.fullmatch(r"[0-9a-f]{40}(-dirty)?|unknown", p["commit"]), p["commit"]
+    assert list(p["versions"]) == ["stringcast", "numpy", "numba", "scipy", "opencv", "pandas", "snakemake",
+                                   "mujoco", "cma"]
+    assert all(v for v in p["versions"].values()) and p["versions"]["numpy"] != "not installed"
+
+    assert prov.provenance(load_config([DEFAULT_CONFIG, OURS_CONFIG]))["method"] == "ours"
+
+    custom = copy.deepcopy(paper)
+    custom["estimation"]["iterations"] = int(custom["estimation"]["iterations"]) + 1
+    c = prov.provenance(custom)
+    assert re.fullmatch(r"[0-9a-f]{12}", c["config_digest"])
+    assert c["method"] == f"custom config {c['config_digest']}" and c["config_digest"] != p["config_digest"]
+    # the digest is of the settings: not of the files' names, nor of the keys' order
+    renamed = dict(reversed(list(custom.items())), _path="elsewhere.yaml")
+    assert prov.config_digest(renamed) == c["config_digest"]
+
+
+def _git(cwd, *args):
+    return subprocess.run(["git", "-c", "user.name=t", "-c", "user.email=t@t", *args], cwd=cwd, check=True,
+                          capture_output=True, text=True).stdout.strip()
+
+
+def test_git_commit_dirty_only_for_tracked_changes(tmp_path):
+    assert prov.git_commit.__wrapped__(tmp_path) == "unknown"   # not a checkout
+    _git(tmp_path, "init", "-q")
+    (tmp_path / "a.txt").write_text("a\n")
+    _git(tmp_path, "add", "a.txt")
+    _git(tmp_path, "commit", "-q", "-m", "a")
+    head = _git(tmp_path, "rev-parse", "HEAD")
+    (tmp_path / "untracked.txt").write_text("u\n")
+    assert prov.git_commit.__wrapped__(tmp_path) == head
+    (tmp_path / "a.txt").write_text("b\n")
+    assert prov.git_commit.__wrapped__(tmp_path) == head + "-dirty"
+    sub = tmp_path / "sub"
+    sub.mkdir()   # a folder inside someone else's checkout is not a checkout of the code
+    assert prov.git_commit.__wrapped__(sub) == "unknown"
+
+
+@pytest.mark.parametrize("files,method", [((DEFAULT_CONFIG,), "the paper&#39;s method"),
+                                          ((DEFAULT_CONFIG, OURS_CONFIG), "ours")])
+def test_campaign_page_footer_shows_provenance(tmp_path, files, method):
+    from stringcast.core.config import resolve_campaign
+
+    config = load_config(list(files))
+    campaign = resolve_campaign({"string": 1, "target": 1}, config, "c")
+    (tmp_path / "data").mkdir()
+    write_campaign_report(tmp_path / "data", tmp_path / "results", campaign, config, tmp_path / "report.html")
+    html = (tmp_path / "report.html").read_text()
+    footer = html[html.index('<footer id="provenance">'):]
+    assert f'<td class="l">{method}</td>' in footer
+    assert prov.git_commit() in footer and f"numpy {prov.library_versions()['numpy']}" in footer

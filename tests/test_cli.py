@@ -1,0 +1,70 @@
+"""The command line: every option says what it is and shows its default; --method picks the config."""
+import argparse
+from pathlib import Path
+
+import pytest
+import yaml
+
+from stringcast.campaign import campaign_config
+from stringcast.cli import build_parser, campaign_config_paths
+from stringcast.core.config import DEFAULT_CONFIG, OURS_CONFIG, load_config
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _subcommands(parser: argparse.ArgumentParser) -> argparse._SubParsersAction:
+    return next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+
+
+def test_every_subcommand_and_option_has_help_and_shows_its_default(capsys):
+    parser = build_parser()
+    sub = _subcommands(parser)
+    listed = {a.dest: a.help for a in sub._choices_actions}
+    assert set(listed) == set(sub.choices) and all(h and h.strip() for h in listed.values()), listed
+    assert all(a.help and a.help.strip() for a in parser._actions), "top-level options"
+    for name, sp in sub.choices.items():
+        with pytest.raises(SystemExit) as e:
+            parser.parse_args([name, "--help"])
+        assert e.value.code == 0
+        text = " ".join(capsys.readouterr().out.split())  # argparse wraps lines
+        for action in sp._actions:
+            assert action.help and action.help.strip(), f"stringcast {name} {action.dest}: no help"
+            assert " ".join(action.help.split()) in text, (name, action.dest)
+            for opt in action.option_strings:
+                assert opt in text, (name, opt)
+            if not action.required and action.default not in (None, argparse.SUPPRESS):
+                assert f"(default: {action.default})" in text, (name, action.dest)
+
+
+def _leaves(doc: dict, prefix=()):
+    for k, v in doc.items():
+        if isinstance(v, dict):
+            yield from _leaves(v, prefix + (k,))
+        else:
+            yield prefix + (k,), v
+
+
+def test_method_ours_merges_config_ours_yaml_last():
+    parser = build_parser()
+    args = parser.parse_args(["campaign", "c"])
+    assert args.method == "paper" and campaign_config_paths(args) == []
+    args = parser.parse_args(["--config", "mine.yaml", "campaign", "c", "--method", "ours"])
+    assert campaign_config_paths(args) == ["mine.yaml", str(OURS_CONFIG)]
+    assert OURS_CONFIG == ROOT / "config" / "ours.yaml"
+
+    args = parser.parse_args(["campaign", "c", "--method", "ours"])
+    config, given = campaign_config(ROOT, campaign_config_paths(args))
+    assert given == [OURS_CONFIG.resolve()]   # what Snakemake gets as --configfile
+    paper = load_config(DEFAULT_CONFIG)
+    ours = yaml.safe_load(OURS_CONFIG.read_text())
+    for path, value in _leaves(ours):
+        got = config
+        for k in path:
+            got = got[k]
+        assert got == value, path
+    assert paper["estimation"]["optimizer"] != ours["estimation"]["optimizer"] == config["estimation"]["optimizer"]
+    # everything ours.yaml does not set is the paper's
+    assert config["targets"] == paper["targets"] and config["model"]["ranges"]["k_s"] == paper["model"]["ranges"]["k_s"]
+    config_paper, given_paper = campaign_config(ROOT, campaign_config_paths(parser.parse_args(["campaign", "c"])))
+    assert given_paper == [] and {k: v for k, v in config_paper.items() if k != "_path"} == \
+        {k: v for k, v in paper.items() if k != "_path"}
