@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from stringcast.core.config import load_config, resolve_campaign
+from stringcast.core.settings import settings_from_config
 
 ROOT = Path(__file__).resolve().parents[1]
 # the real camera data: $STRINGCAST_REAL_DATA, else ../shared/real beside the clone
@@ -59,3 +60,9 @@ def tiny_lab_trial(tmp_path, config, bands=None):
     run_calibration(trial, None, campaign, res / "calibration.json")
     run_sync(trial, res / "calibration.json", campaign, cfg, res / "sync.json")
     return trial, res, campaign, cfg
+
+
+@pytest.fixture(scope="session")
+def settings(config):
+    """Every stage's settings (:class:`stringcast.core.Settings`) from the project's config."""
+    return settings_from_config(config)

@@ -376,9 +376,14 @@ def load_campaign(path: str | Path, config: Mapping | None = None) -> Campaign:
     return resolve_campaign(doc, config, path.parent.name, path)
 
 
-def model_ranges(config: Mapping) -> tuple[np.ndarray, np.ndarray, tuple[float, float]]:
-    """Table 2 ranges: (p_min (10,), p_max (10,), (mu_min, mu_max))."""
-    r = config["model"]["ranges"]
+def model_ranges(model) -> tuple[np.ndarray, np.ndarray, tuple[float, float]]:
+    """Table 2 ranges from :class:`~stringcast.core.settings.ModelSettings` ``model``:
+    (p_min (10,), p_max (10,), (mu_min, mu_max)).
+
+    Raises:
+        ConfigError: a range that is not 0 < min <= max.
+    """
+    r = model.ranges
     lo = np.array([r[k][0] for k in PARAM_NAMES], float)
     hi = np.array([r[k][1] for k in PARAM_NAMES], float)
     if np.any(lo <= 0) or np.any(hi < lo):

@@ -1,5 +1,28 @@
-"""Settings of the stages, one per config section, with their defaults in one place."""
+"""Settings: one frozen, typed object per config section, with every default in one place.
+
+``config/config.yaml`` describes the lab (arms, cameras, set-ups, strings, targets, and the
+virtual lab's hidden physics); the stages' settings default to the classes below, which are
+the paper's method. A config file (``--configfile``) sets any of them, section by section;
+:func:`settings_from_config` builds every section once from the merged, schema-validated
+config, and refuses a key no class knows. ``config/README.md`` lists every setting with its
+default and meaning (made from these classes by ``stringcast settings --markdown``).
+
+A stage's entry point names the settings it reads by its parameters' types (for example
+``run_estimation(..., estimation: EstimationSettings, evaluation: EvaluationSettings, ...)``);
+:func:`sections_read` reads them back, so the workflow reruns a stage exactly when a
+section it reads changes (``workflow/rules/common.smk``).
+
+Units are those of the key's suffix (``_mm``, ``_px``, ``_s``, ``_deg``, ``_rad_s``); the
+stages convert on use, as they did when the settings were a dict.
+"""
 from __future__ import annotations
+
+import dataclasses
+import inspect
+import typing
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any, Mapping
 
 from .config import ConfigError
 
@@ -7,28 +30,336 @@ MODES = ("markerless", "markers")
 """``tracking.mode``: the string's points by arc length, or by the bands at the mass points."""
 POLARITIES = ("auto", "brighter", "darker")
 """``tracking.band_polarity``: a band brighter or darker than the string, or whichever gives more."""
-
-DEFAULTS = {
-    "rest_frames": 40, "background_samples": 31, "threshold_low": 4.0, "threshold_high": 8.0,
-    "smooth_px": 0.8, "roi_margin_mm": 120.0, "grasp_search_mm": 60.0, "grasp_clear_mm": 15.0,
-    "max_gap_px": 8.0, "end_tolerance_mm": 6.0, "arc_step_px": 4.0, "overlay_frames": 6,
-    # the arm's outline for its mask (UR5e-sized; set them for your arm and gripper)
-    "arm_link_widths_mm": [120.0, 100.0, 85.0], "arm_joint_radii_mm": [70.0, 60.0, 50.0, 45.0],
-    "gripper_widths_mm": [66.0, 30.0], "gripper_mask_extend_mm": 3.0, "arm_mask_margin_px": 2.0,
-    "arm_guard_px": 3.0, "branch_min_px": 6, "anchor_tol_mm": 3.0, "anchor_tol_px": 2.0, "end_sigma_px": 1.0,
-    "scale_sigma": 0.003, "tip_shortfall_mm": 0.0, "end_contrast_min": 0.4, "end_edge_max": 0.25, "max_missing_frac": 0.3,
-    "end_touch_mm": 12.0,
-    "background_window_s": None, "background_bursts": 5, "prefetch_frames": 48,
-    # markers (stringcast.track.markers): a band centred at each mass point gives its position
-    "mode": "markerless", "band_width_mm": 8.0, "band_contrast_min": 0.25, "band_tolerance": 0.35,
-    "band_length_tol": 0.5, "band_polarity": "auto", "band_step_px": 0.25,
-}
+OPTIMIZERS = ("random_search", "cmaes", "differential_evolution")
+PLANNERS = ("paper", "robust")
 
 
-def tracking_settings(config: dict | None) -> dict:
-    """Tracking settings: ``config['tracking']`` over :data:`DEFAULTS`."""
-    s = dict(DEFAULTS)
-    s.update((config or {}).get("tracking", {}) or {})
-    if s["mode"] not in MODES or s["band_polarity"] not in POLARITIES:
-        raise ConfigError(f"tracking: mode {s['mode']!r} (one of {MODES}), band_polarity {s['band_polarity']!r}")
-    return s
+def _f(default, help: str):
+    """A field with its default and its help text (``config/README.md``)."""
+    if isinstance(default, Mapping):
+        frozen = MappingProxyType(dict(default))
+        return field(default_factory=lambda: frozen, metadata={"help": help})
+    return field(default=default, metadata={"help": help})
+
+
+def _frozen(value):
+    """Lists become tuples and mappings read-only, recursively (a setting cannot be changed)."""
+    if isinstance(value, Mapping):
+        return MappingProxyType({k: _frozen(v) for k, v in value.items()})
+    if isinstance(value, (list, tuple)):
+        return tuple(_frozen(v) for v in value)
+    return value
+
+
+def _plain(value):
+    """The inverse of :func:`_frozen`: dicts and lists, for JSON, YAML and Snakemake params."""
+    if isinstance(value, Mapping):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, tuple):
+        return [_plain(v) for v in value]
+    return value
+
+
+class _Section:
+    """Shared behaviour of the settings classes: built from a config section, and back."""
+
+    SECTION: typing.ClassVar[str] = ""
+
+    @classmethod
+    def from_mapping(cls, d: Mapping | None):
+        """The section's settings: ``d`` (the config's section, may be None) over the defaults.
+
+        Raises:
+            ConfigError: a key this section does not have, naming it and the section.
+        """
+        d = dict(d or {})
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(d) - names)
+        if unknown:
+            raise ConfigError(f"{cls.SECTION}: unknown setting(s) {', '.join(unknown)} "
+                              f"(known: {', '.join(sorted(names))})")
+        defaults = cls()
+        for k, v in d.items():  # a mapping-valued setting is merged over its default, key by key
+            if isinstance(v, Mapping) and isinstance(getattr(defaults, k), Mapping):
+                d[k] = {**getattr(defaults, k), **v}
+        return cls(**{k: _frozen(v) for k, v in d.items()})
+
+    def as_dict(self) -> dict:
+        """The settings as plain data (lists, dicts), every key present."""
+        return {f.name: _plain(getattr(self, f.name)) for f in dataclasses.fields(self)}
+
+
+@dataclass(frozen=True)
+class ModelSettings(_Section):
+    """``model``: the string model's integration and the parameter ranges (Table 2)."""
+
+    SECTION: typing.ClassVar[str] = "model"
+    dt_s: float = _f(1.0e-4, "integration step of the string model, s")
+    psi0_deg: float = _f(0.0, "the string's rest direction in the hand frame, deg")
+    first_mu: float = _f(1.0, "relative masses for the first plan (Table 2 has no mass row)")
+    ranges: Mapping[str, tuple] = _f({
+        "k_s": (1.0e+3, 1.0e+6), "c_s": (1.0, 10.0), "k_h": (1.0e-3, 10.0), "c_h": (1.0e-3, 10.0),
+        "k_sh": (1.0e-4, 1.0), "c_sh": (1.0e-4, 1.0), "C_c1": (1.0e-6, 10.0), "C_c2": (1.0e-6, 10.0),
+        "k_ph": (1.0e-3, 1.0e-2), "c_ph": (1.0e-3, 1.0e-2), "mu": (0.1, 100.0)},
+        "[min, max] of each coefficient (Table 2) and of the relative masses mu; a file may set some")
+
+    def __post_init__(self):
+        if self.dt_s <= 0:
+            raise ConfigError(f"model.dt_s must be > 0, got {self.dt_s}")
+
+
+@dataclass(frozen=True)
+class EvaluationSettings(_Section):
+    """``evaluation``: the evaluation value E (eqs. 4-6)."""
+
+    SECTION: typing.ClassVar[str] = "evaluation"
+    w: float = _f(0.1, "tip weighting of eq. (6): point i counts 1 + w (i - 1) times")
+
+
+@dataclass(frozen=True)
+class EstimationSettings(_Section):
+    """``estimation``: the parameter search (eqs. 2-3) and what params.json keeps."""
+
+    SECTION: typing.ClassVar[str] = "estimation"
+    optimizer: str = _f("random_search", "random_search (eqs. 2-3), cmaes or differential_evolution")
+    iterations: int = _f(3000, "candidates evaluated per trial")
+    batch: int = _f(64, "candidates simulated per numba batch")
+    chi0: float = _f(1.0, "eq. (3): the first sampling radius in chi")
+    beta: float = _f(0.998, "eq. (3): the radius shrinks by this factor per sample")
+    seed: int = _f(0, "the search's random seed (with the trial number)")
+    de_popsize: int = _f(8, "SciPy differential evolution population (per dimension)")
+    top_k: int = _f(20, "params.json keeps the best K sets (the robust planner's ensemble)")
+    near_best_tol: float = _f(0.05, "diagnostics: sets within this share of the best E show which parameters are pinned")
+    pinned_spread: float = _f(0.2, "... pinned when they spread over less than this share of Table 2's log range")
+    cmaes_sigma0: float = _f(0.3, "CMA-ES initial step in chi (log-parameter) space, / M")
+    cmaes_popsize: int = _f(0, "CMA-ES population; 0: cma's default (4 + 3 ln D)")
+    cmaes_runs: int = _f(1, "CMA-ES runs sharing the budget: the first from the last estimate, the others from the centre")
+    cmaes_options: Mapping[str, Any] = _f({}, "passed on to cma.CMAOptions (e.g. {CSA_dampfac: 0.5}); an unknown name is an error")
+    cmaes_first_look: int = _f(300, "CMA-ES: first evaluate this many eq. (3) samples around chi_best and start at their best (0: off)")
+    cmaes_stall_generations: int = _f(0, "CMA-ES: restart at the best point after this many generations without a gain (0: off)")
+    compare_after_motion_s: float | None = _f(None, "compare frames up to this long after the arm stops, s (null: the whole joint log, as the paper)")
+    joint_trials: int = _f(1, "trials fitted at once: 1 the last (paper), N the last N, 0 every trial so far")
+    cmaes_first_start: str = _f("centre", "CMA-ES on trial 1 without a first look: from the centre of the box, or its minima corner")
+
+    def __post_init__(self):
+        if self.optimizer not in OPTIMIZERS:
+            raise ConfigError(f"estimation.optimizer must be one of {OPTIMIZERS}, got {self.optimizer!r}")
+
+
+@dataclass(frozen=True)
+class MotionSettings(_Section):
+    """``motion``: motion generation (Section V) and the planners."""
+
+    SECTION: typing.ClassVar[str] = "motion"
+    T_range_s: tuple = _f((0.2, 1.2), "[min, max] motion duration T, s")
+    n_control_points: int = _f(6, "control points of eq. (1)'s Bezier velocity curves")
+    alpha_max_rad_s2: float = _f(40.0, "|alpha_k| of eq. (1), rad/s^2")
+    perturb_rad_s: float = _f(0.5, "later trials: control points moved by up to this, rad/s")
+    flight_window_s: float = _f(0.5, "the tip may hit up to this long after the motion ends, s")
+    max_candidates: int = _f(20000, "candidates searched at most per plan")
+    extra_after_hit: int = _f(200, "keep searching this many candidates after the first hit, take the closest")
+    batch: int = _f(64, "candidates simulated per numba batch")
+    seed: int = _f(0, "the planner's random seed (with the trial number)")
+    floor_margin_m: float = _f(0.05, "the hanging string must clear the floor by this at the start posture, m")
+    posture_pool: int = _f(32, "random initial postures tried per batch in the first plan")
+    start_grasp_box_mm: tuple | None = _f(((-200.0, 900.0), (-100.0, 700.0)),
+                                          "start grasp inside [[x_min, x_max], [y_min, y_max]], mm: where the camera sees the hanging string")
+    first_max_strain: float = _f(0.05, "first plan: k_s raised so the hanging string stretches at most this")
+    first_k_s: str = _f("carrying", "first plan's k_s: carrying (the least that keeps first_max_strain) or max (Table 2's)")
+    planner: str = _f("paper", "paper: Section V; robust: prefer motions that hit under most of the estimate's best sets")
+    robust_screen_mm: float = _f(20.0, "robust: only candidates within this of the target edge (best set) are scored on the ensemble, mm")
+    robust_min_share: float = _f(0.0, "robust: the first hit must hit under at least this share of the sets")
+    residual_correction: bool = _f(False, "aim at the target minus the model's error on the played motion's tracked tip")
+    hang_clearance_mm: float = _f(60.0, "the hanging string at the start posture stays this far from the arm's centre lines, mm")
+    replan_miss_mm: float = _f(0.0, "> 0: after a tracked miss larger than this, plan a new motion (0: always perturb, Section V.B), mm")
+    replan_perturb_rad_s: float = _f(0.0, "> 0 (with replan_miss_mm): first try perturbing the played motion by up to this, rad/s")
+    replan_min_share: float = _f(0.9, "that wider perturbation is kept when it hits under at least this share of the ensemble")
+    replan_residual_mm: float = _f(0.0, "> 0 (with residual_correction): no perturbation when the model's tip error on the played motion exceeds this, mm")
+    first_ensemble: int = _f(0, "> 0: the first plan prefers the motion that hits under most of this many random Table 2 sets")
+    first_extra_after_hit: int = _f(200, "first plan with first_ensemble: candidates searched past the first hit")
+
+    def __post_init__(self):
+        if self.planner not in PLANNERS:
+            raise ConfigError(f"motion.planner must be one of {PLANNERS}, got {self.planner!r}")
+        if self.first_k_s not in ("carrying", "max"):
+            raise ConfigError(f"motion.first_k_s must be carrying or max, got {self.first_k_s!r}")
+
+
+@dataclass(frozen=True)
+class ExecutorSettings(_Section):
+    """``executor``: playing a motion file (pre- and post-roll, the UR backend)."""
+
+    SECTION: typing.ClassVar[str] = "executor"
+    pre_roll_s: float = _f(0.3, "hold the start posture, filmed, before the motion, s")
+    post_roll_s: float = _f(0.6, "hold the end posture after the motion (covers the flight window), s")
+    start_tolerance_rad: float = _f(0.02, "ur-rtde: refuse (or --move-to-start) if the arm is further from the start, rad")
+    ur: Mapping[str, Any] = _f({
+        "joint_map": (1, 2, 3), "sign": (-1, -1, -1), "offset_deg": (0.0, 0.0, -90.0), "lookahead_time_s": 0.1,
+        "gain": 300, "servo_speed_rad_s": 0.5, "servo_acceleration_rad_s2": 0.5, "settle_s": 0.2,
+        "move_to_start_speed_rad_s": 0.3, "move_to_start_acceleration_rad_s2": 0.5},
+        "ur-rtde backend: joint_map (UR joint of q1..qJ), sign and offset_deg (q_planar = sign q_ur + offset), "
+        "servoJ lookahead_time_s (0.03-0.2) and gain (100-2000), settle_s, move_to_start speed and acceleration")
+
+
+@dataclass(frozen=True)
+class TrackingSettings(_Section):
+    """``tracking``: markerless (or band-marker) tracking of the string."""
+
+    SECTION: typing.ClassVar[str] = "tracking"
+    rest_frames: int = _f(40, "frames before the motion used for the rest state")
+    background_samples: int = _f(31, "frames in the background's temporal median")
+    threshold_low: float = _f(4.0, "hysteresis threshold, low, in units of the local noise sigma")
+    threshold_high: float = _f(8.0, "hysteresis threshold, high, in units of the local noise sigma")
+    smooth_px: float = _f(0.8, "Gaussian smoothing of |I - g B| before thresholding, px")
+    roi_margin_mm: float = _f(120.0, "segment within the string's length plus this of the grasp, mm")
+    grasp_search_mm: float = _f(60.0, "the centreline's walk starts within this of the grasp, mm")
+    grasp_clear_mm: float = _f(15.0, "the first stretch from the grasp, hidden by the fingers, is a circular arc, mm")
+    max_gap_px: float = _f(8.0, "gaps in the skeleton bridged up to this (bridged parts are never valid), px")
+    end_tolerance_mm: float = _f(6.0, "a free end's length may differ from L by this, mm")
+    arc_step_px: float = _f(4.0, "chord length of the centreline's spline, px")
+    overlay_frames: int = _f(6, "frames drawn in tracking_overlay.png")
+    arm_link_widths_mm: tuple = _f((120.0, 100.0, 85.0), "the arm's link widths for its mask, mm (set them for your arm)")
+    arm_joint_radii_mm: tuple = _f((70.0, 60.0, 50.0, 45.0), "the arm's joint disc radii for its mask, mm")
+    gripper_widths_mm: tuple = _f((66.0, 30.0), "the gripper's widths at its base and fingertips, mm")
+    gripper_mask_extend_mm: float = _f(3.0, "the gripper's mask reaches this past the grasp point, mm")
+    arm_mask_margin_px: float = _f(2.0, "margin around the arm's mask, px")
+    arm_guard_px: float = _f(3.0, "guard band around the arm's mask where the string is not trusted, px")
+    branch_min_px: int = _f(6, "skeleton branches shorter than this are spurs, px")
+    anchor_tol_mm: float = _f(3.0, "a free end is trusted when the length agrees with L within this, mm ...")
+    anchor_tol_px: float = _f(2.0, "... or within this, px")
+    end_sigma_px: float = _f(1.0, "uncertainty of a free end's position, px")
+    scale_sigma: float = _f(0.003, "relative uncertainty of the pixel scale along the string")
+    tip_shortfall_mm: float = _f(0.0, "the visible string ends this short of the tip (a tip that does not show), mm")
+    end_contrast_min: float = _f(0.4, "a free end is clean when its contrast stays above this share ...")
+    end_edge_max: float = _f(0.25, "... and not more than this share of it lies on an occluder's rim")
+    max_missing_frac: float = _f(0.3, "a frame with more than this share of the string missing gives no points")
+    end_touch_mm: float = _f(12.0, "a free end this close to the string's own earlier stretch is not trusted, mm")
+    background_window_s: float | None = _f(None, "background samples only from the motion's first seconds, s (null: all)")
+    background_bursts: int = _f(5, "the background samples are decoded in this many short runs")
+    prefetch_frames: int = _f(48, "frames decoded ahead of the tracker")
+    mode: str = _f("markerless", "markerless: points by arc length from the grasp; markers: a band at each mass point")
+    band_width_mm: float = _f(8.0, "markers: the bands' length along the string, mm")
+    band_contrast_min: float = _f(0.25, "markers: a band's grey differs from the string's by >= this x the string's contrast")
+    band_tolerance: float = _f(0.35, "markers: a band lies within this share of the point spacing of its expected place")
+    band_length_tol: float = _f(0.5, "markers: its measured length within +- this share of band_width_mm")
+    band_polarity: str = _f("auto", "markers: brighter or darker than the string; auto: per frame, whichever gives more bands")
+    band_step_px: float = _f(0.25, "markers: sampling step along the centreline, px")
+
+    def __post_init__(self):
+        if self.mode not in MODES or self.band_polarity not in POLARITIES:
+            raise ConfigError(f"tracking: mode {self.mode!r} (one of {MODES}), band_polarity {self.band_polarity!r}")
+
+
+@dataclass(frozen=True)
+class SyncSettings(_Section):
+    """``sync``: the video's frames on the controller clock."""
+
+    SECTION: typing.ClassVar[str] = "sync"
+    method: str = _f("video", "video: the arm in the video against the forward kinematics; trigger: video.yaml's trigger time")
+    search_ms: float = _f(10.0, "fine search +- around the trigger time (or the coarse estimate), ms")
+    step_ms: float = _f(0.25, "fine search step, ms")
+    coarse_step_ms: float = _f(0.5, "coarse search step without a trigger time, ms")
+    strip_samples: int = _f(8, "sample strips across each arm segment")
+    strip_width_samples: int = _f(41, "samples across a strip")
+    strip_margin_mm: float = _f(10.0, "a strip reaches this past the segment's outline, mm")
+    rest_frames: int = _f(5, "frames before the motion that give the still arm's reference")
+    smooth_px: float = _f(1.0, "Gaussian smoothing of the frames, px")
+    board_check_warn_mm: float = _f(20.0, "sync warns when the still arm is seen farther than this from the forward kinematics, mm")
+    min_frame_contrast: float = _f(0.02, "frames whose score varies less than this are left out")
+    min_frames: int = _f(20, "fewer frames than this: no video estimate")
+    segment_agree_ms: float = _f(3.0, "segments whose own peak is farther than this from the others' are left out, ms")
+    recentre_ms: float = _f(1.0, "the fine search recentres until the peak lies within this of the centre, ms")
+
+    def __post_init__(self):
+        if self.method not in ("video", "trigger"):
+            raise ConfigError(f"sync.method must be video or trigger, got {self.method!r}")
+
+
+@dataclass(frozen=True)
+class BoardCheckSettings(_Section):
+    """``board_check``: the still-arm check of the board-to-robot transform."""
+
+    SECTION: typing.ClassVar[str] = "board_check"
+    warn_mm: float = _f(5.0, "calibration warns when the still arm is seen farther than this from where the board pose puts it, mm")
+    margin_mm: float = _f(30.0, "profiles across a link reach this past its outline, mm")
+    step_mm: float = _f(0.5, "sampling step along a profile, mm")
+    rows: int = _f(24, "profiles across each link")
+    width_range: tuple = _f((0.6, 1.1), "an edge pair counts when its width is within this share of the link's width")
+    clear_mm: float = _f(10.0, "profiles keep this clear of the joints, mm")
+    min_rows: int = _f(6, "a link with fewer agreeing profiles gives no offset")
+    min_share: float = _f(0.4, "... or with fewer than this share of its profiles agreeing")
+    max_spread_mm: float = _f(2.0, "profiles agree within this, mm")
+    use_discs: bool = _f(True, "use the joint discs' rims")
+    disc_rays: int = _f(48, "rays around a joint disc")
+    disc_reach_mm: float = _f(35.0, "a disc rim is searched this far around its expected radius, mm")
+    use_string: bool = _f(False, "use the hanging string below the grasp")
+    string_rows_mm: tuple = _f((20.0, 140.0), "the string's rows below the grasp, [from, to], mm")
+    string_search_mm: float = _f(40.0, "the string is searched this far either side, mm")
+
+
+SECTION_CLASSES: tuple[type, ...] = (ModelSettings, EvaluationSettings, EstimationSettings, MotionSettings,
+                                     ExecutorSettings, TrackingSettings, SyncSettings, BoardCheckSettings)
+"""The stages' settings classes, one per config section."""
+LAB_SECTIONS: tuple[str, ...] = ("arms", "cameras", "setups", "strings", "targets")
+"""Sections that describe the lab; a campaign reads only its own entries (:func:`campaign_sections`)."""
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Every stage's settings, built once from the merged config (:func:`settings_from_config`)."""
+
+    model: ModelSettings = field(default_factory=ModelSettings)
+    evaluation: EvaluationSettings = field(default_factory=EvaluationSettings)
+    estimation: EstimationSettings = field(default_factory=EstimationSettings)
+    motion: MotionSettings = field(default_factory=MotionSettings)
+    executor: ExecutorSettings = field(default_factory=ExecutorSettings)
+    tracking: TrackingSettings = field(default_factory=TrackingSettings)
+    sync: SyncSettings = field(default_factory=SyncSettings)
+    board_check: BoardCheckSettings = field(default_factory=BoardCheckSettings)
+
+
+def settings_from_config(config: Mapping | None) -> Settings:
+    """Build every section's settings from a merged config (the sections it lacks take the defaults).
+
+    Raises:
+        ConfigError: an unknown key or a value out of its set (naming section and key).
+    """
+    config = config or {}
+    return Settings(**{c.SECTION: c.from_mapping(config.get(c.SECTION)) for c in SECTION_CLASSES})
+
+
+def sections_read(func) -> tuple[str, ...]:
+    """The config sections a stage reads: those of the settings classes among ``func``'s
+    parameter annotations (in :data:`SECTION_CLASSES` order).
+
+    ``stringcast.cli`` hands each stage exactly these, and the workflow makes them the rule's
+    params, so Snakemake reruns the rule when one of them changes and only then.
+    """
+    hints = typing.get_type_hints(func)
+    types = {h for name, h in hints.items() if name != "return"}
+    return tuple(c.SECTION for c in SECTION_CLASSES if c in types)
+
+
+def stage_kwargs(func, settings: Settings) -> dict:
+    """The keyword arguments ``{parameter: section settings}`` that ``func`` takes from ``settings``."""
+    hints = typing.get_type_hints(func)
+    by_type = {c: c.SECTION for c in SECTION_CLASSES}
+    return {name: getattr(settings, by_type[h]) for name, h in hints.items()
+            if name != "return" and h in by_type and name in inspect.signature(func).parameters}
+
+
+def markdown_table() -> str:
+    """Every setting with its default and help, one table per section (``config/README.md``)."""
+    import yaml
+
+    out = []
+    for c in SECTION_CLASSES:
+        out += [f"### `{c.SECTION}`", "", (c.__doc__ or "").strip().split("\n")[0], "",
+                "| setting | default | meaning |", "| --- | --- | --- |"]
+        for f in dataclasses.fields(c):
+            value = getattr(c(), f.name)
+            text = yaml.safe_dump(_plain(value), default_flow_style=True, width=1000).strip()
+            text = text.removesuffix("\n...").removesuffix("...").strip()
+            out.append(f"| `{f.name}` | `{text}` | {f.metadata.get('help', '')} |")
+        out.append("")
+    return "\n".join(out)
