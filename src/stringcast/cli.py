@@ -9,10 +9,40 @@ print one line naming the file and the problem and exit with status 2.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
 from stringcast.core import METHOD_CONFIGS
+
+
+CONFIG_ENV = "STRINGCAST_CONFIG"
+"""Environment variable with the config files a job reads (``os.pathsep``-separated), set by
+the workflow for its jobs in place of ``--config`` (so no config path is part of a rule's
+command line; Snakemake compares the settings a stage reads instead)."""
+
+
+def config_paths(args) -> list[str] | None:
+    """The config files to merge, in order: each ``--config``, else ``$STRINGCAST_CONFIG``, else
+    None (the project's config/config.yaml)."""
+    if args.config:
+        return [str(c) for c in args.config]
+    env = os.environ.get(CONFIG_ENV, "")
+    return [p for p in env.split(os.pathsep) if p] or None
+
+
+_CONFIG_CACHE: dict = {}
+
+
+def _config(args):
+    """The merged, validated config (read once per process)."""
+    from stringcast.core import load_config
+
+    paths = config_paths(args)
+    key = str(paths)
+    if key not in _CONFIG_CACHE:
+        _CONFIG_CACHE[key] = load_config(paths)
+    return _CONFIG_CACHE[key]
 
 
 def _campaign(args):
@@ -21,16 +51,43 @@ def _campaign(args):
     return load_campaign(args.campaign, _config(args))
 
 
-_CONFIG_CACHE: dict = {}
+def _settings(func, args) -> dict:
+    """The settings objects ``func`` takes (by its annotations), built once from the config."""
+    from stringcast.core import settings_from_config, stage_kwargs
+
+    config = _config(args)
+    if "_settings" not in _CONFIG_CACHE:
+        _CONFIG_CACHE["_settings"] = settings_from_config(config)
+    return stage_kwargs(func, _CONFIG_CACHE["_settings"])
 
 
-def _config(args):
-    from stringcast.core import load_config
+STAGES = {
+    "calibrate": "stringcast.calibrate:run_calibration",
+    "sync": "stringcast.sync:run_sync",
+    "track": "stringcast.track:run_tracking",
+    "estimate": "stringcast.estimate:run_estimation",
+    "plan-first": "stringcast.plan:run_first_plan",
+    "plan": "stringcast.plan:run_plan",
+    "report-trial": "stringcast.report:write_trial_report",
+    "report-campaign": "stringcast.report:write_campaign_report",
+}
+"""Each workflow subcommand's stage entry point, ``module:function``."""
 
-    key = str(args.config)
-    if key not in _CONFIG_CACHE:
-        _CONFIG_CACHE[key] = load_config(args.config)
-    return _CONFIG_CACHE[key]
+
+def stage_entry(command: str):
+    """The stage function a subcommand runs (imported on demand: each loads only its stage)."""
+    import importlib
+
+    module, _, name = STAGES[command].partition(":")
+    return getattr(importlib.import_module(module), name)
+
+
+def stage_sections(command: str) -> tuple[str, ...]:
+    """The config sections a workflow subcommand reads: those of its stage entry's settings
+    parameters (:func:`stringcast.core.sections_read`). The rules' params are these sections."""
+    from stringcast.core import sections_read
+
+    return sections_read(stage_entry(command))
 
 
 def cmd_calibrate(args):
@@ -112,8 +169,8 @@ def cmd_report_campaign(args):
 def cmd_execute(args):
     from stringcast.execute import execute
 
-    execute(Path(args.motion), args.backend, Path(args.out), Path(args.campaign), _config(args),
-            seed=int(args.seed), dry_run=bool(args.dry_run), robot_ip=args.robot_ip,
+    execute(Path(args.motion), args.backend, Path(args.out), Path(args.campaign), config=_config(args),
+            **_settings(execute, args), seed=int(args.seed), dry_run=bool(args.dry_run), robot_ip=args.robot_ip,
             move_to_start=bool(args.move_to_start))
 
 
@@ -127,7 +184,7 @@ def cmd_calib_clip(args):
 def campaign_config_paths(args) -> list[str]:
     """The config files ``stringcast campaign`` merges over the project's config/config.yaml, in
     order: each ``--config``, then ``--method``'s file (ours: config/ours.yaml) last."""
-    return [str(c) for c in (args.config or [])] + [str(c) for c in METHOD_CONFIGS[args.method]]
+    return (config_paths(args) or []) + [str(c) for c in METHOD_CONFIGS[args.method]]
 
 
 def cmd_campaign(args):

@@ -38,11 +38,11 @@ def _write_motion(path, t, q):
     return path
 
 
-def test_plays_motion_with_pre_and_post_roll(tmp_path, campaign, config, fake_lab):
+def test_plays_motion_with_pre_and_post_roll(tmp_path, campaign, config, fake_lab, settings):
     t, q = _smooth_motion(campaign)
     motion = _write_motion(tmp_path / "motion.csv", t, q)
     out = tmp_path / "trial_1"
-    info = execute(motion, "virtual", out, campaign, config, seed=7)
+    info = execute(motion, "virtual", out, campaign, settings.executor, config, seed=7)
     assert len(fake_lab) == 1
     call = fake_lab[0]
     rate = campaign.arm.controller_rate
@@ -60,62 +60,62 @@ def test_plays_motion_with_pre_and_post_roll(tmp_path, campaign, config, fake_la
     assert (out / "motion.json").exists()
 
 
-def test_out_of_limit_motion_refused_before_backend(tmp_path, campaign, config, fake_lab):
+def test_out_of_limit_motion_refused_before_backend(tmp_path, campaign, config, fake_lab, settings):
     t, q = _smooth_motion(campaign, T=0.2, amp=1.5)  # far beyond the speed limit
     motion = _write_motion(tmp_path / "motion.csv", t, q)
     with pytest.raises(JointLimitError, match="motion.csv"):
-        execute(motion, "virtual", tmp_path / "trial_1", campaign, config)
+        execute(motion, "virtual", tmp_path / "trial_1", campaign, settings.executor, config)
     assert fake_lab == []
     assert not (tmp_path / "trial_1").exists()
 
 
-def test_position_limit_refused(tmp_path, campaign, config, fake_lab):
+def test_position_limit_refused(tmp_path, campaign, config, fake_lab, settings):
     t, q = _smooth_motion(campaign)
     q = q.copy()
     q[:, 0] += campaign.arm.q_max[0]  # start beyond the maximum
     motion = _write_motion(tmp_path / "motion.csv", t, q)
     with pytest.raises(JointLimitError, match="above its maximum"):
-        execute(motion, "virtual", tmp_path / "trial_1", campaign, config)
+        execute(motion, "virtual", tmp_path / "trial_1", campaign, settings.executor, config)
     assert fake_lab == []
 
 
-def test_dry_run_moves_nothing(tmp_path, campaign, config, fake_lab, capsys):
+def test_dry_run_moves_nothing(tmp_path, campaign, config, fake_lab, capsys, settings):
     t, q = _smooth_motion(campaign)
     motion = _write_motion(tmp_path / "motion.csv", t, q)
-    info = execute(motion, "virtual", tmp_path / "trial_1", campaign, config, dry_run=True)
+    info = execute(motion, "virtual", tmp_path / "trial_1", campaign, settings.executor, config, dry_run=True)
     assert fake_lab == [] and info["dry_run"]
     assert not (tmp_path / "trial_1").exists()
     assert "dry run" in capsys.readouterr().out
 
 
-def test_bad_timing_refused(tmp_path, campaign, config, fake_lab):
+def test_bad_timing_refused(tmp_path, campaign, config, fake_lab, settings):
     t, q = _smooth_motion(campaign)
     motion = _write_motion(tmp_path / "motion.csv", t + 0.01, q)
     with pytest.raises(DataError, match="starts at t_s = 0"):
-        execute(motion, "virtual", tmp_path / "a", campaign, config)
+        execute(motion, "virtual", tmp_path / "a", campaign, settings.executor, config)
     motion = _write_motion(tmp_path / "motion.csv", t * 2, q)  # 250 Hz
     with pytest.raises(DataError, match="controller period"):
-        execute(motion, "virtual", tmp_path / "a", campaign, config)
+        execute(motion, "virtual", tmp_path / "a", campaign, settings.executor, config)
     assert fake_lab == []
 
 
-def test_refuses_to_overwrite_recorded_trial(tmp_path, campaign, config, fake_lab):
+def test_refuses_to_overwrite_recorded_trial(tmp_path, campaign, config, fake_lab, settings):
     t, q = _smooth_motion(campaign)
     motion = _write_motion(tmp_path / "motion.csv", t, q)
     out = tmp_path / "trial_1"
-    execute(motion, "virtual", out, campaign, config)
+    execute(motion, "virtual", out, campaign, settings.executor, config)
     with pytest.raises(DataError, match="joints.csv"):
-        execute(motion, "virtual", out, campaign, config)
+        execute(motion, "virtual", out, campaign, settings.executor, config)
     assert len(fake_lab) == 1
 
 
-def test_ur_rtde_and_unknown_backend(tmp_path, campaign, config, fake_lab):
+def test_ur_rtde_and_unknown_backend(tmp_path, campaign, config, fake_lab, settings):
     t, q = _smooth_motion(campaign)
     motion = _write_motion(tmp_path / "motion.csv", t, q)
     with pytest.raises(ConfigError, match="--robot-ip"):
-        execute(motion, "ur-rtde", tmp_path / "x", campaign, config)
+        execute(motion, "ur-rtde", tmp_path / "x", campaign, settings.executor, config)
     with pytest.raises(ConfigError, match="unknown backend"):
-        execute(motion, "robot9000", tmp_path / "x", campaign, config)
+        execute(motion, "robot9000", tmp_path / "x", campaign, settings.executor, config)
     assert fake_lab == []
 
 

@@ -13,6 +13,7 @@ import pytest
 from stringcast.core.arm import JointLimitError, motion_window
 from stringcast.core.config import ConfigError
 from stringcast.execute.executor import execute
+from stringcast.core import ExecutorSettings
 from stringcast.execute.ur_rtde import StartPostureError, URMapping, URSettings
 from stringcast.core.files import read_joint_table, write_joint_table, write_json
 
@@ -122,7 +123,7 @@ def _motion(campaign, tmp_path, T=0.4, amp=0.3, q0=(0.6, -0.4, -0.2)):
 
 def _arm_at(campaign, config, q_planar, base=0.3, wrist2=1.2, wrist3=-0.4, **kw):
     held = np.array([base, 0.0, 0.0, 0.0, wrist2, wrist3])
-    m = URSettings.from_config(config, campaign.arm).mapping
+    m = URSettings.from_settings(settings.executor, campaign.arm).mapping
     return FakeArm(m.to_ur(np.asarray(q_planar, float), held), rate=campaign.arm.controller_rate, **kw)
 
 
@@ -132,9 +133,9 @@ def _n_cmd(config, campaign, n_motion):
     return n_motion + round(e["pre_roll_s"] * rate) + round(e["post_roll_s"] * rate)
 
 
-def test_default_mapping_matches_ur_joint_frames(campaign, config):
+def test_default_mapping_matches_ur_joint_frames(campaign, config, settings):
     """UR's upright pose is planar (90, 0, 0) deg; all-zero is the arm flat with the wrist link down."""
-    m = URSettings.from_config(config, campaign.arm).mapping
+    m = URSettings.from_settings(settings.executor, campaign.arm).mapping
     np.testing.assert_allclose(m.to_planar(UPRIGHT), np.radians([90.0, 0.0, 0.0]), atol=1e-12)
     np.testing.assert_allclose(m.to_planar(np.zeros(6)), np.radians([0.0, 0.0, -90.0]), atol=1e-12)
     # lifting the shoulder (negative UR angle) raises the elbow: planar +y
@@ -148,24 +149,24 @@ def test_default_mapping_matches_ur_joint_frames(campaign, config):
     with pytest.raises(ConfigError, match="joint_map"):
         URMapping(np.array([1, 1, 3]), -np.ones(3), np.zeros(3))
     with pytest.raises(ConfigError, match="gain"):
-        URSettings.from_config({"executor": {"ur": {"gain": 5}}}, campaign.arm)
+        URSettings.from_settings(ExecutorSettings.from_mapping({"ur": {"gain": 5}}), campaign.arm)
 
 
-def test_out_of_limit_motion_never_touches_the_arm(tmp_path, campaign, config):
+def test_out_of_limit_motion_never_touches_the_arm(tmp_path, campaign, config, settings):
     motion, t, q = _motion(campaign, tmp_path, T=0.2, amp=1.5)  # far beyond the speed limit
     arm = _arm_at(campaign, config, q[0])
     with pytest.raises(JointLimitError, match="speed"):
-        execute(motion, "ur-rtde", tmp_path / "trial_1", campaign, config, robot_ip="10.0.0.2",
+        execute(motion, "ur-rtde", tmp_path / "trial_1", campaign, settings.executor, config, robot_ip="10.0.0.2",
                 interfaces=factory(arm))
     assert arm.constructed == 0 and arm.calls == []
     assert not (tmp_path / "trial_1").exists()
 
 
-def test_start_posture_too_far_refused_before_servoj(tmp_path, campaign, config):
+def test_start_posture_too_far_refused_before_servoj(tmp_path, campaign, config, settings):
     motion, t, q = _motion(campaign, tmp_path)
     arm = _arm_at(campaign, config, q[0] + np.array([0.0, 0.05, 0.0]))   # 0.05 rad > 0.02 tolerance
     with pytest.raises(StartPostureError, match="--move-to-start"):
-        execute(motion, "ur-rtde", tmp_path / "trial_1", campaign, config, robot_ip="10.0.0.2",
+        execute(motion, "ur-rtde", tmp_path / "trial_1", campaign, settings.executor, config, robot_ip="10.0.0.2",
                 interfaces=factory(arm))
     names = arm.names()
     assert "servoJ" not in names and "moveJ" not in names and "servoStop" not in names
@@ -173,12 +174,12 @@ def test_start_posture_too_far_refused_before_servoj(tmp_path, campaign, config)
     assert not (tmp_path / "trial_1").exists()                # nothing moved, nothing recorded
 
 
-def test_full_play_logs_every_cycle(tmp_path, campaign, config):
+def test_full_play_logs_every_cycle(tmp_path, campaign, config, settings):
     motion, t, q = _motion(campaign, tmp_path)
     arm = _arm_at(campaign, config, q[0] + 0.01, stall_every=97)   # within tolerance; stale packages
     held0 = arm.q[[0, 4, 5]].copy()
     out = tmp_path / "trial_1"
-    info = execute(motion, "ur-rtde", out, campaign, config, robot_ip="10.0.0.2", interfaces=factory(arm))
+    info = execute(motion, "ur-rtde", out, campaign, settings.executor, config, robot_ip="10.0.0.2", interfaces=factory(arm))
     K = _n_cmd(config, campaign, len(t))
     rate = campaign.arm.controller_rate
     n_settle = round(0.2 * rate)   # the default unlogged settle ramp
@@ -192,7 +193,7 @@ def test_full_play_logs_every_cycle(tmp_path, campaign, config):
     assert names.index("servoStop") > max(i for i, n in enumerate(names) if n == "servoJ")
     assert names.index("stopScript") > names.index("servoStop")
     # servoJ arguments: held joints fixed, mapped joints = the command, period and gains from config
-    m = URSettings.from_config(config, campaign.arm).mapping
+    m = URSettings.from_settings(settings.executor, campaign.arm).mapping
     sent = np.array([c[1][0] for c in arm.calls if c[0] == "servoJ"])
     np.testing.assert_allclose(sent[:, [0, 4, 5]], np.repeat(held0[None], n_settle + K, axis=0))
     settle = m.to_planar(sent[:n_settle])   # a smooth ramp from where the arm was onto the start
@@ -220,22 +221,22 @@ def test_full_play_logs_every_cycle(tmp_path, campaign, config):
     assert not (out / "joints.partial.csv").exists()
 
 
-def test_move_to_start(tmp_path, campaign, config):
+def test_move_to_start(tmp_path, campaign, config, settings):
     motion, t, q = _motion(campaign, tmp_path)
     arm = _arm_at(campaign, config, q[0] + np.array([0.2, -0.1, 0.1]))
-    execute(motion, "ur-rtde", tmp_path / "trial_1", campaign, config, robot_ip="ip", move_to_start=True,
+    execute(motion, "ur-rtde", tmp_path / "trial_1", campaign, settings.executor, config, robot_ip="ip", move_to_start=True,
             interfaces=factory(arm))
     names = arm.names()
     assert names.count("moveJ") == 1 and names.index("moveJ") < names.index("servoJ")
     target, speed, _ = next(c[1] for c in arm.calls if c[0] == "moveJ")
-    m = URSettings.from_config(config, campaign.arm).mapping
+    m = URSettings.from_settings(settings.executor, campaign.arm).mapping
     np.testing.assert_allclose(m.to_planar(np.array(target)), q[0], atol=1e-12)
     assert speed <= 0.3
     assert json.loads((tmp_path / "trial_1" / "executor.json").read_text())["moved_to_start"] is True
     # a start posture whose straight joint path to the start leaves the limits: no moveJ
     arm = _arm_at(campaign, config, np.array([campaign.arm.q_min[0] - 0.2, q[0, 1], q[0, 2]]))
     with pytest.raises(StartPostureError, match="pendant"):
-        execute(motion, "ur-rtde", tmp_path / "trial_2", campaign, config, robot_ip="ip", move_to_start=True,
+        execute(motion, "ur-rtde", tmp_path / "trial_2", campaign, settings.executor, config, robot_ip="ip", move_to_start=True,
                 interfaces=factory(arm))
     assert "moveJ" not in arm.names() and "servoJ" not in arm.names() and "stopScript" in arm.names()
 
@@ -243,12 +244,12 @@ def test_move_to_start(tmp_path, campaign, config):
 # call numbers 100 settle cycles + 300 and 1 start check + 300: mid-motion (pre-roll is 150 cycles)
 @pytest.mark.parametrize("where, call, exc", [("servoJ", 400, KeyboardInterrupt()),
                                               ("getActualQ", 301, RuntimeError("RTDE lost"))])
-def test_interrupt_or_error_stops_arm_and_leaves_partial_log(tmp_path, campaign, config, where, call, exc, capsys):
+def test_interrupt_or_error_stops_arm_and_leaves_partial_log(tmp_path, campaign, config, where, call, exc, capsys, settings):
     motion, t, q = _motion(campaign, tmp_path)
     arm = _arm_at(campaign, config, q[0], fail={where: (call, exc)})
     out = tmp_path / "trial_1"
     with pytest.raises(type(exc)):
-        execute(motion, "ur-rtde", out, campaign, config, robot_ip="ip", interfaces=factory(arm))
+        execute(motion, "ur-rtde", out, campaign, settings.executor, config, robot_ip="ip", interfaces=factory(arm))
     names = arm.names()
     i_stop = names.index("servoStop")
     assert names.index("stopScript") > i_stop
@@ -263,27 +264,27 @@ def test_interrupt_or_error_stops_arm_and_leaves_partial_log(tmp_path, campaign,
     assert "joints.partial.csv" in capsys.readouterr().err
     # the trial can be played again into the same folder
     arm2 = _arm_at(campaign, config, q[0])
-    execute(motion, "ur-rtde", out, campaign, config, robot_ip="ip", interfaces=factory(arm2))
+    execute(motion, "ur-rtde", out, campaign, settings.executor, config, robot_ip="ip", interfaces=factory(arm2))
     assert (out / "joints.csv").exists()
 
 
-def test_stop_goes_on_when_servostop_fails(tmp_path, campaign, config):
+def test_stop_goes_on_when_servostop_fails(tmp_path, campaign, config, settings):
     motion, t, q = _motion(campaign, tmp_path)
     arm = _arm_at(campaign, config, q[0], fail={"servoJ": (10, KeyboardInterrupt()),
                                                  "servoStop": (1, RuntimeError("no connection"))})
     with pytest.raises(KeyboardInterrupt):
-        execute(motion, "ur-rtde", tmp_path / "t", campaign, config, robot_ip="ip", interfaces=factory(arm))
+        execute(motion, "ur-rtde", tmp_path / "t", campaign, settings.executor, config, robot_ip="ip", interfaces=factory(arm))
     assert "stopScript" in arm.names()
     doc = json.loads((tmp_path / "t" / "executor.json").read_text())
     assert any("servoStop" in f for f in doc["stop_failures"])
 
 
-def test_missing_ur_rtde_and_dry_run(tmp_path, campaign, config, monkeypatch, capsys):
+def test_missing_ur_rtde_and_dry_run(tmp_path, campaign, config, monkeypatch, capsys, settings):
     motion, t, q = _motion(campaign, tmp_path)
     monkeypatch.setitem(sys.modules, "rtde_control", None)     # import fails as if not installed
     with pytest.raises(ConfigError, match=r"stringcast\[ur\]"):
-        execute(motion, "ur-rtde", tmp_path / "trial_1", campaign, config, robot_ip="10.0.0.2")
-    info = execute(motion, "ur-rtde", tmp_path / "trial_2", campaign, config, dry_run=True)
+        execute(motion, "ur-rtde", tmp_path / "trial_1", campaign, settings.executor, config, robot_ip="10.0.0.2")
+    info = execute(motion, "ur-rtde", tmp_path / "trial_2", campaign, settings.executor, config, dry_run=True)
     out = capsys.readouterr().out
     assert info["dry_run"] and "shoulder" in out and "wrist1" in out
     assert not (tmp_path / "trial_2").exists()

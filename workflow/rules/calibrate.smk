@@ -20,8 +20,8 @@ rule calibrate:
     params:
         cli=CLI,
         calib=calib_arg,
-        setups=config["setups"],
-        board_check=config.get("board_check", {}),
+        settings=stage_settings("calibrate"),
+        lab=campaign_entries,
     shell:
         '{params.cli} calibrate --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '{params.calib} --campaign "{input.campaign}" --out "{output}" > "{log}" 2>&1'

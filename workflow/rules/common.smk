@@ -1,9 +1,20 @@
 # Helpers shared by the rules: paths, input functions, the CLI command.
 # No lambdas in rules: every input function is a named def here.
+import os
 import sys
 from pathlib import Path
 
 from snakemake.exceptions import WorkflowError
+
+from stringcast.cli import stage_sections
+from stringcast.core import (
+    ConfigError,
+    DataError,
+    check_joint_header,
+    load_campaign,
+    load_yaml,
+    settings_from_config,
+)
 
 
 wildcard_constraints:
@@ -12,12 +23,12 @@ wildcard_constraints:
 
 
 # Jobs run the package's `stringcast` command from the environment Snakemake runs in
-# (the project's venv), found by PATH so that the command line (a param, tracked for
-# provenance) does not depend on which interpreter path started Snakemake.
-shell.prefix(f'set -euo pipefail; export PATH="{Path(sys.executable).parent}:$PATH"; ')
-# The jobs read the config Snakemake uses: the Snakefile's configfile, then every
-# --configfile over it (stringcast merges them the same way). --config KEY=VALUE
-# overrides would not reach them, so they are refused.
+# (the project's venv), found by PATH, and read the config files Snakemake read: the
+# Snakefile's configfile, then every --configfile over it (stringcast merges them the same
+# way), named in $STRINGCAST_CONFIG. Neither is part of a rule's command line: a rule's
+# params are the settings its stage reads, so Snakemake reruns a stage when, and only
+# when, one of them changes. --config KEY=VALUE overrides would not reach the jobs, so
+# they are refused.
 if workflow.config_settings.config:
     raise WorkflowError(
         "stringcast: --config KEY=VALUE overrides do not reach the jobs, which read config "
@@ -32,7 +43,43 @@ CONFIG_FILES = [
     ),
     *map(str, workflow.config_settings.configfiles),
 ]
-CLI = "stringcast " + " ".join(f'--config "{f}"' for f in CONFIG_FILES)
+shell.prefix(
+    f'set -euo pipefail; export PATH="{Path(sys.executable).parent}:$PATH"; '
+    f'export STRINGCAST_CONFIG="{os.pathsep.join(map(os.path.abspath, CONFIG_FILES))}"; '
+)
+CLI = "stringcast"
+try:
+    SETTINGS = settings_from_config(config)
+except ConfigError as exc:
+    raise WorkflowError(f"stringcast: {exc}") from exc
+
+
+def stage_settings(command):
+    """The settings of the config sections that `stringcast <command>`'s stage reads (its
+    entry point's settings parameters, stringcast.cli.stage_sections), as plain data: a
+    rule's params, so that a changed setting reruns exactly the stages that read it."""
+    return {s: getattr(SETTINGS, s).as_dict() for s in stage_sections(command)}
+
+
+def campaign_entries(wildcards):
+    """The config's entries this campaign resolves to (its arm, set-up, camera, string and
+    target; inline entries as written): a rule's params, so that editing one of them reruns
+    that campaign's stages and no other campaign's."""
+    doc = load_yaml(Path("data", wildcards.campaign, "campaign.yaml")) or {}
+    out = {}
+    for key, table, fallback in (
+        ("string", "strings", None),
+        ("target", "targets", None),
+        ("arm", "arms", next(iter(config["arms"]))),
+        ("setup", "setups", "default"),
+    ):
+        ref = doc.get(key, fallback)
+        out[key] = ref if isinstance(ref, dict) else config[table].get(str(ref))
+    setup = out["setup"] or {}
+    out["camera"] = config["cameras"].get(str(setup.get("camera")))
+    return out
+
+
 VIDEO_NAMES = ("video.mkv", "video.avi", "video.mp4", "video.cihx", "video")
 
 
@@ -66,9 +113,6 @@ def check_joint_logs(campaign, ks):
     ]
     if not todo:
         return
-    from stringcast.core import ConfigError, load_campaign
-    from stringcast.core import DataError, check_joint_header
-
     try:
         arm = load_campaign(Path("data", campaign, "campaign.yaml"), config).arm
         for path in todo:
@@ -108,7 +152,7 @@ def previous_params(wildcards):
 def earlier_trials(wildcards):
     """The earlier trials fitted together with this one (estimation.joint_trials; 1: none)."""
     k = int(wildcards.trial)
-    n = int(config["estimation"].get("joint_trials", 1))
+    n = SETTINGS.estimation.joint_trials
     first = 1 if n == 0 else max(1, k - n + 1)
     return {
         "earlier_tracks": [

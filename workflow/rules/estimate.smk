@@ -23,8 +23,8 @@ rule estimate:
         cli=CLI,
         prev=prev_arg,
         earlier=earlier_arg,
-        cfg=config["estimation"],
-        model=config["model"],
+        settings=stage_settings("estimate"),
+        lab=campaign_entries,
     shell:
         'NUMBA_NUM_THREADS={threads} {params.cli} estimate --tracks "{input.tracks}" '
         '--joints "{input.joints}" --campaign "{input.campaign}" {params.prev} {params.earlier} '

@@ -17,8 +17,8 @@ rule plan_first:
     threads: 8  # capped at --cores when run locally
     params:
         cli=CLI,
-        cfg=config["motion"],
-        model=config["model"],
+        settings=stage_settings("plan-first"),
+        lab=campaign_entries,
     shell:
         'NUMBA_NUM_THREADS={threads} {params.cli} plan-first --campaign "{input.campaign}" '
         '--out-dir "results/{wildcards.campaign}/first_motion" > "{log}" 2>&1'
@@ -43,7 +43,8 @@ rule plan:
     threads: 8  # capped at --cores when run locally
     params:
         cli=CLI,
-        cfg=config["motion"],
+        settings=stage_settings("plan"),
+        lab=campaign_entries,
     shell:
         'NUMBA_NUM_THREADS={threads} {params.cli} plan --params "{input.params}" --played-motion "{input.played}" '
         '--tracks "{input.tracks}" --joints "{input.joints}" --campaign "{input.campaign}" --seed {wildcards.trial} '

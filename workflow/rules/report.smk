@@ -26,6 +26,8 @@ rule report_trial:
         "../envs/stringcast.yaml"
     params:
         cli=CLI,
+        settings=stage_settings("report-trial"),
+        lab=campaign_entries,
     shell:
         '{params.cli} report-trial --data-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '--results-dir "results/{wildcards.campaign}/trial_{wildcards.trial}" '
@@ -50,6 +52,8 @@ rule report_campaign:
         "../envs/stringcast.yaml"
     params:
         cli=CLI,
+        settings=stage_settings("report-campaign"),
+        lab=campaign_entries,
     shell:
         '{params.cli} report-campaign --data-dir "data/{wildcards.campaign}" '
         '--results-dir "results/{wildcards.campaign}" --campaign "{input.campaign}" '

@@ -19,7 +19,8 @@ rule sync:
         "../envs/stringcast.yaml"
     params:
         cli=CLI,
-        cfg=config.get("sync", {}),
+        settings=stage_settings("sync"),
+        lab=campaign_entries,
     shell:
         '{params.cli} sync --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '--calibration "{input.calibration}" --campaign "{input.campaign}" '

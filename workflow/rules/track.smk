@@ -24,7 +24,8 @@ rule track:
         "../envs/stringcast.yaml"
     params:
         cli=CLI,
-        cfg=config["tracking"],
+        settings=stage_settings("track"),
+        lab=campaign_entries,
     shell:
         '{params.cli} track --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '--calibration "{input.calibration}" --sync "{input.sync}" '

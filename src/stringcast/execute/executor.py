@@ -26,9 +26,8 @@ from typing import Mapping
 
 import numpy as np
 
-from stringcast.core import assert_within_limits
-from stringcast.core import Campaign, ConfigError, load_campaign
-from stringcast.core import DataError, atomic_path, read_joint_table
+from stringcast.core import (Campaign, ConfigError, DataError, ExecutorSettings, assert_within_limits, atomic_path,
+                             load_campaign, read_joint_table)
 from stringcast.lab import run_trial
 from .ur_rtde import UR_JOINTS, URSettings, play_ur
 
@@ -66,9 +65,9 @@ def build_command(q: np.ndarray, rate: float, pre_roll_s: float, post_roll_s: fl
     return np.arange(len(q_cmd)) / rate, q_cmd, pre / rate
 
 
-def execute(motion_csv: Path, backend: str, out_dir: Path, campaign_yaml: Path | Campaign, config: Mapping,
-            seed: int = 0, dry_run: bool = False, robot_ip: str | None = None, move_to_start: bool = False,
-            interfaces=None) -> dict:
+def execute(motion_csv: Path, backend: str, out_dir: Path, campaign_yaml: Path | Campaign,
+            executor: ExecutorSettings, config: Mapping, seed: int = 0, dry_run: bool = False,
+            robot_ip: str | None = None, move_to_start: bool = False, interfaces=None) -> dict:
     """Check a motion file, play it on ``backend`` and record the trial into ``out_dir``.
 
     Args:
@@ -77,6 +76,9 @@ def execute(motion_csv: Path, backend: str, out_dir: Path, campaign_yaml: Path |
         backend: ``"virtual"`` or ``"ur-rtde"``.
         out_dir: the trial folder to create (``data/<campaign>/trial_<k>``).
         campaign_yaml: ``campaign.yaml`` (or an already resolved :class:`Campaign`).
+        executor: pre- and post-roll, the UR backend's settings (:class:`~stringcast.core.ExecutorSettings`).
+        config: the merged config: its lab tables resolve ``campaign.yaml``, and the virtual
+            lab reads its world (``lab``) from it.
         dry_run: check and describe the command, move nothing, write nothing.
         robot_ip, move_to_start, interfaces: ``ur-rtde`` only (see
             :func:`stringcast.execute.ur_rtde.play_ur`; ``interfaces`` replaces ur_rtde in tests).
@@ -100,12 +102,11 @@ def execute(motion_csv: Path, backend: str, out_dir: Path, campaign_yaml: Path |
     assert_within_limits(arm, q, 1.0 / arm.controller_rate, source=str(motion_csv))
     if (out_dir / "joints.csv").exists():
         raise DataError(f"{out_dir}: already holds a joints.csv; refusing to overwrite a recorded trial")
-    ecfg = config.get("executor", {})
-    t_cmd, q_cmd, t_move = build_command(q, arm.controller_rate, float(ecfg.get("pre_roll_s", 0.3)),
-                                         float(ecfg.get("post_roll_s", 0.6)))
+    t_cmd, q_cmd, t_move = build_command(q, arm.controller_rate, executor.pre_roll_s, executor.post_roll_s)
     where = ""
     if backend == "ur-rtde":
-        m = URSettings.from_config(config, arm).mapping  # bad settings fail before anything connects
+        ur = URSettings.from_settings(executor, arm)  # bad settings fail before anything connects
+        m = ur.mapping
         if not robot_ip and not dry_run:
             raise ConfigError("executor: the ur-rtde backend needs the arm's address (--robot-ip)")
         q0 = m.to_ur(q[0], np.zeros(6))
@@ -118,7 +119,7 @@ def execute(motion_csv: Path, backend: str, out_dir: Path, campaign_yaml: Path |
               f"{len(t_cmd)} samples ({t_cmd[-1]:.3f} s, motion from {t_move:.3f} s) on {backend}{where} into {out_dir}")
         return info
     if backend == "ur-rtde":
-        result = play_ur(t_cmd, q_cmd, arm, config, out_dir, robot_ip, move_to_start, interfaces)
+        result = play_ur(t_cmd, q_cmd, arm, ur, out_dir, robot_ip, move_to_start, interfaces)
     else:
         out_dir.mkdir(parents=True, exist_ok=True)
         result = run_trial(t_cmd, q_cmd, campaign, config, out_dir, seed, t_move)

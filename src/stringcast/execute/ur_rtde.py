@@ -52,7 +52,7 @@ from typing import Any
 import numpy as np
 
 from stringcast.core import JointLimitError, check_limits
-from stringcast.core import ArmSpec, ConfigError
+from stringcast.core import ArmSpec, ConfigError, ExecutorSettings
 from stringcast.core import write_joint_table, write_json
 
 UR_JOINTS = ("base", "shoulder", "elbow", "wrist1", "wrist2", "wrist3")
@@ -125,26 +125,30 @@ class URSettings:
                               "and ur.move_to_start_acceleration_rad_s2 in (0, 2]")
 
     @classmethod
-    def from_config(cls, config: Mapping, arm: ArmSpec) -> URSettings:
-        """Read ``executor.ur`` (defaults above; mapping defaults for a 3-joint arm on a UR5e).
+    def from_settings(cls, executor: ExecutorSettings, arm: ArmSpec) -> URSettings:
+        """Read ``executor.ur`` and ``executor.start_tolerance_rad`` for ``arm``.
+
+        The default mapping (joint_map (1, 2, 3), sign -1, offsets (0, 0, -90) deg: a UR5e's
+        shoulder-lift, elbow and wrist-1) is cut to an arm of fewer joints, the last offset kept
+        at -90 deg.
 
         Raises:
             ConfigError: wrong lengths, out-of-range values.
         """
-        ecfg = config.get("executor", {}) or {}
-        u = ecfg.get("ur", {}) or {}
+        u, default = executor.ur, ExecutorSettings().ur
         j = arm.n_joints
+        fitted = {"joint_map": [1, 2, 3][:j], "sign": [-1.0] * j, "offset_deg": ([0.0] * j)[:-1] + [-90.0]}
+        pick = {k: (fitted[k] if tuple(u[k]) == tuple(default[k]) else u[k]) for k in fitted}
         try:
-            mapping = URMapping(np.asarray(u.get("joint_map", [1, 2, 3][:j]), dtype=int),
-                                np.asarray(u.get("sign", [-1.0] * j), float),
-                                np.radians(np.asarray(u.get("offset_deg", ([0.0] * j)[:-1] + [-90.0]), float)))
+            mapping = URMapping(np.asarray(pick["joint_map"], dtype=int), np.asarray(pick["sign"], float),
+                                np.radians(np.asarray(pick["offset_deg"], float)))
             if len(mapping.joint_map) != j:
                 raise ConfigError(f"executor.ur.joint_map has {len(mapping.joint_map)} entries, arm {arm.name} has {j} joints")
-            return cls(mapping, float(u.get("lookahead_time_s", 0.1)), float(u.get("gain", 300.0)),
-                       float(u.get("servo_speed_rad_s", 0.5)), float(u.get("servo_acceleration_rad_s2", 0.5)),
-                       float(ecfg.get("start_tolerance_rad", 0.02)), float(u.get("move_to_start_speed_rad_s", 0.3)),
-                       float(u.get("move_to_start_acceleration_rad_s2", 0.5)), float(u.get("settle_s", 0.2)))
-        except (TypeError, ValueError) as exc:
+            return cls(mapping, float(u["lookahead_time_s"]), float(u["gain"]),
+                       float(u["servo_speed_rad_s"]), float(u["servo_acceleration_rad_s2"]),
+                       float(executor.start_tolerance_rad), float(u["move_to_start_speed_rad_s"]),
+                       float(u["move_to_start_acceleration_rad_s2"]), float(u["settle_s"]))
+        except (TypeError, ValueError, KeyError) as exc:
             raise ConfigError(f"executor.ur: {exc}") from exc
 
 
@@ -235,7 +239,7 @@ def _write_log(out_dir: Path, arm: ArmSpec, settings: URSettings, stamps: np.nda
     return path
 
 
-def play_ur(t_cmd: np.ndarray, q_cmd: np.ndarray, arm: ArmSpec, config: Mapping, out_dir: Path, robot_ip: str,
+def play_ur(t_cmd: np.ndarray, q_cmd: np.ndarray, arm: ArmSpec, settings: URSettings, out_dir: Path, robot_ip: str,
             move_to_start: bool = False, interfaces: Interfaces | None = None) -> dict:
     """Play a command stream on a UR arm with servoJ and log the measured joints.
 
@@ -243,7 +247,7 @@ def play_ur(t_cmd: np.ndarray, q_cmd: np.ndarray, arm: ArmSpec, config: Mapping,
         t_cmd: (K,) s from 0 at the controller period (pre-roll, motion, post-roll).
         q_cmd: (K, J) planar joint angles, rad (already checked against the arm's limits).
         arm: the planar arm (its ``controller_rate`` is the servo rate, 500 Hz on e-Series).
-        config: the loaded config (``executor``, ``executor.ur``).
+        settings: the backend's settings (:meth:`URSettings.from_settings`).
         out_dir: the trial folder: ``joints.csv`` (or ``joints.partial.csv``) and ``executor.json``.
         robot_ip: the controller's address.
         move_to_start: moveJ (slowly) to the start posture if the arm is not within
@@ -260,7 +264,6 @@ def play_ur(t_cmd: np.ndarray, q_cmd: np.ndarray, arm: ArmSpec, config: Mapping,
         KeyboardInterrupt: Ctrl-C; the arm was stopped and the partial log written.
     """
     t_cmd, q_cmd, out_dir = np.asarray(t_cmd, float), np.asarray(q_cmd, float), Path(out_dir)
-    settings = URSettings.from_config(config, arm)
     rate = float(arm.controller_rate)
     control, receive = (interfaces or rtde_interfaces)(robot_ip, rate)
     meta: dict = {"backend": "ur-rtde", "robot_ip": robot_ip, "partial": True, "reason": None,
