@@ -23,16 +23,14 @@ from typing import Mapping
 
 import cv2
 import numpy as np
-import pandas as pd
 
-from stringcast.core import forward_kinematics
-from stringcast.core import Campaign, ConfigError
-from stringcast.core import DataError, atomic_path, write_json, write_joint_table, write_parquet, write_yaml
+from stringcast.core import Campaign, ConfigError, DataError, atomic_path, write_json, write_joint_table, write_yaml
 from .camera import CameraModel, IdealCanvas, Sensor, camera_settings
 from .mjcf import StringPhysics
 from .physics import simulate
 from .scene import (FrameRenderer, StringLook, gain_map, render_background, supersample_homography,
                     warp_board)
+from .truth import physics_truth, verdict, write_points
 
 TRIGGER_DELAY_S = (0.02, 0.08)
 
@@ -184,13 +182,8 @@ def run_trial(t_cmd: np.ndarray, q_cmd: np.ndarray, campaign: Campaign, config: 
     wall0 = time.perf_counter()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    t_cmd = np.asarray(t_cmd, float)
-    q_cmd = np.asarray(q_cmd, float)
     arm = campaign.arm
-    if t_cmd.ndim != 1 or len(t_cmd) < 2 or np.any(np.diff(t_cmd) <= 0):
-        raise ValueError("run_trial: t_cmd must be (K,) strictly increasing, K >= 2")
-    if q_cmd.shape != (len(t_cmd), arm.n_joints):
-        raise ValueError(f"run_trial: q_cmd must be ({len(t_cmd)}, {arm.n_joints}), got {q_cmd.shape}")
+    t_cmd, q_cmd = _checked_command(t_cmd, q_cmd, arm.n_joints)
     lab = _lab(config)
     ss = np.random.SeedSequence(int(seed))
     rng_trig, rng_joint, rng_noise = (np.random.default_rng(s) for s in ss.spawn(3))
@@ -215,23 +208,85 @@ def run_trial(t_cmd: np.ndarray, q_cmd: np.ndarray, campaign: Campaign, config: 
     renderer = build_renderer(campaign, config, phys)
     cam = renderer.cam
     fps = _fps(campaign)
+    exposure, t_trigger, t_trigger_written, n_frames = _frame_clock(settings, fps, float(rec.t[-1]), lab, rng_trig)
+    n = campaign.string.n_points
+    gt_rows, size_mb = _film(out_dir / "video.mkv", renderer, rec, t_trigger, n_frames, exposure, fps, n, lpp)
+    wall_render = time.perf_counter() - wall1
+
+    write_yaml(out_dir / "video.yaml", {
+        "file": "video.mkv", "fps": fps, "frames": n_frames, "trigger_time_s": round(t_trigger_written, 9),
+        "width_px": cam.width, "height_px": cam.height, "bit_depth": 8})
+    write_points(out_dir / "ground_truth.parquet", gt_rows)
+
+    # -- verdict -------------------------------------------------------------------
+    truth = {
+        **verdict(rec, campaign, config, motion_start_s, motion_end(t_cmd, q_cmd)),
+        "trigger_time_s": t_trigger,
+        "trigger_time_written_s": t_trigger_written,
+        "exposure_s": exposure,
+        "fps": fps,
+        "frames": n_frames,
+        "n_points": n,
+        "camera": cam.truth(),
+        **physics_truth(rec, phys),
+        "video_mb": size_mb,
+        "video_mb_per_frame": size_mb / n_frames,
+        "wall_s": {"physics": wall_physics, "render": wall_render, "total": time.perf_counter() - wall0},
+        "seed": int(seed),
+    }
+    write_json(out_dir / "ground_truth.json", truth)
+    return truth
+
+
+def _checked_command(t_cmd: np.ndarray, q_cmd: np.ndarray, n_joints: int) -> tuple[np.ndarray, np.ndarray]:
+    """t_cmd (K,) s and q_cmd (K, J) rad as float arrays, checked.
+
+    Raises:
+        ValueError: t_cmd not (K,) strictly increasing with K >= 2, or q_cmd not (K, n_joints).
+    """
+    t_cmd = np.asarray(t_cmd, float)
+    q_cmd = np.asarray(q_cmd, float)
+    if t_cmd.ndim != 1 or len(t_cmd) < 2 or np.any(np.diff(t_cmd) <= 0):
+        raise ValueError("run_trial: t_cmd must be (K,) strictly increasing, K >= 2")
+    if q_cmd.shape != (len(t_cmd), n_joints):
+        raise ValueError(f"run_trial: q_cmd must be ({len(t_cmd)}, {n_joints}), got {q_cmd.shape}")
+    return t_cmd, q_cmd
+
+
+def _frame_clock(settings: Mapping, fps: float, t_end: float, lab: dict,
+                 rng_trig: np.random.Generator) -> tuple[float, float, float, int]:
+    """The camera's clock: exposure s, the true trigger time s (U(TRIGGER_DELAY_S), frame 0's
+    exposure centre), the trigger time video.yaml states (off by U(+-lab.trigger_error_s)) and the
+    number of whole exposures before the log ends at ``t_end`` s. Two draws from ``rng_trig``.
+
+    Raises:
+        ConfigError: an exposure not within (0, 1/fps). ValueError: a log shorter than the trigger delay.
+    """
     exposure = float(settings["exposure_s"])
     if not 0 < exposure < 1 / fps:
         raise ConfigError(f"lab.camera.exposure_s = {exposure} must be within (0, 1/fps = {1 / fps:.6g})")
     t_trigger = float(rng_trig.uniform(*TRIGGER_DELAY_S))
-    t_end = float(rec.t[-1])
     n_frames = int(math.floor((t_end - exposure / 2 - t_trigger) * fps + 1e-9)) + 1
     if n_frames < 1:
         raise ValueError(f"run_trial: the log ({t_end:.3f} s) is shorter than the camera's trigger delay")
     trigger_error = float(lab.get("trigger_error_s", 0.002))
     t_trigger_written = t_trigger + float(rng_trig.uniform(-trigger_error, trigger_error))
-    t_frames = t_trigger + np.arange(n_frames) / fps
+    return exposure, t_trigger, t_trigger_written, n_frames
 
+
+def _film(path: Path, renderer: FrameRenderer, rec, t_trigger: float, n_frames: int, exposure: float, fps: float,
+          n: int, lpp: int) -> tuple[list, float]:
+    """Render and write the video (FFV1) of the simulation ``rec``: n_frames exposures centred on
+    t_trigger + k / fps, s.
+
+    Returns the ground-truth rows (per frame: frame, t_s, point, x_m, y_m, each (n + 1,): the string's
+    n + 1 points, every ``lpp``-th link end, at the exposure centre) and the video's size, MB.
+    """
+    t_frames = t_trigger + np.arange(n_frames) / fps
     gt_rows = []
-    n = campaign.string.n_points
     from tqdm import tqdm
 
-    with atomic_path(out_dir / "video.mkv") as tmp, FFV1Writer(tmp, fps, cam.width, cam.height) as writer:
+    with atomic_path(path) as tmp, FFV1Writer(tmp, fps, renderer.cam.width, renderer.cam.height) as writer:
         for k, tc in enumerate(tqdm(t_frames, desc="lab frames", unit="frame", disable=None, leave=False)):
             m = renderer.n_sub(rec.at(np.array([tc - exposure / 2, tc + exposure / 2])))
             sub_t = tc + exposure * ((np.arange(m) + 0.5) / m - 0.5)
@@ -240,64 +295,7 @@ def run_trial(t_cmd: np.ndarray, q_cmd: np.ndarray, campaign: Campaign, config: 
             gt_rows.append((np.full(n + 1, k), np.full(n + 1, tc), np.arange(n + 1), pts[:, 0], pts[:, 1]))
         writer.close()
         size_mb = tmp.stat().st_size / 1e6
-    wall_render = time.perf_counter() - wall1
-
-    write_yaml(out_dir / "video.yaml", {
-        "file": "video.mkv", "fps": fps, "frames": n_frames, "trigger_time_s": round(t_trigger_written, 9),
-        "width_px": cam.width, "height_px": cam.height, "bit_depth": 8})
-    cols = [np.concatenate(c) for c in zip(*gt_rows)]
-    gt = pd.DataFrame({"frame": cols[0].astype(np.int64), "t_s": cols[1], "point": cols[2].astype(np.int64),
-                       "x_m": cols[3], "y_m": cols[4]})
-    write_parquet(out_dir / "ground_truth.parquet", gt)
-
-    # -- verdict -------------------------------------------------------------------
-    t_motion_end = motion_end(t_cmd, q_cmd)
-    flight = float((config.get("motion", {}) or {}).get("flight_window_s", 0.5))
-    w0, w1 = float(motion_start_s), min(t_motion_end + flight, t_end)
-    sel = (rec.t >= w0 - 1e-12) & (rec.t <= w1 + 1e-12)
-    if not sel.any():
-        sel = rec.t >= rec.t[-1]
-    tip = rec.points[sel, -1]
-    d = np.linalg.norm(tip - campaign.target.xy, axis=1)
-    i_best = int(np.argmin(d))
-    arm_pts = forward_kinematics(arm, rec.q_arm[sel][::20])
-    min_y = float(min(rec.points[sel, :, 1].min(), arm_pts[:, 1:, 1].min()))
-    clearance = min_y - arm.floor_y
-    closest = float(d[i_best])
-    hit = bool(closest <= campaign.target.radius and clearance >= 0)
-    length = np.linalg.norm(np.diff(rec.points[:, :, :], axis=1), axis=2).sum(axis=1)
-
-    truth = {
-        "hit": hit,
-        "closest_approach_mm": closest * 1000,
-        "closest_approach_t_s": float(rec.t[sel][i_best]),
-        "target_mm": [campaign.target.x * 1000, campaign.target.y * 1000, campaign.target.radius * 1000],
-        "hit_window_s": [w0, w1],
-        "motion_start_s": float(motion_start_s),
-        "motion_end_s": t_motion_end,
-        "floor_clearance_mm": clearance * 1000,
-        "trigger_time_s": t_trigger,
-        "trigger_time_written_s": t_trigger_written,
-        "exposure_s": exposure,
-        "fps": fps,
-        "frames": n_frames,
-        "n_points": n,
-        "camera": cam.truth(),
-        "string_physics": {
-            "length_m": phys.length, "n_links": phys.n_links, "mass_kg": phys.mass,
-            "density_kg_m": phys.density, "diameter_m": phys.diameter, "bending_EI": phys.bending_EI,
-            "bending_damping": phys.bending_damping, "grasp_stiffness": phys.grasp_stiffness,
-            "grasp_damping": phys.grasp_damping, "weights": phys.weights, "pipes": phys.pipes},
-        "length_error_max": float(np.max(np.abs(length - phys.length)) / phys.length),
-        "settle_speed_m_s": rec.settle_speed,
-        "mujoco_steps_per_s": rec.steps_per_s,
-        "video_mb": size_mb,
-        "video_mb_per_frame": size_mb / n_frames,
-        "wall_s": {"physics": wall_physics, "render": wall_render, "total": time.perf_counter() - wall0},
-        "seed": int(seed),
-    }
-    write_json(out_dir / "ground_truth.json", truth)
-    return truth
+    return gt_rows, size_mb
 
 
 def _board_pose(rng: np.random.Generator, cam: CameraModel, board_size: np.ndarray, uv: np.ndarray,
