@@ -195,6 +195,20 @@ def cmd_campaign(args):
                  root=Path(args.root))
 
 
+def cmd_settings(args):
+    import yaml
+
+    from stringcast.core import SECTION_CLASSES, settings_from_config
+    from stringcast.core.settings import markdown_table
+
+    if args.markdown:
+        print(markdown_table())
+        return
+    s = settings_from_config(_config(args))
+    doc = {c.SECTION: getattr(s, c.SECTION).as_dict() for c in SECTION_CLASSES}
+    print(yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=110), end="")
+
+
 class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
     """Shows each option's default after its help, except where it has none (required, or None)."""
 
@@ -313,13 +327,16 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--method", choices=list(METHOD_CONFIGS), default="paper",
                     help="paper: the config as given (config/config.yaml: the paper's method); ours: "
                          "config/ours.yaml merged over it, after any --config")
+
+    sp = add("settings", cmd_settings, "print the settings the stages would run with (the merged config over "
+                                       "the defaults), as YAML")
+    sp.add_argument("--markdown", action="store_true",
+                    help="print every setting's default and meaning as Markdown tables instead (config/README.md)")
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
-    from stringcast.core import JointLimitError
-    from stringcast.core import ConfigError
-    from stringcast.core import DataError
+    from stringcast.core import ConfigError, DataError, JointLimitError
 
     args = build_parser().parse_args(argv)
     try:

@@ -37,8 +37,8 @@ def small_config(config: dict) -> dict:
     cfg["setups"]["default"].update(camera="small", board_origin_mm=[700.0, -250.0], board={
         "squares_x": 6, "squares_y": 4, "square_mm": 100.0, "marker_mm": 75.0, "dictionary": "DICT_4X4_50"})
     cfg["lab"]["camera"]["focal_px"] = 695.0
-    cfg["estimation"].update(iterations=256, batch=64)
-    cfg["motion"].update(max_candidates=4096, extra_after_hit=64)
+    cfg.setdefault("estimation", {}).update(iterations=256, batch=64)
+    cfg.setdefault("motion", {}).update(max_candidates=4096, extra_after_hit=64)
     return cfg
 
 
@@ -78,16 +78,22 @@ def test_tracking_error_against_truth(tmp_path):
         tracking_error_mm(tmp_path / "tracks.parquet", tmp_path / "bad.parquet")
 
 
-@pytest.mark.slow
-def test_campaign_end_to_end(tmp_path, config):
-    root = tmp_path / "project"
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory, config):
+    """A campaign run to its end (at most 2 executions) in a tmp project: (root, summary)."""
+    root = tmp_path_factory.mktemp("e2e") / "project"
     (root / "config").mkdir(parents=True)
     (root / "Snakefile").symlink_to(ROOT / "Snakefile")
     (root / "workflow").symlink_to(ROOT / "workflow")
     (root / "config" / "config.yaml").write_text(yaml.safe_dump(small_config(config)))
-
     summary = run_campaign("e2e", "1", "1", config_path=str(root / "config" / "config.yaml"),
                            max_executions=2, cores=2, seed=3, root=root)
+    return root, summary
+
+
+@pytest.mark.slow
+def test_campaign_end_to_end(tmp_path, finished):
+    root, summary = finished
     k = summary["executions"]
     assert 1 <= k <= 2
     res = root / "results" / "e2e"
@@ -152,3 +158,52 @@ def test_campaign_end_to_end(tmp_path, config):
     assert again["E_mm"] == pytest.approx(params["E_mm"], rel=1e-9)
     # raw data under data/ were never written by the workflow
     assert snapshot(root / "data") == before_data
+
+
+def _edit_config(root: Path, section: str, key: str, value) -> dict:
+    """Set ``section.key`` in the project's config/config.yaml; returns the file's old content."""
+    path = root / "config" / "config.yaml"
+    old = yaml.safe_load(path.read_text())
+    new = copy.deepcopy(old)
+    new.setdefault(section, {})[key] = value
+    path.write_text(yaml.safe_dump(new))
+    return old
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("section, key, value, reruns, spared", [
+    ("evaluation", "w", 0.5, {"estimate", "plan", "report_trial", "report_campaign"},
+     {"calibrate", "sync", "track", "plan_first"}),
+    ("tracking", "rest_frames", 30, {"track", "estimate", "plan", "report_trial", "report_campaign"},
+     {"calibrate", "sync", "plan_first"}),
+])
+def test_a_changed_setting_reruns_exactly_what_reads_it(finished, section, key, value, reruns, spared):
+    """Snakemake compares the settings each stage reads (its rule's params): a changed setting
+    reruns the stages that read it and what follows them, and nothing upstream."""
+    root, _ = finished
+    assert "Nothing to be done" in snakemake(root, "-n")
+    old = _edit_config(root, section, key, value)
+    try:
+        out = snakemake(root, "-n")
+        assert planned_rules(out) == reruns, out
+        assert not planned_rules(out) & spared
+        assert "params" in out.lower()   # the reason Snakemake gives is the changed params
+    finally:
+        (root / "config" / "config.yaml").write_text(yaml.safe_dump(old))
+    assert "Nothing to be done" in snakemake(root, "-n")
+
+
+@pytest.mark.slow
+def test_a_configfile_that_changes_nothing_a_stage_reads_reruns_nothing(finished):
+    """A --configfile that restates a default and changes only the virtual lab (which no stage
+    reads) leaves every result as it is; one that changes a setting reruns."""
+    root, _ = finished
+    noop = root / "config" / "noop.yaml"
+    noop.write_text(yaml.safe_dump({"evaluation": {"w": 0.1}, "estimation": {"optimizer": "random_search"},
+                                    "lab": {"scene_seed": 12}}))
+    out = snakemake(root, "-n", "--configfile", str(noop))
+    assert "Nothing to be done" in out or not planned_rules(out), out
+    some = root / "config" / "some.yaml"
+    some.write_text(yaml.safe_dump({"motion": {"flight_window_s": 0.6}}))
+    rules = planned_rules(snakemake(root, "-n", "--configfile", str(some)))
+    assert {"plan", "plan_first"} <= rules and not rules & {"calibrate", "sync", "track"}

@@ -328,24 +328,41 @@ def settings_from_config(config: Mapping | None) -> Settings:
     return Settings(**{c.SECTION: c.from_mapping(config.get(c.SECTION)) for c in SECTION_CLASSES})
 
 
+def _settings_parameters(func) -> dict[str, type]:
+    """``{parameter: class}`` for ``func``'s parameters annotated with a settings class or
+    :class:`Settings` (a stage that takes every section, as the reports' provenance does)."""
+    hints = typing.get_type_hints(func)
+    known = (*SECTION_CLASSES, Settings)
+    return {name: h for name, h in hints.items() if name in inspect.signature(func).parameters and h in known}
+
+
 def sections_read(func) -> tuple[str, ...]:
     """The config sections a stage reads: those of the settings classes among ``func``'s
-    parameter annotations (in :data:`SECTION_CLASSES` order).
+    parameter annotations (in :data:`SECTION_CLASSES` order; every section for a parameter
+    annotated :class:`Settings`).
 
     ``stringcast.cli`` hands each stage exactly these, and the workflow makes them the rule's
     params, so Snakemake reruns the rule when one of them changes and only then.
     """
-    hints = typing.get_type_hints(func)
-    types = {h for name, h in hints.items() if name != "return"}
-    return tuple(c.SECTION for c in SECTION_CLASSES if c in types)
+    types = set(_settings_parameters(func).values())
+    return tuple(c.SECTION for c in SECTION_CLASSES if c in types or Settings in types)
 
 
 def stage_kwargs(func, settings: Settings) -> dict:
-    """The keyword arguments ``{parameter: section settings}`` that ``func`` takes from ``settings``."""
-    hints = typing.get_type_hints(func)
-    by_type = {c: c.SECTION for c in SECTION_CLASSES}
-    return {name: getattr(settings, by_type[h]) for name, h in hints.items()
-            if name != "return" and h in by_type and name in inspect.signature(func).parameters}
+    """The keyword arguments ``{parameter: settings}`` that ``func`` takes from ``settings``:
+    each section's object by its class, and ``settings`` itself for a :class:`Settings` one."""
+    return {name: settings if h is Settings else getattr(settings, h.SECTION)
+            for name, h in _settings_parameters(func).items()}
+
+
+def settings_digest(settings: Settings) -> str:
+    """SHA-256 (first 12 hex digits) of every section's settings as canonical JSON: two
+    configs that give the same settings give the same digest, whatever their files say."""
+    import hashlib
+    import json
+
+    doc = {s: getattr(settings, s).as_dict() for s in (c.SECTION for c in SECTION_CLASSES)}
+    return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:12]
 
 
 def markdown_table() -> str:
@@ -354,11 +371,12 @@ def markdown_table() -> str:
 
     out = []
     for c in SECTION_CLASSES:
-        out += [f"### `{c.SECTION}`", "", (c.__doc__ or "").strip().split("\n")[0], "",
+        summary = (c.__doc__ or "").strip().split("\n")[0].removeprefix(f"``{c.SECTION}``: ")
+        out += [f"### `{c.SECTION}`", "", summary[:1].upper() + summary[1:], "",
                 "| setting | default | meaning |", "| --- | --- | --- |"]
         for f in dataclasses.fields(c):
             value = getattr(c(), f.name)
-            text = yaml.safe_dump(_plain(value), default_flow_style=True, width=1000).strip()
+            text = yaml.safe_dump(_plain(value), default_flow_style=True, width=1000, sort_keys=False).strip()
             text = text.removesuffix("\n...").removesuffix("...").strip()
             out.append(f"| `{f.name}` | `{text}` | {f.metadata.get('help', '')} |")
         out.append("")
