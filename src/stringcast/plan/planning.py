@@ -68,7 +68,8 @@ import numpy as np
 from stringcast.core import PARAM_NAMES, Campaign, ConfigError
 from stringcast.core import read_json, write_joint_table, write_json
 from stringcast.model import ensemble_parameters, first_parameters, planned_parameters, prior_ensemble
-from .motion import Motion, read_motion_json, sample_control_points, sample_postures, start_box, time_grid, valid_curves
+from .motion import Motion, read_motion_json, time_grid
+from .search import draw_candidates, keep_best, residual_correction, start_postures
 from .prediction import Predictor
 from stringcast.core import TRACK_COLUMNS, read_joint_table, read_parquet
 from .residual import observed_miss, observed_tip
@@ -133,47 +134,21 @@ def search(campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarr
     t_lo, t_hi = (float(x) for x in mcfg.get("T_range_s", [0.2, 1.2]))
     n_cp, alpha = int(mcfg.get("n_control_points", 6)), float(mcfg.get("alpha_max_rad_s2", 40.0))
     perturb = float(mcfg.get("perturb_rad_s", 0.5))
-    if previous is not None:
-        if previous.control_points.shape[1] < 1:
-            raise ValueError("search: the previous motion has no control points to perturb")
-        postures = previous.q0[None]
-        fixed_T = previous.T
-    else:
-        margin = float(mcfg.get("floor_margin_m", 0.05))
-        postures = sample_postures(campaign, rng, int(mcfg.get("posture_pool", 32)), margin, box=start_box(config),
-                                   clearance=float(mcfg.get("hang_clearance_mm", 0.0)) / 1000)
+    postures = start_postures(campaign, config, mcfg, rng, previous)
     equilibria: dict[int, np.ndarray] = {}
     member_eq: dict[int, np.ndarray] = {}    # posture -> (K, n, 2), robust planner
     screen = float(mcfg.get("robust_screen_mm", 20.0)) / 1000
     radius = campaign.target.radius
-    why_not = ""
-    if observed is not None and previous is not None:
-        equilibria[0] = pl.equilibrium(previous.q0)
-        sets_c, sets_mu, eq = coeffs[None], mu[None], equilibria[0][None]
-        if ensemble is not None:
-            member_eq[0] = np.stack([pl.equilibrium(previous.q0, c, m) for c, m in zip(*ensemble)])
-            sets_c, sets_mu, eq = (np.concatenate(a) for a in ((sets_c, ensemble[0]), (sets_mu, ensemble[1]),
-                                                               (eq, member_eq[0])))
-        why_not = pl.set_residual(previous, observed, eq, sets_c, sets_mu)
+    why_not = residual_correction(pl, previous, observed, coeffs, mu, ensemble, equilibria, member_eq)
     best, best_key, tried, first_hit, fails = None, None, 0, None, 0
     bar = tqdm(total=max_cand, desc="plan", unit="cand", disable=None)
     while tried < max_cand and (first_hit is None or tried < first_hit + extra):
         if previous is not None:
-            T = fixed_T
+            T = previous.T
         else:
             T = time_grid(rng.uniform(t_lo, t_hi), pl.rate)[1]
         want = min(batch, max_cand - tried)
-        cands = []
-        for _ in range(50):
-            if previous is not None:
-                cps = previous.control_points[None] + rng.uniform(-perturb, perturb, (4 * want,) + previous.control_points.shape)
-                cps[..., -1] = previous.control_points[:, -1]
-            else:
-                cps = sample_control_points(rng, T, arm.n_joints, n_cp, alpha, 4 * want)
-            cands += valid_curves(arm, cps, T, pl.rate, postures, rng)
-            if len(cands) >= want:
-                break
-        cands = cands[:want]
+        cands = draw_candidates(arm, pl.rate, rng, T, want, postures, previous, perturb, n_cp, alpha)
         if not cands:
             fails += 1
             if fails >= 20 or previous is not None:
@@ -182,27 +157,41 @@ def search(campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarr
                                   "check motion.alpha_max_rad_s2, T_range_s and the arm limits")
             continue
         fails = 0
-        for _, _, _, i in cands:
-            if i not in equilibria:
-                equilibria[i] = pl.equilibrium(postures[i])
-        q = np.stack([c[2] for c in cands])
-        p_init = np.stack([equilibria[c[3]] for c in cands])
-        d, tm, my, ok = pl.evaluate(q, T, p_init)
-        hit = ok & (d <= radius) & (my >= arm.floor_y)
-        scores = _ensemble_scores(pl, cands, q, T, ok & (my >= arm.floor_y) & (d <= radius + screen), ensemble,
-                                  postures, member_eq) if ensemble is not None else {}
-        for b, c in enumerate(cands):
-            share, margin, d_k = scores.get(b, (0.0, -np.inf, None))
-            key = (-share, -margin if share > 0 else np.inf, not hit[b], not (ok[b] and my[b] >= arm.floor_y), not ok[b],
-                   d[b] if np.isfinite(d[b]) else np.inf)
-            if best_key is None or key < best_key:
-                best_key = key
-                best = (c, T, bool(hit[b]), float(d[b]), float(tm[b]), float(my[b]), share, margin, d_k)
+        d, tm, my, ok, hit, scores = _score_batch(pl, cands, T, postures, equilibria, member_eq, ensemble, radius,
+                                                  arm.floor_y, screen)
+        best, best_key = keep_best(cands, T, d, tm, my, ok, hit, scores, arm.floor_y, best, best_key)
         tried += len(cands)
         bar.update(len(cands))
         if first_hit is None and any(hit[b] and scores.get(b, (0.0,))[0] >= min_share for b in range(len(cands))):
             first_hit = tried
     bar.close()
+    return _plan_result(pl, best, tried, radius, ensemble, why_not, equilibria)
+
+
+def _score_batch(pl: Predictor, cands: list, T: float, postures: np.ndarray, equilibria: dict, member_eq: dict,
+                 ensemble: tuple[np.ndarray, np.ndarray] | None, radius: float, floor_y: float,
+                 screen: float) -> tuple:
+    """One batch's candidates cands (B,) of T s under the planning set, each from its posture's hanging
+    equilibrium (added to ``equilibria`` when new): closest approach d (B,) m at tm (B,) s, lowest point
+    my (B,) m, valid ok (B,), hit (B,), and with an ``ensemble`` the scores of those valid, above the
+    floor and within ``screen`` m of the target's edge (:func:`_ensemble_scores`; else {})."""
+    for _, _, _, i in cands:
+        if i not in equilibria:
+            equilibria[i] = pl.equilibrium(postures[i])
+    q = np.stack([c[2] for c in cands])
+    p_init = np.stack([equilibria[c[3]] for c in cands])
+    d, tm, my, ok = pl.evaluate(q, T, p_init)
+    hit = ok & (d <= radius) & (my >= floor_y)
+    scores = _ensemble_scores(pl, cands, q, T, ok & (my >= floor_y) & (d <= radius + screen), ensemble,
+                              postures, member_eq) if ensemble is not None else {}
+    return d, tm, my, ok, hit, scores
+
+
+def _plan_result(pl: Predictor, best: tuple, tried: int, radius: float, ensemble: tuple[np.ndarray, np.ndarray] | None,
+                 why_not: str, equilibria: dict) -> PlanResult:
+    """The :class:`PlanResult` of the search's best candidate (:func:`keep_best`'s tuple) after ``tried``
+    candidates: its motion, predicted tip path and messages (no hit, chosen for the ensemble, the
+    model's first warning, why there is no residual correction)."""
     (cp, q0, q, i), T, hit, d, tm, my, share, margin, d_k = best
     t, _ = time_grid(T, pl.rate)
     motion = Motion(t=t, q=q, T=T, control_points=cp, q0=q0)
