@@ -26,15 +26,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping
 
 import numpy as np
 from scipy.integrate import cumulative_trapezoid
 from scipy.special import comb
 
-from stringcast.core import check_limits, forward_kinematics
-from stringcast.core import Campaign, ConfigError
-from stringcast.core import DataError, read_joint_table, read_json
+from stringcast.core import (Campaign, ConfigError, DataError, MotionSettings, check_limits, forward_kinematics,
+                             read_joint_table, read_json)
 
 
 @dataclass(frozen=True)
@@ -204,9 +202,9 @@ def _vertical_clearance(top: np.ndarray, bottom: np.ndarray, pts: np.ndarray) ->
     return np.where(cross, 0.0, np.minimum(ends, arm_ends)).min(axis=-1)
 
 
-def start_box(config: Mapping) -> np.ndarray | None:
-    """config ``motion.start_grasp_box_mm`` as (2, 2) m, or None when not set."""
-    box = config.get("motion", {}).get("start_grasp_box_mm")
+def start_box(motion: MotionSettings) -> np.ndarray | None:
+    """``motion.start_grasp_box_mm`` as (2, 2) m, or None when not set."""
+    box = motion.start_grasp_box_mm
     return None if box is None else np.asarray(box, float) / 1000
 
 

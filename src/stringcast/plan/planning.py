@@ -61,11 +61,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Mapping
 
 import numpy as np
 
-from stringcast.core import PARAM_NAMES, Campaign, ConfigError
+from stringcast.core import PARAM_NAMES, Campaign, ConfigError, ModelSettings, MotionSettings
 from stringcast.core import read_json, write_joint_table, write_json
 from stringcast.model import ensemble_parameters, first_parameters, planned_parameters, prior_ensemble
 from .motion import Motion, read_motion_json, time_grid
@@ -103,12 +102,14 @@ class PlanResult:
 # ---------------------------------------------------------------------------
 # Candidate search
 # ---------------------------------------------------------------------------
-def search(campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarray, rng: np.random.Generator,
+def search(campaign: Campaign, model: ModelSettings, motion: MotionSettings, coeffs: np.ndarray, mu: np.ndarray,
+           rng: np.random.Generator,
            previous: Motion | None = None, ensemble: tuple[np.ndarray, np.ndarray] | None = None,
            observed: tuple | None = None) -> PlanResult:
     """Search random motions (first plan) or perturbations of ``previous`` (later plans) for a hit.
 
     Args:
+        model, motion: the model's and the planner's settings.
         coeffs (10,), mu (n,): the parameter set the model is simulated with.
         previous: the motion just played (its q0, T and control points are kept / perturbed).
         ensemble: robust planner (module doc): coeffs (K, 10), mu (K, n), the sets that
@@ -126,18 +127,18 @@ def search(campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarr
     """
     from tqdm.auto import tqdm
 
-    arm, mcfg = campaign.arm, config.get("motion", {})
-    pl = Predictor(campaign, config, coeffs, mu)
-    batch, max_cand = int(mcfg.get("batch", 64)), int(mcfg.get("max_candidates", 20000))
-    extra = int(mcfg.get("extra_after_hit", 200))
-    min_share = float(mcfg.get("robust_min_share", 0.0)) if ensemble is not None else 0.0
-    t_lo, t_hi = (float(x) for x in mcfg.get("T_range_s", [0.2, 1.2]))
-    n_cp, alpha = int(mcfg.get("n_control_points", 6)), float(mcfg.get("alpha_max_rad_s2", 40.0))
-    perturb = float(mcfg.get("perturb_rad_s", 0.5))
-    postures = start_postures(campaign, config, mcfg, rng, previous)
+    arm = campaign.arm
+    pl = Predictor(campaign, model, motion, coeffs, mu)
+    batch, max_cand = int(motion.batch), int(motion.max_candidates)
+    extra = int(motion.extra_after_hit)
+    min_share = float(motion.robust_min_share) if ensemble is not None else 0.0
+    t_lo, t_hi = (float(x) for x in motion.T_range_s)
+    n_cp, alpha = int(motion.n_control_points), float(motion.alpha_max_rad_s2)
+    perturb = float(motion.perturb_rad_s)
+    postures = start_postures(campaign, motion, rng, previous)
     equilibria: dict[int, np.ndarray] = {}
     member_eq: dict[int, np.ndarray] = {}    # posture -> (K, n, 2), robust planner
-    screen = float(mcfg.get("robust_screen_mm", 20.0)) / 1000
+    screen = float(motion.robust_screen_mm) / 1000
     radius = campaign.target.radius
     why_not = residual_correction(pl, previous, observed, coeffs, mu, ensemble, equilibria, member_eq)
     best, best_key, tried, first_hit, fails = None, None, 0, None, 0
@@ -236,7 +237,7 @@ def _ensemble_scores(pl: Predictor, cands: list, q: np.ndarray, T: float, screen
 # ---------------------------------------------------------------------------
 # Files and stage entry points
 # ---------------------------------------------------------------------------
-def write_motion(result: PlanResult, campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarray,
+def write_motion(result: PlanResult, campaign: Campaign, motion: MotionSettings, coeffs: np.ndarray, mu: np.ndarray,
                  seed: int, out_csv: Path, out_json: Path, kind: str, observed_miss_mm: float | None = None) -> None:
     """Write ``motion.csv`` (t_s, q1_rad..) and its ``motion.json`` sidecar (``observed_miss_mm``: the
     played motion's tracked tip's closest approach, when the plan read it)."""
@@ -250,7 +251,7 @@ def write_motion(result: PlanResult, campaign: Campaign, config: Mapping, coeffs
         "predicted_tip_path": result.tip_path[::step], "closest_approach_mm": result.d_min * 1000,
         "closest_approach_t_s": result.t_min, "min_y_mm": result.min_y * 1000,
         "hit_predicted": result.hit, "candidates": result.candidates, "seed": seed,
-        "flight_window_s": float(config.get("motion", {}).get("flight_window_s", 0.5)),
+        "flight_window_s": float(motion.flight_window_s),
         "target": {"x_mm": campaign.target.x * 1000, "y_mm": campaign.target.y * 1000,
                    "radius_mm": campaign.target.radius * 1000},
         "planner": result.planner, "ensemble_size": None if result.ensemble_d_min is None else len(result.ensemble_d_min),
@@ -261,49 +262,48 @@ def write_motion(result: PlanResult, campaign: Campaign, config: Mapping, coeffs
         "origin": result.origin, "message": result.message})
 
 
-def _rng(config: Mapping, seed: int) -> np.random.Generator:
-    return np.random.default_rng([int(config.get("motion", {}).get("seed", 0)), int(seed)])
+def _rng(motion: MotionSettings, seed: int) -> np.random.Generator:
+    return np.random.default_rng([int(motion.seed), int(seed)])
 
 
-def run_first_plan(campaign: Campaign, config: Mapping, out_csv: Path, out_json: Path, seed: int = 0) -> PlanResult:
+def run_first_plan(campaign: Campaign, out_csv: Path, out_json: Path, seed: int = 0, *, model: ModelSettings,
+                   motion: MotionSettings) -> PlanResult:
     """First motion of a campaign, planned with :func:`first_parameters` (Table 2 minima, k_s per
     ``motion.first_k_s``);
     with ``motion.first_ensemble`` = K > 0 also scored under K random sets (module doc)."""
-    coeffs, mu = first_parameters(config, campaign.string)
-    rng, mcfg = _rng(config, seed), config.get("motion", {})
-    k = int(mcfg.get("first_ensemble", 0))
+    coeffs, mu = first_parameters(model=model, motion=motion, string=campaign.string)
+    rng = _rng(motion, seed)
+    k = int(motion.first_ensemble)
     ensemble = None
     if k > 0:
-        ensemble = prior_ensemble(config, campaign.string, k, rng)
-        extra = mcfg.get("first_extra_after_hit", mcfg.get("extra_after_hit", 200))
-        config = {**config, "motion": {**mcfg, "extra_after_hit": int(extra)}}
-    result = replace(search(campaign, config, coeffs, mu, rng, ensemble=ensemble), origin="first")
-    write_motion(result, campaign, config, coeffs, mu, seed, out_csv, out_json, "first")
+        ensemble = prior_ensemble(model=model, motion=motion, string=campaign.string, k=k, rng=rng)
+        motion = replace(motion, extra_after_hit=int(motion.first_extra_after_hit))
+    result = replace(search(campaign, model, motion, coeffs, mu, rng, ensemble=ensemble), origin="first")
+    write_motion(result, campaign, motion, coeffs, mu, seed, out_csv, out_json, "first")
     return result
 
 
-def _replan(campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarray, seed: int, previous: Motion,
+def _replan(campaign: Campaign, model: ModelSettings, motion: MotionSettings, coeffs: np.ndarray, mu: np.ndarray,
+            seed: int, previous: Motion,
             ensemble: tuple[np.ndarray, np.ndarray] | None, observed: tuple | None, why: str,
             wide: float = 0.0) -> PlanResult:
     """A new motion instead of the perturbation (module doc, "Replan"), after ``why``; first, when
     ``wide`` > 0, the played motion perturbed by up to ``wide`` rad/s, kept when its best candidate hits
     under at least ``motion.replan_min_share`` of the ensemble (the planning set alone without one) and
     the model's error on the played motion is within ``motion.replan_residual_mm``."""
-    mcfg = config.get("motion", {})
     if wide > 0:
-        cfg = {**config, "motion": {**mcfg, "perturb_rad_s": wide}}
-        result = search(campaign, cfg, coeffs, mu, _rng(config, seed), previous=previous, ensemble=ensemble,
-                        observed=observed)
+        result = search(campaign, model, replace(motion, perturb_rad_s=wide), coeffs, mu, _rng(motion, seed),
+                        previous=previous, ensemble=ensemble, observed=observed)
         share = result.hit_share if ensemble is not None else float(result.hit)   # search sets it with an ensemble
-        need = float(mcfg.get("replan_min_share", 0.9))
-        too_far = _residual_too_large(result, mcfg)
+        need = float(motion.replan_min_share)
+        too_far = _residual_too_large(result, motion)
         if share >= need and not too_far:
             return _with_message(replace(result, origin="wide_perturbation"),
                                  f"{why}: the played motion perturbed by +-{wide:g} rad/s "
                                  f"(hits under {share:.0%} of the sets)")
         why += f"; its +-{wide:g} rad/s perturbation " + (too_far or f"hits under {share:.0%} of the sets "
                                                            f"(< {need:.0%})")
-    result = replace(search(campaign, config, coeffs, mu, _rng(config, seed), ensemble=ensemble), origin="new")
+    result = replace(search(campaign, model, motion, coeffs, mu, _rng(motion, seed), ensemble=ensemble), origin="new")
     return _with_message(result, f"{why}: a new motion (random posture and T), not a perturbation of the played one")
 
 
@@ -312,19 +312,19 @@ def _with_message(result: PlanResult, text: str) -> PlanResult:
     return replace(result, message="; ".join([text] + [result.message] * bool(result.message)))
 
 
-def _residual_too_large(result: PlanResult, mcfg: Mapping) -> str:
+def _residual_too_large(result: PlanResult, motion: MotionSettings) -> str:
     """Why the residual correction is not to be trusted ("" when it is, or there is none): the model's
     tip error on the played motion (median over the motion) beyond ``motion.replan_residual_mm`` (> 0)."""
-    limit = float(mcfg.get("replan_residual_mm", 0.0))
+    limit = float(motion.replan_residual_mm)
     size = None if result.residual is None else result.residual["median_mm"]
     if limit > 0 and size is not None and size > limit:
         return f"relies on a model {size:.0f} mm off the played motion's tip (median; > replan_residual_mm {limit:.0f})"
     return ""
 
 
-def run_plan(params_json: Path, played_motion_json: Path, campaign: Campaign, config: Mapping, out_csv: Path,
-             out_json: Path, seed: int = 0, tracks_parquet: Path | None = None,
-             joints_csv: Path | None = None) -> PlanResult:
+def run_plan(params_json: Path, played_motion_json: Path, campaign: Campaign, out_csv: Path, out_json: Path,
+             seed: int = 0, tracks_parquet: Path | None = None, joints_csv: Path | None = None, *,
+             model: ModelSettings, motion: MotionSettings) -> PlanResult:
     """Next motion (Section V.B): the played motion's posture and T, perturbed control points, estimated parameters.
 
     With ``motion.planner: robust`` the candidates are also scored under params.json's
@@ -343,18 +343,14 @@ def run_plan(params_json: Path, played_motion_json: Path, campaign: Campaign, co
         DataError: unreadable params.json (or, robust, one without ``top``), a played
             motion.json without q0_rad, T_s, control_points_rad_s, or (residual correction)
             unreadable tracks or a joint log that is not the played motion.
-        ConfigError: an unknown ``motion.planner``; residual correction without the trial's files.
+        ConfigError: residual correction without the trial's files.
     """
     params = read_json(params_json)
-    coeffs, mu = planned_parameters(config, campaign.string.n_points, params, str(params_json))
+    coeffs, mu = planned_parameters(n_points=campaign.string.n_points, params=params, source=str(params_json))
     previous = read_motion_json(played_motion_json, campaign.arm.n_joints, campaign.arm.controller_rate)
-    planner = str(config.get("motion", {}).get("planner", "paper"))
-    if planner not in ("paper", "robust"):
-        raise ConfigError(f"motion.planner: unknown {planner!r} (known: paper, robust)")
-    ensemble = ensemble_parameters(config, campaign.string.n_points, params, str(params_json)) \
-        if planner == "robust" else None
-    mcfg = config.get("motion", {})
-    residual, replan_mm = bool(mcfg.get("residual_correction", False)), float(mcfg.get("replan_miss_mm", 0.0))
+    ensemble = ensemble_parameters(n_points=campaign.string.n_points, params=params, source=str(params_json)) \
+        if motion.planner == "robust" else None
+    residual, replan_mm = bool(motion.residual_correction), float(motion.replan_miss_mm)
     observed, miss = None, float("nan")
     if residual or replan_mm > 0:
 
@@ -364,21 +360,21 @@ def run_plan(params_json: Path, played_motion_json: Path, campaign: Campaign, co
         t_j, q_j, _ = read_joint_table(joints_csv, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
         observed = observed_tip(read_parquet(tracks_parquet, TRACK_COLUMNS), t_j, q_j, previous.q,
                                 campaign.string.n_points, campaign.arm.controller_rate, str(tracks_parquet))
-        miss = observed_miss(*observed[:3], campaign.target.xy, previous.T + float(mcfg.get("flight_window_s", 0.5)))
+        miss = observed_miss(*observed[:3], campaign.target.xy, previous.T + float(motion.flight_window_s))
     observed = observed if residual else None
     if replan_mm > 0 and miss * 1000 > replan_mm:
         why = f"the tracked tip missed by {miss * 1000:.0f} mm (> replan_miss_mm {replan_mm:.0f})"
-        wide = float(mcfg.get("replan_perturb_rad_s", 0.0))
+        wide = float(motion.replan_perturb_rad_s)
         if wide > 0 and read_json(played_motion_json).get("origin") == "wide_perturbation":
             wide, why = 0.0, why + " after a wide perturbation"
-        result = _replan(campaign, config, coeffs, mu, seed, previous, ensemble, observed, why, wide)
+        result = _replan(campaign, model, motion, coeffs, mu, seed, previous, ensemble, observed, why, wide)
     else:
-        result = replace(search(campaign, config, coeffs, mu, _rng(config, seed), previous=previous,
+        result = replace(search(campaign, model, motion, coeffs, mu, _rng(motion, seed), previous=previous,
                                 ensemble=ensemble, observed=observed), origin="perturbation")
-        too_far = _residual_too_large(result, mcfg)
+        too_far = _residual_too_large(result, motion)
         if too_far:
-            result = _replan(campaign, config, coeffs, mu, seed, previous, ensemble, observed,
+            result = _replan(campaign, model, motion, coeffs, mu, seed, previous, ensemble, observed,
                              "the perturbation " + too_far)
-    write_motion(result, campaign, config, coeffs, mu, seed, out_csv, out_json, "next",
+    write_motion(result, campaign, motion, coeffs, mu, seed, out_csv, out_json, "next",
                  observed_miss_mm=miss * 1000 if np.isfinite(miss) else None)
     return result

@@ -10,12 +10,10 @@ against the target minus the model's error on the played motion, per parameter s
 """
 from __future__ import annotations
 
-from typing import Mapping
 
 import numpy as np
 
-from stringcast.core import hand_pose
-from stringcast.core import Campaign
+from stringcast.core import Campaign, ModelSettings, MotionSettings, hand_pose
 from .motion import Motion
 from stringcast.model import closest_approach_batch, hanging_equilibrium, simulate, simulate_batch, straight_hanging
 from .residual import tip_residual
@@ -30,14 +28,14 @@ class Predictor:
     that moves the target the candidates are scored against.
     """
 
-    def __init__(self, campaign: Campaign, config: Mapping, coeffs: np.ndarray, mu: np.ndarray):
-        self.campaign, self.arm, self.config = campaign, campaign.arm, config
-        self.mcfg = config.get("motion", {})
+    def __init__(self, campaign: Campaign, model: ModelSettings, motion: MotionSettings, coeffs: np.ndarray,
+                 mu: np.ndarray):
+        self.campaign, self.arm = campaign, campaign.arm
         self.coeffs, self.mu = np.asarray(coeffs, float), np.asarray(mu, float)
         self.rate = float(self.arm.controller_rate)
-        self.flight = float(self.mcfg.get("flight_window_s", 0.5))
-        self.dt = float(config["model"]["dt_s"])
-        self.psi0 = np.radians(float(config["model"].get("psi0_deg", 0.0)))
+        self.flight = float(motion.flight_window_s)
+        self.dt = float(model.dt_s)
+        self.psi0 = np.radians(float(model.psi0_deg))
         self.n, self.l0 = campaign.string.n_points, campaign.string.l0
         self.warnings: list[str] = []
         self.residual = None    # residual.TipResidual: row 0 the planned set, rows 1.. the ensemble

@@ -3,16 +3,15 @@ the postures candidates start from, the candidate curves of one batch, the resid
 correction's sets, and the ranking that keeps the best candidate so far."""
 from __future__ import annotations
 
-from typing import Mapping
 
 import numpy as np
 
-from stringcast.core import Campaign
+from stringcast.core import Campaign, MotionSettings
 from .motion import Motion, sample_control_points, sample_postures, start_box, valid_curves
 from .prediction import Predictor
 
 
-def start_postures(campaign: Campaign, config: Mapping, mcfg: Mapping, rng: np.random.Generator,
+def start_postures(campaign: Campaign, motion: MotionSettings, rng: np.random.Generator,
                    previous: Motion | None) -> np.ndarray:
     """The initial postures (P, J) rad candidates start from: ``previous``'s q0 (P = 1) for a
     perturbation, else a pool of ``motion.posture_pool`` random postures drawn with ``rng``
@@ -25,9 +24,8 @@ def start_postures(campaign: Campaign, config: Mapping, mcfg: Mapping, rng: np.r
         if previous.control_points.shape[1] < 1:
             raise ValueError("search: the previous motion has no control points to perturb")
         return previous.q0[None]
-    margin = float(mcfg.get("floor_margin_m", 0.05))
-    return sample_postures(campaign, rng, int(mcfg.get("posture_pool", 32)), margin, box=start_box(config),
-                           clearance=float(mcfg.get("hang_clearance_mm", 0.0)) / 1000)
+    return sample_postures(campaign, rng, int(motion.posture_pool), float(motion.floor_margin_m),
+                           box=start_box(motion), clearance=float(motion.hang_clearance_mm) / 1000)
 
 
 def draw_candidates(arm, rate: float, rng: np.random.Generator, T: float, want: int, postures: np.ndarray,
