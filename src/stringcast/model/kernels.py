@@ -95,11 +95,10 @@ def step(px, py, vx, vy, fx, fy, hx, hy, hvx, hvy, phi, dphi, c, inv_mu,
          l0, psi0, dt, g, lmax, relax):
     """One semi-implicit Euler step of one candidate (STRING_MODEL.md, Table 1).
 
-    Forces use the state at time t and the hand (hx, hy, phi) with velocity
-    (hvx, hvy, dphi) at t; then v += a dt, p += v dt in place. ``relax`` (1/s) adds a
-    mass-proportional damping -relax * v to the acceleration (0 in normal runs; used
-    by the equilibrium settling, where it does not change the rest state).
-    Returns False if a segment is longer than lmax or not finite (blow-up).
+    Forces use the state at time t and the hand (hx, hy, phi) with velocity (hvx, hvy, dphi) at t;
+    then v += a dt, p += v dt in place. ``relax`` (1/s) adds a mass-proportional damping -relax * v
+    to the acceleration (0 in normal runs; used by the equilibrium settling, where it does not change
+    the rest state). Returns False if a segment is longer than lmax or not finite (blow-up).
     """
     n = px.shape[0]
     k_s = c[0]
