@@ -125,6 +125,11 @@ class ArmSpec:
         qdd_max: (J,) joint acceleration limits, rad/s^2.
         controller_rate: servo rate in Hz (motion files are sampled at it).
         floor_y: height of the floor/table in the robot frame, m.
+        link_widths: (>= 1,) the links' widths as the camera sees them, m (the last repeats).
+        joint_radii: (>= 1,) the joint discs' radii from the base on, m (the last repeats).
+        gripper_widths: (2,) the gripper's width at the wrist and at the fingertips, m.
+        gripper_mask_extend: the gripper's outline reaches this past the grasp point, m.
+    The outline is what tracking masks out and what the board and sync checks look for.
     """
 
     name: str
@@ -136,6 +141,10 @@ class ArmSpec:
     qdd_max: np.ndarray
     controller_rate: float
     floor_y: float
+    link_widths: np.ndarray
+    joint_radii: np.ndarray
+    gripper_widths: np.ndarray
+    gripper_mask_extend: float
 
     def __post_init__(self):
         j = len(self.link_lengths)
@@ -167,6 +176,10 @@ class ArmSpec:
             qdd_max=_arr(np.asarray(d["qdd_max_deg_s2"]) * rad),
             controller_rate=float(d["controller_rate_hz"]),
             floor_y=float(d["floor_y_mm"]) / 1000,
+            link_widths=_arr(np.asarray(d["link_widths_mm"], float) / 1000),
+            joint_radii=_arr(np.asarray(d["joint_radii_mm"], float) / 1000),
+            gripper_widths=_arr(np.asarray(d["gripper_widths_mm"], float) / 1000, (2,), f"arm {name}: gripper_widths_mm"),
+            gripper_mask_extend=float(d["gripper_mask_extend_mm"]) / 1000,
         )
 
 
