@@ -90,30 +90,30 @@ def stage_sections(command: str) -> tuple[str, ...]:
     return sections_read(stage_entry(command))
 
 
-def cmd_calibrate(args):
-    from stringcast.calibrate import run_calibration
+def _run(command: str, args, *positional):
+    """Run ``command``'s stage on ``positional`` (its own order) and the settings it takes."""
+    func = stage_entry(command)
+    return func(*positional, **_settings(func, args))
 
+
+def cmd_calibrate(args):
     calib_dir = Path(args.calib_dir) if args.calib_dir and Path(args.calib_dir).is_dir() else None
-    cal = run_calibration(Path(args.trial_dir), calib_dir, _campaign(args), Path(args.out), config=_config(args))
+    cal = _run("calibrate", args, Path(args.trial_dir), calib_dir, _campaign(args), Path(args.out))
     bc = (cal.board_check or {}).get("residual_mm")
     extra = "" if bc is None else f", board-to-robot check {bc:.1f} mm"
     print(f"calibration: reprojection error {cal.reprojection_error_px:.3f} px{extra} -> {args.out}")
 
 
 def cmd_sync(args):
-    from stringcast.sync import run_sync
-
-    doc = run_sync(Path(args.trial_dir), Path(args.calibration), _campaign(args), _config(args), Path(args.out))
+    doc = _run("sync", args, Path(args.trial_dir), Path(args.calibration), _campaign(args), Path(args.out))
     extra = "" if doc.get("time_residual_ms") is None else \
         f", time residual {doc['time_residual_ms']:.2f} ms, arm match residual {doc['residual_mm'] or float('nan'):.1f} mm"
     print(f"sync: offset {doc['offset_s']:.6f} s ({doc['method']}{extra}) -> {args.out}")
 
 
 def cmd_track(args):
-    from stringcast.track import run_tracking
-
-    df = run_tracking(Path(args.trial_dir), Path(args.calibration), Path(args.sync), _campaign(args),
-                      _config(args), Path(args.out), Path(args.overlay) if args.overlay else None)
+    df = _run("track", args, Path(args.trial_dir), Path(args.calibration), Path(args.sync), _campaign(args),
+              Path(args.out), Path(args.overlay) if args.overlay else None)
     print(f"tracking: {df['frame'].nunique()} frames, valid share {df['valid'].mean():.3f} -> {args.out}")
 
 
@@ -126,43 +126,33 @@ def _earlier(args) -> tuple:
 
 
 def cmd_estimate(args):
-    from stringcast.estimate import run_estimation
-
-    est = run_estimation(Path(args.tracks), Path(args.joints), _campaign(args), _config(args),
-                         Path(args.prev) if args.prev else None, int(args.trial),
-                         Path(args.out_params), Path(args.out_fit), _earlier(args))
+    est = _run("estimate", args, Path(args.tracks), Path(args.joints), _campaign(args),
+               Path(args.prev) if args.prev else None, int(args.trial), Path(args.out_params), Path(args.out_fit),
+               _earlier(args))
     print(f"estimation: E = {est.E_m * 1000:.2f} mm after {est.n_evaluations} evaluations -> {args.out_params}")
 
 
 def cmd_plan_first(args):
-    from stringcast.plan import run_first_plan
-
     out = Path(args.out_dir)
-    run_first_plan(_campaign(args), _config(args), out / "motion.csv", out / "motion.json", int(args.seed))
+    _run("plan-first", args, _campaign(args), out / "motion.csv", out / "motion.json", int(args.seed))
     print(f"first motion -> {out / 'motion.csv'}")
 
 
 def cmd_plan(args):
-    from stringcast.plan import run_plan
-
     out = Path(args.out_dir)
-    run_plan(Path(args.params), Path(args.played_motion), _campaign(args), _config(args),
-             out / "motion.csv", out / "motion.json", int(args.seed),
-             Path(args.tracks) if args.tracks else None, Path(args.joints) if args.joints else None)
+    _run("plan", args, Path(args.params), Path(args.played_motion), _campaign(args), out / "motion.csv",
+         out / "motion.json", int(args.seed), Path(args.tracks) if args.tracks else None,
+         Path(args.joints) if args.joints else None)
     print(f"next motion -> {out / 'motion.csv'}")
 
 
 def cmd_report_trial(args):
-    from stringcast.report import write_trial_report
-
-    write_trial_report(Path(args.data_dir), Path(args.results_dir), _campaign(args), _config(args), Path(args.out))
+    _run("report-trial", args, Path(args.data_dir), Path(args.results_dir), _campaign(args), Path(args.out))
     print(f"trial report -> {args.out}")
 
 
 def cmd_report_campaign(args):
-    from stringcast.report import write_campaign_report
-
-    write_campaign_report(Path(args.data_dir), Path(args.results_dir), _campaign(args), _config(args), Path(args.out))
+    _run("report-campaign", args, Path(args.data_dir), Path(args.results_dir), _campaign(args), Path(args.out))
     print(f"campaign report -> {args.out}")
 
 
@@ -231,11 +221,19 @@ def build_parser() -> argparse.ArgumentParser:
         sp.set_defaults(func=func)
         return sp
 
-    campaign_help = "data/<campaign>/campaign.yaml: the campaign's string, target, arm and set-up"
-    trial_help = "data/<campaign>/trial_<k>: the trial's raw files (video, video.yaml, joints.csv, motion.json)"
-    seed_help = "random seed of {}"
-    plan_seed_help = seed_help.format("the planner's search (beside the config's motion.seed)")
+    _add_analysis_commands(add)
+    _add_planning_and_tools(add)
+    return p
 
+
+CAMPAIGN_HELP = "data/<campaign>/campaign.yaml: the campaign's string, target, arm and set-up"
+TRIAL_HELP = "data/<campaign>/trial_<k>: the trial's raw files (video, video.yaml, joints.csv, motion.json)"
+SEED_HELP = "random seed of {}"
+
+
+def _add_analysis_commands(add) -> None:
+    """calibrate, sync, track, estimate: one trial's analysis, stage by stage (the rules call them)."""
+    campaign_help, trial_help = CAMPAIGN_HELP, TRIAL_HELP
     sp = add("calibrate", cmd_calibrate, "ChArUco calibration of one trial -> calibration.json")
     sp.add_argument("--trial-dir", required=True, help=trial_help)
     sp.add_argument("--calib-dir", help="data/<campaign>/calib/: ChArUco clip or views for the camera intrinsics; "
@@ -270,6 +268,13 @@ def build_parser() -> argparse.ArgumentParser:
                                                      "frame (m)")
     sp.add_argument("--earlier-tracks", nargs="*", help="earlier trials' tracks.parquet, fitted together")
     sp.add_argument("--earlier-joints", nargs="*", help="their joints.csv, in the same order")
+
+
+def _add_planning_and_tools(add) -> None:
+    """plan-first, plan, the reports, and the tools around the workflow (execute, calib-clip,
+    campaign, settings)."""
+    campaign_help, seed_help = CAMPAIGN_HELP, SEED_HELP
+    plan_seed_help = seed_help.format("the planner's search (beside the config's motion.seed)")
 
     sp = add("plan-first", cmd_plan_first, "first motion with Table 2's minimum parameters")
     sp.add_argument("--campaign", required=True, help=campaign_help)
@@ -332,7 +337,6 @@ def build_parser() -> argparse.ArgumentParser:
                                        "the defaults), as YAML")
     sp.add_argument("--markdown", action="store_true",
                     help="print every setting's default and meaning as Markdown tables instead (config/README.md)")
-    return p
 
 
 def main(argv: list[str] | None = None) -> int:
