@@ -63,16 +63,18 @@ def film_first_motion(string_type: int, config: dict, work: Path, seed: int, cal
     """Plan a campaign's first motion for ``string_type`` (target 1), play it on the lab and
     calibrate the trial: returns (campaign, d, trial) with ``d/calibration.json`` written."""
     from stringcast.calibrate.calibration import run_calibration
-    from stringcast.core.config import resolve_campaign
+    from stringcast.core import resolve_campaign, settings_from_config, stage_kwargs
     from stringcast.execute.executor import execute
     from stringcast.plan.planning import run_first_plan
 
     campaign = resolve_campaign({"string": string_type, "target": 1}, config, f"bench_{string_type}")
+    settings = settings_from_config(config)
     d = work / f"string_{string_type}"
-    run_first_plan(campaign, config, d / "motion.csv", d / "motion.json", seed=seed)
+    run_first_plan(campaign, d / "motion.csv", d / "motion.json", seed=seed,
+                   **stage_kwargs(run_first_plan, settings))
     trial = d / "trial_1"
-    execute(d / "motion.csv", "virtual", trial, campaign, config, seed=seed)
-    run_calibration(trial, calib_dir, campaign, d / "calibration.json")
+    execute(d / "motion.csv", "virtual", trial, campaign, settings.executor, config, seed=seed)
+    run_calibration(trial, calib_dir, campaign, d / "calibration.json", **stage_kwargs(run_calibration, settings))
     return campaign, d, trial
 
 

@@ -68,3 +68,16 @@ def test_method_ours_merges_config_ours_yaml_last():
     config_paper, given_paper = campaign_config(ROOT, campaign_config_paths(parser.parse_args(["campaign", "c"])))
     assert given_paper == [] and {k: v for k, v in config_paper.items() if k != "_path"} == \
         {k: v for k, v in paper.items() if k != "_path"}
+
+
+def test_config_readme_lists_every_setting_as_the_code_defines_it():
+    """config/README.md's reference (below its mark) is what ``stringcast settings --markdown``
+    prints: every setting with the default that core.settings holds, and each stage's sections."""
+    from stringcast.cli import REFERENCE_MARK, settings_reference
+    from stringcast.core.settings import SECTION_CLASSES, markdown_table
+
+    text = (Path(__file__).resolve().parents[1] / "config" / "README.md").read_text()
+    assert REFERENCE_MARK in text, "config/README.md lacks the generated reference: run stringcast settings --markdown"
+    assert text[text.index(REFERENCE_MARK):].strip() == settings_reference(markdown_table()).strip()
+    for c in SECTION_CLASSES:
+        assert f"### `{c.SECTION}`" in text

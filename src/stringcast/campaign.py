@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from stringcast.core import ConfigError, load_config, load_yaml, resolve_campaign
+from stringcast.core import ConfigError, load_config, load_yaml, resolve_campaign, settings_from_config
 from stringcast.core import read_parquet, write_yaml
 from stringcast.execute import execute
 from stringcast.lab import write_calibration_clip
@@ -84,6 +84,7 @@ def run_campaign(name: str, string: str, target: str, config_path: str | Path | 
 
     root = Path(root).resolve()
     config, given = campaign_config(root, config_path)
+    settings = settings_from_config(config)
     data = root / "data" / name
     camp_yaml = data / "campaign.yaml"
     doc = {"string": _id(string), "target": _id(target), "setup": "default", "seed": int(seed)}
@@ -115,7 +116,7 @@ def run_campaign(name: str, string: str, target: str, config_path: str | Path | 
             t0 = time.perf_counter()
             tmp = data / f".trial_{k}.partial"
             shutil.rmtree(tmp, ignore_errors=True)
-            execute(motion, "virtual", tmp, camp_yaml, config, seed=seed * 1000 + k)
+            execute(motion, "virtual", tmp, camp_yaml, settings.executor, config, seed=seed * 1000 + k)
             os.replace(tmp, trial)
             timings[f"execute_{k}_s"] = time.perf_counter() - t0
         truth = json.loads((trial / "ground_truth.json").read_text())

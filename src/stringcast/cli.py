@@ -185,6 +185,18 @@ def cmd_campaign(args):
                  root=Path(args.root))
 
 
+REFERENCE_MARK = "<!-- below: made by `stringcast settings --markdown`; tests/test_cli.py keeps it in step -->"
+
+
+def settings_reference(tables: str) -> str:
+    """config/README.md's generated part: which sections each workflow stage reads, then
+    ``tables`` (every setting's default and meaning)."""
+    rows = [f"| `{cmd}` | {', '.join(f'`{s}`' for s in stage_sections(cmd))} |" for cmd in STAGES]
+    return "\n".join([REFERENCE_MARK, "", "## What each stage reads", "",
+                      "| stage (`stringcast` command) | sections read |", "| --- | --- |", *rows, "",
+                      "## Every setting", "", tables])
+
+
 def cmd_settings(args):
     import yaml
 
@@ -192,7 +204,7 @@ def cmd_settings(args):
     from stringcast.core.settings import markdown_table
 
     if args.markdown:
-        print(markdown_table())
+        print(settings_reference(markdown_table()))
         return
     s = settings_from_config(_config(args))
     doc = {c.SECTION: getattr(s, c.SECTION).as_dict() for c in SECTION_CLASSES}

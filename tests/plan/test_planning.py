@@ -1,5 +1,5 @@
 """Motion planning (paper Section V): parameter sets, hit search, motion files, stage entry points."""
-import copy
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -14,75 +14,83 @@ from stringcast.model.string_model import closest_approach_batch
 
 
 @pytest.fixture
-def small(config):
-    cfg = copy.deepcopy(config)
-    cfg["motion"].update(max_candidates=2048, extra_after_hit=64, batch=64, posture_pool=8)
-    return cfg
+def small(settings):
+    return _with(settings, max_candidates=2048, extra_after_hit=64, batch=64, posture_pool=8)
 
 
-def test_first_parameters_carry_their_weight(config, campaign):
-    coeffs, mu = pn.first_parameters(config, campaign.string)
-    lo = np.array([config["model"]["ranges"][k][0] for k in PARAM_NAMES])
+def _with(s, **motion):
+    """Settings ``s`` with these motion settings changed."""
+    return replace(s, motion=replace(s.motion, **motion))
+
+
+def _first(s, string):
+    return pn.first_parameters(model=s.model, motion=s.motion, string=string)
+
+
+def _prior(s, string, k, rng):
+    return pn.prior_ensemble(model=s.model, motion=s.motion, string=string, k=k, rng=rng)
+
+
+def test_first_parameters_carry_their_weight(settings, campaign):
+    coeffs, mu = _first(settings, campaign.string)
+    lo = np.array([settings.model.ranges[k][0] for k in PARAM_NAMES])
     np.testing.assert_array_equal(coeffs[1:], lo[1:])
     assert coeffs[0] > lo[0]
     top_stretch = 9.81 * mu.sum() / coeffs[0]
-    assert top_stretch == pytest.approx(config["motion"].get("first_max_strain", 0.05) * campaign.string.l0)
+    assert top_stretch == pytest.approx(settings.motion.first_max_strain * campaign.string.l0)
 
 
-def test_first_k_s_max_and_bad_mode(config, campaign):
+def test_first_k_s_max_and_bad_mode(settings, campaign):
     """motion.first_k_s: max takes Table 2's largest k_s and leaves the rest of the set as it was;
     an unknown mode is a ConfigError naming the key."""
-    cfg = copy.deepcopy(config)
-    cfg["motion"]["first_k_s"] = "max"
-    carrying, mu_c = pn.first_parameters(config, campaign.string)
-    stiff, mu_s = pn.first_parameters(cfg, campaign.string)
-    assert stiff[0] == config["model"]["ranges"]["k_s"][1] > carrying[0]
+    cfg = _with(settings, first_k_s="max")
+    carrying, mu_c = _first(settings, campaign.string)
+    stiff, mu_s = _first(cfg, campaign.string)
+    assert stiff[0] == settings.model.ranges["k_s"][1] > carrying[0]
     np.testing.assert_array_equal(stiff[1:], carrying[1:])
     np.testing.assert_array_equal(mu_s, mu_c)
-    cfg["motion"]["first_k_s"] = "stiff"
-    with pytest.raises(pn.ConfigError, match="motion.first_k_s"):
-        pn.first_parameters(cfg, campaign.string)
+    with pytest.raises(pn.ConfigError, match="motion.first_k_s"):   # refused as the settings are built
+        _with(cfg, first_k_s="stiff")
 
 
-def test_prior_ensemble_spans_table2_and_carries_its_weight(config, campaign):
-    from stringcast.model.parameters import encode, prior_ensemble
+def test_prior_ensemble_spans_table2_and_carries_its_weight(settings, campaign):
+    from stringcast.model.parameters import encode
 
-    coeffs, mu = prior_ensemble(config, campaign.string, 64, np.random.default_rng(0))
+    coeffs, mu = _prior(settings, campaign.string, 64, np.random.default_rng(0))
     n = campaign.string.n_points
     assert coeffs.shape == (64, len(PARAM_NAMES)) and mu.shape == (64, n)
-    lo = np.array([config["model"]["ranges"][k][0] for k in PARAM_NAMES])
-    hi = np.array([config["model"]["ranges"][k][1] for k in PARAM_NAMES])
+    lo = np.array([settings.model.ranges[k][0] for k in PARAM_NAMES])
+    hi = np.array([settings.model.ranges[k][1] for k in PARAM_NAMES])
     assert np.all(coeffs >= lo * (1 - 1e-12)) and np.all(coeffs[:, 1:] <= hi[1:] * (1 + 1e-12))
     # log-uniform: every coefficient but the lifted k_s spreads over most of its log range
     chi = np.log(coeffs / lo) / np.log(hi / lo)
     assert np.all(chi[:, 1:].max(axis=0) - chi[:, 1:].min(axis=0) > 0.7)
     # the k_s lift of first_parameters, per member: the top segment stretches at most first_max_strain
-    strain = config["motion"].get("first_max_strain", 0.05)
+    strain = settings.motion.first_max_strain
     assert np.all(9.81 * mu.sum(axis=1) / coeffs[:, 0] <= strain * campaign.string.l0 * (1 + 1e-9))
     # plain points share one mass (one group), special points have their own
     plain = campaign.string.mass_groups() == 0
     assert np.all(mu[:, plain] == mu[:, plain][:, :1])
     with pytest.raises(ValueError, match="k must be"):
-        prior_ensemble(config, campaign.string, 0, np.random.default_rng(0))
-    assert encode(coeffs[0], mu[0, :1], config).shape == (len(PARAM_NAMES) + 1,)
+        _prior(settings, campaign.string, 0, np.random.default_rng(0))
+    assert encode(coeffs[0], mu[0, :1], settings.model).shape == (len(PARAM_NAMES) + 1,)
 
 
 def test_first_plan_with_prior_ensemble(tmp_path, campaign, small):
     """motion.first_ensemble: the first plan is scored under K random sets, and says so in motion.json."""
-    cfg = copy.deepcopy(small)
-    cfg["motion"].update(first_ensemble=6, first_extra_after_hit=32, robust_screen_mm=200.0)
-    res = pn.run_first_plan(campaign, cfg, tmp_path / "motion.csv", tmp_path / "motion.json", seed=0)
+    cfg = _with(small, first_ensemble=6, first_extra_after_hit=32, robust_screen_mm=200.0)
+    res = pn.run_first_plan(campaign, tmp_path / "motion.csv", tmp_path / "motion.json", seed=0, model=cfg.model, motion=cfg.motion)
     assert res.planner == "robust" and res.ensemble_d_min.shape == (6,)
     assert res.hit_share == pytest.approx(np.mean(res.ensemble_d_min <= campaign.target.radius))
     doc = read_json(tmp_path / "motion.json")
     assert doc["kind"] == doc["origin"] == "first" and doc["ensemble_size"] == 6
     # the search went on past the first hit by first_extra_after_hit, not extra_after_hit
-    assert res.candidates <= small["motion"]["max_candidates"]
-    base = pn.run_first_plan(campaign, small, tmp_path / "m0.csv", tmp_path / "m0.json", seed=0)
+    assert res.candidates <= small.motion.max_candidates
+    base = pn.run_first_plan(campaign, tmp_path / "m0.csv", tmp_path / "m0.json", seed=0, model=small.model, motion=small.motion)
     assert base.planner == "paper" and base.hit_share is None
     # the chosen motion hits under at least as many sets as the paper's first plan does
-    ens = pn.prior_ensemble(cfg, campaign.string, 6, pn._rng(cfg, 0))
-    pl = pn.Predictor(campaign, cfg, *pn.first_parameters(cfg, campaign.string))
+    ens = _prior(cfg, campaign.string, 6, pn._rng(cfg.motion, 0))
+    pl = pn.Predictor(campaign, cfg.model, cfg.motion, *_first(cfg, campaign.string))
     p0 = np.stack([pl.equilibrium(base.motion.q0, c, m) for c, m in zip(*ens)])
     d, my, ok = pl.evaluate_ensemble(base.motion.q[None], base.motion.T, p0[None], *ens)
     base_share = np.mean(ok[0] & (d[0] <= campaign.target.radius) & (my[0] >= campaign.arm.floor_y))
@@ -90,7 +98,7 @@ def test_first_plan_with_prior_ensemble(tmp_path, campaign, small):
 
 
 def test_first_plan_hits_and_is_consistent(tmp_path, campaign, small):
-    res = pn.run_first_plan(campaign, small, tmp_path / "motion.csv", tmp_path / "motion.json", seed=0)
+    res = pn.run_first_plan(campaign, tmp_path / "motion.csv", tmp_path / "motion.json", seed=0, model=small.model, motion=small.motion)
     m = res.motion
     rate = campaign.arm.controller_rate
     assert check_limits(campaign.arm, m.q, 1 / rate).ok
@@ -106,7 +114,7 @@ def test_first_plan_hits_and_is_consistent(tmp_path, campaign, small):
     np.testing.assert_allclose(q, m.q, atol=1e-8)
     np.testing.assert_allclose(t, m.t, atol=1e-12)
     doc = read_json(tmp_path / "motion.json")
-    pl = pn.Predictor(campaign, small, np.array([doc["params"][k] for k in PARAM_NAMES]), np.array(doc["mu"]))
+    pl = pn.Predictor(campaign, small.model, small.motion, np.array([doc["params"][k] for k in PARAM_NAMES]), np.array(doc["mu"]))
     hand_t, hand = pl.hand_trajectory(m.q)
     d, tm, my, ok = closest_approach_batch(pl.coeffs, pl.mu, hand_t, hand[None], np.zeros(1, np.int64),
                                            pl.equilibrium(m.q0)[None], pl.l0, pl.psi0, pl.dt, 0.0,
@@ -116,22 +124,21 @@ def test_first_plan_hits_and_is_consistent(tmp_path, campaign, small):
     tip = np.array(doc["predicted_tip_path"])
     assert tip.shape[1] == 3 and np.min(np.hypot(*(tip[:, 1:] - campaign.target.xy).T)) < 0.03
     # the executor accepts the planned file
-    info = execute(tmp_path / "motion.csv", "virtual", tmp_path / "trial", campaign, small, dry_run=True)
+    info = execute(tmp_path / "motion.csv", "virtual", tmp_path / "trial", campaign, small.executor, {}, dry_run=True)
     assert info["dry_run"]
 
 
 def test_next_plan_keeps_posture_and_T(tmp_path, campaign, small):
     rng = np.random.default_rng(5)
-    coeffs, mu = pn.first_parameters(small, campaign.string)
-    first = pn.search(campaign, small, coeffs, mu, rng)
-    pn.write_motion(first, campaign, small, coeffs, mu, 0, tmp_path / "m1.csv", tmp_path / "m1.json", "first")
+    coeffs, mu = _first(small, campaign.string)
+    first = pn.search(campaign, small.model, small.motion, coeffs, mu, rng)
+    pn.write_motion(first, campaign, small.motion, coeffs, mu, 0, tmp_path / "m1.csv", tmp_path / "m1.json", "first")
     write_json(tmp_path / "params.json", {"coefficients": dict(zip(PARAM_NAMES, coeffs * 2)), "mu": mu * 3})
-    nxt = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, small,
-                      tmp_path / "m2.csv", tmp_path / "m2.json", seed=1)
+    nxt = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, tmp_path / "m2.csv", tmp_path / "m2.json", seed=1, model=small.model, motion=small.motion)
     a, b = first.motion, nxt.motion
     assert b.T == a.T and np.allclose(b.q0, a.q0)
     diff = b.control_points - a.control_points
-    assert np.all(np.abs(diff) <= small["motion"]["perturb_rad_s"] + 1e-9) and np.abs(diff).max() > 0
+    assert np.all(np.abs(diff) <= small.motion.perturb_rad_s + 1e-9) and np.abs(diff).max() > 0
     assert np.all(b.control_points[:, -1] == 0)
     assert check_limits(campaign.arm, b.q, 1 / campaign.arm.controller_rate).ok
     assert read_json(tmp_path / "m2.json")["params"]["k_s"] == pytest.approx(coeffs[0] * 2)
@@ -139,10 +146,9 @@ def test_next_plan_keeps_posture_and_T(tmp_path, campaign, small):
 
 def test_unreachable_target_returns_closest(config, small):
     camp = resolve_campaign({"string": 1, "target": {"x_mm": 3000, "y_mm": 300, "radius_mm": 20}}, config, "far")
-    cfg = copy.deepcopy(small)
-    cfg["motion"]["max_candidates"] = 128
-    coeffs, mu = pn.first_parameters(cfg, camp.string)
-    res = pn.search(camp, cfg, coeffs, mu, np.random.default_rng(0))
+    cfg = _with(small, max_candidates=128)
+    coeffs, mu = _first(cfg, camp.string)
+    res = pn.search(camp, cfg.model, cfg.motion, coeffs, mu, np.random.default_rng(0))
     assert not res.hit and res.candidates == 128
     assert "no candidate hit" in res.message
     assert 1.0 < res.d_min < 2.5  # the closest approach, not a made-up number
@@ -162,33 +168,30 @@ def test_search_keeps_looking_after_first_hit(monkeypatch, campaign, small):
 
     monkeypatch.setattr(pn.Predictor, "evaluate", fake_evaluate)
     monkeypatch.setattr(pn.Predictor, "tip_path", lambda self, m, p: np.zeros((0, 3)))
-    cfg = copy.deepcopy(small)
-    cfg["motion"].update(max_candidates=1000, extra_after_hit=100, batch=50)
-    coeffs, mu = pn.first_parameters(cfg, campaign.string)
-    res = pn.search(campaign, cfg, coeffs, mu, np.random.default_rng(0))
+    cfg = _with(small, max_candidates=1000, extra_after_hit=100, batch=50)
+    coeffs, mu = _first(cfg, campaign.string)
+    res = pn.search(campaign, cfg.model, cfg.motion, coeffs, mu, np.random.default_rng(0))
     assert res.hit and res.d_min == pytest.approx(0.004)
     assert res.candidates == 200  # first hit in the batch ending at 100, then 100 more
 
 
 def test_played_motion_without_control_points_is_refused(tmp_path, campaign, small):
     write_json(tmp_path / "played.json", {"q0_rad": [0.5, 0.0, 0.0], "T_s": 0.5, "control_points_rad_s": [[], [], []]})
-    coeffs, mu = pn.first_parameters(small, campaign.string)
+    coeffs, mu = _first(small, campaign.string)
     write_json(tmp_path / "params.json", {"coefficients": dict(zip(PARAM_NAMES, coeffs)), "mu": mu})
     with pytest.raises(DataError, match="played.json"):
-        pn.run_plan(tmp_path / "params.json", tmp_path / "played.json", campaign, small,
-                    tmp_path / "m.csv", tmp_path / "m.json")
+        pn.run_plan(tmp_path / "params.json", tmp_path / "played.json", campaign, tmp_path / "m.csv", tmp_path / "m.json", model=small.model, motion=small.motion)
     write_json(tmp_path / "bad_params.json", {"coefficients": {"k_s": 1.0}, "mu": mu})
     with pytest.raises(DataError, match="bad_params.json"):
-        pn.run_plan(tmp_path / "bad_params.json", tmp_path / "played.json", campaign, small,
-                    tmp_path / "m.csv", tmp_path / "m.json")
+        pn.run_plan(tmp_path / "bad_params.json", tmp_path / "played.json", campaign, tmp_path / "m.csv", tmp_path / "m.json", model=small.model, motion=small.motion)
     assert not (tmp_path / "m.csv").exists()
 
 
 # ---------------------------------------------------------------------------
 # Robust planner (motion.planner: robust): candidates scored under an ensemble of parameter sets
 # ---------------------------------------------------------------------------
-def _ensemble(config, campaign, k=4):
-    coeffs, mu = pn.first_parameters(config, campaign.string)
+def _ensemble(s, campaign, k=4):
+    coeffs, mu = _first(s, campaign.string)
     scale = np.linspace(1.0, 3.0, k)
     return np.stack([coeffs * np.r_[1.0, [s] * 9] for s in scale]), np.stack([mu * s ** 0.5 for s in scale])
 
@@ -202,17 +205,15 @@ def _params_doc(coeffs, mu, campaign):
 
 def test_robust_plan_scores_the_ensemble(tmp_path, campaign, small):
     """The chosen motion's ensemble d_min is what an independent run of each member gives."""
-    coeffs, mu = pn.first_parameters(small, campaign.string)
-    first = pn.search(campaign, small, coeffs, mu, np.random.default_rng(5))
-    pn.write_motion(first, campaign, small, coeffs, mu, 0, tmp_path / "m1.csv", tmp_path / "m1.json", "first")
+    coeffs, mu = _first(small, campaign.string)
+    first = pn.search(campaign, small.model, small.motion, coeffs, mu, np.random.default_rng(5))
+    pn.write_motion(first, campaign, small.motion, coeffs, mu, 0, tmp_path / "m1.csv", tmp_path / "m1.json", "first")
     ens_c, ens_mu = _ensemble(small, campaign)
     write_json(tmp_path / "params.json", _params_doc(ens_c, ens_mu, campaign))
-    cfg = copy.deepcopy(small)
-    cfg["motion"].update(planner="robust", max_candidates=256, extra_after_hit=64, robust_screen_mm=200.0)
-    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, cfg, tmp_path / "m2.csv",
-                      tmp_path / "m2.json", seed=1)
+    cfg = _with(small, planner="robust", max_candidates=256, extra_after_hit=64, robust_screen_mm=200.0)
+    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, tmp_path / "m2.csv", tmp_path / "m2.json", seed=1, model=cfg.model, motion=cfg.motion)
     assert res.planner == "robust" and res.ensemble_d_min.shape == (4,)
-    pl = pn.Predictor(campaign, cfg, ens_c[0], ens_mu[0])
+    pl = pn.Predictor(campaign, cfg.model, cfg.motion, ens_c[0], ens_mu[0])
     hand_t, hand = pl.hand_trajectory(res.motion.q)
     r = campaign.target.radius
     for k in range(4):
@@ -228,8 +229,7 @@ def test_robust_plan_scores_the_ensemble(tmp_path, campaign, small):
     assert doc["ensemble_hit_share"] == pytest.approx(res.hit_share)
     assert doc["ensemble_margin_mm"] == pytest.approx(res.margin * 1000)
     # the paper's planner (default) ignores the ensemble and writes no ensemble figures
-    res_p = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, small, tmp_path / "m3.csv",
-                        tmp_path / "m3.json", seed=1)
+    res_p = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, tmp_path / "m3.csv", tmp_path / "m3.json", seed=1, model=small.model, motion=small.motion)
     assert res_p.planner == "paper" and res_p.hit_share is None
     assert read_json(tmp_path / "m3.json")["ensemble_hit_share"] is None
 
@@ -264,21 +264,20 @@ def test_robust_prefers_hit_share_then_margin(monkeypatch, campaign, small):
     d_best = {3: 0.015, 5: 0.001, 7: 0.010}
     members = {3: [0.015, 0.019, 0.018, 0.017], 5: [0.001, 0.5, 0.5, 0.5], 7: [0.010, 0.001, 0.002, 0.5]}
     state = _fake_model(monkeypatch, d_best, members, screened=3)   # only the screened ones go to the ensemble
-    cfg = copy.deepcopy(small)
-    cfg["motion"].update(max_candidates=20, extra_after_hit=100, batch=20)
-    coeffs, mu = pn.first_parameters(cfg, campaign.string)
-    res = pn.search(campaign, cfg, coeffs, mu, np.random.default_rng(0), ensemble=_ensemble(cfg, campaign))
+    cfg = _with(small, max_candidates=20, extra_after_hit=100, batch=20)
+    coeffs, mu = _first(cfg, campaign.string)
+    res = pn.search(campaign, cfg.model, cfg.motion, coeffs, mu, np.random.default_rng(0), ensemble=_ensemble(cfg, campaign))
     assert res.hit_share == 1.0 and res.d_min == pytest.approx(0.015)          # candidate 3
     members[3] = [0.015, 0.019, 0.018, 0.5]                                    # now 3 and 7 both hit 3 of 4
     state["k"] = 0
-    res = pn.search(campaign, cfg, coeffs, mu, np.random.default_rng(0), ensemble=_ensemble(cfg, campaign))
+    res = pn.search(campaign, cfg.model, cfg.motion, coeffs, mu, np.random.default_rng(0), ensemble=_ensemble(cfg, campaign))
     assert res.hit_share == 0.75 and res.d_min == pytest.approx(0.010)         # 7: median 6 mm beats 18.5 mm
     assert res.margin == pytest.approx(0.020 - 0.006)
     # a motion that misses under the planning set (30 mm) but hits under 3 of 4 members with the larger
     # margin is chosen, and the message says why rather than "no candidate hit"
     d_best[7], members[7] = 0.030, [0.030, 0.001, 0.002, 0.003]
     state["k"] = 0
-    res = pn.search(campaign, cfg, coeffs, mu, np.random.default_rng(0), ensemble=_ensemble(cfg, campaign))
+    res = pn.search(campaign, cfg.model, cfg.motion, coeffs, mu, np.random.default_rng(0), ensemble=_ensemble(cfg, campaign))
     assert not res.hit and res.d_min == pytest.approx(0.030) and res.hit_share == 0.75
     assert "chosen for the ensemble (hits under 75% of its 4 sets)" in res.message
     assert "no candidate hit" not in res.message
@@ -289,24 +288,22 @@ def test_robust_min_share_keeps_searching_until_the_sets_agree(monkeypatch, camp
     start the count of extra candidates; the search goes on to one they all share (candidate 130)."""
     state = _fake_model(monkeypatch, {5: 0.001, 130: 0.010},
                         {5: [0.001, 0.5, 0.5, 0.5], 130: [0.010, 0.012, 0.008, 0.011]})
-    cfg = copy.deepcopy(small)
-    cfg["motion"].update(max_candidates=400, extra_after_hit=20, batch=50)
-    coeffs, mu = pn.first_parameters(cfg, campaign.string)
-    res = pn.search(campaign, cfg, coeffs, mu, np.random.default_rng(0), ensemble=_ensemble(cfg, campaign))
+    cfg = _with(small, max_candidates=400, extra_after_hit=20, batch=50)
+    coeffs, mu = _first(cfg, campaign.string)
+    res = pn.search(campaign, cfg.model, cfg.motion, coeffs, mu, np.random.default_rng(0), ensemble=_ensemble(cfg, campaign))
     assert res.hit_share == 0.25 and res.candidates == 100          # first hit in 0-49, then 20 more: 50-99
-    cfg["motion"]["robust_min_share"] = 0.9
+    cfg = _with(cfg, robust_min_share=0.9)
     state["k"] = 0
-    res = pn.search(campaign, cfg, coeffs, mu, np.random.default_rng(0), ensemble=_ensemble(cfg, campaign))
+    res = pn.search(campaign, cfg.model, cfg.motion, coeffs, mu, np.random.default_rng(0), ensemble=_ensemble(cfg, campaign))
     assert res.hit_share == 1.0 and res.d_min == pytest.approx(0.010) and res.candidates == 200
 
 
 def test_robust_all_miss_and_all_blown_up(monkeypatch, config, small):
     """No candidate near the target, or every simulation blowing up: the closest found, a message, no crash."""
     camp = resolve_campaign({"string": 1, "target": {"x_mm": 3000, "y_mm": 300, "radius_mm": 20}}, config, "far")
-    cfg = copy.deepcopy(small)
-    cfg["motion"]["max_candidates"] = 64
-    coeffs, mu = pn.first_parameters(cfg, camp.string)
-    res = pn.search(camp, cfg, coeffs, mu, np.random.default_rng(0), ensemble=_ensemble(cfg, camp))
+    cfg = _with(small, max_candidates=64)
+    coeffs, mu = _first(cfg, camp.string)
+    res = pn.search(camp, cfg.model, cfg.motion, coeffs, mu, np.random.default_rng(0), ensemble=_ensemble(cfg, camp))
     assert not res.hit and res.hit_share == 0.0 and res.candidates == 64
     assert "no candidate hit" in res.message and "ensemble" in res.message and np.isfinite(res.d_min)
 
@@ -316,22 +313,19 @@ def test_robust_all_miss_and_all_blown_up(monkeypatch, config, small):
 
     monkeypatch.setattr(pn.Predictor, "evaluate", blown)
     for ens in (None, _ensemble(cfg, camp)):
-        res = pn.search(camp, cfg, coeffs, mu, np.random.default_rng(1), ensemble=ens)
+        res = pn.search(camp, cfg.model, cfg.motion, coeffs, mu, np.random.default_rng(1), ensemble=ens)
         assert not res.hit and res.d_min == np.inf and "no candidate hit" in res.message
         assert res.motion.q.shape[1] == 3
 
 
 def test_robust_needs_the_ensemble(tmp_path, campaign, small):
-    coeffs, mu = pn.first_parameters(small, campaign.string)
+    coeffs, mu = _first(small, campaign.string)
     write_json(tmp_path / "played.json", {"q0_rad": [0.5, 0.0, 0.0], "T_s": 0.5,
                                           "control_points_rad_s": [[1.0, 0.0]] * 3})
     write_json(tmp_path / "params.json", {"coefficients": dict(zip(PARAM_NAMES, coeffs)), "mu": mu})
-    cfg = copy.deepcopy(small)
-    cfg["motion"]["planner"] = "robust"
+    cfg = _with(small, planner="robust")
     with pytest.raises(DataError, match="params.json.*top"):
-        pn.run_plan(tmp_path / "params.json", tmp_path / "played.json", campaign, cfg, tmp_path / "m.csv",
-                    tmp_path / "m.json")
-    cfg["motion"]["planner"] = "magic"
-    with pytest.raises(ConfigError, match="motion.planner"):
-        pn.run_plan(tmp_path / "params.json", tmp_path / "played.json", campaign, cfg, tmp_path / "m.csv",
-                    tmp_path / "m.json")
+        pn.run_plan(tmp_path / "params.json", tmp_path / "played.json", campaign, tmp_path / "m.csv", tmp_path / "m.json", model=cfg.model, motion=cfg.motion)
+    with pytest.raises(ConfigError, match="motion.planner"):   # refused as the settings are built
+        cfg = _with(cfg, planner="magic")
+        pn.run_plan(tmp_path / "params.json", tmp_path / "played.json", campaign, tmp_path / "m.csv", tmp_path / "m.json", model=cfg.model, motion=cfg.motion)

@@ -1,5 +1,5 @@
 """Residual correction of the plan (stringcast.plan.residual): delay, residual, and the planner aiming with it."""
-import copy
+from dataclasses import replace
 import dataclasses
 
 import numpy as np
@@ -89,15 +89,15 @@ def test_observed_tip_reads_the_tip_on_motion_time(tmp_path):
     assert valid.tolist() == (frames % 2 == 0).tolist()
 
 
-def test_planner_aims_the_model_at_the_corrected_target(tmp_path, config, campaign):
+def test_planner_aims_the_model_at_the_corrected_target(tmp_path, settings, campaign):
     """The played motion's tip was seen 40 mm further out than the model said: the next plan
     hits the target with the model aimed at target - offset, and run_plan records the correction."""
-    cfg = copy.deepcopy(config)
-    cfg["motion"].update(max_candidates=2048, extra_after_hit=64, batch=64, posture_pool=8)
-    coeffs, mu = pn.first_parameters(cfg, campaign.string)
-    first = pn.search(campaign, cfg, coeffs, mu, np.random.default_rng(5))
-    pn.write_motion(first, campaign, cfg, coeffs, mu, 0, tmp_path / "m1.csv", tmp_path / "m1.json", "first")
-    pl = pn.Predictor(campaign, cfg, coeffs, mu)
+    model = settings.model
+    motion = replace(settings.motion, max_candidates=2048, extra_after_hit=64, batch=64, posture_pool=8)
+    coeffs, mu = pn.first_parameters(model=model, motion=motion, string=campaign.string)
+    first = pn.search(campaign, model, motion, coeffs, mu, np.random.default_rng(5))
+    pn.write_motion(first, campaign, motion, coeffs, mu, 0, tmp_path / "m1.csv", tmp_path / "m1.json", "first")
+    pl = pn.Predictor(campaign, model, motion, coeffs, mu)
     m1, p0 = first.motion, pl.equilibrium(first.motion.q0)
     # the "trial": joints as commanded (pre-roll 0.3 s, 6 ms lag), tracks = model tip + offset
     t_cmd, q_cmd, t_move = build_command(m1.q, RATE, 0.3, 0.6)
@@ -116,10 +116,10 @@ def test_planner_aims_the_model_at_the_corrected_target(tmp_path, config, campai
         "point": np.tile(np.arange(n + 1), len(ft)), "x_m": xy[..., 0].ravel(), "y_m": xy[..., 1].ravel(),
         "valid": np.ones(len(ft) * (n + 1), bool)}))
     write_json(tmp_path / "params.json", {"coefficients": dict(zip(pn.PARAM_NAMES, coeffs)), "mu": mu})
-    cfg["motion"]["residual_correction"] = True
-    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, cfg, tmp_path / "m2.csv",
+    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, tmp_path / "m2.csv",
                       tmp_path / "m2.json", seed=1, tracks_parquet=tmp_path / "tracks.parquet",
-                      joints_csv=tmp_path / "joints.csv")
+                      joints_csv=tmp_path / "joints.csv", model=model,
+                      motion=(motion := replace(motion, residual_correction=True)))
     assert res.hit and res.residual["delay_s"] == pytest.approx(t_move + 0.006, abs=2e-4)
     assert res.residual["median_mm"] == pytest.approx(np.hypot(*offset) * 1000, abs=0.5)
     # an independent run: the chosen motion's model tip, moved by the offset, passes where the plan says
@@ -130,45 +130,45 @@ def test_planner_aims_the_model_at_the_corrected_target(tmp_path, config, campai
     doc = pn.read_json(tmp_path / "m2.json")
     assert doc["played_observed_miss_mm"] > 0 and doc["residual_correction"]["sets"] == 1
     # a tracked miss beyond replan_miss_mm: a new motion from scratch (a new posture or T), no correction
-    cfg["motion"]["replan_miss_mm"] = 1.0
-    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, cfg, tmp_path / "m4.csv",
+    motion = replace(motion, replan_miss_mm=1.0)
+    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, tmp_path / "m4.csv",
                       tmp_path / "m4.json", seed=1, tracks_parquet=tmp_path / "tracks.parquet",
-                      joints_csv=tmp_path / "joints.csv")
+                      joints_csv=tmp_path / "joints.csv", model=model, motion=motion)
     assert "replan_miss_mm" in res.message and res.residual is None
     assert res.motion.T != m1.T or not np.allclose(res.motion.q0, m1.q0)
     # replan_perturb_rad_s: first a wider, corrected perturbation of the played motion (its posture and T)
-    cfg["motion"]["replan_perturb_rad_s"] = 1.0
-    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, cfg, tmp_path / "m5.csv",
+    motion = replace(motion, replan_perturb_rad_s=1.0)
+    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, tmp_path / "m5.csv",
                       tmp_path / "m5.json", seed=1, tracks_parquet=tmp_path / "tracks.parquet",
-                      joints_csv=tmp_path / "joints.csv")
+                      joints_csv=tmp_path / "joints.csv", model=model, motion=motion)
     assert res.hit and "perturbed by +-1 rad/s" in res.message and res.residual is not None
     assert res.motion.T == m1.T and np.allclose(res.motion.q0, m1.q0)
     assert [pn.read_json(tmp_path / f"m{k}.json")["origin"] for k in (2, 4, 5)] == \
         ["perturbation", "new", "wide_perturbation"]
     # ... but not twice in a row: a played wide perturbation that missed so gets the new motion
     write_json(tmp_path / "m1w.json", {**pn.read_json(tmp_path / "m1.json"), "origin": "wide_perturbation"})
-    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1w.json", campaign, cfg, tmp_path / "m5w.csv",
+    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1w.json", campaign, tmp_path / "m5w.csv",
                       tmp_path / "m5w.json", seed=1, tracks_parquet=tmp_path / "tracks.parquet",
-                      joints_csv=tmp_path / "joints.csv")
+                      joints_csv=tmp_path / "joints.csv", model=model, motion=motion)
     assert "after a wide perturbation: a new motion" in res.message and res.origin == "new"
     assert res.residual is None and (res.motion.T != m1.T or not np.allclose(res.motion.q0, m1.q0))
     # ... and the new motion when that perturbation cannot hit (too small to bridge the tracked 17 mm
     # to a 5 mm target)
-    cfg["motion"].update(replan_perturb_rad_s=1e-6, max_candidates=256)
+    motion = replace(motion, replan_perturb_rad_s=1e-6, max_candidates=256)
     small_target = dataclasses.replace(campaign, target=dataclasses.replace(campaign.target, radius=0.005))
-    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", small_target, cfg, tmp_path / "m6.csv",
+    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", small_target, tmp_path / "m6.csv",
                       tmp_path / "m6.json", seed=1, tracks_parquet=tmp_path / "tracks.parquet",
-                      joints_csv=tmp_path / "joints.csv")
+                      joints_csv=tmp_path / "joints.csv", model=model, motion=motion)
     assert "hits under 0% of the sets (< 90%)" in res.message and "a new motion" in res.message
     assert res.residual is None and (res.motion.T != m1.T or not np.allclose(res.motion.q0, m1.q0))
     # a model further off the played tip (41 mm) than replan_residual_mm: no perturbation, a new motion
-    cfg["motion"].update(replan_miss_mm=0.0, replan_residual_mm=30.0)
-    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, cfg, tmp_path / "m7.csv",
+    motion = replace(motion, replan_miss_mm=0.0, replan_residual_mm=30.0)
+    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, tmp_path / "m7.csv",
                       tmp_path / "m7.json", seed=1, tracks_parquet=tmp_path / "tracks.parquet",
-                      joints_csv=tmp_path / "joints.csv")
+                      joints_csv=tmp_path / "joints.csv", model=model, motion=motion)
     assert "relies on a model 41 mm off" in res.message and "a new motion" in res.message
     assert res.residual is None and (res.motion.T != m1.T or not np.allclose(res.motion.q0, m1.q0))
     # without the trial's files the correction cannot be made, and says so
     with pytest.raises(pn.ConfigError, match="residual_correction"):
-        pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, cfg, tmp_path / "m3.csv",
-                    tmp_path / "m3.json", seed=1)
+        pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, tmp_path / "m3.csv",
+                    tmp_path / "m3.json", seed=1, model=model, motion=motion)
