@@ -21,6 +21,7 @@ Run: ``python -m benchmarks.sync [--quick]`` -> results/bench/sync.json.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import tempfile
 import time
 from pathlib import Path
@@ -33,8 +34,10 @@ from benchmarks.common import film_first_motion, header, lab_calibration_clip, w
 WRONG_TRIGGER_MS = 25.0
 
 
-def _sync_case(trial: Path, calibration_json: Path, campaign, config: dict, out: Path, truth: dict,
+def _sync_case(trial: Path, calibration_json: Path, campaign, settings, out: Path, truth: dict,
                trigger_s: float | None) -> dict:
+    """run_sync on ``trial`` with ``video.yaml``'s trigger time set to ``trigger_s`` (None: withheld), with the
+    sync, tracking and board-check sections of ``settings`` (:class:`stringcast.core.Settings`)."""
     from stringcast.core.files import DataError
     from stringcast.sync.offset import run_sync
 
@@ -45,7 +48,8 @@ def _sync_case(trial: Path, calibration_json: Path, campaign, config: dict, out:
     (trial / "video.yaml").write_text(yaml.safe_dump(meta))  # the benchmark's own copy
     t0 = time.perf_counter()
     try:
-        doc = run_sync(trial, calibration_json, campaign, config, out)
+        doc = run_sync(trial, calibration_json, campaign, out, sync=settings.sync, tracking=settings.tracking,
+                       board_check=settings.board_check)
     except DataError as exc:  # a sync that fails is a result (e.g. lens distortion uncorrected at the image edge)
         return {"offset_error_ms": None, "error": str(exc), "seconds": time.perf_counter() - t0,
                 "written_trigger_error_ms": (truth["trigger_time_written_s"] - truth["trigger_time_s"]) * 1000}
@@ -60,11 +64,13 @@ def _sync_case(trial: Path, calibration_json: Path, campaign, config: dict, out:
 
 def run(quick: bool = False) -> dict:
     from stringcast.calibrate.calibration import run_calibration
+    from stringcast.core import settings_from_config
     from stringcast.core.config import load_config
     from stringcast.core.files import read_json
 
     config = load_config()
-    config["sync"] = dict(config.get("sync", {}), method="video")
+    settings = settings_from_config(config)
+    settings = dataclasses.replace(settings, sync=dataclasses.replace(settings.sync, method="video"))
     types = [1, 5] if quick else [1, 4, 5, 7]
     cases, extra = {}, {}
     with tempfile.TemporaryDirectory(prefix="bench_sync_") as tmp:
@@ -73,7 +79,8 @@ def run(quick: bool = False) -> dict:
         for k in types:
             campaign, d, trial = film_first_motion(k, config, work, seed=10 + k, calib_dir=calib)
             truth = read_json(trial / "ground_truth.json")
-            cases[str(k)] = r = _sync_case(trial, d / "calibration.json", campaign, config, d / "sync.json", truth, None)
+            cases[str(k)] = r = _sync_case(trial, d / "calibration.json", campaign, settings, d / "sync.json", truth,
+                                             None)
             print(f"  string {k}: " + (f"FAILED: {r['error']}" if r.get("error") else
                   f"error {r['offset_error_ms']:+.3f} ms (written trigger {r['written_trigger_error_ms']:+.3f} ms), "
                   f"residual {r['residual_mm']:.2f} mm, board check {r['board_check_mm']} mm, {r['seconds']:.1f} s"),
@@ -81,13 +88,14 @@ def run(quick: bool = False) -> dict:
             if k == types[0]:
                 wrong = truth["trigger_time_s"] + WRONG_TRIGGER_MS / 1000
                 extra[f"{k}_trigger_wrong_by_+{WRONG_TRIGGER_MS:g}ms"] = r = _sync_case(
-                    trial, d / "calibration.json", campaign, config, d / "sync_wrong.json", truth, wrong)
+                    trial, d / "calibration.json", campaign, settings, d / "sync_wrong.json", truth, wrong)
                 print(f"  string {k}, trigger +{WRONG_TRIGGER_MS:g} ms wrong: " + (f"FAILED: {r['error']}" if r.get(
                       "error") else f"error {r['offset_error_ms']:+.3f} ms, disagreement flagged: {r['trigger_disagrees']}"),
                       flush=True)
-                run_calibration(trial, None, campaign, d / "calibration_h.json")
+                run_calibration(trial, None, campaign, d / "calibration_h.json", board_check=settings.board_check,
+                                tracking=settings.tracking)
                 extra[f"{k}_homography_only"] = r = _sync_case(
-                    trial, d / "calibration_h.json", campaign, config, d / "sync_h.json", truth, None)
+                    trial, d / "calibration_h.json", campaign, settings, d / "sync_h.json", truth, None)
                 print(f"  string {k}, homography-only calibration: " + (f"FAILED: {r['error']}" if r.get("error")
                       else f"error {r['offset_error_ms']:+.3f} ms, board check {r['board_check_mm']} mm"), flush=True)
     # a failed case counts as an infinite error

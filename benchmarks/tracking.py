@@ -45,8 +45,9 @@ def _decode_fps(video: Path) -> float:
     return n / (time.perf_counter() - t0)
 
 
-def track_string(string_type: int, config: dict, calib_dir: Path, work: Path, seed: int) -> dict:
-    """Film, calibrate, sync and track one string type's first motion; errors and timings."""
+def track_string(string_type: int, config: dict, settings, calib_dir: Path, work: Path, seed: int) -> dict:
+    """Film, calibrate, sync and track one string type's first motion; errors and timings. ``settings``:
+    every stage's settings (:class:`stringcast.core.Settings`)."""
     from stringcast.campaign import tracking_errors
     from stringcast.core.config import resolve_campaign
     from stringcast.sync.offset import run_sync
@@ -58,10 +59,12 @@ def track_string(string_type: int, config: dict, calib_dir: Path, work: Path, se
         campaign = resolve_campaign({"string": string_type, "target": 1}, config, f"bench_{string_type}")
     else:
         campaign, d, trial = film_first_motion(string_type, config, work, seed, calib_dir)
-        run_sync(trial, d / "calibration.json", campaign, config, d / "sync.json")
+        run_sync(trial, d / "calibration.json", campaign, d / "sync.json", sync=settings.sync,
+                 tracking=settings.tracking, board_check=settings.board_check)
     decode = _decode_fps(trial / "video.mkv")
     t0 = time.perf_counter()
-    tracks = run_tracking(trial, d / "calibration.json", d / "sync.json", campaign, config, d / "tracks.parquet")
+    tracks = run_tracking(trial, d / "calibration.json", d / "sync.json", campaign, d / "tracks.parquet",
+                          tracking=settings.tracking)
     seconds = time.perf_counter() - t0
     frames = int(tracks["frame"].nunique())
     e, valid = tracking_errors(tracks, pd.read_parquet(trial / "ground_truth.parquet"))
@@ -91,9 +94,11 @@ def _figure(per: dict, path: Path) -> None:
 
 
 def run(quick: bool = False, types: list[int] | None = None, work: Path | None = None) -> dict:
+    from stringcast.core import settings_from_config
     from stringcast.core.config import load_config
 
     config = load_config()
+    settings = settings_from_config(config)
     name = "tracking_partial" if types else "tracking"
     types = sorted(types) if types else ([1, 5] if quick else sorted(int(k) for k in config["strings"]))
     unknown = [k for k in types if str(k) not in config["strings"]]
@@ -107,7 +112,7 @@ def run(quick: bool = False, types: list[int] | None = None, work: Path | None =
             lab_calibration_clip(config, work)
         for k in types:
             t0 = time.perf_counter()
-            per[str(k)] = track_string(k, config, calib, work, seed=k)
+            per[str(k)] = track_string(k, config, settings, calib, work, seed=k)
             r = per[str(k)]
             print(f"  string {k}: median {np.median(r['errors_mm']):.2f} mm, p95 "
                   f"{np.percentile(r['errors_mm'], 95):.2f} mm, valid {r['valid_share']:.3f}, "

@@ -1,4 +1,5 @@
 """Shared fixtures: the project's config, a resolved demo campaign, a tiny lab clip."""
+import dataclasses
 import os
 from pathlib import Path
 
@@ -26,7 +27,8 @@ def campaign(config):
 def tiny_lab_trial(tmp_path, config, bands=None):
     """A 0.35 s lab clip (320 x 240 px, 1.3 mm per px, 87 frames) of a 150 mm string of 5 points swung
     by the wrist, with ``lab.string_bands`` = bands (None: a plain string); calibrated
-    and synced. Returns (trial folder, results folder, campaign, config)."""
+    and synced (the config's settings, sync ``method: trigger``). Returns (trial folder, results
+    folder, campaign, config)."""
     import copy
 
     lab = pytest.importorskip("stringcast.lab")
@@ -42,7 +44,6 @@ def tiny_lab_trial(tmp_path, config, bands=None):
     cfg["lab"] = dict(cfg.get("lab", {}), links_per_point=2, settle_s=0.1, trigger_error_s=0.0)
     if bands:
         cfg["lab"]["string_bands"] = bands
-    cfg["sync"] = dict(cfg.get("sync", {}), method="trigger")
     cfg["lab"]["camera"] = dict(cfg["lab"].get("camera", {}), focal_px=1900.0, center_mm=[g[0] + 60, g[1] - 90])
     doc = {"string": {"length_mm": 150.0, "n_points": 5, "weights": [], "stiff_sections": []},
            "target": {"x_mm": g[0] + 150, "y_mm": g[1] + 10, "radius_mm": 20.0}, "allow_reachable": True,
@@ -57,8 +58,10 @@ def tiny_lab_trial(tmp_path, config, bands=None):
     q_cmd = np.concatenate([np.repeat(q0[None], 60, 0), q, np.repeat(q[-1:], 60, 0)])
     trial, res = tmp_path / "trial_1", tmp_path / "res"
     lab.run_trial(np.arange(len(q_cmd)) / rate, q_cmd, campaign, cfg, trial, seed=3, motion_start_s=0.12)
-    run_calibration(trial, None, campaign, res / "calibration.json")
-    run_sync(trial, res / "calibration.json", campaign, cfg, res / "sync.json")
+    st = settings_from_config(config)
+    run_calibration(trial, None, campaign, res / "calibration.json", board_check=st.board_check, tracking=st.tracking)
+    run_sync(trial, res / "calibration.json", campaign, res / "sync.json",
+             sync=dataclasses.replace(st.sync, method="trigger"), tracking=st.tracking, board_check=st.board_check)
     return trial, res, campaign, cfg
 
 

@@ -46,32 +46,34 @@ def still_arm(request, tmp_path_factory, config):
     return rest, read_json(trial / "ground_truth.json"), campaign, cfg, q_log[0], trial
 
 
-def test_true_board_pose_reads_near_zero(still_arm):
+def test_true_board_pose_reads_near_zero(still_arm, settings):
     rest, truth, campaign, cfg, q0, _ = still_arm
-    r = check_board_to_robot(rest, _calibration(truth), campaign.arm, q0, cfg)
+    r = check_board_to_robot(rest, _calibration(truth), campaign.arm, q0, settings.board_check, settings.tracking)
     print(f"true board: residual {r['residual_mm']:.2f} mm from {r['n_used']} features {r['segment_offsets_mm']}")
     assert r["n_used"] >= 2 and r["residual_mm"] < 3.0
     assert set(r) >= {"residual_mm", "dx_mm", "dy_mm", "method", "n_used"}
 
 
 @pytest.mark.parametrize("shift_mm", [(25.0, 0.0), (0.0, -20.0), (-15.0, 20.0)])
-def test_a_shifted_board_pose_reads_as_the_shift(still_arm, shift_mm):
+def test_a_shifted_board_pose_reads_as_the_shift(still_arm, shift_mm, settings):
     rest, truth, campaign, cfg, q0, _ = still_arm
-    r = check_board_to_robot(rest, _calibration(truth, np.asarray(shift_mm) / 1000), campaign.arm, q0, cfg)
+    r = check_board_to_robot(rest, _calibration(truth, np.asarray(shift_mm) / 1000), campaign.arm, q0,
+                             settings.board_check, settings.tracking)
     print(f"board shifted {shift_mm} mm: reads dx {r['dx_mm']:.2f}, dy {r['dy_mm']:.2f} mm")
     assert r["dx_mm"] == pytest.approx(shift_mm[0], abs=3.0)
     assert r["dy_mm"] == pytest.approx(shift_mm[1], abs=3.0)
     assert r["residual_mm"] == pytest.approx(np.hypot(*shift_mm), abs=3.0)
 
 
-def test_a_blank_image_is_not_checked_and_bad_shapes_raise(still_arm):
+def test_a_blank_image_is_not_checked_and_bad_shapes_raise(still_arm, settings):
     rest, truth, campaign, cfg, q0, _ = still_arm
-    r = check_board_to_robot(np.full_like(rest, 128), _calibration(truth), campaign.arm, q0, cfg)
+    st = (settings.board_check, settings.tracking)
+    r = check_board_to_robot(np.full_like(rest, 128), _calibration(truth), campaign.arm, q0, *st)
     assert r["residual_mm"] is None and r["n_used"] == 0 and "not checked" in r["method"]
     with pytest.raises(ValueError, match="rest_image"):
-        check_board_to_robot(np.stack([rest, rest], -1), _calibration(truth), campaign.arm, q0, cfg)
+        check_board_to_robot(np.stack([rest, rest], -1), _calibration(truth), campaign.arm, q0, *st)
     with pytest.raises(ValueError, match="q_rest"):
-        check_board_to_robot(rest, _calibration(truth), campaign.arm, q0[:2], cfg)
+        check_board_to_robot(rest, _calibration(truth), campaign.arm, q0[:2], *st)
 
 
 def test_edge_pair_centre_prefers_the_pair_of_the_right_width():
@@ -84,7 +86,7 @@ def test_edge_pair_centre_prefers_the_pair_of_the_right_width():
     assert edge_pair_centre(np.full(len(v), 0.6), 0.0005, v[0], 0.06, 0.11) is None
 
 
-def test_calibration_stage_records_the_check_and_warns(still_arm, tmp_path):
+def test_calibration_stage_records_the_check_and_warns(still_arm, tmp_path, settings):
     """run_calibration puts the check in calibration.json; a board pose 30 mm off in config is caught."""
     from stringcast.calibrate.calibration import run_calibration
     from stringcast.core.config import resolve_campaign
@@ -92,14 +94,15 @@ def test_calibration_stage_records_the_check_and_warns(still_arm, tmp_path):
 
     _, _, campaign, cfg, _, trial = still_arm
     calib = write_calibration_clip(campaign, cfg, tmp_path / "calib", seed=5, n_frames=14)
-    ok = run_calibration(trial, calib, campaign, tmp_path / "ok.json", config=cfg)
+    st = {"board_check": settings.board_check, "tracking": settings.tracking}
+    ok = run_calibration(trial, calib, campaign, tmp_path / "ok.json", **st)
     assert ok.board_check["residual_mm"] < 5.0  # the intrinsics' own error near the arm: a few mm at most
     assert not any("board-to-robot" in w for w in ok.warnings)
     bad_cfg = copy.deepcopy(cfg)
     x0, y0 = cfg["setups"]["default"]["board_origin_mm"]
     bad_cfg["setups"]["default"]["board_origin_mm"] = [x0 + 30.0, y0]
     run_calibration(trial, calib, resolve_campaign({"string": 1, "target": 1}, bad_cfg, "bc"),
-                    tmp_path / "bad.json", config=bad_cfg)
+                    tmp_path / "bad.json", **st)
     doc = read_json(tmp_path / "bad.json")
     assert doc["board_check"]["dx_mm"] - ok.board_check["dx_mm"] == pytest.approx(30.0, abs=2.0)
     assert any("board-to-robot check" in w and "board_origin_mm" in w for w in doc["warnings"])

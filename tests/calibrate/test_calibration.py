@@ -219,7 +219,7 @@ def test_calibration_json_round_trip(tmp_path):
         Calibration.from_json(tmp_path / "bad.json")
 
 
-def test_run_calibration_on_trial_folder(tmp_path, campaign):
+def test_run_calibration_on_trial_folder(tmp_path, campaign, settings):
     board = campaign.setup.board.make()
     Hb = _pose_h([0.05, -0.07, 0.03], [-0.275, -0.185, 0.667])
     img = _render_plane(board, Hb, K_TRUE, DIST_TRUE)
@@ -237,7 +237,8 @@ def test_run_calibration_on_trial_folder(tmp_path, campaign):
         t = np.array([-0.27 + 0.03 * k, -0.18, 0.75 + 0.05 * k])
         Hk = K_TRUE @ np.column_stack([R[:, 0], R[:, 1], t])
         cv2.imwrite(str(calib / f"board_{k:02d}.png"), _render_plane(board, Hk / Hk[2, 2], K_TRUE, DIST_TRUE))
-    cal = run_calibration(trial, calib, campaign, tmp_path / "out" / "calibration.json")
+    st = {"board_check": settings.board_check, "tracking": settings.tracking}
+    cal = run_calibration(trial, calib, campaign, tmp_path / "out" / "calibration.json", **st)
     doc = read_json(tmp_path / "out" / "calibration.json")
     assert doc["n_corners"] == cal.n_corners >= 30 and doc["K"] is not None
     assert abs(cal.K[0, 0] - K_TRUE[0, 0]) / K_TRUE[0, 0] < 0.02
@@ -252,15 +253,15 @@ def test_run_calibration_on_trial_folder(tmp_path, campaign):
     # reproducible: the same files give the same bytes (OpenCV's threads once made the 9th digit vary)
     threads = cv2.getNumThreads()
     for i in range(3):
-        run_calibration(trial, calib, campaign, tmp_path / "out" / f"again_{i}.json")
+        run_calibration(trial, calib, campaign, tmp_path / "out" / f"again_{i}.json", **st)
         assert (tmp_path / "out" / f"again_{i}.json").read_bytes() == (tmp_path / "out" / "calibration.json").read_bytes()
     assert cv2.getNumThreads() == threads   # restored after the stage
     # homography only (no calib/) still works but warns
-    cal2 = run_calibration(trial, None, campaign, tmp_path / "out2.json")
+    cal2 = run_calibration(trial, None, campaign, tmp_path / "out2.json", **st)
     assert cal2.K is None and any("homography only" in w for w in cal2.warnings)
 
 
-def test_run_calibration_without_board(tmp_path, campaign):
+def test_run_calibration_without_board(tmp_path, campaign, settings):
     trial = tmp_path / "trial_1"
     trial.mkdir()
     vw = cv2.VideoWriter(str(trial / "video.mkv"), cv2.VideoWriter_fourcc(*"FFV1"), 500.0, (64, 64), isColor=False)
@@ -268,7 +269,8 @@ def test_run_calibration_without_board(tmp_path, campaign):
         vw.write(np.full((64, 64), 90, np.uint8))
     vw.release()
     with pytest.raises(DataError, match="video.mkv.*no ChArUco board"):
-        run_calibration(trial, None, campaign, tmp_path / "c.json")
+        run_calibration(trial, None, campaign, tmp_path / "c.json", board_check=settings.board_check,
+                        tracking=settings.tracking)
     assert not (tmp_path / "c.json").exists()
 
 

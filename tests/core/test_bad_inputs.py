@@ -42,29 +42,34 @@ def _board_image(campaign, width=640, height=480):
     return canvas, (x0, y0)
 
 
+def _calibrate(settings, *args):
+    """run_calibration(*args) with the project's settings."""
+    return run_calibration(*args, board_check=settings.board_check, tracking=settings.tracking)
+
+
 def _no_output(trial, out_json):
     assert not out_json.exists()
     assert not [p.name for p in out_json.parent.iterdir() if p.name.startswith(f".{out_json.name}")]
 
 
 @pytest.mark.parametrize("content", [b"", b"\x1aE\xdf\xa3 not really matroska" * 40])
-def test_unreadable_video_stops_calibration_and_writes_nothing(tmp_path, campaign, content):
+def test_unreadable_video_stops_calibration_and_writes_nothing(tmp_path, campaign, settings, content):
     (tmp_path / "video.mkv").write_bytes(content)
     out = tmp_path / "calibration.json"
     with pytest.raises(DataError, match="video.mkv"):
-        run_calibration(tmp_path, None, campaign, out)
+        _calibrate(settings, tmp_path, None, campaign, out)
     _no_output(tmp_path, out)
 
 
-def test_blank_video_no_board_found(tmp_path, campaign):
+def test_blank_video_no_board_found(tmp_path, campaign, settings):
     _write_mkv(tmp_path / "video.mkv", [np.full((240, 320), 128, np.uint8)] * 5)
     out = tmp_path / "calibration.json"
     with pytest.raises(DataError, match=r"video.mkv.*no ChArUco board found.*needs >= \d+"):
-        run_calibration(tmp_path, None, campaign, out)
+        _calibrate(settings, tmp_path, None, campaign, out)
     _no_output(tmp_path, out)
 
 
-def test_board_mostly_hidden_too_few_corners(tmp_path, campaign):
+def test_board_mostly_hidden_too_few_corners(tmp_path, campaign, settings):
     img, (x0, y0) = _board_image(campaign)
     hidden = img.copy()
     hidden[:, x0 + 150:] = 255  # only the left 2.5 squares' columns stay visible ...
@@ -72,15 +77,15 @@ def test_board_mostly_hidden_too_few_corners(tmp_path, campaign):
     _write_mkv(tmp_path / "video.mkv", [hidden] * 3)
     out = tmp_path / "calibration.json"
     with pytest.raises(DataError, match=r"video.mkv.*only \d board corners found"):
-        run_calibration(tmp_path, None, campaign, out)
+        _calibrate(settings, tmp_path, None, campaign, out)
     _no_output(tmp_path, out)
     # the whole board in the same clip calibrates: the failure above was the hidden board
     _write_mkv(tmp_path / "video.mkv", [img] * 3)
-    run_calibration(tmp_path, None, campaign, out)
+    _calibrate(settings, tmp_path, None, campaign, out)
     assert out.exists()
 
 
-def test_calibration_views_without_board(tmp_path, campaign):
+def test_calibration_views_without_board(tmp_path, campaign, settings):
     img, _ = _board_image(campaign)
     _write_mkv(tmp_path / "video.mkv", [img] * 3)
     calib = tmp_path / "calib"
@@ -89,7 +94,7 @@ def test_calibration_views_without_board(tmp_path, campaign):
         cv2.imwrite(str(calib / f"view_{i}.png"), np.full((480, 640), 40 * i, np.uint8))
     out = tmp_path / "calibration.json"
     with pytest.raises(DataError, match=r"calib.*board was found in 0 views"):
-        run_calibration(tmp_path, calib, campaign, out)
+        _calibrate(settings, tmp_path, calib, campaign, out)
     _no_output(tmp_path, out)
 
 

@@ -1,19 +1,27 @@
 """Sync: the video-to-controller offset from the arm seen in a small lab clip, and from video.yaml."""
 import copy
+import dataclasses
 import warnings
 
 import numpy as np
 import pytest
 import yaml
 
+from stringcast.core import SyncSettings
 from stringcast.core.files import DataError, read_json
 from stringcast.sync.offset import frame_times, run_sync
 
 FPS = 500.0
 
 
+def _kw(settings, **sync):
+    """run_sync's settings: the project's, with ``method: video`` and the ``sync`` changes."""
+    return {"sync": dataclasses.replace(settings.sync, **{"method": "video", **sync}), "tracking": settings.tracking,
+            "board_check": settings.board_check}
+
+
 @pytest.fixture(scope="module")
-def lab_trial(tmp_path_factory, config):
+def lab_trial(tmp_path_factory, config, settings):
     """A 768 x 768, 500 fps lab clip of a short swing, with the whole arm in view; calibrated."""
     from stringcast.calibrate.calibration import run_calibration
     from stringcast.core.config import resolve_campaign
@@ -26,7 +34,6 @@ def lab_trial(tmp_path_factory, config):
     cfg["setups"]["default"].update(camera="sync_small", board_origin_mm=[700.0, -250.0], board={
         "squares_x": 6, "squares_y": 4, "square_mm": 100.0, "marker_mm": 75.0, "dictionary": "DICT_4X4_50"})
     cfg["lab"] = dict(cfg["lab"], links_per_point=2, settle_s=0.1)
-    cfg["sync"] = dict(cfg.get("sync", {}), method="video")
     cfg["lab"]["camera"] = dict(cfg["lab"]["camera"], focal_px=1390.0 * 768 / 1024)
     campaign = resolve_campaign({"string": 1, "target": 1}, cfg, "sync")
     rate = campaign.arm.controller_rate
@@ -36,7 +43,8 @@ def lab_trial(tmp_path_factory, config):
     q_cmd = np.concatenate([np.repeat(q0[None], int(0.15 * rate), 0), q0 + dq, np.repeat((q0 + dq)[-1:], int(0.1 * rate), 0)])
     trial = root / "trial_1"
     run_trial(np.arange(len(q_cmd)) / rate, q_cmd, campaign, cfg, trial, seed=5, motion_start_s=0.15)
-    run_calibration(trial, None, campaign, root / "calibration_h.json")  # homography only
+    run_calibration(trial, None, campaign, root / "calibration_h.json",  # homography only
+                    board_check=settings.board_check, tracking=settings.tracking)
     truth = read_json(trial / "ground_truth.json")
     true_calibration(truth).to_json(root / "calibration.json")
     return root, trial, campaign, cfg, truth
@@ -69,14 +77,14 @@ def _with_video_yaml(root, trial, name, **change):
 
 
 @pytest.mark.parametrize("trigger", ["withheld", "wrong by 25 ms", "as written"])
-def test_offset_from_the_video_within_half_a_millisecond(lab_trial, trigger):
+def test_offset_from_the_video_within_half_a_millisecond(lab_trial, settings, trigger):
     root, trial, campaign, cfg, truth = lab_trial
     written = truth["trigger_time_written_s"]
     value = {"withheld": None, "wrong by 25 ms": truth["trigger_time_s"] + 0.025, "as written": written}[trigger]
     d = _with_video_yaml(root, trial, f"t_{trigger.replace(' ', '_')}", trigger_time_s=value)
     with warnings.catch_warnings(record=True):
         warnings.simplefilter("always")
-        doc = run_sync(d, root / "calibration.json", campaign, cfg, root / f"sync_{d.name}.json")
+        doc = run_sync(d, root / "calibration.json", campaign, root / f"sync_{d.name}.json", **_kw(settings))
     err_ms = (doc["offset_s"] - truth["trigger_time_s"]) * 1000
     print(f"sync ({trigger}): error {err_ms:+.3f} ms, time residual {doc['time_residual_ms']:.2f} ms, "
           f"residual {doc['residual_mm']:.2f} mm, frames {doc['frames_used']}")
@@ -96,14 +104,13 @@ def test_offset_from_the_video_within_half_a_millisecond(lab_trial, trigger):
     assert read_json(root / f"sync_{d.name}.json")["offset_s"] == doc["offset_s"]
 
 
-def test_a_misplaced_board_neither_biases_the_offset_nor_goes_unnoticed(lab_trial):
+def test_a_misplaced_board_neither_biases_the_offset_nor_goes_unnoticed(lab_trial, settings):
     """Board pose 20 mm off in x: the board check measures it, the strips follow it, and a warning says so."""
     root, trial, campaign, cfg, truth = lab_trial
     true_calibration(truth, (0.020, 0.0)).to_json(root / "calibration_off.json")
     with warnings.catch_warnings(record=True):
         warnings.simplefilter("always")
-        doc = run_sync(trial, root / "calibration_off.json", campaign,
-                       dict(cfg, sync=dict(cfg["sync"], board_check_warn_mm=5.0)))
+        doc = run_sync(trial, root / "calibration_off.json", campaign, **_kw(settings, board_check_warn_mm=5.0))
     err_ms = (doc["offset_s"] - truth["trigger_time_s"]) * 1000
     bc = doc["board_check"]
     print(f"board 20 mm off: error {err_ms:+.3f} ms, board check dx {bc['dx_mm']:.1f} dy {bc['dy_mm']:.1f} mm")
@@ -112,20 +119,19 @@ def test_a_misplaced_board_neither_biases_the_offset_nor_goes_unnoticed(lab_tria
     assert any("board pose" in w for w in doc["warnings"])
 
 
-def test_homography_only_calibration_still_near(lab_trial):
+def test_homography_only_calibration_still_near(lab_trial, settings):
     """Lens distortion left uncorrected (no calib/ clip) puts the arm 5-20 mm off where it moves;
     the offset stays within about a millisecond (the workflow should calibrate intrinsics)."""
     root, trial, campaign, cfg, truth = lab_trial
-    doc = run_sync(trial, root / "calibration_h.json", campaign, cfg)
+    doc = run_sync(trial, root / "calibration_h.json", campaign, **_kw(settings))
     err_ms = (doc["offset_s"] - truth["trigger_time_s"]) * 1000
     print(f"homography only: error {err_ms:+.3f} ms, residual {doc['residual_mm']:.2f} mm")
     assert abs(err_ms) <= 1.5
 
 
 def test_video_is_the_default_method():
-    from stringcast.sync.arm_match import settings
-
-    assert settings(None)["method"] == "video" and settings({"sync": {"method": "trigger"}})["method"] == "trigger"
+    assert SyncSettings().method == "video" and SyncSettings.from_mapping(None).method == "video"
+    assert SyncSettings.from_mapping({"method": "trigger"}).method == "trigger"
 
 
 def test_match_residual_is_the_robust_distance_across_the_segments():
@@ -145,26 +151,26 @@ def test_match_residual_is_the_robust_distance_across_the_segments():
     assert match_residual(np.full((4, S), np.nan), a[:4], tau) == (None, 0)
 
 
-def test_trigger_method_and_frame_times(lab_trial, tmp_path):
+def test_trigger_method_and_frame_times(lab_trial, settings, tmp_path):
     root, trial, campaign, cfg, truth = lab_trial
-    cfg = dict(cfg, sync=dict(cfg["sync"], method="trigger"))
-    doc = run_sync(trial, None, campaign, cfg, tmp_path / "out" / "sync.json")  # selectable, not the default
+    kw = _kw(settings, method="trigger")
+    doc = run_sync(trial, None, campaign, tmp_path / "out" / "sync.json", **kw)  # selectable, not the default
     assert doc["offset_s"] == pytest.approx(truth["trigger_time_written_s"], abs=1e-9)
     assert doc["method"] == "video.yaml trigger_time_s" and "not estimated" in doc["note"]
     t = frame_times(doc)
     assert t.shape == (doc["frames"],) and np.allclose(np.diff(t), 1 / FPS)
     d = _with_video_yaml(root, trial, "no_trigger", trigger_time_s=None)
     with pytest.raises(DataError, match="video.yaml.*no trigger_time_s"):
-        run_sync(d, None, campaign, cfg, tmp_path / "none.json")
+        run_sync(d, None, campaign, tmp_path / "none.json", **kw)
     assert not (tmp_path / "none.json").exists()
 
 
-def test_bad_inputs_name_the_file(lab_trial, tmp_path):
+def test_bad_inputs_name_the_file(lab_trial, settings, tmp_path):
     root, trial, campaign, cfg, _ = lab_trial
     d = _with_video_yaml(root, trial, "bad_fps", fps=-1)
     with pytest.raises(DataError, match="video.yaml"):
-        run_sync(d, root / "calibration.json", campaign, cfg)
+        run_sync(d, root / "calibration.json", campaign, **_kw(settings))
     with pytest.raises(DataError, match="not found"):
-        run_sync(tmp_path / "nope", root / "calibration.json", campaign, cfg)
+        run_sync(tmp_path / "nope", root / "calibration.json", campaign, **_kw(settings))
     with pytest.raises(DataError, match="fps"):
         frame_times({"offset_s": 0.0, "fps": 0.0, "frames": 3})

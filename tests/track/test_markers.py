@@ -1,4 +1,5 @@
 """Marker mode: bands at the mass points found along the centreline (synthetic images and a lab render)."""
+import dataclasses
 import math
 
 import cv2
@@ -9,12 +10,12 @@ import pytest
 from scipy.spatial import cKDTree
 
 from stringcast.track.markers import assign_bands, centreline_profile, find_band_runs, find_bands
-from stringcast.core.settings import DEFAULTS
+from stringcast.core import TrackingSettings, settings_from_config
 
 from conftest import tiny_lab_trial
 
 N, SPACING, BAND = 5, 40.0, 8.0        # points, their spacing and the bands' length, px
-ST = {k: v for k, v in DEFAULTS.items() if k.startswith("band_")}
+ST = TrackingSettings()  # the band settings (band_*) at their defaults
 
 
 def _curve(n_fine=4000):
@@ -127,13 +128,12 @@ def test_mode_and_bands_are_checked(config):
     import copy
 
     from stringcast.core.config import ConfigError, validate
-    from stringcast.track.tracking import settings
 
     cfg = copy.deepcopy(config)
-    assert settings(cfg)["mode"] == "markerless"
-    cfg["tracking"]["mode"] = "bands"
+    assert settings_from_config(cfg).tracking.mode == "markerless"
+    cfg["tracking"] = dict(cfg.get("tracking", {}), mode="bands")
     with pytest.raises(ConfigError, match="mode"):
-        settings(cfg)
+        settings_from_config(cfg)
     with pytest.raises(ConfigError, match="tracking"):
         validate(cfg, "config.schema.json", "cfg")
     cfg["tracking"] = {"mode": "markers", "band_widht_mm": 8.0}
@@ -191,7 +191,7 @@ def test_the_lab_draws_bands_at_the_models_points(config):
         build_renderer(campaign, cfg)
 
 
-def _track(trial, res, campaign, cfg, mode):
+def _track(trial, res, campaign, tracking, mode):
     """Track in ``mode``; errors of the valid points 1..n: in the robot frame (mm), and in the image
     against the lab camera's true projection (px: the detection's own error, without the
     calibration's; tracked positions go back to px through the calibration they came from)."""
@@ -199,8 +199,8 @@ def _track(trial, res, campaign, cfg, mode):
     from stringcast.core.files import read_json
     from stringcast.track.tracking import run_tracking
 
-    cfg = dict(cfg, tracking=dict(cfg["tracking"], mode=mode))
-    df = run_tracking(trial, res / "calibration.json", res / "sync.json", campaign, cfg, res / f"{mode}.parquet")
+    df = run_tracking(trial, res / "calibration.json", res / "sync.json", campaign, res / f"{mode}.parquet",
+                      tracking=dataclasses.replace(tracking, mode=mode))
     m = df.merge(pd.read_parquet(trial / "ground_truth.parquet"), on=["frame", "point"], suffixes=("", "_true"))
     pts = m[m["point"] > 0]
     assert pts.loc[~pts["valid"], ["x_m", "y_m"]].isna().all().all()  # never a position for an invalid point
@@ -216,7 +216,7 @@ def _track(trial, res, campaign, cfg, mode):
     return e_mm, e_px, float(pts["valid"].mean()), ok.groupby("point").size().to_dict()
 
 
-def test_marker_mode_on_a_tiny_lab_render_with_bands(tmp_path, config):
+def test_marker_mode_on_a_tiny_lab_render_with_bands(tmp_path, config, settings):
     """Light bands (tape of reflectance 0.45 on a 0.10 cord, 8 mm) at the 5 points: marker mode finds
     them all, to a tenth of a pixel in the image; markerless still works on the same footage."""
     from stringcast.calibrate.calibration import Calibration
@@ -225,7 +225,7 @@ def test_marker_mode_on_a_tiny_lab_render_with_bands(tmp_path, config):
     trial, res, campaign, cfg = tiny_lab_trial(tmp_path, config, {"width_mm": 8.0, "reflectance": 0.45})
     stats = {}
     for mode in ("markers", "markerless"):
-        e_mm, e_px, share, per_point = stats[mode] = _track(trial, res, campaign, cfg, mode)
+        e_mm, e_px, share, per_point = stats[mode] = _track(trial, res, campaign, settings.tracking, mode)
         print(f"lab tiny with bands, {mode}: median {np.median(e_mm):.2f} mm, p95 {np.percentile(e_mm, 95):.2f} mm, "
               f"valid {share:.3f}, valid frames per point {per_point}; in the image against the true camera: "
               f"median {np.median(e_px):.2f} px, p95 {np.percentile(e_px, 95):.2f} px")
@@ -251,10 +251,10 @@ def test_marker_mode_on_a_tiny_lab_render_with_bands(tmp_path, config):
     assert share > 0.85 and np.median(e_mm) < 1.2 and np.percentile(e_mm, 95) < 2.5, (share, np.median(e_mm))
 
 
-def test_marker_mode_invents_nothing_on_a_plain_string(tmp_path, config):
+def test_marker_mode_invents_nothing_on_a_plain_string(tmp_path, config, settings):
     """The same clip without bands: marker mode must leave (almost) every point invalid."""
     trial, res, campaign, cfg = tiny_lab_trial(tmp_path, config, None)
-    e_mm, e_px, share, per_point = _track(trial, res, campaign, cfg, "markers")
+    e_mm, e_px, share, per_point = _track(trial, res, campaign, settings.tracking, "markers")
     print(f"lab tiny without bands, markers: valid {share:.3f}, per point {per_point}")
     # measured: valid 0.000 (no point in any of the 87 frames)
     assert share < 0.02, (share, per_point)

@@ -1,4 +1,5 @@
 """Markerless tracking on synthetic clips with known string positions (and a tiny lab render)."""
+import dataclasses
 import math
 
 import cv2
@@ -7,6 +8,7 @@ import pandas as pd
 import pytest
 from scipy.spatial import cKDTree
 
+from stringcast.core import TrackingSettings
 from stringcast.core.arm import forward_kinematics
 from stringcast.calibrate.calibration import Calibration
 from stringcast.track.centreline import mismatch_split, resample_by_arc, trace_path
@@ -22,8 +24,9 @@ ORIGIN = np.array([0.55, 0.25])  # robot (x, y) at pixel (0, 0); y up -> rows do
 
 
 # how the synthetic arm looks: thinner than the tracker's default mask, as a real arm should be
-ARM_LOOK = {"arm_link_widths_mm": [100.0, 85.0, 70.0], "arm_joint_radii_mm": [60.0, 50.0, 40.0, 35.0],
-            "gripper_widths_mm": [55.0, 25.0], "gripper_mask_extend_mm": 0.0, "arm_mask_margin_px": 0.0}
+ARM_LOOK = dataclasses.replace(TrackingSettings(), arm_link_widths_mm=(100.0, 85.0, 70.0),
+                               arm_joint_radii_mm=(60.0, 50.0, 40.0, 35.0), gripper_widths_mm=(55.0, 25.0),
+                               gripper_mask_extend_mm=0.0, arm_mask_margin_px=0.0)
 
 
 def _calibration(K=None, dist=None):
@@ -95,11 +98,11 @@ def _errors(df, truth, n):
     return err, valid
 
 
-def test_tracking_synthetic_curve(tmp_path, campaign, config):
+def test_tracking_synthetic_curve(tmp_path, campaign, settings):
     n = campaign.string.n_points
     truth = make_trial(tmp_path, campaign)
-    df = run_tracking(tmp_path, tmp_path / "calibration.json", tmp_path / "sync.json", campaign, config,
-                      tmp_path / "out" / "tracks.parquet", tmp_path / "out" / "overlay.png")
+    df = run_tracking(tmp_path, tmp_path / "calibration.json", tmp_path / "sync.json", campaign,
+                      tmp_path / "out" / "tracks.parquet", tmp_path / "out" / "overlay.png", tracking=settings.tracking)
     assert list(df.columns) == ["frame", "t_s", "point", "x_m", "y_m", "valid"]
     assert len(df) == 48 * (n + 1) and (tmp_path / "out" / "overlay.png").stat().st_size > 1000
     back = pd.read_parquet(tmp_path / "out" / "tracks.parquet")
@@ -112,7 +115,7 @@ def test_tracking_synthetic_curve(tmp_path, campaign, config):
     assert np.median(e) < 1.0 and np.percentile(e, 95) < 3.0, (np.median(e), np.percentile(e, 95))
 
 
-def test_string_leaving_the_image_is_invalid_not_invented(tmp_path, campaign, config):
+def test_string_leaving_the_image_is_invalid_not_invented(tmp_path, campaign, settings):
     n = campaign.string.n_points
     truth = make_trial(tmp_path, campaign, n_frames=24, blob_at_tip=False)
     cal = _calibration()
@@ -126,8 +129,8 @@ def test_string_leaving_the_image_is_invalid_not_invented(tmp_path, campaign, co
         f[:, cut:] = 128
         vw.write(f)
     vw.release()
-    df = run_tracking(tmp_path, tmp_path / "calibration.json", tmp_path / "sync.json", campaign, config,
-                      tmp_path / "tracks.parquet")
+    df = run_tracking(tmp_path, tmp_path / "calibration.json", tmp_path / "sync.json", campaign,
+                      tmp_path / "tracks.parquet", tracking=settings.tracking)
     err, valid = _errors(df, truth, n)
     tpx = cal.robot_to_pixel(truth.reshape(-1, 2)).reshape(truth.shape)
     hidden = tpx[..., 0] > cut + 2
@@ -153,15 +156,14 @@ def test_trace_path_prefers_straight_and_bridges_gaps():
     assert pts[-1].tolist() == [20, 35]  # gap wider than max_gap: stops
 
 
-def test_centreline_walks_the_string_not_a_hook_at_the_fingertips(campaign, config):
+def test_centreline_walks_the_string_not_a_hook_at_the_fingertips(campaign, settings):
     """A lab string at rest (type 2) left the gripper in a short hook: the walk from the skeleton pixel
     nearest the grasp went into the hook (2 px) and the whole string was lost in every rest frame.
     A walk from a pixel just outside the clear zone must win when it is much longer."""
     from stringcast.track.frame_tracker import FrameTracker
-    from stringcast.track.tracking import settings
 
     tracker = FrameTracker(np.full((SIZE, SIZE), 100, np.float32), (1.0, 0.0), _calibration(), campaign,
-                           settings(config))
+                           settings.tracking)
     fg = np.zeros((200, 100), np.uint8)
     cv2.line(fg, (52, 22), (52, 170), 1, 3)                          # the string, below the grasp
     cv2.polylines(fg, [np.array([[52, 22], [47, 17], [42, 18], [41, 22]], np.int32)], False, 1, 2)  # the hook
@@ -205,7 +207,7 @@ def test_prefetch_keeps_order_and_raises_reader_errors():
 
 
 # ---------------------------------------------------------------------------- virtual lab
-def test_tracking_on_a_tiny_lab_render(tmp_path, config):
+def test_tracking_on_a_tiny_lab_render(tmp_path, config, settings):
     """The whole metrology chain (calibration, sync, tracking) on a short lab clip."""
     trial, res, campaign, cfg = tiny_lab_trial(tmp_path, config)
     cal = Calibration.from_json(res / "calibration.json")
@@ -213,8 +215,8 @@ def test_tracking_on_a_tiny_lab_render(tmp_path, config):
     sync = read_json(res / "sync.json")
     truth_trigger = read_json(trial / "ground_truth.json")["trigger_time_s"]
     assert abs(sync["offset_s"] - truth_trigger) < 1e-3, (sync["offset_s"], truth_trigger)
-    df = run_tracking(trial, res / "calibration.json", res / "sync.json", campaign, cfg, res / "tracks.parquet",
-                      res / "overlay.png")
+    df = run_tracking(trial, res / "calibration.json", res / "sync.json", campaign, res / "tracks.parquet",
+                      res / "overlay.png", tracking=settings.tracking)
     truth = pd.read_parquet(trial / "ground_truth.parquet")
     m = df.merge(truth, on=["frame", "point"], suffixes=("", "_true"))
     pts = m[m["point"] > 0]
@@ -270,7 +272,7 @@ def test_clean_end_refuses_a_tip_curled_back_onto_the_string():
     earlier stretch does not (the tip could be either strand), and neither does one that fades."""
     from stringcast.track.centreline import clean_end
 
-    st = {"branch_min_px": 6, "end_contrast_min": 0.4, "end_edge_max": 0.25}
+    st = dataclasses.replace(TrackingSettings(), branch_min_px=6, end_contrast_min=0.4, end_edge_max=0.25)
     straight = np.column_stack([np.full(120, 60.0), np.arange(20.0, 140.0)])
     hook = np.vstack([straight[:100], [[60.0 - r, 119.0] for r in range(1, 21)],
                       [[40.0, 119.0 - c] for c in range(1, 21)], [[40.0 + r, 99.0] for r in range(1, 16)]])

@@ -17,6 +17,7 @@ import pandas as pd
 import pytest
 
 from stringcast.core.arm import hand_pose
+from stringcast.core import settings_from_config
 from stringcast.core.config import resolve_campaign
 from stringcast.core.files import read_joint_table, read_video_meta, write_json
 from stringcast.lab import apply_preset, build_renderer, run_trial
@@ -67,11 +68,13 @@ def _clip(tmp_path, campaign, cfg, motion, seed=3):
     t_cmd, q_cmd, t0 = motion
     trial, res = tmp_path / "trial", tmp_path / "res"
     truth = run_trial(t_cmd, q_cmd, campaign, cfg, trial, seed=seed, motion_start_s=t0)
-    run_calibration(trial, None, campaign, res / "calibration.json")
+    st = settings_from_config(cfg)  # the config's settings
+    run_calibration(trial, None, campaign, res / "calibration.json", board_check=st.board_check, tracking=st.tracking)
     meta = read_video_meta(trial / "video.yaml")  # exact trigger (trigger_error_s = 0): tracking alone is tested
     write_json(res / "sync.json", {"offset_s": meta["trigger_time_s"], "fps": meta["fps"], "frames": meta["frames"],
                                    "method": "test: exact trigger", "residual_mm": None})
-    df = run_tracking(trial, res / "calibration.json", res / "sync.json", campaign, cfg, res / "tracks.parquet")
+    df = run_tracking(trial, res / "calibration.json", res / "sync.json", campaign, res / "tracks.parquet",
+                      tracking=st.tracking)
     gt = pd.read_parquet(trial / "ground_truth.parquet")
     m = gt.merge(df, on=["frame", "point"], suffixes=("_true", ""))
     m["err_mm"] = np.hypot(m["x_m"] - m["x_m_true"], m["y_m"] - m["y_m_true"]) * 1000

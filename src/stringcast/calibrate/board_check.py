@@ -41,20 +41,9 @@ import math
 import numpy as np
 from scipy.ndimage import gaussian_filter1d, map_coordinates
 
-from stringcast.core import forward_kinematics
-from stringcast.core import tracking_settings
+from stringcast.core import BoardCheckSettings, TrackingSettings, forward_kinematics
 
-DEFAULTS = {"margin_mm": 30.0, "step_mm": 0.5, "rows": 24, "width_range": [0.6, 1.1], "clear_mm": 10.0,
-            "min_rows": 6, "min_share": 0.4, "max_spread_mm": 2.0, "use_discs": True, "disc_rays": 48, "disc_reach_mm": 35.0, "use_string": False, "string_rows_mm": [20.0, 140.0],
-            "string_search_mm": 40.0, "warn_mm": 5.0}
 METHOD = "rest image: link/gripper edge pairs across their FK axes, joint-disc rims"
-
-
-def settings(config: dict | None) -> dict:
-    """Board-check settings: ``config['board_check']`` over :data:`DEFAULTS`."""
-    st = dict(DEFAULTS)
-    st.update((config or {}).get("board_check", {}) or {})
-    return st
 
 
 def _sample(image: np.ndarray, calibration, pts: np.ndarray) -> np.ndarray:
@@ -106,11 +95,12 @@ def edge_pair_centre(profile: np.ndarray, step: float, v0: float, width_lo: floa
     return centre
 
 
-def _segment_offsets(image, calibration, arm, q_rest, st, tst) -> list[tuple[np.ndarray, float, float]]:
+def _segment_offsets(image, calibration, arm, q_rest, st: BoardCheckSettings,
+                     tst: TrackingSettings) -> list[tuple[np.ndarray, float, float]]:
     """[(normal (2,), offset m, spread m)] for each link/gripper whose edges were found."""
     pts = forward_kinematics(arm, np.asarray(q_rest, float))
     J = arm.n_joints
-    links, radii = tst["arm_link_widths_mm"], tst["arm_joint_radii_mm"]
+    links, radii = tst.arm_link_widths_mm, tst.arm_joint_radii_mm
     out = []
     for s in range(J + 1):
         a, b = pts[s], pts[s + 1]
@@ -119,9 +109,9 @@ def _segment_offsets(image, calibration, arm, q_rest, st, tst) -> list[tuple[np.
             w0 = w1 = links[min(s, len(links) - 1)] / 1000
             r_a, r_b = radii[min(s, len(radii) - 1)] / 1000, radii[min(s + 1, len(radii) - 1)] / 1000
         else:
-            w0, w1 = (w / 1000 for w in tst["gripper_widths_mm"])
+            w0, w1 = (w / 1000 for w in tst.gripper_widths_mm)
             r_a, r_b = radii[min(J, len(radii) - 1)] / 1000, 0.0
-        clear = st["clear_mm"] / 1000
+        clear = st.clear_mm / 1000
         u0, u1 = (r_a + clear) / L, 1 - (r_b + clear) / L
         if s == J:
             u1 = min(u1, 0.9)
@@ -129,20 +119,20 @@ def _segment_offsets(image, calibration, arm, q_rest, st, tst) -> list[tuple[np.
             continue  # too short to show its sides clear of the joint discs
         e = (b - a) / L
         nrm = np.array([-e[1], e[0]])
-        step = st["step_mm"] / 1000
-        us = np.linspace(u0, u1, int(st["rows"]))
+        step = st.step_mm / 1000
+        us = np.linspace(u0, u1, int(st.rows))
         centres = []
         for u in us:
             w = w0 + (w1 - w0) * u
-            half = w / 2 + st["margin_mm"] / 1000
+            half = w / 2 + st.margin_mm / 1000
             v = np.arange(-half, half + step / 2, step)
             prof = _sample(image, calibration, a + u * (b - a) + v[:, None] * nrm)
-            prof = gaussian_filter1d(prof, 1.0 / st["step_mm"]) if np.all(np.isfinite(prof)) else prof
-            c = edge_pair_centre(prof, step, v[0], st["width_range"][0] * w, st["width_range"][1] * w)
+            prof = gaussian_filter1d(prof, 1.0 / st.step_mm) if np.all(np.isfinite(prof)) else prof
+            c = edge_pair_centre(prof, step, v[0], st.width_range[0] * w, st.width_range[1] * w)
             if c is not None:
                 centres.append(c)
-        c = _consensus(np.asarray(centres), st["max_spread_mm"] / 1000,
-                       max(int(st["min_rows"]), int(np.ceil(st["min_share"] * len(us)))))
+        c = _consensus(np.asarray(centres), st.max_spread_mm / 1000,
+                       max(int(st.min_rows), int(np.ceil(st.min_share * len(us)))))
         if c is not None:
             out.append((nrm, *c))
     return out
@@ -162,7 +152,7 @@ def _consensus(values: np.ndarray, tol: float, min_count: int) -> tuple[float, f
     return med, float(np.median(np.abs(group - med)) * 1.4826)
 
 
-def _disc_offsets(image, calibration, arm, q_rest, st, tst) -> list[np.ndarray]:
+def _disc_offsets(image, calibration, arm, q_rest, st: BoardCheckSettings, tst: TrackingSettings) -> list[np.ndarray]:
     """[(2,) centre offset m] of the joint discs (base excluded) whose rim was found.
 
     Rays from the FK joint centre at ``disc_rays`` angles; on each, the strongest edge
@@ -172,14 +162,14 @@ def _disc_offsets(image, calibration, arm, q_rest, st, tst) -> list[np.ndarray]:
     for (r0, c), kept if r0 fits the outline, most rays agree and the rim is round.
     """
     pts = forward_kinematics(arm, np.asarray(q_rest, float))
-    radii = tst["arm_joint_radii_mm"]
-    step = st["step_mm"] / 1000
-    th = np.linspace(0, 2 * np.pi, int(st["disc_rays"]), endpoint=False)
+    radii = tst.arm_joint_radii_mm
+    step = st.step_mm / 1000
+    th = np.linspace(0, 2 * np.pi, int(st.disc_rays), endpoint=False)
     ray = np.stack([np.cos(th), np.sin(th)], axis=1)
     out = []
     for j in range(1, arm.n_joints + 1):
         R = radii[min(j, len(radii) - 1)] / 1000
-        r = np.arange(0.3 * R, R + st["disc_reach_mm"] / 1000, step)
+        r = np.arange(0.3 * R, R + st.disc_reach_mm / 1000, step)
         centre, ok = np.zeros(2), False
         for _ in range(3):  # re-centre: the rim model is linear in the offset only for small ones
             fit = _rim_fit(image, calibration, pts[j] + centre, r, ray, step, st)
@@ -187,7 +177,7 @@ def _disc_offsets(image, calibration, arm, q_rest, st, tst) -> list[np.ndarray]:
                 break
             r0, c, inl = fit
             centre = centre + c
-            ok = inl >= st["min_share"] * 1.5 and 0.7 * R <= r0 <= 1.1 * R
+            ok = inl >= st.min_share * 1.5 and 0.7 * R <= r0 <= 1.1 * R
             if np.hypot(*c) < 0.001:
                 break
         if ok:
@@ -206,34 +196,34 @@ def _huber_lstsq(A: np.ndarray, y: np.ndarray, scale: float = 0.002, iters: int 
     return x, r
 
 
-def _rim_fit(image, calibration, centre, r, ray, step, st):
+def _rim_fit(image, calibration, centre, r, ray, step, st: BoardCheckSettings):
     """(r0 m, centre correction (2,) m, inlier share) of a disc rim seen on rays from centre; None off-image."""
     prof = _sample(image, calibration, centre + r[None, :, None] * ray[:, None, :])  # (rays, r)
     if not np.all(np.isfinite(prof)):
         return None
-    g = np.abs(np.gradient(gaussian_filter1d(prof, 1.0 / st["step_mm"], axis=1), axis=1))
+    g = np.abs(np.gradient(gaussian_filter1d(prof, 1.0 / st.step_mm, axis=1), axis=1))
     idx = np.argmax(g, axis=1)
     r_obs = r[0] + step * np.array([_refine(g[i], int(idx[i])) for i in range(len(ray))])
     A = np.column_stack([np.ones(len(ray)), ray])
     sol, res = _huber_lstsq(A, r_obs)
-    inl = np.abs(res) <= st["max_spread_mm"] / 1000
+    inl = np.abs(res) <= st.max_spread_mm / 1000
     if inl.sum() >= 3:
         sol = np.linalg.lstsq(A[inl], r_obs[inl], rcond=None)[0]
     return float(sol[0]), sol[1:], float(inl.mean())
 
 
-def _string_offset(image, calibration, arm, q_rest, st, tst) -> float | None:
+def _string_offset(image, calibration, arm, q_rest, st: BoardCheckSettings, tst: TrackingSettings) -> float | None:
     """x offset (m) of the hanging string below the grasp point, seen minus FK; None if unclear."""
     pts = forward_kinematics(arm, np.asarray(q_rest, float))
     grasp = pts[-1]
-    step = st["step_mm"] / 1000
-    half = st["string_search_mm"] / 1000
+    step = st.step_mm / 1000
+    half = st.string_search_mm / 1000
     x = np.arange(-half, half + step / 2, step)
     # clear of the arm: farther than the outline's half-width (+ clear_mm) from every segment
-    widths = list(tst["arm_link_widths_mm"][:arm.n_joints]) + [max(tst["gripper_widths_mm"])]
-    widths += [tst["arm_link_widths_mm"][-1]] * (arm.n_joints + 1 - len(widths))
+    widths = list(tst.arm_link_widths_mm[:arm.n_joints]) + [max(tst.gripper_widths_mm)]
+    widths += [tst.arm_link_widths_mm[-1]] * (arm.n_joints + 1 - len(widths))
     offs = []
-    for dy in np.arange(st["string_rows_mm"][0], st["string_rows_mm"][1], 5.0) / 1000:
+    for dy in np.arange(st.string_rows_mm[0], st.string_rows_mm[1], 5.0) / 1000:
         row = np.column_stack([grasp[0] + x, np.full_like(x, grasp[1] - dy)])
         near = False
         for s in range(len(pts) - 1):
@@ -241,7 +231,7 @@ def _string_offset(image, calibration, arm, q_rest, st, tst) -> float | None:
             d = b - a
             t = np.clip(((row - a) @ d) / max(d @ d, 1e-12), 0, 1)
             dist = np.linalg.norm(row - (a + t[:, None] * d), axis=1)
-            if np.any(dist < widths[min(s, len(widths) - 1)] / 2000 + st["clear_mm"] / 1000):
+            if np.any(dist < widths[min(s, len(widths) - 1)] / 2000 + st.clear_mm / 1000):
                 near = True
                 break
         if near:
@@ -249,15 +239,16 @@ def _string_offset(image, calibration, arm, q_rest, st, tst) -> float | None:
         prof = _sample(image, calibration, row)
         if not np.all(np.isfinite(prof)):
             continue
-        ridge = gaussian_filter1d(prof, 1.5 / st["step_mm"], order=2)  # a thin line: |2nd derivative| peak
+        ridge = gaussian_filter1d(prof, 1.5 / st.step_mm, order=2)  # a thin line: |2nd derivative| peak
         i = int(np.argmax(np.abs(ridge)))
         if 0 < i < len(x) - 1:
             offs.append(x[0] + step * _refine(ridge, i))
-    c = _consensus(np.asarray(offs), st["max_spread_mm"] / 1000, int(st["min_rows"]))
+    c = _consensus(np.asarray(offs), st.max_spread_mm / 1000, int(st.min_rows))
     return None if c is None else c[0]
 
 
-def check_board_to_robot(rest_image: np.ndarray, calibration, arm, q_rest: np.ndarray, config: dict | None) -> dict:
+def check_board_to_robot(rest_image: np.ndarray, calibration, arm, q_rest: np.ndarray, board_check: BoardCheckSettings,
+                         tracking: TrackingSettings) -> dict:
     """Translation between where the still arm is seen and where config's board pose + the FK put it.
 
     Args:
@@ -265,8 +256,9 @@ def check_board_to_robot(rest_image: np.ndarray, calibration, arm, q_rest: np.nd
             median of the frames before the motion.
         calibration: :class:`~stringcast.calibrate.calibration.Calibration` (robot_to_pixel).
         arm: :class:`~stringcast.core.config.ArmSpec`. q_rest: (J,) rad, ``joints.csv``'s first row.
-        config: the project config (``board_check`` and ``tracking`` sections; defaults
-            :data:`DEFAULTS`).
+        board_check: board-check settings (:class:`~stringcast.core.BoardCheckSettings`).
+        tracking: tracking settings (:class:`~stringcast.core.TrackingSettings`): the arm's
+            outline (``arm_link_widths_mm``, ``arm_joint_radii_mm``, ``gripper_widths_mm``).
 
     Returns:
         ``{"residual_mm": |d| or None, "dx_mm", "dy_mm" (seen minus FK, robot frame),
@@ -284,21 +276,21 @@ def check_board_to_robot(rest_image: np.ndarray, calibration, arm, q_rest: np.nd
     q_rest = np.asarray(q_rest, float)
     if q_rest.shape != (arm.n_joints,):
         raise ValueError(f"check_board_to_robot: q_rest must be ({arm.n_joints},), got {q_rest.shape}")
-    st, tst = settings(config), tracking_settings(config)
+    st, tst = board_check, tracking
     segs = _segment_offsets(img, calibration, arm, q_rest, st, tst)
     rows = [n for n, _, _ in segs]
     rhs = [o for _, o, _ in segs]
     discs: list = []
-    if st["use_discs"]:
+    if st.use_discs:
         for c in _disc_offsets(img, calibration, arm, q_rest, st, tst):
             rows += [np.array([1.0, 0.0]), np.array([0.0, 1.0])]
             rhs += [float(c[0]), float(c[1])]
             discs.append([float(c[0] * 1000), float(c[1] * 1000)])
-    x_str = _string_offset(img, calibration, arm, q_rest, st, tst) if st["use_string"] else None
+    x_str = _string_offset(img, calibration, arm, q_rest, st, tst) if st.use_string else None
     if x_str is not None:
         rows.append(np.array([1.0, 0.0]))
         rhs.append(x_str)
-    doc = {"method": METHOD, "n_used": len(segs) + len(discs) + (x_str is not None), "warn_mm": float(st["warn_mm"]),
+    doc = {"method": METHOD, "n_used": len(segs) + len(discs) + (x_str is not None), "warn_mm": float(st.warn_mm),
            "segment_offsets_mm": [float(o * 1000) for _, o, _ in segs],
            "disc_offsets_mm": discs, "string_offset_mm": None if x_str is None else float(x_str * 1000),
            "residual_mm": None, "dx_mm": None, "dy_mm": None, "fit_rms_mm": None}

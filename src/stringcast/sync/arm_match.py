@@ -44,25 +44,14 @@ import cv2
 import numpy as np
 from scipy.ndimage import map_coordinates
 
-from stringcast.core import forward_kinematics
-
-DEFAULTS = {"method": "video", "search_ms": 10.0, "step_ms": 0.25, "coarse_step_ms": 0.5, "strip_samples": 8,
-            "strip_width_samples": 41, "strip_margin_mm": 10.0, "rest_frames": 5, "smooth_px": 1.0,
-            "board_check_warn_mm": 20.0, "min_frame_contrast": 0.02,
-            "min_frames": 20, "segment_agree_ms": 3.0, "recentre_ms": 1.0}
+from stringcast.core import TrackingSettings, forward_kinematics
 
 
-def settings(config: dict | None) -> dict:
-    """Sync settings: ``config['sync']`` over :data:`DEFAULTS`."""
-    st = dict(DEFAULTS)
-    st.update((config or {}).get("sync", {}) or {})
-    return st
-
-
-def segment_half_widths(arm, tracking_st: dict, margin_m: float) -> np.ndarray:
-    """(S,) half-widths of the strips, m: links then gripper, from the arm outline (mm) + margin."""
-    links = tracking_st["arm_link_widths_mm"]
-    widths = [links[min(j, len(links) - 1)] for j in range(arm.n_joints)] + [max(tracking_st["gripper_widths_mm"])]
+def segment_half_widths(arm, tracking: TrackingSettings, margin_m: float) -> np.ndarray:
+    """(S,) half-widths of the strips, m: links then gripper, from the arm outline (mm, tracking
+    settings :class:`~stringcast.core.TrackingSettings`) + margin."""
+    links = tracking.arm_link_widths_mm
+    widths = [links[min(j, len(links) - 1)] for j in range(arm.n_joints)] + [max(tracking.gripper_widths_mm)]
     return np.asarray(widths, float) / 2000 + margin_m
 
 

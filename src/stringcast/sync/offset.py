@@ -9,7 +9,7 @@ half an exposure earlier than ``offset_s``. With motion blur the arm seen in a f
 its mean over the exposure, i.e. (to first order) its pose at the exposure centre, so
 the video estimate measures the centre whatever the exposure.
 
-:func:`run_sync` with ``config["sync"]["method"]: video`` (the default) estimates the
+:func:`run_sync` with the sync setting ``method: video`` (the default) estimates the
 offset from the video: the arm seen in the frames is matched with the forward kinematics
 of the joint log (:mod:`stringcast.sync.arm_match`; the arm rather than the tracked grasp point,
 because the links are large, sharp-edged and seen in every frame, whereas the grasp point
@@ -43,7 +43,10 @@ from . import arm_match as sync_arm
 from stringcast.core import motion_window
 from stringcast.calibrate import check_board_to_robot
 from stringcast.core import (
+    BoardCheckSettings,
     DataError,
+    SyncSettings,
+    TrackingSettings,
     check_joint_coverage,
     find_video,
     read_joint_table,
@@ -51,7 +54,6 @@ from stringcast.core import (
     write_json,
 )
 from stringcast.calibrate import Calibration
-from stringcast.core import tracking_settings
 from stringcast.video import check_frame_count, dropped_frames, open_video
 
 METHOD_TRIGGER = "video.yaml trigger_time_s"
@@ -67,16 +69,19 @@ def _trigger_doc(meta: dict, video_yaml: Path) -> dict:
             "note": "offset taken from the recording's trigger time, not estimated from the video"}
 
 
-def estimate_offset(video, calibration, arm, t_j: np.ndarray, q_j: np.ndarray, tracking_st: dict, st: dict,
-                    trigger_s: float | None = None, config: dict | None = None) -> dict:
+def estimate_offset(video, calibration, arm, t_j: np.ndarray, q_j: np.ndarray, tracking: TrackingSettings,
+                    sync: SyncSettings, board_check: BoardCheckSettings, trigger_s: float | None = None) -> dict:
     """Offset of frame 0 on the controller clock, from the arm seen in the video.
 
     Args:
         video: a :class:`~stringcast.video.container.VideoReader` (fps known). calibration:
             :class:`~stringcast.calibrate.calibration.Calibration`. t_j (K,) s, q_j (K, J) rad: the
-            joint log. tracking_st: tracking settings (the arm's outline). st: sync settings.
+            joint log.
+        tracking: tracking settings (:class:`~stringcast.core.TrackingSettings`): the arm's outline.
+        sync: sync settings (:class:`~stringcast.core.SyncSettings`).
+        board_check: the board check's settings (:class:`~stringcast.core.BoardCheckSettings`), for
+            the check on the rest frames when the calibration has none.
         trigger_s: the recording's trigger time, a starting guess only.
-        config: the project config, for the board check's settings (defaults if None).
 
     Steps: the board check on the median of the rest frames gives the translation d
     between where the still arm is seen and its FK position; the strips are moved by d
@@ -101,11 +106,11 @@ def estimate_offset(video, calibration, arm, t_j: np.ndarray, q_j: np.ndarray, t
         DataError: the video has no still frames of the arm before the motion, or no
             frame in the motion.
     """
-    fps = float(video.fps)
-    hw = sync_arm.segment_half_widths(arm, tracking_st, st["strip_margin_mm"] / 1000)
-    n_u, n_v, sig = int(st["strip_samples"]), int(st["strip_width_samples"]), float(st["smooth_px"])
+    fps, st = float(video.fps), sync
+    hw = sync_arm.segment_half_widths(arm, tracking, st.strip_margin_mm / 1000)
+    n_u, n_v, sig = int(st.strip_samples), int(st.strip_width_samples), float(st.smooth_px)
     hw, segments = _segments_in_view(video, calibration, arm, q_j[0], hw, n_u, n_v)
-    n_rest, rest, board, shift = _rest_and_board(video, calibration, arm, q_j[0], st, config)
+    n_rest, rest, board, shift = _rest_and_board(video, calibration, arm, q_j[0], st, board_check, tracking)
 
     def strips(q):
         return sync_arm.strip_points(arm, q, hw, n_u, n_v, segments) + shift
@@ -117,7 +122,7 @@ def estimate_offset(video, calibration, arm, t_j: np.ndarray, q_j: np.ndarray, t
         t_on, t_off = motion_window(t_j, q_j)
     except ValueError as exc:
         raise DataError(f"{video.path}: sync from the video needs the arm to move: {exc}") from exc
-    search, step = st["search_ms"] / 1000, st["step_ms"] / 1000
+    search, step = st.search_ms / 1000, st.step_ms / 1000
     coarse = partial(_coarse_search, video, calibration, sig, rest_pts, rest_s, template, strips, n_rest, t_j, q_j,
                      fps, st)
     fine = partial(_fine_search, video, calibration, sig, template, strips, t_j, q_j, fps, (t_on, t_off), search,
@@ -153,19 +158,20 @@ def _segments_in_view(video, calibration, arm, q0: np.ndarray, hw: np.ndarray, n
     return hw[seen], np.nonzero(seen)[0]
 
 
-def _rest_and_board(video, calibration, arm, q0: np.ndarray, st: dict,
-                    config: dict | None) -> tuple[int, np.ndarray, dict, np.ndarray]:
+def _rest_and_board(video, calibration, arm, q0: np.ndarray, st: SyncSettings, board_check: BoardCheckSettings,
+                    tracking: TrackingSettings) -> tuple[int, np.ndarray, dict, np.ndarray]:
     """The rest frames: their count n_rest, their median image (H, W) float32, the board check on it
     (calibrate's, if it ran) and the check's translation (2,) m (zero without a check residual)."""
-    n_rest = max(1, min(int(st["rest_frames"]), video.n_frames))
+    n_rest = max(1, min(int(st.rest_frames), video.n_frames))
     rest = np.median(np.stack([video.read(k).astype(np.float32) for k in range(n_rest)]), axis=0)
-    board = calibration.board_check or check_board_to_robot(rest, calibration, arm, q0, config)  # calibrate's, if it ran
+    board = calibration.board_check or check_board_to_robot(  # calibrate's, if it ran
+        rest, calibration, arm, q0, board_check, tracking)
     shift = np.zeros(2) if board["residual_mm"] is None else np.array([board["dx_mm"], board["dy_mm"]]) / 1000
     return n_rest, rest, board, shift
 
 
 def _coarse_search(video, calibration, sig: float, rest_pts: np.ndarray, rest_s: np.ndarray, template: np.ndarray,
-                   strips, n_rest: int, t_j: np.ndarray, q_j: np.ndarray, fps: float, st: dict) -> float:
+                   strips, n_rest: int, t_j: np.ndarray, q_j: np.ndarray, fps: float, st: SyncSettings) -> float:
     """The coarse offset, s (:func:`stringcast.sync_arm.coarse_offset`): every frame's match with the rest
     template against the predicted match of the rest image at the arm's logged postures (1 ms grid).
     ``strips(q)``: the shifted strip points of postures q.
@@ -182,11 +188,11 @@ def _coarse_search(video, calibration, sig: float, rest_pts: np.ndarray, rest_s:
     pred = sync_arm.ncc(sync_arm.sample(rest_s, calibration,
                                         strips(sync_arm.joints_at(tp, t_j, q_j))),
                         template)
-    return sync_arm.coarse_offset(rest_ncc, fps, tp, pred, st["coarse_step_ms"] / 1000)
+    return sync_arm.coarse_offset(rest_ncc, fps, tp, pred, st.coarse_step_ms / 1000)
 
 
 def _fine_search(video, calibration, sig: float, template: np.ndarray, strips, t_j: np.ndarray, q_j: np.ndarray,
-                 fps: float, window: tuple[float, float], search: float, step: float, n_seg: int, st: dict,
+                 fps: float, window: tuple[float, float], search: float, step: float, n_seg: int, st: SyncSettings,
                  tau0: float) -> tuple[np.ndarray, np.ndarray, list, np.ndarray, np.ndarray, np.ndarray]:
     """Each motion frame's match over the candidate offsets taus = tau0 +- search (step), s.
 
@@ -205,7 +211,7 @@ def _fine_search(video, calibration, sig: float, template: np.ndarray, strips, t
     # matches the still arm equally well for all earlier (or later) offsets, a one-sided
     # score that pulls the peak towards the rest posture (the overlapping ones if too few)
     frames = np.nonzero((k_t + tau0 - search >= t_on) & (k_t + tau0 + search <= t_off))[0]
-    if len(frames) < st["min_frames"]:
+    if len(frames) < st.min_frames:
         frames = np.nonzero((k_t + tau0 + search >= t_on) & (k_t + tau0 - search <= t_off))[0]
     if len(frames) == 0:
         raise DataError(f"{video.path}: no frame falls in the arm's motion ({t_on:.3f}-{t_off:.3f} s on the "
@@ -218,14 +224,14 @@ def _fine_search(video, calibration, sig: float, template: np.ndarray, strips, t
         q = sync_arm.joints_at(taus + k / fps, t_j, q_j)
         per_seg = sync_arm.ncc_segments(sync_arm.sample(f, calibration, strips(q)), template)  # (T, S)
         score = per_seg.mean(axis=1)
-        if np.ptp(score) >= st["min_frame_contrast"]:
+        if np.ptp(score) >= st.min_frame_contrast:
             total += score
             total_seg += per_seg
             best.append(taus[int(np.argmax(score))])
         for s_ in range(per_seg.shape[1]):
             c = per_seg[:, s_]
             j = int(np.argmax(c))
-            if np.ptp(c) >= st["min_frame_contrast"] and 1 <= j <= len(c) - 2:
+            if np.ptp(c) >= st.min_frame_contrast and 1 <= j <= len(c) - 2:
                 tau_ks[i, s_] = sync_arm.parabola_peak(taus[j - 1:j + 2], c[j - 1:j + 2])
     return taus, total, best, frames, tau_ks, total_seg
 
@@ -235,7 +241,8 @@ def _on_grid(t: float, step: float) -> float:
     return float(np.round(t / step) * step)
 
 
-def _recentred_search(coarse, fine, trigger_s: float | None, step: float, st: dict) -> tuple[float | None, tuple]:
+def _recentred_search(coarse, fine, trigger_s: float | None, step: float,
+                      st: SyncSettings) -> tuple[float | None, tuple]:
     """The fine search re-centred on its peak until the peak sits within ``recentre_ms`` of the window's
     centre (at most 5 windows; following the peak off an edge), from the trigger time, else (or when the
     trigger time is off by more than the search) from ``coarse()``. ``fine(tau0)`` is
@@ -245,7 +252,7 @@ def _recentred_search(coarse, fine, trigger_s: float | None, step: float, st: di
     for attempt in range(5):  # re-centre the search window on the peak (and follow it off an edge)
         taus, total, best, frames, tau_ks, total_seg = fine(tau0)
         i = int(np.argmax(total))
-        if best and 2 <= i <= len(taus) - 3 and abs(taus[i] - tau0) <= st["recentre_ms"] / 1000:
+        if best and 2 <= i <= len(taus) - 3 and abs(taus[i] - tau0) <= st.recentre_ms / 1000:
             break
         if attempt == 0 and coarse_s is None and not (best and 2 <= i <= len(taus) - 3):
             coarse_s = coarse()  # the trigger time was off by more than the search
@@ -256,14 +263,14 @@ def _recentred_search(coarse, fine, trigger_s: float | None, step: float, st: di
 
 
 def _segment_offset(taus: np.ndarray, total: np.ndarray, total_seg: np.ndarray, n_seg: int,
-                    st: dict) -> tuple[np.ndarray, np.ndarray, float]:
+                    st: SyncSettings) -> tuple[np.ndarray, np.ndarray, float]:
     """The offset, s, from the segments that agree: each segment's own peak (S,) s of its summed match
     total_seg (T, S) over taus (T,) s, which agree (S,) bool (within ``segment_agree_ms`` of the
     median peak), and the peak of their sum (of ``total`` (T,) if none agrees)."""
     # each segment's own summed match; a segment whose peak disagrees with the others (a static
     # feature such as a cable behind it in the rest template, the string across it) is left out
     seg_peaks = np.array([sync_arm.parabola_peak(taus, total_seg[:, j]) for j in range(n_seg)])
-    keep = np.abs(seg_peaks - np.median(seg_peaks)) <= st["segment_agree_ms"] / 1000
+    keep = np.abs(seg_peaks - np.median(seg_peaks)) <= st.segment_agree_ms / 1000
     offset = sync_arm.parabola_peak(taus, total_seg[:, keep].sum(axis=1)) if keep.any() else \
         sync_arm.parabola_peak(taus, total)
     return seg_peaks, keep, offset
@@ -281,14 +288,19 @@ def _offset_residual(arm, t_j: np.ndarray, q_j: np.ndarray, frames: np.ndarray, 
     return sync_arm.match_residual(tau_ks, a, offset)
 
 
-def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaign, config: dict | None,
-             out_json: str | Path | None = None) -> dict:
+def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaign, out_json: str | Path | None = None,
+             *, sync: SyncSettings, tracking: TrackingSettings, board_check: BoardCheckSettings) -> dict:
     """Write ``sync.json`` for one trial (see the module docstring for its keys).
 
     Args:
         trial_dir: ``data/<campaign>/trial_<k>`` with ``video.yaml``, the video and ``joints.csv``.
         calibration_json: the trial's ``calibration.json`` (needed by ``method: video``).
-        campaign: :class:`~stringcast.core.config.Campaign` (the arm). config: the project config.
+        campaign: :class:`~stringcast.core.config.Campaign` (the arm).
+        out_json: where to write ``sync.json`` (None: not written).
+        sync: sync settings (:class:`~stringcast.core.SyncSettings`).
+        tracking: tracking settings (:class:`~stringcast.core.TrackingSettings`): the arm's outline.
+        board_check: board-check settings (:class:`~stringcast.core.BoardCheckSettings`), for the
+            check on the rest frames when ``calibration.json`` has none.
 
     Raises:
         DataError: missing/malformed inputs (the file is named), no trigger time with
@@ -298,9 +310,8 @@ def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaig
     trial_dir = Path(trial_dir)
     video_yaml = trial_dir / "video.yaml"
     meta = read_video_meta(video_yaml)
-    st = sync_arm.settings(config)
     doc = {"fps": float(meta["fps"]), "frames": int(meta["frames"]), "trigger_time_s": meta.get("trigger_time_s")}
-    if st["method"] == "trigger":
+    if sync.method == "trigger":
         doc.update(_trigger_doc(meta, video_yaml))
     else:
         if calibration_json is None:
@@ -310,8 +321,8 @@ def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaig
         cal = Calibration.from_json(calibration_json)
         with open_video(find_video(trial_dir), fps=doc["fps"]) as video:
             warns = check_frame_count(video, meta, video_yaml)
-            est = estimate_offset(video, cal, campaign.arm, t_j, q_j, tracking_settings(config), st,
-                                  doc["trigger_time_s"], config)
+            est = estimate_offset(video, cal, campaign.arm, t_j, q_j, tracking, sync, board_check,
+                                  doc["trigger_time_s"])
             # the file's own frame times, where a full pass (the coarse search) has read them already
             stamps = video.timestamps_s if est["coarse_offset_s"] is not None else None
         check_joint_coverage(t_j, est["offset_s"] + np.arange(doc["frames"]) / doc["fps"], trial_dir / "joints.csv")
@@ -328,9 +339,9 @@ def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaig
                 warns.append(f"video.yaml's trigger_time_s is {gap_ms:+.2f} ms from the offset the video shows "
                              f"(more than a frame, {1000 / doc['fps']:.2f} ms): the video's estimate is used")
         doc["dropped_frames"] = None if stamps is None else [list(g) for g in dropped_frames(stamps, doc["fps"])]
-        if bc["residual_mm"] is not None and bc["residual_mm"] > st["board_check_warn_mm"]:
+        if bc["residual_mm"] is not None and bc["residual_mm"] > sync.board_check_warn_mm:
             warns.append(f"the still arm is seen {bc['residual_mm']:.1f} mm from where the forward kinematics and "
-                         f"the board-to-robot transform put it (> {st['board_check_warn_mm']} mm): check the "
+                         f"the board-to-robot transform put it (> {sync.board_check_warn_mm} mm): check the "
                          "board pose in config")
         if doc["dropped_frames"]:
             warns.append(f"{len(doc['dropped_frames'])} dropped frame(s) by the file's timestamps")

@@ -12,6 +12,8 @@ import cv2
 import numpy as np
 from scipy.ndimage import gaussian_filter1d, map_coordinates
 
+from stringcast.core import TrackingSettings
+
 from .skeleton_walk import trace_path  # noqa: F401 (part of this module's interface)
 
 
@@ -260,7 +262,7 @@ def mismatch_split(D: float, sigmas) -> np.ndarray:
 
 
 def clean_end(pts: np.ndarray, skel: np.ndarray, skel_at: np.ndarray, absd: np.ndarray, bg: np.ndarray,
-              st: dict, touch_px: float) -> bool:
+              st: TrackingSettings, touch_px: float) -> bool:
     """Whether a skeleton walk's last vertex is the string's free end.
 
     It is not when: the walk more than 3 ``touch_px`` back comes within ``touch_px`` of the
@@ -274,7 +276,8 @@ def clean_end(pts: np.ndarray, skel: np.ndarray, skel_at: np.ndarray, absd: np.n
     Args:
         pts: (M, 2) (row, col) walk, the end last (image px). skel: (h, w) bool skeleton whose
             pixel (0, 0) is ``skel_at`` (row, col) in the image. absd, bg: (H, W) contrast and
-            background. st: tracking settings (``branch_min_px``, ``end_contrast_min``, ``end_edge_max``).
+            background. st: tracking settings (:class:`~stringcast.core.TrackingSettings`:
+            ``branch_min_px``, ``end_contrast_min``, ``end_edge_max``).
     """
     cum = arc_length(pts)
     back = pts[cum < cum[-1] - 3 * touch_px]
@@ -288,7 +291,7 @@ def clean_end(pts: np.ndarray, skel: np.ndarray, skel_at: np.ndarray, absd: np.n
     win[wr[inside], wc[inside]] = False  # off the walk: a loop's other strand, or a spur
     _, lab, stats, _ = cv2.connectedComponentsWithStats(win.astype(np.uint8), connectivity=8)
     core = np.unique(lab[max(r - 2 - r0, 0):r + 3 - r0, max(c - 2 - c0, 0):c + 3 - c0])
-    if np.any(stats[core[core > 0], cv2.CC_STAT_AREA] >= st["branch_min_px"]):
+    if np.any(stats[core[core > 0], cv2.CC_STAT_AREA] >= st.branch_min_px):
         return False
     ij = pts.astype(int)
     v = absd[ij[:, 0], ij[:, 1]]
@@ -297,5 +300,5 @@ def clean_end(pts: np.ndarray, skel: np.ndarray, skel_at: np.ndarray, absd: np.n
     ray = pts[-1] + np.arange(-4.0, 5.0)[:, None] * t  # behind and past the end
     b = map_coordinates(bg, ray.T, order=1, mode="nearest")
     step = abs(float(np.median(b[6:])) - float(np.median(b[:3])))  # the background changes at the end:
-    return (float(v[-3:].mean()) >= st["end_contrast_min"] * float(np.median(v))  # an occluder's rim
-            and step < st["end_edge_max"] * float(np.median(v)))
+    return (float(v[-3:].mean()) >= st.end_contrast_min * float(np.median(v))  # an occluder's rim
+            and step < st.end_edge_max * float(np.median(v)))

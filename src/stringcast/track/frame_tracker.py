@@ -12,6 +12,7 @@ from skimage.morphology import skeletonize
 
 from .arm_mask import draw_arm_mask
 from stringcast.calibrate import Calibration
+from stringcast.core import TrackingSettings
 from .centreline import (
     arc_length,
     branch_vertices,
@@ -51,13 +52,14 @@ class FrameTracker:
 
     Args:
         bg: (H, W) background; noise: (a, b) of sigma^2 = a + b B (:func:`build_background`).
-        cal: the trial's :class:`Calibration`. campaign: gives L and n. st: :func:`settings`.
+        cal: the trial's :class:`Calibration`. campaign: gives L and n.
+        st: tracking settings (:class:`~stringcast.core.TrackingSettings`).
     """
 
-    def __init__(self, bg: np.ndarray, noise: tuple[float, float], cal: Calibration, campaign, st: dict):
+    def __init__(self, bg: np.ndarray, noise: tuple[float, float], cal: Calibration, campaign, st: TrackingSettings):
         self.bg, self.cal, self.st = bg, cal, st
         # noise sigma of the smoothed difference, per pixel (white noise through the Gaussian)
-        k = 1.0 / (2 * math.sqrt(math.pi) * st["smooth_px"]) if st["smooth_px"] > 0.3 else 1.0
+        k = 1.0 / (2 * math.sqrt(math.pi) * st.smooth_px) if st.smooth_px > 0.3 else 1.0
         self.sigma = (np.sqrt(noise[0] + noise[1] * np.clip(bg, 0, None)) * k).astype(np.float32)
         self.L, self.n = campaign.string.length, campaign.string.n_points
         self.s_targets = np.arange(1, self.n + 1) * self.L / self.n
@@ -68,7 +70,7 @@ class FrameTracker:
         st, cal, n = self.st, self.cal, self.n
         gpx = poses_px[len(poses_px) // 2][-1]
         scale = float(cal.m_per_px(gpx[None])[0])  # m per px near the grasp
-        R = (self.L + st["roi_margin_mm"] / 1000) / scale
+        R = (self.L + st.roi_margin_mm / 1000) / scale
         H, W = frame.shape
         x0, y0 = int(max(0, gpx[0] - R)), int(max(0, gpx[1] - R))
         x1, y1 = int(min(W, gpx[0] + R + 1)), int(min(H, gpx[1] + R + 1))
@@ -80,14 +82,14 @@ class FrameTracker:
         absd, fg = self._segment(frame[y0:y1, x0:x1].astype(np.float32), self.bg[y0:y1, x0:x1],
                                  self.sigma[y0:y1, x0:x1], arm)
         absd[arm] = 0.0  # the arm's own contrast must not pull the centreline
-        if st["arm_guard_px"] >= 1:  # the arm's rim (blur, anti-aliasing) leaves slivers by the mask
-            k = 2 * round(st["arm_guard_px"]) + 1
+        if st.arm_guard_px >= 1:  # the arm's rim (blur, anti-aliasing) leaves slivers by the mask
+            k = 2 * round(st.arm_guard_px) + 1
             arm = cv2.dilate(arm.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))) > 0
             fg &= ~arm
         g = np.array([gpx[1] - y0, gpx[0] - x0])  # grasp (row, col) in the ROI
         self._bg = self.bg[y0:y1, x0:x1]
-        rho = st["grasp_clear_mm"] / 1000 / scale
-        found = self._centreline(fg, g, st["grasp_search_mm"] / 1000 / scale, rho)
+        rho = st.grasp_clear_mm / 1000 / scale
+        found = self._centreline(fg, g, st.grasp_search_mm / 1000 / scale, rho)
         if found is None:
             return none()
         pts, bridged, branch = found
@@ -96,7 +98,7 @@ class FrameTracker:
         free_end = bool(3 <= end[0] + y0 < H - 3 and 3 <= end[1] + x0 < W - 3
                         and not arm[e0[0]:e1[0], e0[1]:e1[1]].any() and np.hypot(*(end - g)) > 2 * rho
                         and clean_end(pts, self._skel, self._skel_at, absd, self._bg, st,
-                                      st["end_touch_mm"] / 1000 / scale))
+                                      st.end_touch_mm / 1000 / scale))
         hidden_start = np.hypot(*(pts[0] - g)) > rho + 3 or self._fallback
         loop_back = np.hypot(*(end - g)) <= 2 * rho  # the walk came back to the grasp
         pts = odd_smooth(refine_centreline(absd, pts), 1.5, twice=True)
@@ -110,7 +112,7 @@ class FrameTracker:
         cum_px = arc_length(pts)
         gap = np.nonzero(bridged & (np.r_[0.0, np.diff(cum_px)] > 2.5))[0]
         ev_px = np.sort(np.concatenate([cum_px[branch], cum_px[gap - 1], cum_px[gap]]))
-        pts, obs = decimate_path(pts, ~bridged[1:], st["arc_step_px"], sub=4)
+        pts, obs = decimate_path(pts, ~bridged[1:], st.arc_step_px, sub=4)
         head = hidden_arc(g, pts)  # grasp -> first visible vertex, under the gripper's mask
         px = np.vstack([head, pts])[:, ::-1] + [x0, y0]  # (x, y) image px, grasp first
         obs = np.concatenate([np.full(len(head), not hidden_start), obs])
@@ -121,16 +123,16 @@ class FrameTracker:
         events = np.interp(ev_px, s_dec, s_poly[len(head):])  # ambiguities, polyline arc (m)
         if hidden_start:
             events = np.r_[L_head, events]
-        D = self.L - st["tip_shortfall_mm"] / 1000 - float(s_poly[-1])  # missing length if the end is the tip
-        tol = max(st["anchor_tol_mm"] / 1000, 0.01 * self.L, st["anchor_tol_px"] * scale)  # both ends +-1 px
+        D = self.L - st.tip_shortfall_mm / 1000 - float(s_poly[-1])  # missing length if the end is the tip
+        tol = max(st.anchor_tol_mm / 1000, 0.01 * self.L, st.anchor_tol_px * scale)  # both ends +-1 px
         slack = L_head - float(np.linalg.norm(xy[len(head)] - xy[0]))  # the head may be shorter, not below its chord
         lo, hi, shift, split = -np.inf, np.inf, 0.0, None
         if free_end and len(events) and float(s_poly[-1]) - events[-1] < self.L / n:
             free_end = False  # a branch joins within a point spacing of the end: is the tip this end or the branch's?
         if free_end and abs(D) <= tol:  # both anchors agree: share the mismatch (head, visible arc, free end)
-            split = mismatch_split(D, np.array([scale * st["end_sigma_px"] + slack, st["scale_sigma"] * (float(
-                s_poly[-1]) - L_head), scale * st["end_sigma_px"]]))
-        elif free_end and -tol - slack < D <= st["max_missing_frac"] * self.L:  # anchored at the tip: valid after the last ambiguity
+            split = mismatch_split(D, np.array([scale * st.end_sigma_px + slack, st.scale_sigma * (float(
+                s_poly[-1]) - L_head), scale * st.end_sigma_px]))
+        elif free_end and -tol - slack < D <= st.max_missing_frac * self.L:  # anchored at the tip: valid after the last ambiguity
             shift, lo = D, (events[-1] if len(events) else (L_head if hidden_start else -np.inf))
             if D > tol:  # the missing length hides by the grasp (a loop at the fingers, under the arm's mask):
                 lo = max(lo, L_head + D)  # the visible path's first D past the head may be that loop's
@@ -142,13 +144,13 @@ class FrameTracker:
             return none(px)
         s_t = self.s_targets - shift  # the targets' polyline arc
         if split is not None:  # model arc -> polyline arc: knots at the head's end and at the free end
-            end = self.L - st["tip_shortfall_mm"] / 1000 - split[2]
+            end = self.L - st.tip_shortfall_mm / 1000 - split[2]
             s_t = np.interp(self.s_targets, [0.0, L_head + split[0], end], [0.0, L_head, float(s_poly[-1])])
             s_t = np.where(self.s_targets > end, float(s_poly[-1]) + self.s_targets - end, s_t)
-        pos, valid = resample_by_arc(xy, obs, s_t, st["end_tolerance_mm"] / 1000 if free_end else 0.0)
+        pos, valid = resample_by_arc(xy, obs, s_t, st.end_tolerance_mm / 1000 if free_end else 0.0)
         trusted = (s_t >= max(lo, 0.0)) & (s_t <= hi) & (self.s_targets >= 0)
         valid &= trusted
-        if st["mode"] == "markers":  # the bands' centres, where the order along the path is trusted
+        if st.mode == "markers":  # the bands' centres, where the order along the path is trusted
             pos, valid = band_points(frame, px, obs & (np.arange(len(obs)) >= len(head)), s_poly, s_t, trusted,
                                      free_end, path_contrast(absd, pts), cal, st)
         pos[~valid] = np.nan
@@ -161,14 +163,14 @@ class FrameTracker:
         use = (bg[sub] > 10) & ~arm[sub]
         gain = float(np.median(img[sub][use] / bg[sub][use])) if use.sum() > 100 else 1.0
         diff = img - gain * bg
-        if st["smooth_px"] > 0:
-            diff = cv2.GaussianBlur(diff, (0, 0), st["smooth_px"])
+        if st.smooth_px > 0:
+            diff = cv2.GaussianBlur(diff, (0, 0), st.smooth_px)
         absd = np.abs(diff)
         z = absd / np.maximum(sigma * math.sqrt(max(gain, 1e-3)), 0.05)
-        weak = (z > st["threshold_low"]) & ~arm
+        weak = (z > st.threshold_low) & ~arm
         nlab, lab = cv2.connectedComponents(weak.astype(np.uint8), connectivity=8)
         keep = np.zeros(nlab, bool)
-        keep[lab[weak & (z > st["threshold_high"])]] = True
+        keep[lab[weak & (z > st.threshold_high)]] = True
         keep[0] = False
         return absd, keep[lab]
 
@@ -213,13 +215,13 @@ class FrameTracker:
                 if all(np.hypot(sy[r] - sy[q], sx[r] - sx[q]) >= 3 for q in picked) and len(picked) < 4:
                     picked.append(r)
             seeds.append((own[np.argmin(dist[own])], *picked))
-        best, zones = None, Zones(skel, self._width, int(self.st["branch_min_px"]))
+        best, zones = None, Zones(skel, self._width, int(self.st.branch_min_px))
         for pair in sorted(seeds, key=lambda p: dist[p[0]])[:6]:
             penalty = 0.0   # once the nearest pixel's walk leaves the clear zone, a ring pixel's must beat it
             for fallback, c in enumerate(pair):   # by 2 rho (a hook at the fingertips caught the first walk)
                 d0 = np.array([sy[c], sx[c]], float) - g
                 pts, bridged, amb, fold, passed = walk_skeleton(
-                    skel, (sy[c], sx[c]), self.st["max_gap_px"], d0 if np.hypot(*d0) >= 1 else None, zones=zones)
+                    skel, (sy[c], sx[c]), self.st.max_gap_px, d0 if np.hypot(*d0) >= 1 else None, zones=zones)
                 cum = arc_length(pts)
                 head = np.nonzero(cum <= 2 * r0)[0]
                 j0 = int(head[np.argmin(np.hypot(*(pts[head] - g).T))])
@@ -241,7 +243,7 @@ class FrameTracker:
         if best[4]:  # the walk skipped a tangle at the fingertips: not a branch
             skel = skel.astype(np.uint8)
             cv2.circle(skel, (round(g[1]), round(g[0])), round(rho + 1), 0, -1)
-        ev = branch_vertices((skel > 0) & ~best[6], walk, int(self.st["branch_min_px"])) | best[5]
+        ev = branch_vertices((skel > 0) & ~best[6], walk, int(self.st.branch_min_px)) | best[5]
         # a branch joining the walk near the grasp: a loop there, the ordering is ambiguous; a fold there
         head = np.hypot(*(walk - g).T) <= 2 * rho  # (a spur) is the fingertips' tangle, or the loop at
         self._head_clutter = bool(np.any(ev & head))  # the fingers that a missing length is anchored for

@@ -40,7 +40,7 @@ import numpy as np
 from scipy.ndimage import map_coordinates, median_filter
 
 from .centreline import arc_length
-from stringcast.core import POLARITIES
+from stringcast.core import POLARITIES, TrackingSettings
 
 
 
@@ -182,7 +182,8 @@ def assign_bands(centres: np.ndarray, whole: np.ndarray, expected: np.ndarray, t
 
 
 def find_bands(image: np.ndarray, path_px: np.ndarray, seen_seg: np.ndarray, s_path: np.ndarray,
-               expected: np.ndarray, band_width: float, contrast: float, st: dict, free_end: bool = False):
+               expected: np.ndarray, band_width: float, contrast: float, st: TrackingSettings,
+               free_end: bool = False):
     """Band centres for the points, along one frame's centreline (image px in, image px out).
 
     Args:
@@ -193,7 +194,8 @@ def find_bands(image: np.ndarray, path_px: np.ndarray, seen_seg: np.ndarray, s_p
         expected: (n,) the points' expected positions on that arc, u. band_width: the bands'
             length along the string, u. contrast: the string's contrast against the
             background, grey levels (the threshold is ``band_contrast_min`` x it).
-        st: settings ``band_contrast_min``, ``band_tolerance`` (x the points' spacing),
+        st: tracking settings (:class:`~stringcast.core.TrackingSettings`): ``band_contrast_min``,
+            ``band_tolerance`` (x the points' spacing),
             ``band_length_tol``, ``band_polarity``, ``band_step_px``.
         free_end: the path's last vertex is the string's free end (the tip).
 
@@ -216,15 +218,15 @@ def find_bands(image: np.ndarray, path_px: np.ndarray, seen_seg: np.ndarray, s_p
         raise ValueError(f"find_bands: bands {band_width:.4g} long at a spacing of {spacing:.4g}: at most half of it")
     if len(path_px) < 2 or not contrast > 0 or n == 0:
         return pos, valid
-    step = float(st.get("band_step_px", 0.25))
+    step = float(st.band_step_px)
     t, value, seg = centreline_profile(image, path_px, step)
     cum_px = arc_length(path_px)
     s_t = np.interp(t, cum_px, s_path)  # samples' arc in u
     u_per_px = (s_path[-1] - s_path[0]) / max(cum_px[-1], 1e-12)
     window = int(round(4 * band_width / max(u_per_px, 1e-12) / step)) | 1
     runs = find_band_runs(value, np.asarray(seen_seg, bool)[seg], step, window,
-                          float(st["band_contrast_min"]) * contrast, st.get("band_polarity", "auto"))
-    lt = float(st["band_length_tol"])
+                          float(st.band_contrast_min) * contrast, st.band_polarity)
+    lt = float(st.band_length_tol)
     best = None
     for sign, rr in runs.items():
         left, right = (np.interp(rr[:, k], t, s_t) for k in (0, 1))
@@ -241,7 +243,7 @@ def find_bands(image: np.ndarray, path_px: np.ndarray, seen_seg: np.ndarray, s_p
         if best is None or score > best[0]:
             best = (score, centre, whole, tip, rr)
     _, centre, whole, tip, rr = best
-    take = assign_bands(centre, whole, expected, float(st["band_tolerance"]) * spacing)
+    take = assign_bands(centre, whole, expected, float(st.band_tolerance) * spacing)
     for i, k in enumerate(take):
         if k < 0 or (tip[k] and i != n - 1):  # a run cut by the end belongs to the tip only
             continue
@@ -263,7 +265,7 @@ def path_contrast(contrast_img: np.ndarray, path_rc: np.ndarray) -> float:
 
 
 def band_points(frame: np.ndarray, path_px: np.ndarray, seen_seg: np.ndarray, s_path: np.ndarray,
-                expected: np.ndarray, trusted: np.ndarray, free_end: bool, contrast: float, cal, st: dict):
+                expected: np.ndarray, trusted: np.ndarray, free_end: bool, contrast: float, cal, st: TrackingSettings):
     """Marker mode's points for one frame, in the robot frame (the hook in ``FrameTracker.track``).
 
     Args:
@@ -279,7 +281,7 @@ def band_points(frame: np.ndarray, path_px: np.ndarray, seen_seg: np.ndarray, s_
     Returns:
         (n, 2) positions, m (NaN where invalid) and (n,) valid.
     """
-    px, valid = find_bands(frame, path_px, seen_seg, s_path, expected, float(st["band_width_mm"]) / 1000,
+    px, valid = find_bands(frame, path_px, seen_seg, s_path, expected, float(st.band_width_mm) / 1000,
                            contrast, st, free_end)
     valid &= np.asarray(trusted, bool)
     pos = np.full(px.shape, np.nan)

@@ -2,7 +2,7 @@
 
 :func:`run_tracking` writes ``tracks.parquet`` (``frame, t_s, point, x_m, y_m, valid``;
 point 0 = grasp, 1..n = the model's points at arc length s_i = i L / n, n = tip).
-Settings: ``config['tracking']`` over :data:`DEFAULTS`.
+Settings: tracking settings (:class:`~stringcast.core.TrackingSettings`).
 
 1. **Background** (:func:`~stringcast.track.background.build_background`): the arm-masked temporal
    median of ``background_samples`` frames spread over the arm's motion in ``background_bursts``
@@ -48,7 +48,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from stringcast.core import forward_kinematics, motion_window
+from stringcast.core import TrackingSettings, forward_kinematics, motion_window
 from .arm_mask import draw_arm_mask
 from .background import background_samples, build_background
 from stringcast.calibrate import Calibration
@@ -58,7 +58,7 @@ from .overlay import write_overlay
 from stringcast.video import prefetch
 from stringcast.sync import frame_times
 from stringcast.video import open_video
-from stringcast.core import tracking_settings as settings
+
 
 def _joint_px(cal: Calibration, arm, q: np.ndarray) -> np.ndarray:
     pts = forward_kinematics(arm, q)  # (F, J + 2, 2)
@@ -69,15 +69,17 @@ def _interp_joints(t: np.ndarray, t_j: np.ndarray, q_j: np.ndarray) -> np.ndarra
     return np.column_stack([np.interp(t, t_j, q_j[:, j]) for j in range(q_j.shape[1])])
 
 
-def run_tracking(trial_dir, calibration_json, sync_json, campaign, config, out_parquet,
-                 overlay_png=None) -> pd.DataFrame:
+def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, overlay_png=None, *,
+                 tracking: TrackingSettings) -> pd.DataFrame:
     """Track the string in one trial; write ``tracks.parquet`` (and the overlay PNG).
 
     Args:
         trial_dir: holds the video (``files.find_video``) and ``joints.csv``.
         calibration_json, sync_json: this trial's ``calibration.json`` and ``sync.json``.
-        campaign: the resolved campaign (arm, string length L and n). config: the config.
+        campaign: the resolved campaign (arm, string length L and n).
+        out_parquet: where to write ``tracks.parquet``.
         overlay_png: if given, a strip of ``overlay_frames`` frames with the tracked points.
+        tracking: tracking settings (:class:`~stringcast.core.TrackingSettings`).
 
     Returns:
         The long table ``frame, t_s, point, x_m, y_m, valid``, (n + 1) rows per frame, in m
@@ -90,7 +92,7 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, config, out_p
     from tqdm import tqdm
 
     trial_dir = Path(trial_dir)
-    st = settings(config)
+    st = tracking
     cal = Calibration.from_json(calibration_json)
     sync = read_json(sync_json)
     t_j, q_j, _ = read_joint_table(trial_dir / "joints.csv", n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
@@ -115,12 +117,12 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, config, out_p
     win = np.nonzero((t >= t_start) & (t <= t_end + 0.1) & in_log)[0]
     if len(win) < 9:
         win = np.arange(F)
-    span = st["background_window_s"]   # None: the whole motion window (the string hangs still in a short one)
+    span = st.background_window_s   # None: the whole motion window (the string hangs still in a short one)
     early = win if span is None else win[t[win] <= t[win[0]] + span]
     bwin = early if len(early) >= 9 else win
-    samples = background_samples(bwin, int(st["background_samples"]), int(st["background_bursts"]))
-    pre = np.nonzero(t < t_start - 0.02)[0][-int(st["rest_frames"]):]
-    frames = prefetch(video, int(st["prefetch_frames"]))  # the main pass decodes while the background is built
+    samples = background_samples(bwin, int(st.background_samples), int(st.background_bursts))
+    pre = np.nonzero(t < t_start - 0.02)[0][-int(st.rest_frames):]
+    frames = prefetch(video, int(st.prefetch_frames))  # the main pass decodes while the background is built
     second = open_video(vpath)
     try:
         bg, noise = build_background(second, samples.astype(int), pre, lambda k: draw_arm_mask(
@@ -134,7 +136,7 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, config, out_p
     xy[:, 0] = forward_kinematics(arm, _interp_joints(t, t_j, q_j))[:, -1]  # point 0: the grasp
     valid[:, 0] = in_log
     xy[~in_log, 0] = np.nan
-    shows = set(np.round(np.linspace(win[0], win[-1], int(st["overlay_frames"]))).astype(int)) if overlay_png else set()
+    shows = set(np.round(np.linspace(win[0], win[-1], int(st.overlay_frames))).astype(int)) if overlay_png else set()
     shown = []
     for k, frame in tqdm(frames, total=F, desc="tracking", unit="frame", disable=not sys.stderr.isatty()):
         if not in_log[k]:
