@@ -44,7 +44,7 @@ Run: ``python -m benchmarks.estimation [--quick] [--work DIR]`` -> results/bench
 from __future__ import annotations
 
 import argparse
-import copy
+import dataclasses
 import tempfile
 import time
 from pathlib import Path
@@ -67,10 +67,12 @@ POCKET_RADII = (0.0025, 0.01)
 POCKET_SAMPLES = 500
 
 
-def prepare(string_type: int, config: dict, calib_dir: Path, work: Path, seed: int):
+def prepare(string_type: int, config: dict, settings, calib_dir: Path, work: Path, seed: int):
     """Film, calibrate, sync and track one string type's first motion (reused if ``work`` has it).
 
+    ``settings``: the stages' settings (:class:`stringcast.core.Settings`) of ``config``.
     Returns (campaign, d): ``d`` holds tracks.parquet and trial_1/joints.csv."""
+    from stringcast.core import stage_kwargs
     from stringcast.core.config import resolve_campaign
     from stringcast.sync.offset import run_sync
     from stringcast.track.tracking import run_tracking
@@ -79,20 +81,21 @@ def prepare(string_type: int, config: dict, calib_dir: Path, work: Path, seed: i
     if (d / "tracks.parquet").exists() and (d / "trial_1" / "joints.csv").exists():
         return resolve_campaign({"string": string_type, "target": 1}, config, f"bench_{string_type}"), d
     campaign, d, trial = film_first_motion(string_type, config, work, seed, calib_dir)
-    run_sync(trial, d / "calibration.json", campaign, config, d / "sync.json")
-    run_tracking(trial, d / "calibration.json", d / "sync.json", campaign, config, d / "tracks.parquet")
+    run_sync(trial, d / "calibration.json", campaign, d / "sync.json", **stage_kwargs(run_sync, settings))
+    run_tracking(trial, d / "calibration.json", d / "sync.json", campaign, d / "tracks.parquet",
+                 **stage_kwargs(run_tracking, settings))
     return campaign, d
 
 
-def _estimate(campaign, d: Path, config: dict, optimizer: str | None, tag: str, seed_offset: int = 0):
+def _estimate(campaign, d: Path, settings, optimizer: str | None, tag: str, seed_offset: int = 0):
+    from stringcast.core import stage_kwargs
     from stringcast.estimate.estimation import run_estimation
 
-    cfg = copy.deepcopy(config)
-    if optimizer is not None:
-        cfg["estimation"]["optimizer"] = optimizer
-    cfg["estimation"]["seed"] = int(cfg["estimation"].get("seed", 0)) + seed_offset
-    return run_estimation(d / "tracks.parquet", d / "trial_1" / "joints.csv", campaign, cfg, None, 1,
-                          d / f"params_{tag}.json", d / f"fit_{tag}.parquet")
+    estimation = dataclasses.replace(settings.estimation, seed=int(settings.estimation.seed) + seed_offset,
+                                     **({} if optimizer is None else {"optimizer": optimizer}))
+    kwargs = stage_kwargs(run_estimation, settings) | {"estimation": estimation}
+    return run_estimation(d / "tracks.parquet", d / "trial_1" / "joints.csv", campaign, None, 1,
+                          d / f"params_{tag}.json", d / f"fit_{tag}.parquet", **kwargs)
 
 
 def evals_to_reach(trace: np.ndarray, level: float) -> int | None:
@@ -101,7 +104,7 @@ def evals_to_reach(trace: np.ndarray, level: float) -> int | None:
     return int(hit[0]) + 1 if len(hit) else None
 
 
-def ruggedness(campaign, d: Path, config: dict, chi_star: np.ndarray, seed: int = 0) -> dict:
+def ruggedness(campaign, d: Path, settings, chi_star: np.ndarray, seed: int = 0) -> dict:
     """E around ``chi_star`` (module doc): {"steps", "E_ratio" (dirs, steps), "basin_radius_chi",
     "pocket" (per radius), "dt_halved_mm"}."""
     from stringcast.estimate.problem import build_problem, make_objective
@@ -109,8 +112,10 @@ def ruggedness(campaign, d: Path, config: dict, chi_star: np.ndarray, seed: int 
 
     t_j, q_j, _ = read_joint_table(d / "trial_1" / "joints.csv", n_joints=campaign.arm.n_joints,
                                     arm_name=campaign.arm.name)
-    problem = build_problem(read_parquet(d / "tracks.parquet", TRACK_COLUMNS), t_j, q_j, campaign, config)
-    objective = make_objective(problem, config)
+    problem = build_problem(read_parquet(d / "tracks.parquet", TRACK_COLUMNS), t_j, q_j, campaign,
+                            model=settings.model, evaluation=settings.evaluation, estimation=settings.estimation,
+                            tracking=settings.tracking)
+    objective = make_objective(problem, settings.model)
     u = np.random.default_rng(seed).standard_normal((PROBE_DIRECTIONS, len(chi_star)))
     u /= np.linalg.norm(u, axis=1, keepdims=True)
     h = np.array(PROBE_STEPS)
@@ -127,19 +132,17 @@ def ruggedness(campaign, d: Path, config: dict, chi_star: np.ndarray, seed: int 
                           "median_E_ratio": float(np.median(E[np.isfinite(E)]) / E0) if np.isfinite(E).any() else None}
     return {"steps": list(PROBE_STEPS), "E_ratio": ratio.tolist(), "E0_mm": E0 * 1000,
             "rise_10pct_step": first, "basin_radius_chi": radius if np.isfinite(radius) else None,
-            "pocket": pocket, "dt_halved_mm": dt_halved(problem, config, chi_star)}
+            "pocket": pocket, "dt_halved_mm": dt_halved(problem, settings.model, chi_star)}
 
 
-def dt_halved(problem, config: dict, chi_star: np.ndarray) -> dict:
+def dt_halved(problem, model, chi_star: np.ndarray) -> dict:
     """How far the model's points move when dt is halved, at chi_star: the largest distance over the
     points (mm) between the runs at dt and dt / 2, at 25, 50, 75 and 100 % of the compared window.
     Large late values say the late frames compare the film with the integrator's chaos, not physics."""
-    import dataclasses
-
     from stringcast.estimate.problem import simulate_fit
 
-    p1, _ = simulate_fit(problem, config, chi_star)
-    p2, _ = simulate_fit(dataclasses.replace(problem, dt=problem.dt / 2), config, chi_star)
+    p1, _ = simulate_fit(problem, model, chi_star)
+    p2, _ = simulate_fit(dataclasses.replace(problem, dt=problem.dt / 2), model, chi_star)
     gap = np.linalg.norm(p1 - p2, axis=2).max(axis=1) * 1000
     t = problem.frame_t - problem.frame_t[0]
     at = {f"{q}%": float(gap[min(len(t) - 1, np.searchsorted(t, t[-1] * q / 100))]) for q in (25, 50, 75, 100)}
@@ -155,20 +158,20 @@ def _subsample(trace: np.ndarray) -> dict:
     return {"evaluations": (idx + 1).tolist(), "best_E_mm": [float(v) for v in trace[idx]]}
 
 
-def one_string(campaign, d: Path, config: dict, cmaes_seeds: int = 1) -> dict:
+def one_string(campaign, d: Path, settings, cmaes_seeds: int = 1) -> dict:
     """Estimate one tracked trial with the default settings and with every optimizer at equal budget
     (CMA-ES with ``cmaes_seeds`` seeds: its evaluations to the paper's E are the median over them)."""
-    default = str(config["estimation"].get("optimizer", "random_search"))
+    default = str(settings.estimation.optimizer)
     t0 = time.perf_counter()
-    runs = {default: _estimate(campaign, d, config, None, default)}
+    runs = {default: _estimate(campaign, d, settings, None, default)}
     seconds_default = time.perf_counter() - t0
     for name in OPTIMIZERS:
         if name not in runs:
-            runs[name] = _estimate(campaign, d, config, name, name)
+            runs[name] = _estimate(campaign, d, settings, name, name)
     traces = {name: _trace(est) for name, est in runs.items()}
     paper = traces["random_search"]
     paper_E = float(paper[-1])
-    cma_runs = [traces["cmaes"]] + [_trace(_estimate(campaign, d, config, "cmaes", f"cmaes_{s}", s))
+    cma_runs = [traces["cmaes"]] + [_trace(_estimate(campaign, d, settings, "cmaes", f"cmaes_{s}", s))
                                     for s in range(1, cmaes_seeds)]
     cma_reach = [evals_to_reach(tr, paper_E) for tr in cma_runs]
     out = {"paper_E_mm": paper_E, "paper_evals": len(paper), "seconds_default": seconds_default,
@@ -185,7 +188,7 @@ def one_string(campaign, d: Path, config: dict, cmaes_seeds: int = 1) -> dict:
     from stringcast.core.files import read_json
 
     out["frames_compared"] = read_json(d / f"params_{default}.json")["frames_compared"]
-    out["ruggedness"] = ruggedness(campaign, d, config, np.asarray(runs["random_search"].chi, float))
+    out["ruggedness"] = ruggedness(campaign, d, settings, np.asarray(runs["random_search"].chi, float))
     return out
 
 
@@ -223,9 +226,11 @@ def _figure(per: dict, path: Path) -> None:
 
 
 def run(quick: bool = False, work: Path | None = None, cmaes_seeds: int = 3) -> dict:
+    from stringcast.core import settings_from_config
     from stringcast.core.config import load_config
 
     config = load_config()
+    settings = settings_from_config(config)
     types = [1, 5] if quick else sorted(int(k) for k in config["strings"])
     per = {}
     with tempfile.TemporaryDirectory(prefix="bench_estimation_") as tmp:
@@ -235,9 +240,9 @@ def run(quick: bool = False, work: Path | None = None, cmaes_seeds: int = 3) -> 
             lab_calibration_clip(config, work)
         for k in types:
             t0 = time.perf_counter()
-            campaign, d = prepare(k, config, calib, work, seed=k)
+            campaign, d = prepare(k, config, settings, calib, work, seed=k)
             t_film = time.perf_counter() - t0
-            per[str(k)] = r = one_string(campaign, d, config, cmaes_seeds)
+            per[str(k)] = r = one_string(campaign, d, settings, cmaes_seeds)
             print(f"  string {k}: paper E {r['paper_E_mm']:.2f} mm in {r['paper_evals']} evals; CMA-ES reaches it "
                   f"after {r['cmaes_evals_to_paper_E']}, DE after {r['de_evals_to_paper_E']}; E rises 10 % within "
                   f"{r['ruggedness']['basin_radius_chi']} (chi) of its set, "
@@ -247,7 +252,7 @@ def run(quick: bool = False, work: Path | None = None, cmaes_seeds: int = 3) -> 
     ratios = [r["cmaes_eval_ratio"] if r["cmaes_eval_ratio"] is not None else np.inf for r in per.values()]
     figure = BENCH_DIR / "estimation.png"
     _figure(per, figure)
-    est_cfg = config["estimation"]
+    est = settings.estimation
     doc = header("estimation", quick) | {
         "per_string": per, "median_eval_ratio_cmaes": float(np.median(ratios)),
         "median_eval_ratio_de": float(np.median([r["de_eval_ratio"] if r["de_eval_ratio"] is not None else np.inf
@@ -259,9 +264,8 @@ def run(quick: bool = False, work: Path | None = None, cmaes_seeds: int = 3) -> 
                                                            for r in per.values()])) for rad in POCKET_RADII},
         "goals": {"seconds_default_max": 60.0, "median_eval_ratio_cmaes": 0.2},
         "reference": {"name": "paper_random_search", "optimizer": "random_search",
-                      "evaluations": int(est_cfg.get("iterations", 3000)), "chi0": est_cfg.get("chi0", 1.0),
-                      "beta": est_cfg.get("beta", 0.998)},
-        "settings": {k: v for k, v in est_cfg.items()}, "figure": figure.name,
+                      "evaluations": int(est.iterations), "chi0": est.chi0, "beta": est.beta},
+        "settings": est.as_dict(), "figure": figure.name,
     }
     write("estimation", doc)
     return doc

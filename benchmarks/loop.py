@@ -78,8 +78,8 @@ def method_config(config: dict, method: str, seed: int) -> dict:
     from stringcast.core.config import merge_config
 
     cfg = merge_config(copy.deepcopy({k: v for k, v in config.items() if k != "_path"}), METHODS[method])
-    cfg["estimation"]["seed"] = int(seed)
-    cfg["motion"]["seed"] = int(seed)
+    cfg.setdefault("estimation", {})["seed"] = int(seed)   # the config file may leave a section to its defaults
+    cfg.setdefault("motion", {})["seed"] = int(seed)
     return cfg
 
 

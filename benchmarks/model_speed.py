@@ -25,10 +25,11 @@ N_POINTS, L0, DT = 15, 0.034, 1e-4
 
 def _case(duration: float):
     """Mid-range Table 2 coefficients, a 2 Hz swinging hand, the hanging start."""
-    from stringcast.core.config import load_config, model_ranges
+    from stringcast.core import model_ranges, settings_from_config
+    from stringcast.core.config import load_config
     from stringcast.model.string_model import hanging_equilibrium
 
-    lo, hi, _ = model_ranges(load_config())
+    lo, hi, _ = model_ranges(settings_from_config(load_config()).model)
     coeffs = np.sqrt(lo * hi)
     hand_t = np.arange(0.0, duration + 1e-9, 0.002)
     w = 2 * np.pi * 2.0

@@ -6,6 +6,7 @@ import yaml
 
 from stringcast.core.config import (PARAM_NAMES, ConfigError, StringSpec, load_campaign, load_config,
                                model_ranges, resolve_campaign)
+from stringcast.core.settings import settings_from_config
 
 
 def test_default_config_resolves_every_string_and_target(config):
@@ -31,7 +32,7 @@ def test_mass_groups_number_special_points():
 
 def test_wrong_key_is_named(tmp_path, config):
     bad = copy.deepcopy({k: v for k, v in config.items() if k != "_path"})
-    bad["model"]["dt_ss"] = 1e-4
+    bad["model"] = {"dt_ss": 1e-4}
     p = tmp_path / "c.yaml"
     p.write_text(yaml.safe_dump(bad))
     with pytest.raises(ConfigError, match=r"c.yaml.*model.*dt_ss"):
@@ -50,12 +51,17 @@ def test_wrong_value_is_named(tmp_path, config):
 def test_config_files_merge_in_order_as_snakemake_does(tmp_path, config):
     """--configfile files over the project's: sections merge key by key, lists are replaced."""
     base = config["_path"]
-    over = tmp_path / "over.yaml"
+    mid, over = tmp_path / "mid.yaml", tmp_path / "over.yaml"
+    mid.write_text("estimation: {iterations: 500}\nmotion: {T_range_s: [0.1, 2.0], batch: 32}\n")
     over.write_text("estimation: {optimizer: cmaes, joint_trials: 0}\nmotion: {T_range_s: [0.3, 0.9]}\n")
-    merged = load_config([base, over])
+    merged = load_config([base, mid, over])
     assert merged["estimation"]["optimizer"] == "cmaes" and merged["estimation"]["joint_trials"] == 0
-    assert merged["estimation"]["iterations"] == config["estimation"]["iterations"]   # kept from the base
+    assert merged["estimation"]["iterations"] == 500 and merged["motion"]["batch"] == 32   # kept from the file before
     assert merged["motion"]["T_range_s"] == [0.3, 0.9] and merged["strings"] == config["strings"]
+    assert str(mid) in merged["_path"] and merged["_path"].index(str(mid)) < merged["_path"].index(str(over))
+    s = settings_from_config(merged)   # the settings no file sets keep their defaults
+    assert (s.estimation.optimizer, s.estimation.iterations, s.estimation.joint_trials) == ("cmaes", 500, 0)
+    assert s.motion.T_range_s == (0.3, 0.9) and s.estimation.batch == settings_from_config(config).estimation.batch
     assert str(over) in merged["_path"]
     with pytest.raises(ConfigError, match=r"over.yaml.*required property"):   # a partial file alone is not a config
         load_config(over)
@@ -88,11 +94,11 @@ def test_campaign_file_errors_name_the_file(tmp_path, config):
         load_campaign(tmp_path / "nope.yaml", config)
 
 
-def test_inline_string_and_ranges(config):
+def test_inline_string_and_ranges(config, settings):
     camp = resolve_campaign({"string": {"length_mm": 400, "n_points": 12, "weights": [{"at_mm": 200}]},
                              "target": 4}, config)
     assert camp.string.n_points == 12 and camp.string.special_points() == [6]
-    lo, hi, mu = model_ranges(config)
+    lo, hi, mu = model_ranges(settings.model)
     assert lo.shape == (len(PARAM_NAMES),) and np.all(hi > lo) and mu == (0.1, 100.0)
 
 

@@ -1,5 +1,5 @@
 """Estimation diagnostics: best K, near-best sets, per-parameter spread and the pinned/loose flag."""
-import copy
+import dataclasses
 
 import numpy as np
 import pytest
@@ -36,16 +36,16 @@ def test_near_best_takes_the_tolerance_or_the_best_k():
     assert len(e) == 3 and np.all(np.isinf(e))
 
 
-def test_search_tells_excited_from_unexcited_parameters(config):
+def test_search_tells_excited_from_unexcited_parameters(settings):
     """E depends on chi[0] and chi[4] only: those are pinned, every other parameter is loose."""
     def f(c):
         return 0.005 + 0.05 * (c[:, 0] - 0.3) ** 2 + 0.05 * (c[:, 4] - 0.7) ** 2
 
-    cfg = copy.deepcopy(config)
-    cfg["estimation"].update(iterations=1500, batch=50, top_k=20, near_best_tol=0.05, pinned_spread=0.2)
-    est = es.estimate(_problem_stub(), cfg, np.full(12, 0.5), 1, seed=1, objective=f)
+    estimation = dataclasses.replace(settings.estimation, iterations=1500, batch=50, top_k=20, near_best_tol=0.05,
+                                     pinned_spread=0.2)
+    est = es.estimate(_problem_stub(), settings.model, estimation, np.full(12, 0.5), 1, seed=1, objective=f)
     lo, hi = np.full(12, -3.0), np.full(12, 3.0)
-    d = dg.diagnostics(est.chi_evaluated, est.E_evaluated, lo, hi, NAMES, cfg)
+    d = dg.diagnostics(est.chi_evaluated, est.E_evaluated, lo, hi, NAMES, estimation)
     assert d["pinned"] == [NAMES[0], NAMES[4]]
     assert set(d["loose"]) == set(NAMES) - {NAMES[0], NAMES[4]}
     assert d["near_best"]["count"] >= 20 and d["near_best"]["E_mm_max"] <= 1.05 * est.E_m * 1000 + 1e-9
@@ -53,16 +53,15 @@ def test_search_tells_excited_from_unexcited_parameters(config):
     assert d["blown_up_share"] == 0.0
 
 
-def test_diagnostics_when_everything_blew_up(config):
-    cfg = copy.deepcopy(config)
-    cfg["estimation"].update(iterations=60, batch=30)
-    est = es.estimate(_problem_stub(), cfg, np.full(12, 0.5), 1, 0, objective=lambda c: np.full(len(c), np.inf))
-    d = dg.diagnostics(est.chi_evaluated, est.E_evaluated, np.zeros(12), np.ones(12), NAMES, cfg)
+def test_diagnostics_when_everything_blew_up(settings):
+    estimation = dataclasses.replace(settings.estimation, iterations=60, batch=30)
+    est = es.estimate(_problem_stub(), settings.model, estimation, np.full(12, 0.5), 1, 0,
+                      objective=lambda c: np.full(len(c), np.inf))
+    d = dg.diagnostics(est.chi_evaluated, est.E_evaluated, np.zeros(12), np.ones(12), NAMES, estimation)
     assert d["blown_up_share"] == 1.0 and d["near_best"]["count"] == 20 and len(d["parameters"]) == 12
 
 
-def test_bad_settings(config):
-    cfg = copy.deepcopy(config)
-    cfg["estimation"]["pinned_spread"] = 0.0
+def test_bad_settings(settings):
+    estimation = dataclasses.replace(settings.estimation, pinned_spread=0.0)
     with pytest.raises(ValueError, match="pinned_spread"):
-        dg.settings(cfg)
+        dg.checked(estimation)

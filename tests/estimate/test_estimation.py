@@ -1,5 +1,5 @@
 """Parameter estimation (eqs. 2-3): problem building, the paper's random search, other optimizers, files."""
-import copy
+import dataclasses
 
 import numpy as np
 import pandas as pd
@@ -53,42 +53,53 @@ def chi_true(campaign):
     return CHI_TRUE[:len(PARAM_NAMES) + campaign.string.mass_groups().max() + 1]
 
 
-def test_eq2_decode_encode(config, campaign):
-    lo, hi, (mlo, mhi) = model_ranges(config)
+def test_eq2_decode_encode(settings, campaign):
+    lo, hi, (mlo, mhi) = model_ranges(settings.model)
     groups = campaign.string.mass_groups()
     d = len(PARAM_NAMES) + groups.max() + 1
-    c0, m0 = prm.decode(np.zeros(d), config, groups)
-    c1, m1 = prm.decode(np.ones(d), config, groups)
+    c0, m0 = prm.decode(np.zeros(d), settings.model, groups)
+    c1, m1 = prm.decode(np.ones(d), settings.model, groups)
     np.testing.assert_allclose(c0, lo)
     np.testing.assert_allclose(c1, hi)
     assert np.allclose(m0, mlo) and np.allclose(m1, mhi) and m0.shape == (campaign.string.n_points,)
     chi = np.random.default_rng(0).uniform(size=d)
-    c, m = prm.decode(chi, config, groups)
+    c, m = prm.decode(chi, settings.model, groups)
     np.testing.assert_allclose(c, lo * (hi / lo) ** chi[:10])  # eq. (2)
     tip = campaign.string.special_points()[0] - 1
     assert m[tip] == pytest.approx(mlo * (mhi / mlo) ** chi[11])
     mu_groups = np.array([m[groups == g][0] for g in range(groups.max() + 1)])
-    np.testing.assert_allclose(prm.encode(c, mu_groups, config), chi, atol=1e-12)
+    np.testing.assert_allclose(prm.encode(c, mu_groups, settings.model), chi, atol=1e-12)
 
 
-def test_start_chi(config, campaign, chi_true):
-    c_first, _ = first_parameters(config, campaign.string)
-    chi = prm.start_chi(None, campaign.string, config)
+def test_start_chi(settings, campaign, chi_true):
+    c_first, _ = first_parameters(settings.model, settings.motion, campaign.string)
+    chi = prm.start_chi(None, campaign.string, settings.model, settings.motion)
     assert chi[0] > 0 and np.all(chi[1:10] == 0)  # Table 2 minima, k_s lifted
-    np.testing.assert_allclose(prm.decode(chi, config, campaign.string.mass_groups())[0], c_first)
+    np.testing.assert_allclose(prm.decode(chi, settings.model, campaign.string.mass_groups())[0], c_first)
     assert chi[10] == pytest.approx(np.log(1.0 / 0.1) / np.log(1000))  # first_mu = 1
-    np.testing.assert_allclose(prm.start_chi({"chi": chi_true.tolist()}, campaign.string, config), chi_true)
-    c, mu = prm.decode(chi_true, config, np.arange(2))
+    first = (settings.model, settings.motion)
+    np.testing.assert_allclose(prm.start_chi({"chi": chi_true.tolist()}, campaign.string, *first), chi_true)
+    c, mu = prm.decode(chi_true, settings.model, np.arange(2))
     prev = {"coefficients": dict(zip(PARAM_NAMES, c)), "mu_groups": mu.tolist()}
-    np.testing.assert_allclose(prm.start_chi(prev, campaign.string, config), chi_true, atol=1e-12)
+    np.testing.assert_allclose(prm.start_chi(prev, campaign.string, *first), chi_true, atol=1e-12)
     with pytest.raises(DataError, match="mu_groups"):
-        prm.start_chi({"coefficients": prev["coefficients"]}, campaign.string, config)
+        prm.start_chi({"coefficients": prev["coefficients"]}, campaign.string, *first)
 
 
-def _cfg(config, **kw):
-    cfg = copy.deepcopy(config)
-    cfg["estimation"].update(kw)
-    return cfg
+def _est(settings, **kw):
+    """The estimation settings with ``kw`` changed."""
+    return dataclasses.replace(settings.estimation, **kw)
+
+
+def _problem_settings(settings, **estimation):
+    """The settings :func:`build_problem` takes, the estimation settings with ``estimation`` changed."""
+    return dict(model=settings.model, evaluation=settings.evaluation, estimation=_est(settings, **estimation),
+                tracking=settings.tracking)
+
+
+def _stage_settings(settings, **estimation):
+    """The settings :func:`run_estimation` takes, the estimation settings with ``estimation`` changed."""
+    return dict(_problem_settings(settings, **estimation), motion=settings.motion)
 
 
 class Recording:
@@ -109,13 +120,13 @@ def _problem_stub(n=10, groups=2):
                                 valid=np.ones((f, n), bool), l0=0.03, psi0=0.0, dt=1e-4, mass_groups=mg, w=0.1)
 
 
-def test_random_search_eq3_steps_shrink(config):
+def test_random_search_eq3_steps_shrink(settings):
     """Constant E keeps chi_best at the start, so every candidate lies within chi0/M beta^m of it."""
     start = np.full(12, 0.5)
     for M in (1, 4):
-        cfg = _cfg(config, iterations=640, batch=64, chi0=1.0, beta=0.995)
+        estimation = _est(settings, iterations=640, batch=64, chi0=1.0, beta=0.995)
         rec = Recording(lambda c: np.ones(len(c)))
-        est = es.estimate(_problem_stub(), cfg, start, M, seed=3, objective=rec)
+        est = es.estimate(_problem_stub(), settings.model, estimation, start, M, seed=3, objective=rec)
         cand = np.concatenate(rec.calls)
         assert cand.shape == (640, 12) and np.all((cand >= 0) & (cand <= 1))
         np.testing.assert_array_equal(cand[0], start)  # m = 0 is chi_best itself
@@ -125,16 +136,16 @@ def test_random_search_eq3_steps_shrink(config):
         assert est.n_evaluations == 640 and est.history["evaluations"][-1] == 640
 
 
-def test_random_search_finds_minimum_reproducibly(config):
+def test_random_search_finds_minimum_reproducibly(settings):
     target = np.linspace(0.2, 0.8, 12)
 
     def f(c):
         return np.sum((c - target) ** 2, axis=1)
 
-    cfg = _cfg(config, iterations=1500, batch=50, chi0=1.0, beta=0.997)
-    a = es.estimate(_problem_stub(), cfg, np.full(12, 0.5), 1, seed=1, objective=f)
-    b = es.estimate(_problem_stub(), cfg, np.full(12, 0.5), 1, seed=1, objective=f)
-    c = es.estimate(_problem_stub(), cfg, np.full(12, 0.5), 1, seed=2, objective=f)
+    estimation = _est(settings, iterations=1500, batch=50, chi0=1.0, beta=0.997)
+    a = es.estimate(_problem_stub(), settings.model, estimation, np.full(12, 0.5), 1, seed=1, objective=f)
+    b = es.estimate(_problem_stub(), settings.model, estimation, np.full(12, 0.5), 1, seed=1, objective=f)
+    c = es.estimate(_problem_stub(), settings.model, estimation, np.full(12, 0.5), 1, seed=2, objective=f)
     assert a.E_m < 0.02 * f(np.full((1, 12), 0.5))[0]
     np.testing.assert_array_equal(a.chi, b.chi)
     assert not np.array_equal(a.chi, c.chi)
@@ -145,40 +156,40 @@ def test_random_search_finds_minimum_reproducibly(config):
 
 
 @pytest.mark.parametrize("name", ["cmaes", "de"])
-def test_other_optimizers_improve(config, name):
+def test_other_optimizers_improve(settings, name):
     target = np.linspace(0.2, 0.8, 12)
 
     def f(c):
         return np.sum((c - target) ** 2, axis=1)
 
-    cfg = _cfg(config, optimizer=name, iterations=2000, batch=32)
-    est = es.estimate(_problem_stub(), cfg, np.full(12, 0.5), 1, seed=0, objective=f)
+    estimation = _est(settings, optimizer=name, iterations=2000, batch=32)
+    est = es.estimate(_problem_stub(), settings.model, estimation, np.full(12, 0.5), 1, seed=0, objective=f)
     assert est.optimizer == name and est.n_evaluations <= 2000
     assert est.E_m < 0.1 * f(np.full((1, 12), 0.5))[0]
 
 
-def test_cmaes_reaches_a_corner_optimum(config):
+def test_cmaes_reaches_a_corner_optimum(settings):
     """Table 2's bounds often hold the optimum: CMA-ES evaluates clipped points, so it lands on them exactly."""
     corner = np.r_[np.ones(6), np.zeros(6)]
     rec = Recording(lambda c: np.sum((c - corner) ** 2, axis=1))
-    est = es.estimate(_problem_stub(), _cfg(config, optimizer="cmaes", iterations=1500, batch=32), np.full(12, 0.2),
-                      1, seed=0, objective=rec)
+    est = es.estimate(_problem_stub(), settings.model, _est(settings, optimizer="cmaes", iterations=1500, batch=32),
+                      np.full(12, 0.2), 1, seed=0, objective=rec)
     assert est.E_m < 1e-12 and est.n_evaluations == 1500
     cand = np.concatenate(rec.calls)
     np.testing.assert_array_equal(cand[0], np.full(12, 0.2))  # chi_best is evaluated first (M = 1: then the centre)
     assert np.all((cand >= 0) & (cand <= 1))
 
 
-def test_cmaes_runs_share_the_budget(config):
+def test_cmaes_runs_share_the_budget(settings):
     """cmaes_runs = 2: at M = 1 both runs start at the centre; at M = 2 the first refines chi_best
     with sigma0 / 2 and the second starts at the centre again with sigma0. Each run converges on
     its half of the budget, and the best of both is the estimate."""
     corner = np.r_[np.ones(6), np.zeros(6)]
-    cfg = _cfg(config, optimizer="cmaes", iterations=1200, batch=32, cmaes_runs=2, cmaes_first_look=0)
+    estimation = _est(settings, optimizer="cmaes", iterations=1200, batch=32, cmaes_runs=2, cmaes_first_look=0)
     pop = 4 + int(3 * np.log(12))
     for M, start, n_first in ((1, np.full(12, 0.5), 1), (2, np.full(12, 0.2), 0)):
         rec = Recording(lambda c: np.sum((c - corner) ** 2, axis=1))
-        est = es.estimate(_problem_stub(), cfg, np.full(12, 0.2), M, seed=0, objective=rec)
+        est = es.estimate(_problem_stub(), settings.model, estimation, np.full(12, 0.2), M, seed=0, objective=rec)
         cand = np.concatenate(rec.calls)
         assert len(cand) == 1200 and est.E_m < 1e-6
         second = n_first + (1200 - n_first) // 2 // pop * pop   # first candidate of run 2
@@ -191,33 +202,35 @@ def test_cmaes_runs_share_the_budget(config):
         assert spread < (0.3 / M) and spread > 0.3 / M / 4, (M, spread)                  # step sigma0 / M
 
 
-def test_partly_blown_up_search_says_so(config):
+def test_partly_blown_up_search_says_so(settings):
     def f(c):  # about 70 % of the candidates blow up, wherever they are
         return np.where((np.sum(c, axis=1) * 1e4) % 1 > 0.3, np.inf, 1.0 + c[:, 1])
 
-    est = es.estimate(_problem_stub(), _cfg(config, iterations=300, batch=50), np.full(12, 0.5), 1, 0, objective=f)
+    est = es.estimate(_problem_stub(), settings.model, _est(settings, iterations=300, batch=50), np.full(12, 0.5),
+                      1, 0, objective=f)
     assert np.isfinite(est.E_m) and est.n_blown_up > 150 and "blew up" in est.message
     assert est.E_m == pytest.approx(1.0 + est.chi[1]) and est.E_m == np.min(est.E_evaluated)
 
 
-def test_unknown_optimizer(config):
+def test_unknown_optimizer(settings):
     with pytest.raises(ConfigError, match="optimizer"):
-        es.estimate(_problem_stub(), _cfg(config, optimizer="magic"), np.full(12, 0.5), 1, 0,
+        es.estimate(_problem_stub(), settings.model, _est(settings, optimizer="magic"), np.full(12, 0.5), 1, 0,
                     objective=lambda c: np.ones(len(c)))
 
 
-def test_all_candidates_blown_up_does_not_crash(config):
-    cfg = _cfg(config, iterations=100, batch=30)
-    est = es.estimate(_problem_stub(), cfg, np.full(12, 0.5), 1, 0, objective=lambda c: np.full(len(c), np.inf))
+def test_all_candidates_blown_up_does_not_crash(settings):
+    estimation = _est(settings, iterations=100, batch=30)
+    est = es.estimate(_problem_stub(), settings.model, estimation, np.full(12, 0.5), 1, 0,
+                      objective=lambda c: np.full(len(c), np.inf))
     assert est.E_m == np.inf and est.n_blown_up == 100 and "blew up" in est.message
     assert est.coeffs.shape == (10,)
 
 
-def test_build_problem(config, campaign, chi_true, tmp_path):
-    c, mu = prm.decode(chi_true, config, campaign.string.mass_groups())
+def test_build_problem(settings, campaign, chi_true, tmp_path):
+    c, mu = prm.decode(chi_true, settings.model, campaign.string.mass_groups())
     df, t, q, p0 = make_trial(campaign, c, mu, tmp_path, drop=(4,))
-    prob = es.build_problem(df, t, q, campaign, config)
-    n_rest = config["tracking"]["rest_frames"]
+    prob = es.build_problem(df, t, q, campaign, **_problem_settings(settings))
+    n_rest = settings.tracking.rest_frames
     t_move = motion_start(t, q)
     ft = np.unique(df["t_s"])
     before = ft[(ft < t_move) & (ft >= t[0])]
@@ -231,56 +244,55 @@ def test_build_problem(config, campaign, chi_true, tmp_path):
     assert not prob.valid[:, 3].any() and prob.valid[:, 0].all()
     late = df[df["t_s"] > t[0] + 0.02]
     with pytest.raises(DataError, match="before the motion starts"):
-        es.build_problem(late[late["t_s"] < t[0] + 0.02 + 0.003], t, q, campaign, config)
+        es.build_problem(late[late["t_s"] < t[0] + 0.02 + 0.003], t, q, campaign,
+                         **_problem_settings(settings))
     with pytest.raises(DataError, match="missing columns"):
-        es.build_problem(df.drop(columns="valid"), t, q, campaign, config)
+        es.build_problem(df.drop(columns="valid"), t, q, campaign, **_problem_settings(settings))
 
 
-def test_compare_after_motion_cuts_the_window(config, campaign, chi_true, tmp_path):
+def test_compare_after_motion_cuts_the_window(settings, campaign, chi_true, tmp_path):
     """estimation.compare_after_motion_s: frames compared up to that long after the arm stops
     (the log holds the end posture 0.3 s), the start unchanged; null keeps the whole log."""
-    c, mu = prm.decode(chi_true, config, campaign.string.mass_groups())
+    c, mu = prm.decode(chi_true, settings.model, campaign.string.mass_groups())
     df, t, q, _ = make_trial(campaign, c, mu, tmp_path)
-    whole = es.build_problem(df, t, q, campaign, config)
-    cfg = copy.deepcopy(config)
-    cfg["estimation"]["compare_after_motion_s"] = 0.1
-    cut = es.build_problem(df, t, q, campaign, cfg)
+    whole = es.build_problem(df, t, q, campaign, **_problem_settings(settings))
+    cut = es.build_problem(df, t, q, campaign, **_problem_settings(settings, compare_after_motion_s=0.1))
     t_stop = t[0] + 0.3 + 0.5          # make_trial: 0.3 s at rest, a 0.5 s motion, 0.3 s still
     assert cut.frame_t[0] == whole.frame_t[0]
     assert t_stop + 0.1 - 0.01 < cut.frame_t[-1] <= t_stop + 0.1 + 0.01
     assert whole.frame_t[-1] > t_stop + 0.25
     np.testing.assert_array_equal(cut.tracked, whole.tracked[:len(cut.frame_t)])
-    cfg["estimation"]["compare_after_motion_s"] = None
-    assert len(es.build_problem(df, t, q, campaign, cfg).frame_t) == len(whole.frame_t)
+    none = _problem_settings(settings, compare_after_motion_s=None)
+    assert len(es.build_problem(df, t, q, campaign, **none).frame_t) == len(whole.frame_t)
 
 
-def test_hidden_rest_points_start_the_model_at_rest(config, campaign, chi_true, tmp_path):
+def test_hidden_rest_points_start_the_model_at_rest(settings, campaign, chi_true, tmp_path):
     """Points 1-3 never tracked (a gripper hides them): the filled rest state keeps the hidden segments
     at (at least) l0, so the model starts at rest and, while the arm is still, stays near the true pose."""
-    c, mu = prm.decode(chi_true, config, campaign.string.mass_groups())
+    c, mu = prm.decode(chi_true, settings.model, campaign.string.mass_groups())
     df, t, q, p0 = make_trial(campaign, c, mu, tmp_path, drop=(1, 2, 3))
-    prob = es.build_problem(df, t, q, campaign, config)
+    prob = es.build_problem(df, t, q, campaign, **_problem_settings(settings))
     assert prob.fallback_points == (1, 2, 3)
     seg = np.linalg.norm(np.diff(np.vstack([prob.hand[0, :2], prob.p_init]), axis=0), axis=1)
     # this chain hangs stretched by its load (chord > 4 l0): the gap is spaced evenly on the line
     np.testing.assert_allclose(seg[:4], seg[0], rtol=1e-9)
     assert seg[0] >= campaign.string.l0
-    sim, ok = es.simulate_fit(prob, config, chi_true)
+    sim, ok = es.simulate_fit(prob, settings.model, chi_true)
     still = prob.frame_t < motion_start(t, q)
     assert ok and still.sum() > 10
     drift = np.linalg.norm(sim[still] - p0[None], axis=2).max()
     assert drift < 2e-3, f"the model moved {drift * 1000:.2f} mm while the arm was still"
 
 
-def test_run_estimation_end_to_end(config, campaign, chi_true, tmp_path):
-    c, mu = prm.decode(chi_true, config, campaign.string.mass_groups())
+def test_run_estimation_end_to_end(settings, campaign, chi_true, tmp_path):
+    c, mu = prm.decode(chi_true, settings.model, campaign.string.mass_groups())
     make_trial(campaign, c, mu, tmp_path)
-    cfg = _cfg(config, iterations=64, batch=32)
     # started from the truth (candidate 0), E is the model's own sampling error: the timing chain is right
     write_json(tmp_path / "prev.json", {"chi": chi_true})
-    est = es.run_estimation(tmp_path / "tracks.parquet", tmp_path / "joints.csv", campaign, cfg,
-                            tmp_path / "prev.json", 3, tmp_path / "params.json", tmp_path / "fit.parquet")
-    assert est.E_m < 1e-4 and est.seed == config["estimation"]["seed"] + 3
+    est = es.run_estimation(tmp_path / "tracks.parquet", tmp_path / "joints.csv", campaign,
+                            tmp_path / "prev.json", 3, tmp_path / "params.json", tmp_path / "fit.parquet",
+                            **_stage_settings(settings, iterations=64, batch=32))
+    assert est.E_m < 1e-4 and est.seed == settings.estimation.seed + 3
     doc = read_json(tmp_path / "params.json")
     assert doc["M"] == 3 and doc["evaluations"] == 64 and doc["optimizer"] == "random_search"
     assert set(doc["coefficients"]) == set(PARAM_NAMES) and len(doc["mu"]) == campaign.string.n_points
@@ -290,7 +302,7 @@ def test_run_estimation_end_to_end(config, campaign, chi_true, tmp_path):
     diag = doc["diagnostics"]
     assert [p["name"] for p in diag["parameters"]] == doc["chi_names"]
     assert set(diag["pinned"]) | set(diag["loose"]) == set(doc["chi_names"])
-    w, n = config["evaluation"]["w"], campaign.string.n_points
+    w, n = settings.evaluation.w, campaign.string.n_points
     e_i = np.array(doc["E_i_mm"])
     assert doc["E_mm"] == pytest.approx(np.sum(e_i * (1 + w * np.arange(n))) / n, rel=1e-6)
     fit = read_parquet(tmp_path / "fit.parquet")
@@ -302,37 +314,38 @@ def test_run_estimation_end_to_end(config, campaign, chi_true, tmp_path):
     assert err.groupby(sim["point"]).mean().to_numpy() == pytest.approx(e_i / 1000, abs=1e-9)
 
     # from the first plan's set (trial 1) the search improves on its start
-    est1 = es.run_estimation(tmp_path / "tracks.parquet", tmp_path / "joints.csv", campaign,
-                             _cfg(config, iterations=192, batch=64), None, 1,
-                             tmp_path / "p1.json", tmp_path / "f1.parquet")
+    est1 = es.run_estimation(tmp_path / "tracks.parquet", tmp_path / "joints.csv", campaign, None, 1,
+                             tmp_path / "p1.json", tmp_path / "f1.parquet",
+                             **_stage_settings(settings, iterations=192, batch=64))
     assert est1.history["best_E_m"][-1] < 0.5 * est1.history["best_E_m"][0]
     assert read_json(tmp_path / "p1.json")["chi_start"] == pytest.approx(
-        prm.start_chi(None, campaign.string, config).tolist())
+        prm.start_chi(None, campaign.string, settings.model, settings.motion).tolist())
 
 
-def test_joint_estimation_fits_every_trial(config, campaign, chi_true, tmp_path):
+def test_joint_estimation_fits_every_trial(settings, campaign, chi_true, tmp_path):
     """estimation.joint_trials: E is the mean of the trials' E; params.json says each trial's."""
-    c, mu = prm.decode(chi_true, config, campaign.string.mass_groups())
+    c, mu = prm.decode(chi_true, settings.model, campaign.string.mass_groups())
     (tmp_path / "a").mkdir(), (tmp_path / "b").mkdir()
     make_trial(campaign, c, mu, tmp_path / "a")
     make_trial(campaign, c, mu, tmp_path / "b", speed=0.6, t0=20.0)
     problems = []
     for d in ("a", "b"):
         t, q, _ = read_joint_table(tmp_path / d / "joints.csv")
-        problems.append(es.build_problem(read_parquet(tmp_path / d / "tracks.parquet"), t, q, campaign, config))
+        problems.append(es.build_problem(read_parquet(tmp_path / d / "tracks.parquet"), t, q, campaign,
+                                         **_problem_settings(settings)))
     chi = np.random.default_rng(0).uniform(0.2, 0.8, (6, len(chi_true)))
     chi[0] = chi_true
-    each = [es.make_objective(pb, config)(chi) for pb in problems]
-    joint = es.make_joint_objective(problems, config)(chi)
+    each = [es.make_objective(pb, settings.model)(chi) for pb in problems]
+    joint = es.make_joint_objective(problems, settings.model)(chi)
     assert joint == pytest.approx((each[0] + each[1]) / 2)
     assert joint[0] < 1e-4 < joint[1:].min()  # the truth fits both motions; random sets fit neither
     assert not np.allclose(each[0][1:], each[1][1:])  # the two motions are different evidence
 
     write_json(tmp_path / "prev.json", {"chi": chi_true})
     est = es.run_estimation(tmp_path / "b" / "tracks.parquet", tmp_path / "b" / "joints.csv", campaign,
-                            _cfg(config, iterations=64, batch=32), tmp_path / "prev.json", 2,
-                            tmp_path / "params.json", tmp_path / "fit.parquet",
-                            earlier=((tmp_path / "a" / "tracks.parquet", tmp_path / "a" / "joints.csv"),))
+                            tmp_path / "prev.json", 2, tmp_path / "params.json", tmp_path / "fit.parquet",
+                            earlier=((tmp_path / "a" / "tracks.parquet", tmp_path / "a" / "joints.csv"),),
+                            **_stage_settings(settings, iterations=64, batch=32))
     doc = read_json(tmp_path / "params.json")
     assert len(doc["E_trials_mm"]) == 2 and doc["trials_fitted"][0].endswith("tracks.parquet")
     assert doc["E_mm"] == pytest.approx(np.mean(doc["E_trials_mm"])) == pytest.approx(est.E_m * 1000)
@@ -340,10 +353,10 @@ def test_joint_estimation_fits_every_trial(config, campaign, chi_true, tmp_path)
 
     other = es.EstimationProblem(**{**problems[0].__dict__, "mass_groups": np.zeros(problems[0].n_points, np.int64)})
     with pytest.raises(ValueError, match="disagree"):
-        es.make_joint_objective([problems[0], other], config)
+        es.make_joint_objective([problems[0], other], settings.model)
 
 
-def test_cmaes_options_reach_cma_and_unknown_ones_are_refused(config, monkeypatch):
+def test_cmaes_options_reach_cma_and_unknown_ones_are_refused(settings, monkeypatch):
     """estimation.cmaes_options goes to every cma.CMAEvolutionStrategy the search builds, over our
     defaults; a name cma does not know is a ConfigError that names it."""
     import cma
@@ -357,27 +370,28 @@ def test_cmaes_options_reach_cma_and_unknown_ones_are_refused(config, monkeypatc
 
     monkeypatch.setattr(cma, "CMAEvolutionStrategy", spy)
     corner = np.r_[np.ones(6), np.zeros(6)]
-    cfg = _cfg(config, optimizer="cmaes", iterations=600, batch=32, cmaes_runs=2,
-               cmaes_options={"CSA_dampfac": 0.5, "tolx": 1e-3})
-    est = es.estimate(_problem_stub(), cfg, np.full(12, 0.2), 1, seed=0,
+    estimation = _est(settings, optimizer="cmaes", iterations=600, batch=32, cmaes_runs=2,
+                      cmaes_options={"CSA_dampfac": 0.5, "tolx": 1e-3})
+    est = es.estimate(_problem_stub(), settings.model, estimation, np.full(12, 0.2), 1, seed=0,
                       objective=lambda c: np.sum((c - corner) ** 2, axis=1))
     assert len(seen) >= 2 and all(o["CSA_dampfac"] == 0.5 and o["tolx"] == 1e-3 for o in seen)
     assert est.E_m < 1e-3
     with pytest.raises(ConfigError, match="CSA_dampfak"):
-        es.estimate(_problem_stub(), _cfg(config, optimizer="cmaes", cmaes_options={"CSA_dampfak": 0.3}),
+        es.estimate(_problem_stub(), settings.model,
+                    _est(settings, optimizer="cmaes", cmaes_options={"CSA_dampfak": 0.3}),
                     np.full(12, 0.2), 1, seed=0, objective=lambda c: np.zeros(len(c)))
 
 
-def test_cmaes_first_look_samples_eq3_and_starts_at_its_best(config):
+def test_cmaes_first_look_samples_eq3_and_starts_at_its_best(settings):
     """cmaes_first_look = L: the first L candidates are eq. (3) at m = 0 around chi_best (the first is
     chi_best itself, the rest chi_best + chi0 / M RAND(-1, 1) clipped: many on the box's faces), and
     CMA-ES's first generation is centred on the best of them."""
     corner = np.r_[np.ones(6), np.zeros(6)]
     L, pop = 96, 4 + int(3 * np.log(12))
-    cfg = _cfg(config, optimizer="cmaes", iterations=L + 40 * pop, batch=32, cmaes_first_look=L)
+    estimation = _est(settings, optimizer="cmaes", iterations=L + 40 * pop, batch=32, cmaes_first_look=L)
     rec = Recording(lambda c: np.sum((c - corner) ** 2, axis=1))
     start = np.full(12, 0.2)
-    es.estimate(_problem_stub(), cfg, start, 1, seed=0, objective=rec)
+    es.estimate(_problem_stub(), settings.model, estimation, start, 1, seed=0, objective=rec)
     cand = np.concatenate(rec.calls)
     look = cand[:L]
     assert np.array_equal(look[0], start)
@@ -388,7 +402,7 @@ def test_cmaes_first_look_samples_eq3_and_starts_at_its_best(config):
     assert np.sum((cand - corner) ** 2, axis=1).min() < 1e-3
 
 
-def test_cmaes_stall_generations_restart_at_the_best_point(config, monkeypatch):
+def test_cmaes_stall_generations_restart_at_the_best_point(settings, monkeypatch):
     """cmaes_stall_generations = G: after G generations without a new best, CMA-ES restarts at its best
     point with the step it had reached. The objective is a smooth bowl whose only deep pocket is the
     first generation's first candidate: the mean drifts to the bowl, and only the restart goes back."""
@@ -416,9 +430,10 @@ def test_cmaes_stall_generations_restart_at_the_best_point(config, monkeypatch):
     for stall, restarts in ((5, True), (0, False)):
         starts.clear()
         pocket.clear()
-        cfg = _cfg(config, optimizer="cmaes", iterations=40 * pop, batch=32, cmaes_first_look=0,
-                   cmaes_first_start="best", cmaes_stall_generations=stall)
-        est = es.estimate(_problem_stub(), cfg, np.full(12, 0.2), 2, seed=0, objective=objective)
+        estimation = _est(settings, optimizer="cmaes", iterations=40 * pop, batch=32, cmaes_first_look=0,
+                          cmaes_first_start="best", cmaes_stall_generations=stall)
+        est = es.estimate(_problem_stub(), settings.model, estimation, np.full(12, 0.2), 2, seed=0,
+                          objective=objective)
         assert est.E_m == 0.0 and np.array_equal(est.chi, pocket[0])
         later = starts[1:]
         assert bool(later) == restarts

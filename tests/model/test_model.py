@@ -12,8 +12,8 @@ DT = 1e-4
 
 
 @pytest.fixture(scope="module")
-def ranges(config):
-    lo, hi, mu_range = model_ranges(config)
+def ranges(settings):
+    lo, hi, mu_range = model_ranges(settings.model)
     return lo, hi
 
 

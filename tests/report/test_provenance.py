@@ -7,6 +7,7 @@ import pytest
 
 from stringcast.report import provenance as prov
 from stringcast.core.config import DEFAULT_CONFIG, OURS_CONFIG, load_config
+from stringcast.core.settings import EstimationSettings, settings_from_config
 from stringcast.report import write_campaign_report
 
 
@@ -22,8 +23,13 @@ def test_provenance_names_the_method_commit_and_versions():
 
     assert prov.provenance(load_config([DEFAULT_CONFIG, OURS_CONFIG]))["method"] == "ours"
 
+    # a file that sets a setting to its default is still the paper's method (the settings are compared)
+    explicit = dict(copy.deepcopy(paper), estimation={"iterations": EstimationSettings().iterations})
+    assert prov.provenance(explicit)["method"] == "the paper's method"
+    assert prov.config_digest(explicit) == p["config_digest"]
+
     custom = copy.deepcopy(paper)
-    custom["estimation"]["iterations"] = int(custom["estimation"]["iterations"]) + 1
+    custom["estimation"] = {"iterations": EstimationSettings().iterations + 1}
     c = prov.provenance(custom)
     assert re.fullmatch(r"[0-9a-f]{12}", c["config_digest"])
     assert c["method"] == f"custom config {c['config_digest']}" and c["config_digest"] != p["config_digest"]
@@ -61,7 +67,8 @@ def test_campaign_page_footer_shows_provenance(tmp_path, files, method):
     config = load_config(list(files))
     campaign = resolve_campaign({"string": 1, "target": 1}, config, "c")
     (tmp_path / "data").mkdir()
-    write_campaign_report(tmp_path / "data", tmp_path / "results", campaign, config, tmp_path / "report.html")
+    write_campaign_report(tmp_path / "data", tmp_path / "results", campaign, config, tmp_path / "report.html",
+                          motion=settings_from_config(config).motion)
     html = (tmp_path / "report.html").read_text()
     footer = html[html.index('<footer id="provenance">'):]
     assert f'<td class="l">{method}</td>' in footer

@@ -5,17 +5,19 @@ E (N,) in m) this module builds the report-ready ``diagnostics`` block of
 ``params.json``:
 
 * ``ensemble`` (written as params.json's ``top``, not here): the best K parameter sets
-  (K = ``estimation.top_k``, default 20, :func:`best_k`): the ensemble the robust planner
+  (K = ``estimation.top_k``, :func:`best_k`): the ensemble the robust planner
   (:mod:`stringcast.plan.planning`, ``motion.planner: robust``) scores motions under.
-* ``near_best``: the candidates whose E is within ``estimation.near_best_tol`` (default
-  0.05, i.e. 5 %) of the best, or the best K if fewer: the parameter sets this trial
+* ``near_best``: the candidates whose E is within ``estimation.near_best_tol`` (5 % by
+  default) of the best, or the best K if fewer: the parameter sets this trial
   cannot tell apart.
 * per parameter (the ten coefficients of Table 2, mu_others, one mu per special point):
   the best value, the log10 min/max and quartiles over ``near_best``, and the
   ``spread``: the near-best sets' chi range (max - min), which is the log10 range over
   Table 2's log10 range (0 = one value, 1 = the whole table range); ``iqr`` likewise
   with the quartiles. ``status`` is ``"pinned"`` when spread <= ``estimation.pinned_spread``
-  (default 0.2) and ``"loose"`` otherwise.
+  and ``"loose"`` otherwise.
+
+The settings are the estimation settings (:class:`~stringcast.core.EstimationSettings`).
 
 Our choice, and why: the best K alone measure the optimizer more than the trial (the
 paper's search samples ever closer to chi_best, so its best K sit close whatever the
@@ -26,25 +28,22 @@ same E.
 """
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
-DEFAULT_TOP_K = 20
-DEFAULT_NEAR_BEST_TOL = 0.05
-DEFAULT_PINNED_SPREAD = 0.2
+from stringcast.core import EstimationSettings
 
 
-def settings(config: Mapping) -> tuple[int, float, float]:
-    """(top_k, near_best_tol, pinned_spread) from ``config.estimation`` with the defaults above.
+def checked(estimation: EstimationSettings) -> tuple[int, float, float]:
+    """(top_k, near_best_tol, pinned_spread) of the estimation settings, checked.
 
     Raises:
         ValueError: top_k < 1, a negative tolerance or a spread outside (0, 1].
     """
-    est = config.get("estimation", {})
-    k = int(est.get("top_k", DEFAULT_TOP_K))
-    tol = float(est.get("near_best_tol", DEFAULT_NEAR_BEST_TOL))
-    pinned = float(est.get("pinned_spread", DEFAULT_PINNED_SPREAD))
+    k = int(estimation.top_k)
+    tol = float(estimation.near_best_tol)
+    pinned = float(estimation.pinned_spread)
     if k < 1 or tol < 0 or not 0 < pinned <= 1:
         raise ValueError(f"estimation.top_k >= 1, near_best_tol >= 0 and 0 < pinned_spread <= 1 "
                          f"(got {k}, {tol}, {pinned})")
@@ -105,12 +104,13 @@ def parameter_spread(chi_set: np.ndarray, log10_lo: np.ndarray, log10_hi: np.nda
 
 
 def diagnostics(chi: np.ndarray, E: np.ndarray, log10_lo: np.ndarray, log10_hi: np.ndarray,
-                names: Sequence[str], config: Mapping) -> dict:
+                names: Sequence[str], estimation: EstimationSettings) -> dict:
     """The ``diagnostics`` block of params.json (module doc).
 
     Args:
         chi: (N, D) every evaluated candidate; E: (N,) their E in m (inf = blew up).
         log10_lo, log10_hi: (D,) Table 2 ranges in log10; names: (D,).
+        estimation: ``top_k``, ``near_best_tol``, ``pinned_spread`` (:class:`~stringcast.core.EstimationSettings`).
 
     Returns:
         {"top_k", "near_best_tol", "pinned_spread", "spread_measure", "near_best": {"count",
@@ -120,7 +120,7 @@ def diagnostics(chi: np.ndarray, E: np.ndarray, log10_lo: np.ndarray, log10_hi: 
     Raises:
         ValueError: bad shapes or settings.
     """
-    k, tol, pinned = settings(config)
+    k, tol, pinned = checked(estimation)
     E = np.asarray(E, float)
     chi_nb, E_nb = near_best(chi, E, k, tol)
     params = parameter_spread(chi_nb, log10_lo, log10_hi, names, pinned)

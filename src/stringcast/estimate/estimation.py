@@ -7,12 +7,12 @@ mass points match the tracked ones (evaluation value E, eqs. 4-6,
 :func:`stringcast.estimate.evaluation.evaluation_value`).
 
 Search space (eq. 2): x = chi in [0, 1]^(10 + 1 + G): the ten coefficients in
-``config.PARAM_NAMES`` order, then mu_others (shared by the plain points), then
+``PARAM_NAMES`` order, then mu_others (shared by the plain points), then
 one mu per special point (``StringSpec.mass_groups``); P = P_min (P_max/P_min)^chi.
 
-Optimizers (``config.estimation.optimizer``; :mod:`stringcast.estimate.optimizers`: the
+Optimizers (``estimation.optimizer``; :mod:`stringcast.estimate.optimizers`: the
 paper's eq. 3 ``random_search``, ``cmaes``, ``de``), all evaluating candidates in
-numba batches of ``config.estimation.batch``, start from chi_best = the previous
+numba batches of ``estimation.batch``, start from chi_best = the previous
 trial's estimate. With no previous estimate (trial 1) chi_best is the set the
 first motion was planned with (:func:`stringcast.model.parameters.first_parameters`):
 chi = 0 for the coefficients (Table 2 minima) except k_s (lifted so the model
@@ -23,6 +23,9 @@ params.json also holds ``top`` (the best ``estimation.top_k`` sets, best first, 
 chi: the robust planner's ensemble) and ``diagnostics`` (which parameters this
 trial's motion pins down, :mod:`stringcast.estimate.diagnostics`).
 
+The settings (``estimation.*``, ``model.*``, ...) are the stage's settings objects
+(:class:`~stringcast.core.EstimationSettings`, :class:`~stringcast.core.ModelSettings`, ...).
+
 The trial's problem and E as a function of chi (the rest state, the frames compared) are
 :mod:`stringcast.estimate.problem`'s.
 """
@@ -31,19 +34,19 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Mapping
+from typing import Callable
 
 import numpy as np
 import pandas as pd
 
-from stringcast.core import PARAM_NAMES, Campaign, ConfigError, model_ranges
-from .diagnostics import best_k, diagnostics
-from .diagnostics import settings as diagnostics_settings
-from .problem import (EstimationProblem, build_problem, make_joint_objective, make_objective,
-                                 point_errors, simulate_fit)
-from stringcast.core import TRACK_COLUMNS, read_joint_table, read_json, read_parquet, tracks_arrays, write_json, write_parquet
-from .optimizers import OPTIMIZERS, Recorder
+from stringcast.core import (PARAM_NAMES, TRACK_COLUMNS, Campaign, ConfigError, EstimationSettings,
+                             EvaluationSettings, ModelSettings, MotionSettings, TrackingSettings, model_ranges,
+                             read_joint_table, read_json, read_parquet, tracks_arrays, write_json, write_parquet)
 from stringcast.model import decode, start_chi
+from .diagnostics import best_k, checked, diagnostics
+from .optimizers import OPTIMIZERS, Recorder
+from .problem import (EstimationProblem, build_problem, make_joint_objective, make_objective, point_errors,
+                      simulate_fit)
 
 
 @dataclass(frozen=True)
@@ -92,11 +95,14 @@ class Estimate:
 # ---------------------------------------------------------------------------
 # Search
 # ---------------------------------------------------------------------------
-def estimate(problem: EstimationProblem, config: Mapping, chi_start: np.ndarray, M: int, seed: int,
-             objective: Callable | None = None, earlier: tuple = ()) -> Estimate:
+def estimate(problem: EstimationProblem, model: ModelSettings, estimation: EstimationSettings,
+             chi_start: np.ndarray, M: int, seed: int, objective: Callable | None = None,
+             earlier: tuple = ()) -> Estimate:
     """Run the configured optimizer on ``problem``.
 
     Args:
+        model: the model settings (:class:`~stringcast.core.ModelSettings`: eq. 2's ranges).
+        estimation: the estimation settings (:class:`~stringcast.core.EstimationSettings`).
         chi_start: (10 + G,) chi_best at m = 0. M: executions so far (>= 1, eq. 3).
         objective: batch objective chi (B, D) -> E (B,); default :func:`make_objective`
             (with a custom objective ``E_i`` is NaN).
@@ -110,11 +116,10 @@ def estimate(problem: EstimationProblem, config: Mapping, chi_start: np.ndarray,
     Raises:
         ConfigError: unknown optimizer name or a bad budget.
     """
-    est_cfg = config.get("estimation", {})
-    name = str(est_cfg.get("optimizer", "random_search"))
+    name = str(estimation.optimizer)
     if name not in OPTIMIZERS:
         raise ConfigError(f"estimation.optimizer: unknown {name!r} (known: {', '.join(OPTIMIZERS)})")
-    budget, batch = int(est_cfg.get("iterations", 3000)), int(est_cfg.get("batch", 64))
+    budget, batch = int(estimation.iterations), int(estimation.batch)
     if budget < 1 or batch < 1:
         raise ConfigError("estimation.iterations and estimation.batch must be >= 1")
     d = len(PARAM_NAMES) + problem.n_groups
@@ -123,22 +128,22 @@ def estimate(problem: EstimationProblem, config: Mapping, chi_start: np.ndarray,
         raise ValueError(f"chi_start: expected ({d},), got {chi_start.shape}")
     custom = objective is not None
     if not custom:
-        objective = make_joint_objective((*earlier, problem), config)   # E itself for one trial
+        objective = make_joint_objective((*earlier, problem), model)   # E itself for one trial
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
     rec = Recorder(objective, budget, f"estimate ({name})")
     try:
-        OPTIMIZERS[name](rec, chi_start, batch, max(1, int(M)), rng, est_cfg)
+        OPTIMIZERS[name](rec, chi_start, batch, max(1, int(M)), rng, estimation)
     finally:
         rec.bar.close()
     all_chi, all_E = np.concatenate(rec.chi), np.concatenate(rec.E)
-    top_chi, top_E = best_k(all_chi, all_E, diagnostics_settings(config)[0])
+    top_chi, top_E = best_k(all_chi, all_E, checked(estimation)[0])
     best_chi = top_chi[0]
-    coeffs, mu = decode(best_chi, config, problem.mass_groups)
+    coeffs, mu = decode(best_chi, model, problem.mass_groups)
     if custom:  # E_i needs the model; a custom objective defines no points
         E_i = np.full(problem.n_points, np.nan)
     elif np.isfinite(top_E[0]):
-        E_i = point_errors(problem, config, best_chi)
+        E_i = point_errors(problem, model, best_chi)
     else:
         E_i = np.full(problem.n_points, np.inf)
     msgs = []
@@ -160,9 +165,11 @@ def estimate(problem: EstimationProblem, config: Mapping, chi_start: np.ndarray,
 # ---------------------------------------------------------------------------
 # Stage entry point
 # ---------------------------------------------------------------------------
-def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign, config: Mapping,
+def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign,
                    prev_params_json: Path | None, trial_index: int, out_params_json: Path,
-                   out_fit_parquet: Path, earlier: tuple = ()) -> Estimate:
+                   out_fit_parquet: Path, earlier: tuple = (), *, model: ModelSettings,
+                   evaluation: EvaluationSettings, estimation: EstimationSettings, motion: MotionSettings,
+                   tracking: TrackingSettings) -> Estimate:
     """Estimate the parameters of one trial and write ``params.json`` and ``fit.parquet``.
 
     Args:
@@ -172,34 +179,40 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign, c
         earlier: (tracks_parquet, joints_csv) pairs of earlier trials of the campaign, fitted
             together with this one (``estimation.joint_trials``; :func:`make_joint_objective`).
             params.json's ``E_mm`` is then the mean over the trials, ``E_trials_mm`` each one's.
+        model, evaluation, estimation, tracking: the settings of the search and its problem
+            (:class:`~stringcast.core.ModelSettings`, :class:`~stringcast.core.EvaluationSettings`,
+            :class:`~stringcast.core.EstimationSettings`, :class:`~stringcast.core.TrackingSettings`).
+        motion: motion settings (:class:`~stringcast.core.MotionSettings`): without ``prev_params_json``
+            the search starts at the first plan's set (``first_k_s``, ``first_max_strain``).
 
     Raises:
         DataError: unreadable or inconsistent inputs (named). ConfigError: bad optimizer settings.
     """
     tracks = read_parquet(tracks_parquet, TRACK_COLUMNS)
     t_j, q_j, _ = read_joint_table(joints_csv, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
-    problem = build_problem(tracks, t_j, q_j, campaign, config, source=str(tracks_parquet))
+    problem_settings = dict(model=model, evaluation=evaluation, estimation=estimation, tracking=tracking)
+    problem = build_problem(tracks, t_j, q_j, campaign, **problem_settings, source=str(tracks_parquet))
     prev = read_json(prev_params_json) if prev_params_json else None
-    chi0 = start_chi(prev, campaign.string, config, str(prev_params_json))
+    chi0 = start_chi(prev, campaign.string, model, motion, str(prev_params_json))
     k = max(1, int(trial_index))
-    seed = int(config.get("estimation", {}).get("seed", 0)) + k
+    seed = int(estimation.seed) + k
     earlier_problems = []
     for tr, jo in earlier:
         t_e, q_e, _ = read_joint_table(jo, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
-        earlier_problems.append(build_problem(read_parquet(tr, TRACK_COLUMNS), t_e, q_e, campaign, config,
-                                              source=str(tr)))
-    est = estimate(problem, config, chi0, k, seed, earlier=tuple(earlier_problems))
-    E_trials = [float(make_objective(p, config)(est.chi[None])[0]) * 1000 for p in (*earlier_problems, problem)]
+        earlier_problems.append(build_problem(read_parquet(tr, TRACK_COLUMNS), t_e, q_e, campaign,
+                                              **problem_settings, source=str(tr)))
+    est = estimate(problem, model, estimation, chi0, k, seed, earlier=tuple(earlier_problems))
+    E_trials = [float(make_objective(p, model)(est.chi[None])[0]) * 1000 for p in (*earlier_problems, problem)]
 
-    _, mu_groups_all = decode(est.top_chi, config, np.arange(problem.n_groups))
+    _, mu_groups_all = decode(est.top_chi, model, np.arange(problem.n_groups))
     top = [{"E_mm": e * 1000, "coefficients": dict(zip(PARAM_NAMES, c)), "mu_groups": m, "chi": x}
-           for e, c, m, x in zip(est.top_E, decode(est.top_chi, config, problem.mass_groups)[0], mu_groups_all,
+           for e, c, m, x in zip(est.top_E, decode(est.top_chi, model, problem.mass_groups)[0], mu_groups_all,
                                  est.top_chi)]
     names = list(PARAM_NAMES) + ["mu_others"] + [f"mu_{i}" for i in campaign.string.special_points()]
-    lo, hi, (mlo, mhi) = model_ranges(config)
+    lo, hi, (mlo, mhi) = model_ranges(model)
     log_lo = np.log10(np.concatenate([lo, np.full(problem.n_groups, mlo)]))
     log_hi = np.log10(np.concatenate([hi, np.full(problem.n_groups, mhi)]))
-    diag = diagnostics(est.chi_evaluated, est.E_evaluated, log_lo, log_hi, names, config)
+    diag = diagnostics(est.chi_evaluated, est.E_evaluated, log_lo, log_hi, names, estimation)
     write_json(out_params_json, {
         "coefficients": dict(zip(PARAM_NAMES, est.coeffs)), "mu": est.mu, "mu_groups": mu_groups_all[0],
         "mass_groups": problem.mass_groups, "special_points": campaign.string.special_points(),
@@ -213,11 +226,11 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign, c
         "t_motion_start_s": problem.t_motion_start,
         "t_sim_start_s": problem.frame_t[0], "frames_compared": len(problem.frame_t),
         "rest_fallback_points": list(problem.fallback_points), "dt_s": problem.dt})
-    write_parquet(out_fit_parquet, fit_table(tracks, problem, config, est.chi, campaign.string.n_points))
+    write_parquet(out_fit_parquet, fit_table(tracks, problem, model, est.chi, campaign.string.n_points))
     return est
 
 
-def fit_table(tracks: pd.DataFrame, problem: EstimationProblem, config: Mapping, chi: np.ndarray,
+def fit_table(tracks: pd.DataFrame, problem: EstimationProblem, model: ModelSettings, chi: np.ndarray,
               n: int) -> pd.DataFrame:
     """``fit.parquet``: ``frame, t_s, point, x_tracked_m, y_tracked_m, valid, x_sim_m, y_sim_m``.
 
@@ -226,7 +239,7 @@ def fit_table(tracks: pd.DataFrame, problem: EstimationProblem, config: Mapping,
     """
     frames, t, xy, valid = tracks_arrays(tracks, n)
     sim = np.full_like(xy[:, 1:], np.nan)
-    pos, ok = simulate_fit(problem, config, chi)
+    pos, ok = simulate_fit(problem, model, chi)
     idx = np.searchsorted(frames, problem.frames)
     sim[idx] = pos if ok else np.nan
     f, nn = len(frames), n

@@ -68,7 +68,7 @@ def evaluation_value(tracked, valid, simulated, w):
 
     Args:
         tracked: (F, n, 2) m, valid: (F, n) bool, simulated: (F, n, 2) or (B, F, n, 2) m.
-        w: tip weighting of eq. (6) (>= 0; config ``evaluation.w``).
+        w: tip weighting of eq. (6) (>= 0; the evaluation setting ``w``, :class:`~stringcast.core.EvaluationSettings`).
 
     Returns:
         E in m: a float for one simulation, a (B,) array for a batch. A candidate with

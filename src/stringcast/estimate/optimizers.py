@@ -3,12 +3,13 @@
 All work in chi space, x = chi in [0, 1]^D (eq. 2, :func:`stringcast.model.parameters.decode`),
 and share one interface::
 
-    optimizer(rec: Recorder, chi_best (D,), batch, M, rng, settings) -> None
+    optimizer(rec: Recorder, chi_best (D,), batch, M, rng, estimation) -> None
 
 They ask ``rec`` (the batch objective chi (B, D) -> E (B,) in m, +inf where the
 simulation blew up) for candidates in batches of at most ``batch`` until its
-budget (``config.estimation.iterations``) is spent; ``rec`` keeps every candidate,
-its E and the search history. ``settings`` is ``config.estimation``.
+budget (``estimation.iterations``) is spent; ``rec`` keeps every candidate,
+its E and the search history. ``estimation`` is the estimation settings
+(:class:`~stringcast.core.EstimationSettings`).
 
 * ``random_search`` (the paper's eq. 3): chi_m = chi_best + (chi0 / M) beta^m
   RAND(-1, 1), clipped to [0, 1], M = executions so far (the trial index), m the
@@ -16,7 +17,7 @@ its E and the search history. ``settings`` is ``config.estimation``.
   to the best candidate after every batch. The first candidate is chi_best itself.
 * ``cmaes``: CMA-ES (``cma``) in chi space, i.e. in log-parameter space (chi is
   log(P / P_min) / log(P_max / P_min), eq. 2), initial step ``cmaes_sigma0`` / M
-  (default 0.3 chi0 / M, in chi units: 0.3 of every log range), population
+  (default 0.3 / M, in chi units: 0.3 of every log range), population
   ``cmaes_popsize`` (default cma's own 4 + 3 ln D: 11 for D = 12; a small population
   takes many short generations, which suits a budget of a few thousand evaluations).
   Our choices, measured on lab trials (benchmarks/estimation.py): (a) the search is
@@ -49,7 +50,8 @@ from __future__ import annotations
 from typing import Mapping
 
 import numpy as np
-from stringcast.core import ConfigError
+
+from stringcast.core import ConfigError, EstimationSettings
 
 
 class Recorder:
@@ -103,9 +105,9 @@ def eq3_candidates(chi_best: np.ndarray, chi0: float, M: int, decay: np.ndarray,
 
 
 def random_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: np.random.Generator,
-                  settings: Mapping) -> None:
+                  estimation: EstimationSettings) -> None:
     """The paper's eq. (3) (see module doc); chi_best moves to the best candidate after each batch."""
-    chi0, beta = float(settings.get("chi0", 1.0)), float(settings.get("beta", 0.998))
+    chi0, beta = float(estimation.chi0), float(estimation.beta)
     chi_best = np.asarray(chi_best, float)
     best_E, m = np.inf, 0
     while rec.remaining > 0:
@@ -119,7 +121,7 @@ def random_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: 
 
 
 def cmaes_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: np.random.Generator,
-                 settings: Mapping) -> None:
+                 estimation: EstimationSettings) -> None:
     """CMA-ES (``cma.CMAEvolutionStrategy``, ask/tell) in [0, 1]^D (module doc); one generation per batch
     (a population larger than ``batch`` is evaluated in chunks of ``batch``). Restarts from the best
     point with the initial step when CMA-ES stops early (converged) and budget is left.
@@ -129,18 +131,18 @@ def cmaes_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: n
     a later trial can leave the basin an earlier one settled in (E is multi-modal: on the lab
     strings a run ends in a weak-hand-spring basin about one time in three)."""
     d = len(chi_best)
-    options = cma_options(settings)
-    sigma0 = float(settings.get("cmaes_sigma0", 0.3 * float(settings.get("chi0", 1.0))))
-    popsize = int(settings.get("cmaes_popsize", 0)) or 4 + int(3 * np.log(d))
-    runs = max(1, int(settings.get("cmaes_runs", 1)))
-    stall = int(settings.get("cmaes_stall_generations", 0))
+    options = cma_options(estimation)
+    sigma0 = float(estimation.cmaes_sigma0)
+    popsize = int(estimation.cmaes_popsize) or 4 + int(3 * np.log(d))
+    runs = max(1, int(estimation.cmaes_runs))
+    stall = int(estimation.cmaes_stall_generations)
     first = np.asarray(chi_best, float)
-    look = min(int(settings.get("cmaes_first_look", 0)), rec.remaining)
+    look = min(int(estimation.cmaes_first_look), rec.remaining)
     if look > 0:  # eq. (3) at m = 0 around chi_best: clipped steps put many samples on the box's faces
-        cand = eq3_candidates(first, float(settings.get("chi0", 1.0)), M, np.ones(look), True, rng)
+        cand = eq3_candidates(first, float(estimation.chi0), M, np.ones(look), True, rng)
         E = np.concatenate([rec(cand[a:a + batch]) for a in range(0, look, batch)])
         first = cand[int(np.argmin(E))]
-    elif M == 1 and settings.get("cmaes_first_start", "centre") == "centre":
+    elif M == 1 and estimation.cmaes_first_start == "centre":
         rec(first[None])  # chi_best is evaluated, but not an estimate yet: start at the centre
         first = np.full(d, 0.5)
     starts = [(first, sigma0 / M)] + [(np.full(d, 0.5), sigma0)] * (runs - 1)
@@ -153,15 +155,14 @@ def cmaes_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: n
         rec(np.clip(best + (s0 / 4) * rng.standard_normal((min(batch, rec.remaining), d)), 0.0, 1.0))
 
 
-def cma_options(settings: Mapping) -> dict:
+def cma_options(estimation: EstimationSettings) -> dict:
     """``estimation.cmaes_options`` checked against ``cma.CMAOptions``.
 
     Raises:
         ConfigError: not a mapping, or a name cma does not know."""
     import cma
 
-
-    options = settings.get("cmaes_options") or {}
+    options = estimation.cmaes_options or {}
     if not isinstance(options, Mapping):
         raise ConfigError("estimation.cmaes_options: expected a mapping of cma.CMAOptions names to values")
     unknown = sorted(set(options) - set(cma.CMAOptions()))
@@ -205,12 +206,12 @@ def _cma_run(rec: Recorder, x0: np.ndarray, sigma0: float, popsize: int, batch: 
 
 
 def de_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: np.random.Generator,
-              settings: Mapping) -> None:
+              estimation: EstimationSettings) -> None:
     """SciPy ``differential_evolution`` (vectorized, no polish), x0 = chi_best; candidates in chunks of ``batch``."""
     from scipy.optimize import differential_evolution
 
     d = len(chi_best)
-    popsize = int(settings.get("de_popsize", 8))
+    popsize = int(estimation.de_popsize)
 
     def f(x):  # x (D, S) -> (S,)
         x = np.asarray(x).T

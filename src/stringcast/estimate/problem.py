@@ -19,14 +19,13 @@ option) up to that long after the arm stops (:func:`stringcast.core.arm.motion_w
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, Mapping
+from typing import Callable
 
 import numpy as np
 import pandas as pd
 
-from stringcast.core import hand_pose, motion_start, motion_window
-from stringcast.core import Campaign
-from stringcast.core import DataError, tracks_arrays
+from stringcast.core import (Campaign, DataError, EstimationSettings, EvaluationSettings, ModelSettings,
+                             TrackingSettings, hand_pose, motion_start, motion_window, tracks_arrays)
 from stringcast.model import decode
 from stringcast.model import fill_rest_pose
 from stringcast.model import simulate_batch
@@ -92,12 +91,18 @@ class EstimationProblem:
 
 
 def build_problem(tracks_df: pd.DataFrame, t_joints: np.ndarray, q_joints: np.ndarray,
-                  campaign: Campaign, config: Mapping, source: str = "tracks.parquet") -> EstimationProblem:
+                  campaign: Campaign, model: ModelSettings, evaluation: EvaluationSettings,
+                  estimation: EstimationSettings, tracking: TrackingSettings,
+                  source: str = "tracks.parquet") -> EstimationProblem:
     """Assemble the estimation problem from tracked points and the measured joint log.
 
     Args:
         tracks_df: long table ``frame, t_s, point, x_m, y_m, valid`` (t_s on the controller clock).
         t_joints: (K,) s; q_joints: (K, J) rad, the measured joint log.
+        model, evaluation, estimation, tracking: the settings read (:class:`~stringcast.core.ModelSettings`:
+            ``dt_s``, ``psi0_deg``; :class:`~stringcast.core.EvaluationSettings`: ``w``;
+            :class:`~stringcast.core.EstimationSettings`: ``compare_after_motion_s``;
+            :class:`~stringcast.core.TrackingSettings`: ``rest_frames``).
 
     Raises:
         DataError: missing columns, a log that never moves, fewer than 3 frames at
@@ -114,14 +119,14 @@ def build_problem(tracks_df: pd.DataFrame, t_joints: np.ndarray, q_joints: np.nd
     except ValueError as exc:
         raise DataError(f"joints.csv: {exc}") from exc
     rest = np.nonzero((t >= t_joints[0]) & (t < t_move))[0]
-    n_rest = int(config.get("tracking", {}).get("rest_frames", 40))
+    n_rest = int(tracking.rest_frames)
     rest = rest[-max(n_rest, MIN_REST_FRAMES):]
     if len(rest) < MIN_REST_FRAMES:
         raise DataError(f"{source}: only {len(rest)} frames before the motion starts at t = {t_move:.3f} s "
                         f"(need {MIN_REST_FRAMES}) within the joint log")
     use = np.arange(rest[0], len(t))
     use = use[t[use] <= t_joints[-1]]
-    window_s = config.get("estimation", {}).get("compare_after_motion_s")
+    window_s = estimation.compare_after_motion_s
     if window_s is not None:
         use = use[t[use] <= motion_window(t_joints, q_joints)[1] + float(window_s)]
     if len(use) < 2:
@@ -137,7 +142,7 @@ def build_problem(tracks_df: pd.DataFrame, t_joints: np.ndarray, q_joints: np.nd
         ok = valid[rest, i]
         if ok.any():
             known[i - 1] = np.median(xy[rest[ok], i], axis=0)
-    psi0 = np.radians(float(config["model"].get("psi0_deg", 0.0)))
+    psi0 = np.radians(float(model.psi0_deg))
     p_init, fallback = fill_rest_pose(hand[0, :2], hand[0, 2] + psi0, known, s.l0)
     if not valid[use, 1:].any():
         raise DataError(f"{source}: no valid tracked point 1..{n} in the frames to compare")
@@ -145,19 +150,20 @@ def build_problem(tracks_df: pd.DataFrame, t_joints: np.ndarray, q_joints: np.nd
     return EstimationProblem(
         hand_t=hand_t, hand=hand, p_init=p_init, frame_t=t[use], frames=frames[use], tracked=tracked,
         valid=valid[use, 1:], l0=s.l0, psi0=psi0,
-        dt=float(config["model"]["dt_s"]), mass_groups=s.mass_groups(),
-        w=float(config.get("evaluation", {}).get("w", 0.1)), fallback_points=tuple(fallback),
+        dt=float(model.dt_s), mass_groups=s.mass_groups(),
+        w=float(evaluation.w), fallback_points=tuple(fallback),
         t_motion_start=t_move)
 
 
-def make_objective(problem: EstimationProblem, config: Mapping) -> Callable[[np.ndarray], np.ndarray]:
-    """E (eqs. 4-6) of a batch: chi (B, D) -> E (B,) in m, +inf where the simulation blew up."""
+def make_objective(problem: EstimationProblem, model: ModelSettings) -> Callable[[np.ndarray], np.ndarray]:
+    """E (eqs. 4-6) of a batch: chi (B, D) -> E (B,) in m, +inf where the simulation blew up; chi decoded
+    over the model settings' ranges (:class:`~stringcast.core.ModelSettings`)."""
 
     hand = problem.hand[None]
     p_init = problem.p_init[None]
 
     def objective(chi: np.ndarray) -> np.ndarray:
-        coeffs, mu = decode(chi, config, problem.mass_groups)
+        coeffs, mu = decode(chi, model, problem.mass_groups)
         b = len(chi)
         pos, ok = simulate_batch(np.ascontiguousarray(coeffs), np.ascontiguousarray(mu), problem.hand_t, hand,
                                  np.zeros(b, np.int64), p_init, problem.l0, problem.psi0, problem.dt,
@@ -168,7 +174,7 @@ def make_objective(problem: EstimationProblem, config: Mapping) -> Callable[[np.
     return objective
 
 
-def make_joint_objective(problems, config: Mapping) -> Callable[[np.ndarray], np.ndarray]:
+def make_joint_objective(problems, model: ModelSettings) -> Callable[[np.ndarray], np.ndarray]:
     """E over several trials of one string: chi (B, D) -> mean over ``problems`` of E (B,), m.
 
     The issue's "fit all of a campaign's trials at once": a set must reproduce every
@@ -183,24 +189,24 @@ def make_joint_objective(problems, config: Mapping) -> Callable[[np.ndarray], np
         raise ValueError("make_joint_objective: no problems")
     if len({(p.n_points, p.n_groups) for p in problems}) != 1:
         raise ValueError("make_joint_objective: the trials disagree on the string's points or mass groups")
-    objectives = [make_objective(p, config) for p in problems]
+    objectives = [make_objective(p, model) for p in problems]
 
     def objective(chi: np.ndarray) -> np.ndarray:
         return np.mean([f(chi) for f in objectives], axis=0)
 
     return objective
 
-def simulate_fit(problem: EstimationProblem, config: Mapping, chi: np.ndarray) -> tuple[np.ndarray, bool]:
+def simulate_fit(problem: EstimationProblem, model: ModelSettings, chi: np.ndarray) -> tuple[np.ndarray, bool]:
     """Simulated points (F, n, 2) at ``problem.frame_t`` for one chi, and whether the run stayed valid."""
 
-    coeffs, mu = decode(np.atleast_2d(chi), config, problem.mass_groups)
+    coeffs, mu = decode(np.atleast_2d(chi), model, problem.mass_groups)
     pos, ok = simulate_batch(coeffs, mu, problem.hand_t, problem.hand[None], np.zeros(1, np.int64),
                              problem.p_init[None], problem.l0, problem.psi0, problem.dt, problem.frame_t)
     return np.asarray(pos)[0], bool(np.asarray(ok)[0])
 
 
-def point_errors(problem: EstimationProblem, config: Mapping, chi: np.ndarray) -> np.ndarray:
+def point_errors(problem: EstimationProblem, model: ModelSettings, chi: np.ndarray) -> np.ndarray:
     """E_i of eq. (5) for one chi: (n,) m (:func:`stringcast.estimate.evaluation.per_point_errors`)."""
 
-    pos, _ = simulate_fit(problem, config, chi)
+    pos, _ = simulate_fit(problem, model, chi)
     return np.asarray(per_point_errors(problem.tracked, problem.valid, pos), float)

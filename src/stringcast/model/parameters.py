@@ -17,16 +17,16 @@ from typing import Mapping
 
 import numpy as np
 
-from stringcast.core import PARAM_NAMES, ConfigError, model_ranges
-from stringcast.core import DataError
+from stringcast.core import PARAM_NAMES, ConfigError, DataError, ModelSettings, MotionSettings, model_ranges
 
 
 # ---------------------------------------------------------------------------
 # Parameter sets the model is simulated with
 # ---------------------------------------------------------------------------
-def first_parameters(config: Mapping, string) -> tuple[np.ndarray, np.ndarray]:
+def first_parameters(model: ModelSettings, motion: MotionSettings, string) -> tuple[np.ndarray, np.ndarray]:
     """The first plan's set: coeffs (10,) Table 2 minima, mu (n,) = ``model.first_mu``; k_s per
-    ``motion.first_k_s`` (below).
+    ``motion.first_k_s`` (below). ``model``, ``motion``: model and motion settings
+    (:class:`~stringcast.core.ModelSettings`, :class:`~stringcast.core.MotionSettings`).
 
     ``carrying`` (default): at Table 2's minimum k_s = 1e3 N/m/kg the model's string cannot
     carry its own weight: the top segment of a hanging 10-point string (mu = 1) stretches by
@@ -43,26 +43,27 @@ def first_parameters(config: Mapping, string) -> tuple[np.ndarray, np.ndarray]:
     Raises:
         ConfigError: ``motion.first_k_s`` is neither ``carrying`` nor ``max``.
     """
-    lo, hi, _ = model_ranges(config)
-    mu = np.full(string.n_points, float(config["model"].get("first_mu", 1.0)))
+    lo, hi, _ = model_ranges(model)
+    mu = np.full(string.n_points, float(model.first_mu))
     coeffs = lo.copy()
-    mode = str(config.get("motion", {}).get("first_k_s", "carrying"))
+    mode = str(motion.first_k_s)
     if mode not in ("carrying", "max"):
         raise ConfigError(f"motion.first_k_s: unknown {mode!r} (known: carrying, max)")
-    coeffs[0] = max(lo[0], _k_s_carrying(config, string, mu))
+    coeffs[0] = max(lo[0], _k_s_carrying(motion, string, mu))
     if mode == "max":
         coeffs[0] = max(coeffs[0], hi[0])
     return coeffs, mu
 
 
-def _k_s_carrying(config: Mapping, string, mu: np.ndarray) -> np.ndarray:
+def _k_s_carrying(motion: MotionSettings, string, mu: np.ndarray) -> np.ndarray:
     """The least k_s at which the top segment's static strain is ``motion.first_max_strain``:
     g sum(mu) / (strain l0), for mu (..., n) -> (...)."""
-    strain = float(config.get("motion", {}).get("first_max_strain", 0.05))
+    strain = float(motion.first_max_strain)
     return 9.81 * np.sum(mu, axis=-1) / (strain * string.l0)
 
 
-def prior_ensemble(config: Mapping, string, k: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+def prior_ensemble(model: ModelSettings, motion: MotionSettings, string, k: int,
+                   rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
     """K random sets over Table 2's box for the first plan's ensemble (``motion.first_ensemble``).
 
     chi ~ U[0, 1]^(10 + G) (eq. 2, log-uniform over every range, one mass per group of
@@ -82,13 +83,12 @@ def prior_ensemble(config: Mapping, string, k: int, rng: np.random.Generator) ->
         raise ValueError(f"prior_ensemble: k must be >= 1, got {k}")
     groups = string.mass_groups()
     chi = rng.uniform(0.0, 1.0, (int(k), len(PARAM_NAMES) + int(groups.max()) + 1))
-    coeffs, mu = decode(chi, config, groups)
-    coeffs[:, 0] = np.maximum(coeffs[:, 0], _k_s_carrying(config, string, mu))
+    coeffs, mu = decode(chi, model, groups)
+    coeffs[:, 0] = np.maximum(coeffs[:, 0], _k_s_carrying(motion, string, mu))
     return coeffs, mu
 
 
-def planned_parameters(config: Mapping, n_points: int, params: Mapping,
-                       source: str = "params.json") -> tuple[np.ndarray, np.ndarray]:
+def planned_parameters(n_points: int, params: Mapping, source: str = "params.json") -> tuple[np.ndarray, np.ndarray]:
     """coeffs (10,), mu (n,) from an estimate's params.json. Raises DataError naming ``source``."""
     try:
         coeffs = np.array([float(params["coefficients"][k]) for k in PARAM_NAMES])
@@ -100,8 +100,7 @@ def planned_parameters(config: Mapping, n_points: int, params: Mapping,
     return coeffs, mu
 
 
-def ensemble_parameters(config: Mapping, n_points: int, params: Mapping,
-                        source: str = "params.json") -> tuple[np.ndarray, np.ndarray]:
+def ensemble_parameters(n_points: int, params: Mapping, source: str = "params.json") -> tuple[np.ndarray, np.ndarray]:
     """The robust planner's ensemble from an estimate's params.json ``top`` (best K sets, best first).
 
     Returns:
@@ -126,30 +125,32 @@ def ensemble_parameters(config: Mapping, n_points: int, params: Mapping,
 # ---------------------------------------------------------------------------
 # Parameter vector (eq. 2)
 # ---------------------------------------------------------------------------
-def decode(chi: np.ndarray, config: Mapping, mass_groups: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Eq. (2): chi (..., 10 + G) -> coefficients (..., 10) and per-point mu (..., n)."""
-    lo, hi, (mlo, mhi) = model_ranges(config)
+def decode(chi: np.ndarray, model: ModelSettings, mass_groups: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. (2): chi (..., 10 + G) -> coefficients (..., 10) and per-point mu (..., n), over the
+    ranges of the model settings (:class:`~stringcast.core.ModelSettings`)."""
+    lo, hi, (mlo, mhi) = model_ranges(model)
     chi = np.clip(np.asarray(chi, float), 0.0, 1.0)
     coeffs = lo * (hi / lo) ** chi[..., :len(lo)]
     mu_groups = mlo * (mhi / mlo) ** chi[..., len(lo):]
     return coeffs, mu_groups[..., np.asarray(mass_groups)]
 
 
-def encode(coeffs: np.ndarray, mu_groups: np.ndarray, config: Mapping) -> np.ndarray:
+def encode(coeffs: np.ndarray, mu_groups: np.ndarray, model: ModelSettings) -> np.ndarray:
     """Inverse of eq. (2): coefficients (10,) and group masses (G,) -> chi (10 + G,), clipped to [0, 1]."""
-    lo, hi, (mlo, mhi) = model_ranges(config)
+    lo, hi, (mlo, mhi) = model_ranges(model)
     c = np.log(np.asarray(coeffs, float) / lo) / np.log(hi / lo)
     m = np.log(np.asarray(mu_groups, float) / mlo) / np.log(mhi / mlo)
     return np.clip(np.concatenate([c, m]), 0.0, 1.0)
 
 
-def start_chi(prev_params: Mapping | None, string, config: Mapping, source="params.json") -> np.ndarray:
+def start_chi(prev_params: Mapping | None, string, model: ModelSettings, motion: MotionSettings,
+              source="params.json") -> np.ndarray:
     """chi_best at m = 0: the previous estimate's chi, else that of the first plan's set
     (:func:`first_parameters`: Table 2 minima but k_s, masses ``model.first_mu``)."""
     n_groups = int(string.mass_groups().max()) + 1
     if prev_params is None:
-        coeffs, _ = first_parameters(config, string)
-        return encode(coeffs, np.full(n_groups, float(config["model"].get("first_mu", 1.0))), config)
+        coeffs, _ = first_parameters(model, motion, string)
+        return encode(coeffs, np.full(n_groups, float(model.first_mu)), model)
     chi = prev_params.get("chi")
     if chi is not None and len(chi) == len(PARAM_NAMES) + n_groups:
         return np.clip(np.asarray(chi, float), 0.0, 1.0)
@@ -161,4 +162,4 @@ def start_chi(prev_params: Mapping | None, string, config: Mapping, source="para
                         f"'coefficients' and 'mu_groups' ({exc})") from exc
     if len(mu_groups) != n_groups:
         raise DataError(f"{source}: mu_groups has {len(mu_groups)} entries, this string has {n_groups}")
-    return encode(coeffs, mu_groups, config)
+    return encode(coeffs, mu_groups, model)

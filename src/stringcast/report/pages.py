@@ -17,19 +17,20 @@ from __future__ import annotations
 
 import datetime as _dt
 from pathlib import Path
+from typing import Mapping
 
 import jinja2
 import numpy as np
 import pandas as pd
 
 from stringcast import __version__
-from . import figures as figs
-from stringcast.core import hand_pose, motion_start
-from stringcast.core import PARAM_NAMES, Campaign, model_ranges
-from .strip import frame_strip, strip_data_uri
 from stringcast.calibrate import Calibration
-from stringcast.core import TRACK_COLUMNS, find_video, read_joint_table, read_json, read_parquet, tracks_arrays, write_text
+from stringcast.core import (PARAM_NAMES, TRACK_COLUMNS, Campaign, ModelSettings, MotionSettings, find_video,
+                             hand_pose, model_ranges, motion_start, read_joint_table, read_json, read_parquet,
+                             tracks_arrays, write_text)
+from . import figures as figs
 from .provenance import provenance
+from .strip import frame_strip, strip_data_uri
 
 
 def _env() -> jinja2.Environment:
@@ -37,7 +38,7 @@ def _env() -> jinja2.Environment:
                               autoescape=jinja2.select_autoescape(["html", "j2"]))
 
 
-def _common(campaign: Campaign, title: str, config: dict) -> dict:
+def _common(campaign: Campaign, title: str, config: Mapping) -> dict:
     return {"title": title, "version": __version__, "provenance": provenance(config),
             "created": _dt.datetime.now().isoformat(timespec="seconds"),
             "string": campaign.string_id or campaign.string.name,
@@ -69,16 +70,21 @@ def _fmt(x, spec=".2f", unit=""):
     return f"{x:{spec}}{unit}"
 
 
-def _motion_window(data_dir: Path, config: dict, arm) -> tuple[float, float, dict]:
+def _motion_window(data_dir: Path, motion: MotionSettings, arm) -> tuple[float, float, dict]:
     t, q, _ = read_joint_table(data_dir / "joints.csv", n_joints=arm.n_joints, arm_name=arm.name)
     played = read_json(data_dir / "motion.json") if (data_dir / "motion.json").exists() else {}
     t0 = motion_start(t, q)
     T = float(played.get("T_s", t[-1] - t0))
-    return t0, t0 + T + float(config["motion"]["flight_window_s"]), played
+    return t0, t0 + T + float(motion.flight_window_s), played
 
 
-def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, config: dict, out: Path) -> None:
+def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, config: Mapping, out: Path, *,
+                       model: ModelSettings, motion: MotionSettings) -> None:
     """Write ``results/<campaign>/trial_<k>/report.html`` from that trial's outputs.
+
+    ``config``, the merged config, only names the method in the page's provenance; ``model``
+    (:class:`~stringcast.core.ModelSettings`: Table 2's ranges) and ``motion``
+    (:class:`~stringcast.core.MotionSettings`: ``flight_window_s``) are the settings read.
 
     Raises:
         DataError: a required result file is missing or malformed (named).
@@ -92,7 +98,7 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
     fit = read_parquet(results_dir / "fit.parquet")
     t_j, q_j, _ = read_joint_table(data_dir / "joints.csv", n_joints=campaign.arm.n_joints,
                                     arm_name=campaign.arm.name)
-    t0, t1, played = _motion_window(data_dir, config, campaign.arm)
+    t0, t1, played = _motion_window(data_dir, motion, campaign.arm)
     tgt = campaign.target.xy
     t_tr, xy_tr, valid = _tracked(tracks, n)
     d_meas, _ = closest_approach(t_tr, xy_tr[:, n], tgt, t0, t1)
@@ -110,7 +116,7 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
                     "src": figs.arm_paths({"played (measured)": hand_pose(campaign.arm, q_j)[:, :2],
                                            "next motion": hand_pose(campaign.arm, q_n)[:, :2]},
                                           tgt, campaign.target.radius)})
-    model_figures, values, lo, hi, diagnostics = _parameter_figures(params, config)
+    model_figures, values, lo, hi, diagnostics = _parameter_figures(params, model)
     figures += model_figures
     strip = frame_strip(find_video(data_dir), Calibration.from_json(results_dir / "calibration.json"), tracks, fit,
                         campaign.string.length)
@@ -135,12 +141,12 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
     write_text(out, _env().get_template("trial.html.j2").render(**ctx))
 
 
-def _parameter_figures(params: dict, config: dict) -> tuple[list, list, np.ndarray, np.ndarray, dict]:
+def _parameter_figures(params: dict, model: ModelSettings) -> tuple[list, list, np.ndarray, np.ndarray, dict]:
     """The estimate's figures: coefficients within Table 2's ranges (Fig. 11), masses (Table 4), E over
     the search. Returns them, the coefficients in PARAM_NAMES order, the ranges (lo, hi) and the
     estimate's diagnostics."""
     figures = []
-    lo, hi, (mu_lo, mu_hi) = model_ranges(config)
+    lo, hi, (mu_lo, mu_hi) = model_ranges(model)
     coeffs = params["coefficients"]
     values = [coeffs[k] for k in PARAM_NAMES]
     diagnostics = params.get("diagnostics") or {}
@@ -231,8 +237,13 @@ def _stage_times(results: Path) -> tuple[list, list]:
     return sorted(rows.items(), key=lambda kv: (not kv[0].isdigit(), int(kv[0]) if kv[0].isdigit() else 0)), stages
 
 
-def write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign, config: dict, out: Path) -> None:
-    """Write ``results/<campaign>/report.html``: one row per execution (paper Table 3)."""
+def write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign, config: Mapping, out: Path, *,
+                          motion: MotionSettings) -> None:
+    """Write ``results/<campaign>/report.html``: one row per execution (paper Table 3).
+
+    ``config``, the merged config, only names the method in the page's provenance; ``motion``
+    (:class:`~stringcast.core.MotionSettings`: ``flight_window_s``) is the setting read.
+    """
     rows, tips = [], {}
     n = campaign.string.n_points
     trials = sorted((int(p.name.split("_")[1]) for p in data_dir.glob("trial_*") if p.name.split("_")[1].isdigit()))
@@ -242,7 +253,7 @@ def write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign,
             continue
         params = read_json(rd / "params.json")
         tracks = read_parquet(rd / "tracks.parquet")
-        t0, t1, played = _motion_window(dd, config, campaign.arm)
+        t0, t1, played = _motion_window(dd, motion, campaign.arm)
         t, xy, valid = _tracked(tracks, n)
         d, _ = closest_approach(t, xy[:, n], campaign.target.xy, t0, t1)
         window = (t >= t0) & (t <= t1)

@@ -7,6 +7,10 @@
   (``stringcast campaign --method ours``), else ``custom config <digest>``;
 * ``config_digest``: the first 12 hex digits of the SHA-256 of the config's canonical JSON
   (keys sorted, no spaces; ``_path``, which only names the files read, left out);
+
+both compare the lab's sections as they are and every stage's settings as
+:func:`~stringcast.core.settings_from_config` builds them, every default filled in: a file that
+sets a setting to its default means the same config as one that leaves it out.
 * ``commit``: ``git rev-parse HEAD`` of the project's checkout, with ``-dirty`` when
   ``git status --porcelain`` shows changes to tracked files; ``unknown`` when the code
   is not a git checkout (an installed package) or git cannot say;
@@ -23,7 +27,8 @@ from pathlib import Path
 from typing import Mapping
 
 from stringcast import __version__
-from stringcast.core import DEFAULT_CONFIG, OURS_CONFIG, ConfigError, load_config
+from stringcast.core import (DEFAULT_CONFIG, OURS_CONFIG, SECTION_CLASSES, ConfigError, load_config,
+                             settings_from_config)
 
 PROJECT_ROOT = DEFAULT_CONFIG.parents[1]
 """The project folder of this code (holding ``config/``), as for ``DEFAULT_CONFIG``."""
@@ -36,23 +41,27 @@ LIBRARIES: dict[str, tuple[str, ...]] = {
 """Library name as shown -> the distributions that provide it (the first installed one counts)."""
 
 
-def _settings(config: Mapping) -> dict:
-    return {k: v for k, v in config.items() if k != "_path"}
+def _canonical(config: Mapping) -> dict:
+    """The config's lab sections (``_path`` left out) and each stage's settings with its defaults."""
+    sections = {c.SECTION for c in SECTION_CLASSES}
+    settings = settings_from_config(config)
+    return {**{k: v for k, v in config.items() if k != "_path" and k not in sections},
+            **{s: getattr(settings, s).as_dict() for s in sorted(sections)}}
 
 
 def config_digest(config: Mapping) -> str:
-    """First 12 hex digits of the SHA-256 of the config's canonical JSON (``_path`` left out)."""
-    text = json.dumps(_settings(config), sort_keys=True, separators=(",", ":"), default=str)
+    """First 12 hex digits of the SHA-256 of the config's canonical JSON (module doc)."""
+    text = json.dumps(_canonical(config), sort_keys=True, separators=(",", ":"), default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:12]
 
 
 def method(config: Mapping) -> str:
     """``the paper's method``, ``ours`` or ``custom config <digest>`` (module doc)."""
-    settings = _settings(config)
+    canonical = _canonical(config)
     try:
-        if settings == _settings(load_config(DEFAULT_CONFIG)):
+        if canonical == _canonical(load_config(DEFAULT_CONFIG)):
             return "the paper's method"
-        if settings == _settings(load_config([DEFAULT_CONFIG, OURS_CONFIG])):
+        if canonical == _canonical(load_config([DEFAULT_CONFIG, OURS_CONFIG])):
             return "ours"
     except ConfigError:  # no config/ beside the code (an installed package): nothing to compare with
         pass
