@@ -48,7 +48,7 @@ def _sync_case(trial: Path, calibration_json: Path, campaign, settings, out: Pat
     (trial / "video.yaml").write_text(yaml.safe_dump(meta))  # the benchmark's own copy
     t0 = time.perf_counter()
     try:
-        doc = run_sync(trial, calibration_json, campaign, out, sync=settings.sync, tracking=settings.tracking,
+        doc = run_sync(trial, calibration_json, campaign, out, sync=settings.sync,
                        board_check=settings.board_check)
     except DataError as exc:  # a sync that fails is a result (e.g. lens distortion uncorrected at the image edge)
         return {"offset_error_ms": None, "error": str(exc), "seconds": time.perf_counter() - t0,
@@ -92,8 +92,7 @@ def run(quick: bool = False) -> dict:
                 print(f"  string {k}, trigger +{WRONG_TRIGGER_MS:g} ms wrong: " + (f"FAILED: {r['error']}" if r.get(
                       "error") else f"error {r['offset_error_ms']:+.3f} ms, disagreement flagged: {r['trigger_disagrees']}"),
                       flush=True)
-                run_calibration(trial, None, campaign, d / "calibration_h.json", board_check=settings.board_check,
-                                tracking=settings.tracking)
+                run_calibration(trial, None, campaign, d / "calibration_h.json", board_check=settings.board_check)
                 extra[f"{k}_homography_only"] = r = _sync_case(
                     trial, d / "calibration_h.json", campaign, settings, d / "sync_h.json", truth, None)
                 print(f"  string {k}, homography-only calibration: " + (f"FAILED: {r['error']}" if r.get("error")

@@ -60,7 +60,7 @@ def track_string(string_type: int, config: dict, settings, calib_dir: Path, work
     else:
         campaign, d, trial = film_first_motion(string_type, config, work, seed, calib_dir)
         run_sync(trial, d / "calibration.json", campaign, d / "sync.json", sync=settings.sync,
-                 tracking=settings.tracking, board_check=settings.board_check)
+                 board_check=settings.board_check)
     decode = _decode_fps(trial / "video.mkv")
     t0 = time.perf_counter()
     tracks = run_tracking(trial, d / "calibration.json", d / "sync.json", campaign, d / "tracks.parquet",

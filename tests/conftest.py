@@ -59,9 +59,9 @@ def tiny_lab_trial(tmp_path, config, bands=None):
     trial, res = tmp_path / "trial_1", tmp_path / "res"
     lab.run_trial(np.arange(len(q_cmd)) / rate, q_cmd, campaign, cfg, trial, seed=3, motion_start_s=0.12)
     st = settings_from_config(config)
-    run_calibration(trial, None, campaign, res / "calibration.json", board_check=st.board_check, tracking=st.tracking)
+    run_calibration(trial, None, campaign, res / "calibration.json", board_check=st.board_check)
     run_sync(trial, res / "calibration.json", campaign, res / "sync.json",
-             sync=dataclasses.replace(st.sync, method="trigger"), tracking=st.tracking, board_check=st.board_check)
+             sync=dataclasses.replace(st.sync, method="trigger"), board_check=st.board_check)
     return trial, res, campaign, cfg
 
 

@@ -1,5 +1,6 @@
 """The command line: every option says what it is and shows its default; --method picks the config."""
 import argparse
+import os
 from pathlib import Path
 
 import pytest
@@ -8,6 +9,7 @@ import yaml
 from stringcast.campaign import campaign_config
 from stringcast.cli import build_parser, campaign_config_paths
 from stringcast.core.config import DEFAULT_CONFIG, OURS_CONFIG, load_config
+from stringcast.core.settings import settings_from_config
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -62,9 +64,11 @@ def test_method_ours_merges_config_ours_yaml_last():
         for k in path:
             got = got[k]
         assert got == value, path
-    assert paper["estimation"]["optimizer"] != ours["estimation"]["optimizer"] == config["estimation"]["optimizer"]
+    s_ours, s_paper = settings_from_config(config), settings_from_config(paper)
+    assert s_paper.estimation.optimizer != ours["estimation"]["optimizer"] == s_ours.estimation.optimizer
     # everything ours.yaml does not set is the paper's
-    assert config["targets"] == paper["targets"] and config["model"]["ranges"]["k_s"] == paper["model"]["ranges"]["k_s"]
+    assert config["targets"] == paper["targets"] and s_ours.model.ranges["k_s"] == s_paper.model.ranges["k_s"]
+    assert s_ours.tracking == s_paper.tracking and s_ours.model.ranges["k_ph"] != s_paper.model.ranges["k_ph"]
     config_paper, given_paper = campaign_config(ROOT, campaign_config_paths(parser.parse_args(["campaign", "c"])))
     assert given_paper == [] and {k: v for k, v in config_paper.items() if k != "_path"} == \
         {k: v for k, v in paper.items() if k != "_path"}
@@ -74,10 +78,23 @@ def test_config_readme_lists_every_setting_as_the_code_defines_it():
     """config/README.md's reference (below its mark) is what ``stringcast settings --markdown``
     prints: every setting with the default that core.settings holds, and each stage's sections."""
     from stringcast.cli import REFERENCE_MARK, settings_reference
-    from stringcast.core.settings import SECTION_CLASSES, markdown_table
+    from stringcast.core import SECTION_CLASSES, markdown_table
 
     text = (Path(__file__).resolve().parents[1] / "config" / "README.md").read_text()
     assert REFERENCE_MARK in text, "config/README.md lacks the generated reference: run stringcast settings --markdown"
     assert text[text.index(REFERENCE_MARK):].strip() == settings_reference(markdown_table()).strip()
     for c in SECTION_CLASSES:
         assert f"### `{c.SECTION}`" in text
+
+
+def test_jobs_read_the_config_files_the_workflow_names(tmp_path, monkeypatch):
+    """Without --config a job reads $STRINGCAST_CONFIG (set by the workflow's shell prefix),
+    so the rules' command lines carry no config path; --config, when given, wins."""
+    from stringcast.cli import CONFIG_ENV, config_paths
+
+    parser = build_parser()
+    monkeypatch.setenv(CONFIG_ENV, f"a.yaml{os.pathsep}b.yaml")
+    assert config_paths(parser.parse_args(["settings"])) == ["a.yaml", "b.yaml"]
+    assert config_paths(parser.parse_args(["--config", "c.yaml", "settings"])) == ["c.yaml"]
+    monkeypatch.delenv(CONFIG_ENV)
+    assert config_paths(parser.parse_args(["settings"])) is None

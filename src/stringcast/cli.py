@@ -200,8 +200,7 @@ def settings_reference(tables: str) -> str:
 def cmd_settings(args):
     import yaml
 
-    from stringcast.core import SECTION_CLASSES, settings_from_config
-    from stringcast.core.settings import markdown_table
+    from stringcast.core import SECTION_CLASSES, markdown_table, settings_from_config
 
     if args.markdown:
         print(settings_reference(markdown_table()))

@@ -48,7 +48,7 @@ def still_arm(request, tmp_path_factory, config):
 
 def test_true_board_pose_reads_near_zero(still_arm, settings):
     rest, truth, campaign, cfg, q0, _ = still_arm
-    r = check_board_to_robot(rest, _calibration(truth), campaign.arm, q0, settings.board_check, settings.tracking)
+    r = check_board_to_robot(rest, _calibration(truth), campaign.arm, q0, settings.board_check)
     print(f"true board: residual {r['residual_mm']:.2f} mm from {r['n_used']} features {r['segment_offsets_mm']}")
     assert r["n_used"] >= 2 and r["residual_mm"] < 3.0
     assert set(r) >= {"residual_mm", "dx_mm", "dy_mm", "method", "n_used"}
@@ -58,7 +58,7 @@ def test_true_board_pose_reads_near_zero(still_arm, settings):
 def test_a_shifted_board_pose_reads_as_the_shift(still_arm, shift_mm, settings):
     rest, truth, campaign, cfg, q0, _ = still_arm
     r = check_board_to_robot(rest, _calibration(truth, np.asarray(shift_mm) / 1000), campaign.arm, q0,
-                             settings.board_check, settings.tracking)
+                             settings.board_check)
     print(f"board shifted {shift_mm} mm: reads dx {r['dx_mm']:.2f}, dy {r['dy_mm']:.2f} mm")
     assert r["dx_mm"] == pytest.approx(shift_mm[0], abs=3.0)
     assert r["dy_mm"] == pytest.approx(shift_mm[1], abs=3.0)
@@ -67,7 +67,7 @@ def test_a_shifted_board_pose_reads_as_the_shift(still_arm, shift_mm, settings):
 
 def test_a_blank_image_is_not_checked_and_bad_shapes_raise(still_arm, settings):
     rest, truth, campaign, cfg, q0, _ = still_arm
-    st = (settings.board_check, settings.tracking)
+    st = (settings.board_check,)
     r = check_board_to_robot(np.full_like(rest, 128), _calibration(truth), campaign.arm, q0, *st)
     assert r["residual_mm"] is None and r["n_used"] == 0 and "not checked" in r["method"]
     with pytest.raises(ValueError, match="rest_image"):
@@ -94,7 +94,7 @@ def test_calibration_stage_records_the_check_and_warns(still_arm, tmp_path, sett
 
     _, _, campaign, cfg, _, trial = still_arm
     calib = write_calibration_clip(campaign, cfg, tmp_path / "calib", seed=5, n_frames=14)
-    st = {"board_check": settings.board_check, "tracking": settings.tracking}
+    st = {"board_check": settings.board_check}
     ok = run_calibration(trial, calib, campaign, tmp_path / "ok.json", **st)
     assert ok.board_check["residual_mm"] < 5.0  # the intrinsics' own error near the arm: a few mm at most
     assert not any("board-to-robot" in w for w in ok.warnings)

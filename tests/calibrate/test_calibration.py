@@ -237,7 +237,7 @@ def test_run_calibration_on_trial_folder(tmp_path, campaign, settings):
         t = np.array([-0.27 + 0.03 * k, -0.18, 0.75 + 0.05 * k])
         Hk = K_TRUE @ np.column_stack([R[:, 0], R[:, 1], t])
         cv2.imwrite(str(calib / f"board_{k:02d}.png"), _render_plane(board, Hk / Hk[2, 2], K_TRUE, DIST_TRUE))
-    st = {"board_check": settings.board_check, "tracking": settings.tracking}
+    st = {"board_check": settings.board_check}
     cal = run_calibration(trial, calib, campaign, tmp_path / "out" / "calibration.json", **st)
     doc = read_json(tmp_path / "out" / "calibration.json")
     assert doc["n_corners"] == cal.n_corners >= 30 and doc["K"] is not None
@@ -269,8 +269,7 @@ def test_run_calibration_without_board(tmp_path, campaign, settings):
         vw.write(np.full((64, 64), 90, np.uint8))
     vw.release()
     with pytest.raises(DataError, match="video.mkv.*no ChArUco board"):
-        run_calibration(trial, None, campaign, tmp_path / "c.json", board_check=settings.board_check,
-                        tracking=settings.tracking)
+        run_calibration(trial, None, campaign, tmp_path / "c.json", board_check=settings.board_check)
     assert not (tmp_path / "c.json").exists()
 
 

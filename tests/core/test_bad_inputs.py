@@ -44,7 +44,7 @@ def _board_image(campaign, width=640, height=480):
 
 def _calibrate(settings, *args):
     """run_calibration(*args) with the project's settings."""
-    return run_calibration(*args, board_check=settings.board_check, tracking=settings.tracking)
+    return run_calibration(*args, board_check=settings.board_check)
 
 
 def _no_output(trial, out_json):

@@ -46,7 +46,7 @@ def test_plays_motion_with_pre_and_post_roll(tmp_path, campaign, config, fake_la
     assert len(fake_lab) == 1
     call = fake_lab[0]
     rate = campaign.arm.controller_rate
-    pre, post = config["executor"]["pre_roll_s"], config["executor"]["post_roll_s"]
+    pre, post = settings.executor.pre_roll_s, settings.executor.post_roll_s
     assert call["start"] == pytest.approx(pre, abs=0.5 / rate)
     assert len(call["t"]) == len(t) + round(pre * rate) + round(post * rate)
     np.testing.assert_allclose(np.diff(call["t"]), 1 / rate)

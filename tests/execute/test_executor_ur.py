@@ -123,14 +123,14 @@ def _motion(campaign, tmp_path, T=0.4, amp=0.3, q0=(0.6, -0.4, -0.2)):
 
 def _arm_at(campaign, config, q_planar, base=0.3, wrist2=1.2, wrist3=-0.4, **kw):
     held = np.array([base, 0.0, 0.0, 0.0, wrist2, wrist3])
-    m = URSettings.from_settings(settings.executor, campaign.arm).mapping
+    m = URSettings.from_settings(ExecutorSettings(), campaign.arm).mapping
     return FakeArm(m.to_ur(np.asarray(q_planar, float), held), rate=campaign.arm.controller_rate, **kw)
 
 
 def _n_cmd(config, campaign, n_motion):
     rate = campaign.arm.controller_rate
-    e = config["executor"]
-    return n_motion + round(e["pre_roll_s"] * rate) + round(e["post_roll_s"] * rate)
+    e = ExecutorSettings()
+    return n_motion + round(e.pre_roll_s * rate) + round(e.post_roll_s * rate)
 
 
 def test_default_mapping_matches_ur_joint_frames(campaign, config, settings):
@@ -199,7 +199,7 @@ def test_full_play_logs_every_cycle(tmp_path, campaign, config, settings):
     settle = m.to_planar(sent[:n_settle])   # a smooth ramp from where the arm was onto the start
     np.testing.assert_allclose(settle[-1], q[0], atol=1e-12)
     assert np.max(np.abs(np.diff(settle, axis=0))) < 0.01 * 2 / n_settle
-    k0 = round(config["executor"]["pre_roll_s"] * rate)
+    k0 = round(ExecutorSettings().pre_roll_s * rate)
     np.testing.assert_allclose(m.to_planar(sent[n_settle + k0:n_settle + k0 + len(q)]), q, atol=1e-12)
     _, _, _, dt, look, gain = next(c[1] for c in arm.calls if c[0] == "servoJ")
     assert dt == pytest.approx(1 / rate) and look == 0.1 and gain == 300

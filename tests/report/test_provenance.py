@@ -12,30 +12,28 @@ from stringcast.report import write_campaign_report
 
 
 def test_provenance_names_the_method_commit_and_versions():
-    paper = load_config(DEFAULT_CONFIG)
+    paper = settings_from_config(load_config(DEFAULT_CONFIG))
     p = prov.provenance(paper)
-    assert set(p) == {"method", "config_digest", "commit", "versions"}
+    assert set(p) == {"method", "settings_digest", "commit", "versions"}
     assert p["method"] == "the paper's method"
     assert re.fullmatch(r"[0-9a-f]{40}(-dirty)?|unknown", p["commit"]), p["commit"]
     assert list(p["versions"]) == ["stringcast", "numpy", "numba", "scipy", "opencv", "pandas", "snakemake",
                                    "mujoco", "cma"]
     assert all(v for v in p["versions"].values()) and p["versions"]["numpy"] != "not installed"
 
-    assert prov.provenance(load_config([DEFAULT_CONFIG, OURS_CONFIG]))["method"] == "ours"
+    assert prov.provenance(settings_from_config(load_config([DEFAULT_CONFIG, OURS_CONFIG])))["method"] == "ours"
 
-    # a file that sets a setting to its default is still the paper's method (the settings are compared)
-    explicit = dict(copy.deepcopy(paper), estimation={"iterations": EstimationSettings().iterations})
-    assert prov.provenance(explicit)["method"] == "the paper's method"
-    assert prov.config_digest(explicit) == p["config_digest"]
+    # a file that sets a setting to its default, or changes only the virtual lab, is still the
+    # paper's method (the settings are compared, not the files)
+    config = load_config(DEFAULT_CONFIG)
+    explicit = dict(copy.deepcopy(config), estimation={"iterations": EstimationSettings().iterations},
+                    lab={**config["lab"], "scene_seed": 12})
+    assert prov.provenance(settings_from_config(explicit)) == p
 
-    custom = copy.deepcopy(paper)
-    custom["estimation"] = {"iterations": EstimationSettings().iterations + 1}
-    c = prov.provenance(custom)
-    assert re.fullmatch(r"[0-9a-f]{12}", c["config_digest"])
-    assert c["method"] == f"custom config {c['config_digest']}" and c["config_digest"] != p["config_digest"]
-    # the digest is of the settings: not of the files' names, nor of the keys' order
-    renamed = dict(reversed(list(custom.items())), _path="elsewhere.yaml")
-    assert prov.config_digest(renamed) == c["config_digest"]
+    custom = dict(copy.deepcopy(config), estimation={"iterations": EstimationSettings().iterations + 1})
+    c = prov.provenance(settings_from_config(custom))
+    assert re.fullmatch(r"[0-9a-f]{12}", c["settings_digest"])
+    assert c["method"] == f"custom settings {c['settings_digest']}" and c["settings_digest"] != p["settings_digest"]
 
 
 def _git(cwd, *args):
@@ -67,8 +65,8 @@ def test_campaign_page_footer_shows_provenance(tmp_path, files, method):
     config = load_config(list(files))
     campaign = resolve_campaign({"string": 1, "target": 1}, config, "c")
     (tmp_path / "data").mkdir()
-    write_campaign_report(tmp_path / "data", tmp_path / "results", campaign, config, tmp_path / "report.html",
-                          motion=settings_from_config(config).motion)
+    write_campaign_report(tmp_path / "data", tmp_path / "results", campaign, tmp_path / "report.html",
+                          settings=settings_from_config(config))
     html = (tmp_path / "report.html").read_text()
     footer = html[html.index('<footer id="provenance">'):]
     assert f'<td class="l">{method}</td>' in footer

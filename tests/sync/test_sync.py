@@ -16,7 +16,7 @@ FPS = 500.0
 
 def _kw(settings, **sync):
     """run_sync's settings: the project's, with ``method: video`` and the ``sync`` changes."""
-    return {"sync": dataclasses.replace(settings.sync, **{"method": "video", **sync}), "tracking": settings.tracking,
+    return {"sync": dataclasses.replace(settings.sync, **{"method": "video", **sync}),
             "board_check": settings.board_check}
 
 
@@ -44,7 +44,7 @@ def lab_trial(tmp_path_factory, config, settings):
     trial = root / "trial_1"
     run_trial(np.arange(len(q_cmd)) / rate, q_cmd, campaign, cfg, trial, seed=5, motion_start_s=0.15)
     run_calibration(trial, None, campaign, root / "calibration_h.json",  # homography only
-                    board_check=settings.board_check, tracking=settings.tracking)
+                    board_check=settings.board_check)
     truth = read_json(trial / "ground_truth.json")
     true_calibration(truth).to_json(root / "calibration.json")
     return root, trial, campaign, cfg, truth

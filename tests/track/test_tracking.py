@@ -23,10 +23,10 @@ M_PER_PX = 0.002
 ORIGIN = np.array([0.55, 0.25])  # robot (x, y) at pixel (0, 0); y up -> rows down
 
 
-# how the synthetic arm looks: thinner than the tracker's default mask, as a real arm should be
-ARM_LOOK = dataclasses.replace(TrackingSettings(), arm_link_widths_mm=(100.0, 85.0, 70.0),
-                               arm_joint_radii_mm=(60.0, 50.0, 40.0, 35.0), gripper_widths_mm=(55.0, 25.0),
-                               gripper_mask_extend_mm=0.0, arm_mask_margin_px=0.0)
+# how the synthetic arm looks: thinner than the outline the tracker masks, as a real arm should be
+ARM_LOOK = {"link_widths": np.array([0.100, 0.085, 0.070]), "joint_radii": np.array([0.060, 0.050, 0.040, 0.035]),
+            "gripper_widths": np.array([0.055, 0.025]), "gripper_mask_extend": 0.0}
+NO_MARGIN = dataclasses.replace(TrackingSettings(), arm_mask_margin_px=0.0)
 
 
 def _calibration(K=None, dist=None):
@@ -80,7 +80,7 @@ def make_trial(tmp_path, campaign, n_frames=48, noise=2.0, fps=100.0, blob_at_ti
         if blob_at_tip:
             cv2.circle(img, tuple(np.round(cpx[-1] * 16).astype(int)), 4 * 16, 70, -1, cv2.LINE_AA, 4)
         jpx = cal.robot_to_pixel(joints)
-        m = draw_arm_mask((SIZE, SIZE), jpx, ARM_LOOK, M_PER_PX)
+        m = draw_arm_mask((SIZE, SIZE), jpx, dataclasses.replace(arm, **ARM_LOOK), NO_MARGIN, M_PER_PX)
         img[m] = 120
         img += rng.normal(0, noise, img.shape)
         vw.write(np.clip(np.round(img), 0, 255).astype(np.uint8))

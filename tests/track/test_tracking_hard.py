@@ -69,7 +69,7 @@ def _clip(tmp_path, campaign, cfg, motion, seed=3):
     trial, res = tmp_path / "trial", tmp_path / "res"
     truth = run_trial(t_cmd, q_cmd, campaign, cfg, trial, seed=seed, motion_start_s=t0)
     st = settings_from_config(cfg)  # the config's settings
-    run_calibration(trial, None, campaign, res / "calibration.json", board_check=st.board_check, tracking=st.tracking)
+    run_calibration(trial, None, campaign, res / "calibration.json", board_check=st.board_check)
     meta = read_video_meta(trial / "video.yaml")  # exact trigger (trigger_error_s = 0): tracking alone is tested
     write_json(res / "sync.json", {"offset_s": meta["trigger_time_s"], "fps": meta["fps"], "frames": meta["frames"],
                                    "method": "test: exact trigger", "residual_mm": None})

@@ -9,8 +9,8 @@ is in the robot frame; :func:`check_board_to_robot` measures where the calibrati
 it, from the rest image alone, with two kinds of feature (no model of the arm's colours):
 
 * **link and gripper edges**: across each link (and the gripper) the image is sampled on
-  rows normal to its FK axis, over the arm outline's width (tracking settings
-  ``arm_link_widths_mm``, ``gripper_widths_mm``) plus ``margin_mm`` each side, clear of the
+  rows normal to its FK axis, over the arm outline's width (the arm's ``link_widths``,
+  ``gripper_widths``) plus ``margin_mm`` each side, clear of the
   joint discs. On each row the strongest pair of edges whose spacing fits
   the outline (``width_range`` of it) is the segment as seen; the median of their
   midpoints over the rows (the largest group within ``max_spread_mm`` of each other, at
@@ -18,7 +18,7 @@ it, from the rest image alone, with two kinds of feature (no model of the arm's 
   segment's offset o_s along its normal n_s: one equation ``n_s . d = o_s``.
 * **joint discs** (if ``use_discs``): around each joint but the base, rays from the FK
   centre find the disc's rim (the strongest edge from 0.3 outline radii,
-  ``arm_joint_radii_mm``, to the radius + ``disc_reach_mm``); a circle fit (Huber-reweighted) gives the centre's
+  the arm's ``joint_radii``, to the radius + ``disc_reach_mm``); a circle fit (Huber-reweighted) gives the centre's
   2-D offset: two equations, which a posture with all links nearly parallel needs.
 * **the hanging string** (if ``use_string``): at rest the string hangs straight down from
   the grasp point (gravity), so its centreline x is the grasp point's x. On rows
@@ -41,7 +41,7 @@ import math
 import numpy as np
 from scipy.ndimage import gaussian_filter1d, map_coordinates
 
-from stringcast.core import BoardCheckSettings, TrackingSettings, forward_kinematics
+from stringcast.core import BoardCheckSettings, forward_kinematics
 
 METHOD = "rest image: link/gripper edge pairs across their FK axes, joint-disc rims"
 
@@ -95,22 +95,21 @@ def edge_pair_centre(profile: np.ndarray, step: float, v0: float, width_lo: floa
     return centre
 
 
-def _segment_offsets(image, calibration, arm, q_rest, st: BoardCheckSettings,
-                     tst: TrackingSettings) -> list[tuple[np.ndarray, float, float]]:
+def _segment_offsets(image, calibration, arm, q_rest, st: BoardCheckSettings) -> list[tuple[np.ndarray, float, float]]:
     """[(normal (2,), offset m, spread m)] for each link/gripper whose edges were found."""
     pts = forward_kinematics(arm, np.asarray(q_rest, float))
     J = arm.n_joints
-    links, radii = tst.arm_link_widths_mm, tst.arm_joint_radii_mm
+    links, radii = arm.link_widths, arm.joint_radii
     out = []
     for s in range(J + 1):
         a, b = pts[s], pts[s + 1]
         L = float(np.hypot(*(b - a)))
         if s < J:
-            w0 = w1 = links[min(s, len(links) - 1)] / 1000
-            r_a, r_b = radii[min(s, len(radii) - 1)] / 1000, radii[min(s + 1, len(radii) - 1)] / 1000
+            w0 = w1 = float(links[min(s, len(links) - 1)])
+            r_a, r_b = float(radii[min(s, len(radii) - 1)]), float(radii[min(s + 1, len(radii) - 1)])
         else:
-            w0, w1 = (w / 1000 for w in tst.gripper_widths_mm)
-            r_a, r_b = radii[min(J, len(radii) - 1)] / 1000, 0.0
+            w0, w1 = (float(w) for w in arm.gripper_widths)
+            r_a, r_b = float(radii[min(J, len(radii) - 1)]), 0.0
         clear = st.clear_mm / 1000
         u0, u1 = (r_a + clear) / L, 1 - (r_b + clear) / L
         if s == J:
@@ -152,23 +151,23 @@ def _consensus(values: np.ndarray, tol: float, min_count: int) -> tuple[float, f
     return med, float(np.median(np.abs(group - med)) * 1.4826)
 
 
-def _disc_offsets(image, calibration, arm, q_rest, st: BoardCheckSettings, tst: TrackingSettings) -> list[np.ndarray]:
+def _disc_offsets(image, calibration, arm, q_rest, st: BoardCheckSettings) -> list[np.ndarray]:
     """[(2,) centre offset m] of the joint discs (base excluded) whose rim was found.
 
     Rays from the FK joint centre at ``disc_rays`` angles; on each, the strongest edge
-    between 0.3 outline radii (``arm_joint_radii_mm``) and the radius + ``disc_reach_mm``
+    between 0.3 outline radii (the arm's ``joint_radii``) and the radius + ``disc_reach_mm``
     (a board pose that far off is still found); the rim
     r(theta) = r0 + (cos theta, sin theta) . c is fitted by Huber-reweighted least squares
     for (r0, c), kept if r0 fits the outline, most rays agree and the rim is round.
     """
     pts = forward_kinematics(arm, np.asarray(q_rest, float))
-    radii = tst.arm_joint_radii_mm
+    radii = arm.joint_radii
     step = st.step_mm / 1000
     th = np.linspace(0, 2 * np.pi, int(st.disc_rays), endpoint=False)
     ray = np.stack([np.cos(th), np.sin(th)], axis=1)
     out = []
     for j in range(1, arm.n_joints + 1):
-        R = radii[min(j, len(radii) - 1)] / 1000
+        R = float(radii[min(j, len(radii) - 1)])
         r = np.arange(0.3 * R, R + st.disc_reach_mm / 1000, step)
         centre, ok = np.zeros(2), False
         for _ in range(3):  # re-centre: the rim model is linear in the offset only for small ones
@@ -212,7 +211,7 @@ def _rim_fit(image, calibration, centre, r, ray, step, st: BoardCheckSettings):
     return float(sol[0]), sol[1:], float(inl.mean())
 
 
-def _string_offset(image, calibration, arm, q_rest, st: BoardCheckSettings, tst: TrackingSettings) -> float | None:
+def _string_offset(image, calibration, arm, q_rest, st: BoardCheckSettings) -> float | None:
     """x offset (m) of the hanging string below the grasp point, seen minus FK; None if unclear."""
     pts = forward_kinematics(arm, np.asarray(q_rest, float))
     grasp = pts[-1]
@@ -220,8 +219,8 @@ def _string_offset(image, calibration, arm, q_rest, st: BoardCheckSettings, tst:
     half = st.string_search_mm / 1000
     x = np.arange(-half, half + step / 2, step)
     # clear of the arm: farther than the outline's half-width (+ clear_mm) from every segment
-    widths = list(tst.arm_link_widths_mm[:arm.n_joints]) + [max(tst.gripper_widths_mm)]
-    widths += [tst.arm_link_widths_mm[-1]] * (arm.n_joints + 1 - len(widths))
+    widths = list(arm.link_widths[:arm.n_joints]) + [max(arm.gripper_widths)]
+    widths += [arm.link_widths[-1]] * (arm.n_joints + 1 - len(widths))
     offs = []
     for dy in np.arange(st.string_rows_mm[0], st.string_rows_mm[1], 5.0) / 1000:
         row = np.column_stack([grasp[0] + x, np.full_like(x, grasp[1] - dy)])
@@ -231,7 +230,7 @@ def _string_offset(image, calibration, arm, q_rest, st: BoardCheckSettings, tst:
             d = b - a
             t = np.clip(((row - a) @ d) / max(d @ d, 1e-12), 0, 1)
             dist = np.linalg.norm(row - (a + t[:, None] * d), axis=1)
-            if np.any(dist < widths[min(s, len(widths) - 1)] / 2000 + st.clear_mm / 1000):
+            if np.any(dist < widths[min(s, len(widths) - 1)] / 2 + st.clear_mm / 1000):
                 near = True
                 break
         if near:
@@ -247,18 +246,17 @@ def _string_offset(image, calibration, arm, q_rest, st: BoardCheckSettings, tst:
     return None if c is None else c[0]
 
 
-def check_board_to_robot(rest_image: np.ndarray, calibration, arm, q_rest: np.ndarray, board_check: BoardCheckSettings,
-                         tracking: TrackingSettings) -> dict:
+def check_board_to_robot(rest_image: np.ndarray, calibration, arm, q_rest: np.ndarray,
+                         board_check: BoardCheckSettings) -> dict:
     """Translation between where the still arm is seen and where config's board pose + the FK put it.
 
     Args:
         rest_image: (H, W) grey image (any dtype) of the arm still at ``q_rest``, e.g. the
             median of the frames before the motion.
         calibration: :class:`~stringcast.calibrate.calibration.Calibration` (robot_to_pixel).
-        arm: :class:`~stringcast.core.config.ArmSpec`. q_rest: (J,) rad, ``joints.csv``'s first row.
+        arm: :class:`~stringcast.core.config.ArmSpec`, with its outline (``link_widths``,
+            ``joint_radii``, ``gripper_widths``). q_rest: (J,) rad, ``joints.csv``'s first row.
         board_check: board-check settings (:class:`~stringcast.core.BoardCheckSettings`).
-        tracking: tracking settings (:class:`~stringcast.core.TrackingSettings`): the arm's
-            outline (``arm_link_widths_mm``, ``arm_joint_radii_mm``, ``gripper_widths_mm``).
 
     Returns:
         ``{"residual_mm": |d| or None, "dx_mm", "dy_mm" (seen minus FK, robot frame),
@@ -276,17 +274,17 @@ def check_board_to_robot(rest_image: np.ndarray, calibration, arm, q_rest: np.nd
     q_rest = np.asarray(q_rest, float)
     if q_rest.shape != (arm.n_joints,):
         raise ValueError(f"check_board_to_robot: q_rest must be ({arm.n_joints},), got {q_rest.shape}")
-    st, tst = board_check, tracking
-    segs = _segment_offsets(img, calibration, arm, q_rest, st, tst)
+    st = board_check
+    segs = _segment_offsets(img, calibration, arm, q_rest, st)
     rows = [n for n, _, _ in segs]
     rhs = [o for _, o, _ in segs]
     discs: list = []
     if st.use_discs:
-        for c in _disc_offsets(img, calibration, arm, q_rest, st, tst):
+        for c in _disc_offsets(img, calibration, arm, q_rest, st):
             rows += [np.array([1.0, 0.0]), np.array([0.0, 1.0])]
             rhs += [float(c[0]), float(c[1])]
             discs.append([float(c[0] * 1000), float(c[1] * 1000)])
-    x_str = _string_offset(img, calibration, arm, q_rest, st, tst) if st.use_string else None
+    x_str = _string_offset(img, calibration, arm, q_rest, st) if st.use_string else None
     if x_str is not None:
         rows.append(np.array([1.0, 0.0]))
         rhs.append(x_str)

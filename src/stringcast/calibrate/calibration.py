@@ -34,7 +34,7 @@ import cv2
 import numpy as np
 
 from .charuco import Intrinsics, calibrate_intrinsics, detect_charuco
-from stringcast.core import (BoardCheckSettings, DataError, TrackingSettings, find_video, read_joint_table, read_json,
+from stringcast.core import (BoardCheckSettings, DataError, find_video, read_joint_table, read_json,
                              write_json)
 from stringcast.video import FRAME_SUFFIXES, open_video
 from .board_check import check_board_to_robot
@@ -274,7 +274,7 @@ def single_threaded_opencv():
 
 
 def run_calibration(trial_dir: str | Path, calib_dir: str | Path | None, campaign, out_json: str | Path,
-                    n_median: int = 5, *, board_check: BoardCheckSettings, tracking: TrackingSettings) -> Calibration:
+                    n_median: int = 5, *, board_check: BoardCheckSettings) -> Calibration:
     """Calibrate one trial and write ``calibration.json`` (reproducibly: :func:`single_threaded_opencv`).
 
     Intrinsics from ``calib_dir`` (if given), then the plane homography from the median of
@@ -284,20 +284,19 @@ def run_calibration(trial_dir: str | Path, calib_dir: str | Path | None, campaig
     ``board_check`` in the file, a warning above ``board_check.warn_mm``).
 
     Args:
-        board_check: board-check settings (:class:`~stringcast.core.BoardCheckSettings`).
-        tracking: tracking settings (:class:`~stringcast.core.TrackingSettings`): the arm's
-            outline the check looks for.
+        board_check: board-check settings (:class:`~stringcast.core.BoardCheckSettings`); the
+            check looks for the arm's outline (``campaign.arm``).
 
     Raises:
         DataError: no board / too few corners in the trial frames or the calibration views,
             or mismatched image sizes (the file is named).
     """
     with single_threaded_opencv():
-        return _run_calibration(Path(trial_dir), calib_dir, campaign, out_json, n_median, board_check, tracking)
+        return _run_calibration(Path(trial_dir), calib_dir, campaign, out_json, n_median, board_check)
 
 
-def _run_calibration(trial_dir: Path, calib_dir, campaign, out_json, n_median: int, board_check: BoardCheckSettings,
-                     tracking: TrackingSettings) -> Calibration:
+def _run_calibration(trial_dir: Path, calib_dir, campaign, out_json, n_median: int,
+                     board_check: BoardCheckSettings) -> Calibration:
     setup = campaign.setup
     board = setup.board.make()
     warnings: list[str] = []
@@ -322,7 +321,7 @@ def _run_calibration(trial_dir: Path, calib_dir, campaign, out_json, n_median: i
                         f"{setup.reprojection_warn_px:.2f} px")
     if cal.n_corners < 0.5 * n_all:
         warnings.append(f"only {cal.n_corners} of {n_all} board corners used: the board is partly hidden")
-    board = _board_check(trial_dir, img, cal, campaign, board_check, tracking, warnings)
+    board = _board_check(trial_dir, img, cal, campaign, board_check, warnings)
     cal = Calibration(cal.H_pixel_to_robot, cal.image_size, cal.K, cal.dist, cal.reprojection_error_px,
                       cal.n_corners, cal.board_to_robot, None if intr is None else intr.rms_px,
                       None if intr is None else intr.n_views, tuple(warnings), cal.corner_ids,
@@ -332,7 +331,7 @@ def _run_calibration(trial_dir: Path, calib_dir, campaign, out_json, n_median: i
 
 
 def _board_check(trial_dir: Path, rest_image: np.ndarray, cal: Calibration, campaign, board_check: BoardCheckSettings,
-                 tracking: TrackingSettings, warnings: list[str]) -> dict | None:
+                 warnings: list[str]) -> dict | None:
     """The board-to-robot check at the joint log's first (rest) posture; None without a joints.csv."""
 
     joints = trial_dir / "joints.csv"
@@ -341,7 +340,7 @@ def _board_check(trial_dir: Path, rest_image: np.ndarray, cal: Calibration, camp
         return None
     _, q, _ = read_joint_table(joints, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
     grey = rest_image if rest_image.ndim == 2 else cv2.cvtColor(rest_image, cv2.COLOR_BGR2GRAY)
-    board = check_board_to_robot(grey.astype(np.float64), cal, campaign.arm, q[0], board_check, tracking)
+    board = check_board_to_robot(grey.astype(np.float64), cal, campaign.arm, q[0], board_check)
     warn = float(board_check.warn_mm)
     if board.get("residual_mm") is None:
         warnings.append("board-to-robot check: the still arm could not be located in the first frames")

@@ -12,8 +12,8 @@ from .files import (TRACK_COLUMNS, DataError, atomic_path, check_joint_coverage,
                     write_json, write_parquet, write_text, write_yaml)
 from .settings import (MODES, POLARITIES, SECTION_CLASSES, BoardCheckSettings, EstimationSettings,
                        EvaluationSettings, ExecutorSettings, ModelSettings, MotionSettings, Settings,
-                       SyncSettings, TrackingSettings, sections_read, settings_digest, settings_from_config,
-                       stage_kwargs)
+                       SyncSettings, TrackingSettings, markdown_table, sections_read, settings_digest,
+                       settings_from_config, stage_kwargs)
 
 __all__ = [
     "JointLimitError", "assert_within_limits", "check_limits", "forward_kinematics", "hand_pose", "motion_start",
@@ -26,5 +26,5 @@ __all__ = [
     "write_json", "write_parquet", "write_text", "write_yaml",
     "MODES", "POLARITIES", "SECTION_CLASSES", "BoardCheckSettings", "EstimationSettings", "EvaluationSettings",
     "ExecutorSettings", "ModelSettings", "MotionSettings", "Settings", "SyncSettings", "TrackingSettings",
-    "sections_read", "settings_digest", "settings_from_config", "stage_kwargs",
+    "markdown_table", "sections_read", "settings_digest", "settings_from_config", "stage_kwargs",
 ]

@@ -30,7 +30,7 @@ MODES = ("markerless", "markers")
 """``tracking.mode``: the string's points by arc length, or by the bands at the mass points."""
 POLARITIES = ("auto", "brighter", "darker")
 """``tracking.band_polarity``: a band brighter or darker than the string, or whichever gives more."""
-OPTIMIZERS = ("random_search", "cmaes", "differential_evolution")
+OPTIMIZERS = ("random_search", "cmaes", "de")
 PLANNERS = ("paper", "robust")
 
 
@@ -121,7 +121,7 @@ class EstimationSettings(_Section):
     """``estimation``: the parameter search (eqs. 2-3) and what params.json keeps."""
 
     SECTION: typing.ClassVar[str] = "estimation"
-    optimizer: str = _f("random_search", "random_search (eqs. 2-3), cmaes or differential_evolution")
+    optimizer: str = _f("random_search", "random_search (eqs. 2-3), cmaes (CMA-ES) or de (SciPy differential evolution)")
     iterations: int = _f(3000, "candidates evaluated per trial")
     batch: int = _f(64, "candidates simulated per numba batch")
     chi0: float = _f(1.0, "eq. (3): the first sampling radius in chi")
@@ -139,7 +139,7 @@ class EstimationSettings(_Section):
     cmaes_stall_generations: int = _f(0, "CMA-ES: restart at the best point after this many generations without a gain (0: off)")
     compare_after_motion_s: float | None = _f(None, "compare frames up to this long after the arm stops, s (null: the whole joint log, as the paper)")
     joint_trials: int = _f(1, "trials fitted at once: 1 the last (paper), N the last N, 0 every trial so far")
-    cmaes_first_start: str = _f("centre", "CMA-ES on trial 1 without a first look: from the centre of the box, or its minima corner")
+    cmaes_first_start: str = _f("centre", "CMA-ES on trial 1 without a first look: from the centre of the box (centre) or from chi_best (best)")
 
     def __post_init__(self):
         if self.optimizer not in OPTIMIZERS:

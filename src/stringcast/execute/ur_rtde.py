@@ -43,7 +43,7 @@ interfaces are injectable (``interfaces``) so the tests drive a recording stand-
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path

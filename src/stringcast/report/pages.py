@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import datetime as _dt
 from pathlib import Path
-from typing import Mapping
 
 import jinja2
 import numpy as np
@@ -25,7 +24,7 @@ import pandas as pd
 
 from stringcast import __version__
 from stringcast.calibrate import Calibration
-from stringcast.core import (PARAM_NAMES, TRACK_COLUMNS, Campaign, ModelSettings, MotionSettings, find_video,
+from stringcast.core import (PARAM_NAMES, TRACK_COLUMNS, Campaign, ModelSettings, MotionSettings, Settings, find_video,
                              hand_pose, model_ranges, motion_start, read_joint_table, read_json, read_parquet,
                              tracks_arrays, write_text)
 from . import figures as figs
@@ -38,8 +37,8 @@ def _env() -> jinja2.Environment:
                               autoescape=jinja2.select_autoescape(["html", "j2"]))
 
 
-def _common(campaign: Campaign, title: str, config: Mapping) -> dict:
-    return {"title": title, "version": __version__, "provenance": provenance(config),
+def _common(campaign: Campaign, title: str, settings: Settings) -> dict:
+    return {"title": title, "version": __version__, "provenance": provenance(settings),
             "created": _dt.datetime.now().isoformat(timespec="seconds"),
             "string": campaign.string_id or campaign.string.name,
             "length_mm": f"{campaign.string.length * 1000:.0f}", "n_points": campaign.string.n_points,
@@ -78,13 +77,13 @@ def _motion_window(data_dir: Path, motion: MotionSettings, arm) -> tuple[float, 
     return t0, t0 + T + float(motion.flight_window_s), played
 
 
-def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, config: Mapping, out: Path, *,
-                       model: ModelSettings, motion: MotionSettings) -> None:
+def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, out: Path, *,
+                       settings: Settings) -> None:
     """Write ``results/<campaign>/trial_<k>/report.html`` from that trial's outputs.
 
-    ``config``, the merged config, only names the method in the page's provenance; ``model``
-    (:class:`~stringcast.core.ModelSettings`: Table 2's ranges) and ``motion``
-    (:class:`~stringcast.core.MotionSettings`: ``flight_window_s``) are the settings read.
+    ``settings``: every stage's (:class:`~stringcast.core.Settings`): the page names the method
+    they make (:mod:`.provenance`), and reads Table 2's ranges (``model``) and the flight
+    window (``motion``).
 
     Raises:
         DataError: a required result file is missing or malformed (named).
@@ -98,7 +97,7 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
     fit = read_parquet(results_dir / "fit.parquet")
     t_j, q_j, _ = read_joint_table(data_dir / "joints.csv", n_joints=campaign.arm.n_joints,
                                     arm_name=campaign.arm.name)
-    t0, t1, played = _motion_window(data_dir, motion, campaign.arm)
+    t0, t1, played = _motion_window(data_dir, settings.motion, campaign.arm)
     tgt = campaign.target.xy
     t_tr, xy_tr, valid = _tracked(tracks, n)
     d_meas, _ = closest_approach(t_tr, xy_tr[:, n], tgt, t0, t1)
@@ -116,7 +115,7 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
                     "src": figs.arm_paths({"played (measured)": hand_pose(campaign.arm, q_j)[:, :2],
                                            "next motion": hand_pose(campaign.arm, q_n)[:, :2]},
                                           tgt, campaign.target.radius)})
-    model_figures, values, lo, hi, diagnostics = _parameter_figures(params, model)
+    model_figures, values, lo, hi, diagnostics = _parameter_figures(params, settings.model)
     figures += model_figures
     strip = frame_strip(find_video(data_dir), Calibration.from_json(results_dir / "calibration.json"), tracks, fit,
                         campaign.string.length)
@@ -135,7 +134,7 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, co
     summary = _trial_summary(params, diagnostics, valid, d_meas, campaign, played, nxt)
     warnings = [str(w) for w in calib.get("warnings", [])] + [str(w) for w in [params.get("message")] if w]
     cal_rows = _calibration_rows(calib, sync)
-    ctx = _common(campaign, f"Campaign {campaign.name}, trial {results_dir.name.split('_')[-1]}", config)
+    ctx = _common(campaign, f"Campaign {campaign.name}, trial {results_dir.name.split('_')[-1]}", settings)
     ctx.update(summary=summary, warnings=warnings, figures=figures, calib=cal_rows,
                params=[(k, v, a, b) for k, v, a, b in zip(PARAM_NAMES, values, lo, hi)])
     write_text(out, _env().get_template("trial.html.j2").render(**ctx))
@@ -237,13 +236,14 @@ def _stage_times(results: Path) -> tuple[list, list]:
     return sorted(rows.items(), key=lambda kv: (not kv[0].isdigit(), int(kv[0]) if kv[0].isdigit() else 0)), stages
 
 
-def write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign, config: Mapping, out: Path, *,
-                          motion: MotionSettings) -> None:
+def write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign, out: Path, *,
+                          settings: Settings) -> None:
     """Write ``results/<campaign>/report.html``: one row per execution (paper Table 3).
 
-    ``config``, the merged config, only names the method in the page's provenance; ``motion``
-    (:class:`~stringcast.core.MotionSettings`: ``flight_window_s``) is the setting read.
+    ``settings``: every stage's: the page names the method they make (:mod:`.provenance`) and
+    reads the flight window (``motion``).
     """
+    motion = settings.motion
     rows, tips = [], {}
     n = campaign.string.n_points
     trials = sorted((int(p.name.split("_")[1]) for p in data_dir.glob("trial_*") if p.name.split("_")[1].isdigit()))
@@ -269,6 +269,6 @@ def write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign,
                         "motion and flight window.", "src": figs.campaign_tips(tips, campaign.target.xy,
                                                                                  campaign.target.radius)})
     timings, stages = _stage_times(results_dir)
-    ctx = _common(campaign, f"Campaign {campaign.name}", config)
+    ctx = _common(campaign, f"Campaign {campaign.name}", settings)
     ctx.update(rows=rows, figures=figures, timings=timings, stages=stages)
     write_text(out, _env().get_template("campaign.html.j2").render(**ctx))

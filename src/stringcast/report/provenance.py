@@ -1,16 +1,14 @@
 """What produced a result: the method, the code and the libraries (the reports' footer).
 
-:func:`provenance` gives, for the merged config a stage ran with (``load_config``'s dict):
+:func:`provenance` gives, for the settings the stages ran with (:class:`~stringcast.core.Settings`):
 
-* ``method``: ``the paper's method`` when the config equals ``config/config.yaml``'s,
-  ``ours`` when it equals ``config/config.yaml`` with ``config/ours.yaml`` merged over it
-  (``stringcast campaign --method ours``), else ``custom config <digest>``;
-* ``config_digest``: the first 12 hex digits of the SHA-256 of the config's canonical JSON
-  (keys sorted, no spaces; ``_path``, which only names the files read, left out);
-
-both compare the lab's sections as they are and every stage's settings as
-:func:`~stringcast.core.settings_from_config` builds them, every default filled in: a file that
-sets a setting to its default means the same config as one that leaves it out.
+* ``method``: ``the paper's method`` when they are the defaults (``config/config.yaml``
+  sets none), ``ours`` when they are ``config/ours.yaml``'s (``stringcast campaign --method
+  ours``), else ``custom settings <digest>``. A file that sets a setting to its default means
+  the same method as one that leaves it out, and what only the virtual lab reads (``lab``)
+  is not part of it;
+* ``settings_digest``: :func:`~stringcast.core.settings_digest`, the first 12 hex digits of
+  the SHA-256 of every section's settings as canonical JSON;
 * ``commit``: ``git rev-parse HEAD`` of the project's checkout, with ``-dirty`` when
   ``git status --porcelain`` shows changes to tracked files; ``unknown`` when the code
   is not a git checkout (an installed package) or git cannot say;
@@ -19,15 +17,12 @@ sets a setting to its default means the same config as one that leaves it out.
 from __future__ import annotations
 
 import functools
-import hashlib
-import json
 import subprocess
 from importlib import metadata
 from pathlib import Path
-from typing import Mapping
 
 from stringcast import __version__
-from stringcast.core import (DEFAULT_CONFIG, OURS_CONFIG, SECTION_CLASSES, ConfigError, load_config,
+from stringcast.core import (DEFAULT_CONFIG, OURS_CONFIG, ConfigError, Settings, load_yaml, settings_digest,
                              settings_from_config)
 
 PROJECT_ROOT = DEFAULT_CONFIG.parents[1]
@@ -41,31 +36,16 @@ LIBRARIES: dict[str, tuple[str, ...]] = {
 """Library name as shown -> the distributions that provide it (the first installed one counts)."""
 
 
-def _canonical(config: Mapping) -> dict:
-    """The config's lab sections (``_path`` left out) and each stage's settings with its defaults."""
-    sections = {c.SECTION for c in SECTION_CLASSES}
-    settings = settings_from_config(config)
-    return {**{k: v for k, v in config.items() if k != "_path" and k not in sections},
-            **{s: getattr(settings, s).as_dict() for s in sorted(sections)}}
-
-
-def config_digest(config: Mapping) -> str:
-    """First 12 hex digits of the SHA-256 of the config's canonical JSON (module doc)."""
-    text = json.dumps(_canonical(config), sort_keys=True, separators=(",", ":"), default=str)
-    return hashlib.sha256(text.encode()).hexdigest()[:12]
-
-
-def method(config: Mapping) -> str:
-    """``the paper's method``, ``ours`` or ``custom config <digest>`` (module doc)."""
-    canonical = _canonical(config)
+def method(settings: Settings) -> str:
+    """``the paper's method``, ``ours`` or ``custom settings <digest>`` (module doc)."""
+    if settings == Settings():
+        return "the paper's method"
     try:
-        if canonical == _canonical(load_config(DEFAULT_CONFIG)):
-            return "the paper's method"
-        if canonical == _canonical(load_config([DEFAULT_CONFIG, OURS_CONFIG])):
+        if settings == settings_from_config(load_yaml(OURS_CONFIG)):
             return "ours"
     except ConfigError:  # no config/ beside the code (an installed package): nothing to compare with
         pass
-    return f"custom config {config_digest(config)}"
+    return f"custom settings {settings_digest(settings)}"
 
 
 def _git(root: Path, *args: str) -> str:
@@ -103,7 +83,7 @@ def library_versions() -> dict[str, str]:
     return out
 
 
-def provenance(config: Mapping) -> dict:
-    """``{"method", "config_digest", "commit", "versions"}`` for a merged config (module doc)."""
-    return {"method": method(config), "config_digest": config_digest(config), "commit": git_commit(),
+def provenance(settings: Settings) -> dict:
+    """``{"method", "settings_digest", "commit", "versions"}`` for the stages' settings (module doc)."""
+    return {"method": method(settings), "settings_digest": settings_digest(settings), "commit": git_commit(),
             "versions": dict(library_versions())}

@@ -44,15 +44,15 @@ import cv2
 import numpy as np
 from scipy.ndimage import map_coordinates
 
-from stringcast.core import TrackingSettings, forward_kinematics
+from stringcast.core import forward_kinematics
 
 
-def segment_half_widths(arm, tracking: TrackingSettings, margin_m: float) -> np.ndarray:
-    """(S,) half-widths of the strips, m: links then gripper, from the arm outline (mm, tracking
-    settings :class:`~stringcast.core.TrackingSettings`) + margin."""
-    links = tracking.arm_link_widths_mm
-    widths = [links[min(j, len(links) - 1)] for j in range(arm.n_joints)] + [max(tracking.gripper_widths_mm)]
-    return np.asarray(widths, float) / 2000 + margin_m
+def segment_half_widths(arm, margin_m: float) -> np.ndarray:
+    """(S,) half-widths of the strips, m: links then gripper, from the arm's outline
+    (:class:`~stringcast.core.ArmSpec` ``link_widths``, ``gripper_widths``) + margin."""
+    links = arm.link_widths
+    widths = [links[min(j, len(links) - 1)] for j in range(arm.n_joints)] + [max(arm.gripper_widths)]
+    return np.asarray(widths, float) / 2 + margin_m
 
 
 def strip_points(arm, q: np.ndarray, half_widths: np.ndarray, n_u: int, n_v: int,

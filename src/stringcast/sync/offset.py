@@ -46,7 +46,6 @@ from stringcast.core import (
     BoardCheckSettings,
     DataError,
     SyncSettings,
-    TrackingSettings,
     check_joint_coverage,
     find_video,
     read_joint_table,
@@ -69,7 +68,7 @@ def _trigger_doc(meta: dict, video_yaml: Path) -> dict:
             "note": "offset taken from the recording's trigger time, not estimated from the video"}
 
 
-def estimate_offset(video, calibration, arm, t_j: np.ndarray, q_j: np.ndarray, tracking: TrackingSettings,
+def estimate_offset(video, calibration, arm, t_j: np.ndarray, q_j: np.ndarray,
                     sync: SyncSettings, board_check: BoardCheckSettings, trigger_s: float | None = None) -> dict:
     """Offset of frame 0 on the controller clock, from the arm seen in the video.
 
@@ -77,7 +76,6 @@ def estimate_offset(video, calibration, arm, t_j: np.ndarray, q_j: np.ndarray, t
         video: a :class:`~stringcast.video.container.VideoReader` (fps known). calibration:
             :class:`~stringcast.calibrate.calibration.Calibration`. t_j (K,) s, q_j (K, J) rad: the
             joint log.
-        tracking: tracking settings (:class:`~stringcast.core.TrackingSettings`): the arm's outline.
         sync: sync settings (:class:`~stringcast.core.SyncSettings`).
         board_check: the board check's settings (:class:`~stringcast.core.BoardCheckSettings`), for
             the check on the rest frames when the calibration has none.
@@ -107,10 +105,10 @@ def estimate_offset(video, calibration, arm, t_j: np.ndarray, q_j: np.ndarray, t
             frame in the motion.
     """
     fps, st = float(video.fps), sync
-    hw = sync_arm.segment_half_widths(arm, tracking, st.strip_margin_mm / 1000)
+    hw = sync_arm.segment_half_widths(arm, st.strip_margin_mm / 1000)
     n_u, n_v, sig = int(st.strip_samples), int(st.strip_width_samples), float(st.smooth_px)
     hw, segments = _segments_in_view(video, calibration, arm, q_j[0], hw, n_u, n_v)
-    n_rest, rest, board, shift = _rest_and_board(video, calibration, arm, q_j[0], st, board_check, tracking)
+    n_rest, rest, board, shift = _rest_and_board(video, calibration, arm, q_j[0], st, board_check)
 
     def strips(q):
         return sync_arm.strip_points(arm, q, hw, n_u, n_v, segments) + shift
@@ -158,14 +156,14 @@ def _segments_in_view(video, calibration, arm, q0: np.ndarray, hw: np.ndarray, n
     return hw[seen], np.nonzero(seen)[0]
 
 
-def _rest_and_board(video, calibration, arm, q0: np.ndarray, st: SyncSettings, board_check: BoardCheckSettings,
-                    tracking: TrackingSettings) -> tuple[int, np.ndarray, dict, np.ndarray]:
+def _rest_and_board(video, calibration, arm, q0: np.ndarray, st: SyncSettings,
+                    board_check: BoardCheckSettings) -> tuple[int, np.ndarray, dict, np.ndarray]:
     """The rest frames: their count n_rest, their median image (H, W) float32, the board check on it
     (calibrate's, if it ran) and the check's translation (2,) m (zero without a check residual)."""
     n_rest = max(1, min(int(st.rest_frames), video.n_frames))
     rest = np.median(np.stack([video.read(k).astype(np.float32) for k in range(n_rest)]), axis=0)
     board = calibration.board_check or check_board_to_robot(  # calibrate's, if it ran
-        rest, calibration, arm, q0, board_check, tracking)
+        rest, calibration, arm, q0, board_check)
     shift = np.zeros(2) if board["residual_mm"] is None else np.array([board["dx_mm"], board["dy_mm"]]) / 1000
     return n_rest, rest, board, shift
 
@@ -289,16 +287,15 @@ def _offset_residual(arm, t_j: np.ndarray, q_j: np.ndarray, frames: np.ndarray, 
 
 
 def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaign, out_json: str | Path | None = None,
-             *, sync: SyncSettings, tracking: TrackingSettings, board_check: BoardCheckSettings) -> dict:
+             *, sync: SyncSettings, board_check: BoardCheckSettings) -> dict:
     """Write ``sync.json`` for one trial (see the module docstring for its keys).
 
     Args:
         trial_dir: ``data/<campaign>/trial_<k>`` with ``video.yaml``, the video and ``joints.csv``.
         calibration_json: the trial's ``calibration.json`` (needed by ``method: video``).
-        campaign: :class:`~stringcast.core.config.Campaign` (the arm).
+        campaign: :class:`~stringcast.core.config.Campaign` (the arm, with its outline).
         out_json: where to write ``sync.json`` (None: not written).
         sync: sync settings (:class:`~stringcast.core.SyncSettings`).
-        tracking: tracking settings (:class:`~stringcast.core.TrackingSettings`): the arm's outline.
         board_check: board-check settings (:class:`~stringcast.core.BoardCheckSettings`), for the
             check on the rest frames when ``calibration.json`` has none.
 
@@ -321,7 +318,7 @@ def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaig
         cal = Calibration.from_json(calibration_json)
         with open_video(find_video(trial_dir), fps=doc["fps"]) as video:
             warns = check_frame_count(video, meta, video_yaml)
-            est = estimate_offset(video, cal, campaign.arm, t_j, q_j, tracking, sync, board_check,
+            est = estimate_offset(video, cal, campaign.arm, t_j, q_j, sync, board_check,
                                   doc["trigger_time_s"])
             # the file's own frame times, where a full pass (the coarse search) has read them already
             stamps = video.timestamps_s if est["coarse_offset_s"] is not None else None

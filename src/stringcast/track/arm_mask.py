@@ -9,7 +9,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from stringcast.core import TrackingSettings
+from stringcast.core import ArmSpec, TrackingSettings
 
 
 def _quad(p0, p1, w0, w1):
@@ -18,15 +18,15 @@ def _quad(p0, p1, w0, w1):
     return np.array([p0 + n * w0, p1 + n * w1, p1 - n * w1, p0 - n * w0])
 
 
-def draw_arm_mask(shape, poses_px, st: TrackingSettings, m_per_px: float, offset=(0, 0),
+def draw_arm_mask(shape, poses_px, arm: ArmSpec, st: TrackingSettings, m_per_px: float, offset=(0, 0),
                   grow_px: float = 0.0) -> np.ndarray:
     """Binary mask (H, W) bool of the arm at one or more poses (their union).
 
-    The outline comes from the tracking settings ``st`` (:class:`~stringcast.core.TrackingSettings`,
-    mm): ``arm_link_widths_mm`` (per link),
-    ``arm_joint_radii_mm`` (discs at the base and each joint), ``gripper_widths_mm`` (at the
-    wrist, at the fingertips; the gripper's quadrilateral ends ``gripper_mask_extend_mm``
-    past the grasp point, square), each grown by ``arm_mask_margin_px`` + ``grow_px``.
+    The outline is the arm's (:class:`~stringcast.core.ArmSpec`, m): ``link_widths`` (per link),
+    ``joint_radii`` (discs at the base and each joint), ``gripper_widths`` (at the wrist, at
+    the fingertips; the gripper's quadrilateral ends ``gripper_mask_extend`` past the grasp
+    point, square), each grown by the tracking settings' ``arm_mask_margin_px`` (``st``,
+    :class:`~stringcast.core.TrackingSettings`) + ``grow_px``.
 
     Args:
         poses_px: (J + 2, 2) or (P, J + 2, 2) base, joints and grasp point in px; several
@@ -36,16 +36,16 @@ def draw_arm_mask(shape, poses_px, st: TrackingSettings, m_per_px: float, offset
     m = np.zeros(shape, np.uint8)
     poses = np.asarray(poses_px, float).reshape(-1, *np.shape(poses_px)[-2:])
     grow = st.arm_mask_margin_px + grow_px
-    px = lambda v: v / 1000 / m_per_px
-    links, radii = st.arm_link_widths_mm, st.arm_joint_radii_mm
-    gw = [px(w) + 2 * grow for w in st.gripper_widths_mm]
+    px = lambda v: v / m_per_px   # m -> px
+    links, radii = arm.link_widths, arm.joint_radii
+    gw = [px(w) + 2 * grow for w in arm.gripper_widths]
     sh = 4  # fixed-point bits for sub-pixel polygons
     fix = lambda v: np.round(np.asarray(v) * 2 ** sh).astype(np.int32)
     for pose in poses:
         p = pose - offset
         J = len(p) - 2
         d = p[-1] - p[-2]
-        tip = p[-1] + d / max(np.hypot(*d), 1e-9) * px(st.gripper_mask_extend_mm)
+        tip = p[-1] + d / max(np.hypot(*d), 1e-9) * px(arm.gripper_mask_extend)
         for j in range(J):
             w = px(links[min(j, len(links) - 1)]) + 2 * grow
             cv2.fillConvexPoly(m, fix(_quad(p[j], p[j + 1], w, w)), 1, cv2.LINE_8, sh)

@@ -52,7 +52,7 @@ class FrameTracker:
 
     Args:
         bg: (H, W) background; noise: (a, b) of sigma^2 = a + b B (:func:`build_background`).
-        cal: the trial's :class:`Calibration`. campaign: gives L and n.
+        cal: the trial's :class:`Calibration`. campaign: gives L and n, and the arm's outline.
         st: tracking settings (:class:`~stringcast.core.TrackingSettings`).
     """
 
@@ -61,7 +61,7 @@ class FrameTracker:
         # noise sigma of the smoothed difference, per pixel (white noise through the Gaussian)
         k = 1.0 / (2 * math.sqrt(math.pi) * st.smooth_px) if st.smooth_px > 0.3 else 1.0
         self.sigma = (np.sqrt(noise[0] + noise[1] * np.clip(bg, 0, None)) * k).astype(np.float32)
-        self.L, self.n = campaign.string.length, campaign.string.n_points
+        self.L, self.n, self.arm = campaign.string.length, campaign.string.n_points, campaign.arm
         self.s_targets = np.arange(1, self.n + 1) * self.L / self.n
 
     def track(self, frame: np.ndarray, poses_px: np.ndarray) -> FrameTrack:
@@ -78,7 +78,7 @@ class FrameTracker:
             return FrameTrack(np.full((n, 2), np.nan), np.zeros(n, bool), np.zeros((0, 2)) if path is None else path)
         if x1 - x0 < 8 or y1 - y0 < 8:
             return none()
-        arm = draw_arm_mask((y1 - y0, x1 - x0), poses_px, st, scale, (x0, y0))
+        arm = draw_arm_mask((y1 - y0, x1 - x0), poses_px, self.arm, st, scale, (x0, y0))
         absd, fg = self._segment(frame[y0:y1, x0:x1].astype(np.float32), self.bg[y0:y1, x0:x1],
                                  self.sigma[y0:y1, x0:x1], arm)
         absd[arm] = 0.0  # the arm's own contrast must not pull the centreline

@@ -126,7 +126,7 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
     second = open_video(vpath)
     try:
         bg, noise = build_background(second, samples.astype(int), pre, lambda k: draw_arm_mask(
-            (video.height, video.width), jpx[k], st, scale, grow_px=2.0))
+            (video.height, video.width), jpx[k], campaign.arm, st, scale, grow_px=2.0))
     finally:
         second.close()
     tracker = FrameTracker(bg, noise, cal, campaign, st)

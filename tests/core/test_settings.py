@@ -1,0 +1,78 @@
+"""Settings: one frozen object per config section, every default in one place, and the map of
+which stage reads which sections (the workflow's params) derived from the stages' signatures."""
+import dataclasses
+
+import pytest
+
+from stringcast.cli import STAGES, stage_entry, stage_sections
+from stringcast.core import (SECTION_CLASSES, ConfigError, EstimationSettings, ModelSettings, MotionSettings,
+                             Settings, TrackingSettings, load_config, sections_read, settings_digest,
+                             settings_from_config, stage_kwargs)
+
+
+def test_defaults_are_the_project_config_and_frozen(config):
+    s = settings_from_config(config)
+    assert s == Settings()   # config/config.yaml describes the lab and sets no stage setting
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        s.motion.flight_window_s = 1.0
+    with pytest.raises(TypeError):
+        s.model.ranges["k_s"] = (1.0, 2.0)   # a mapping setting is read-only too
+    assert isinstance(s.motion.T_range_s, tuple)
+
+
+def test_a_file_sets_some_keys_and_a_mapping_merges_over_its_default():
+    s = settings_from_config({"motion": {"planner": "robust"}, "model": {"ranges": {"k_ph": [1e-3, 1.0]}}})
+    assert s.motion.planner == "robust" and s.motion.flight_window_s == MotionSettings().flight_window_s
+    assert s.model.ranges["k_ph"] == (1e-3, 1.0) and s.model.ranges["k_s"] == ModelSettings().ranges["k_s"]
+    assert s.model.as_dict()["ranges"]["k_ph"] == [1e-3, 1.0]   # plain data again, for JSON and params
+
+
+@pytest.mark.parametrize("doc, match", [({"tracking": {"rest_frame": 3}}, "tracking: unknown setting.*rest_frame"),
+                                        ({"estimation": {"optimizer": "bfgs"}}, "estimation.optimizer"),
+                                        ({"motion": {"planner": "magic"}}, "motion.planner"),
+                                        ({"tracking": {"mode": "laser"}}, "tracking: mode"),
+                                        ({"model": {"dt_s": 0.0}}, "model.dt_s")])
+def test_a_wrong_setting_is_an_error_naming_it(doc, match):
+    with pytest.raises(ConfigError, match=match):
+        settings_from_config(doc)
+
+
+def test_sections_read_and_stage_kwargs_follow_the_annotations():
+    def stage(path, tracking: TrackingSettings, model: ModelSettings, seed: int = 0):
+        return tracking, model
+
+    def everything(path, *, settings: Settings):
+        return settings
+
+    s = Settings(tracking=TrackingSettings(rest_frames=7))
+    assert sections_read(stage) == ("model", "tracking")   # SECTION_CLASSES order
+    assert stage(1, **stage_kwargs(stage, s)) == (s.tracking, s.model)
+    assert sections_read(everything) == tuple(c.SECTION for c in SECTION_CLASSES)
+    assert everything(1, **stage_kwargs(everything, s)) is s
+
+
+def test_every_workflow_stage_names_what_it_reads():
+    """The map the rules' params come from: each stage's sections, as its entry point takes them."""
+    read = {cmd: stage_sections(cmd) for cmd in STAGES}
+    assert read["calibrate"] == ("board_check",)
+    assert read["sync"] == ("sync", "board_check")
+    assert read["track"] == ("tracking",)
+    assert set(read["estimate"]) == {"model", "evaluation", "estimation", "motion", "tracking"}
+    assert set(read["plan"]) == set(read["plan-first"]) == {"model", "motion"}
+    assert read["report-trial"] == read["report-campaign"] == tuple(c.SECTION for c in SECTION_CLASSES)
+    for cmd in STAGES:   # nothing else in the signature looks like a config
+        assert "config" not in stage_entry(cmd).__code__.co_varnames[:stage_entry(cmd).__code__.co_argcount]
+
+
+def test_digest_is_of_the_settings_not_the_files(config):
+    same = dict(config, estimation={"iterations": EstimationSettings().iterations}, lab={"scene_seed": 99})
+    assert settings_digest(settings_from_config(same)) == settings_digest(Settings())
+    other = settings_from_config({"estimation": {"iterations": 10}})
+    assert settings_digest(other) != settings_digest(Settings())
+
+
+def test_ours_yaml_is_read_by_the_same_classes():
+    from stringcast.core import DEFAULT_CONFIG, OURS_CONFIG
+
+    s = settings_from_config(load_config([DEFAULT_CONFIG, OURS_CONFIG]))
+    assert s.estimation.optimizer == "cmaes" and s.evaluation.w == 1.0 and s.motion.first_k_s == "max"
