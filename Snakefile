@@ -1,4 +1,4 @@
-# stringcast workflow: raw trial files under data/ -> results/ (DESIGN.md).
+# stringcast workflow: raw trial files under data/ -> results/ (docs/data_contract.md).
 # One campaign = one string and target; each trial_<k> is one execution.
 #   snakemake -n                                        # what would run
 #   snakemake --cores 2 results/demo/trial_1/tracks.parquet   # one stage of one trial

@@ -73,7 +73,7 @@ def prepare(string_type: int, config: dict, settings, calib_dir: Path, work: Pat
     ``settings``: the stages' settings (:class:`stringcast.core.Settings`) of ``config``.
     Returns (campaign, d): ``d`` holds tracks.parquet and trial_1/joints.csv."""
     from stringcast.core import stage_kwargs
-    from stringcast.core.config import resolve_campaign
+    from stringcast.core import resolve_campaign
     from stringcast.sync.offset import run_sync
     from stringcast.track.tracking import run_tracking
 
@@ -227,7 +227,7 @@ def _figure(per: dict, path: Path) -> None:
 
 def run(quick: bool = False, work: Path | None = None, cmaes_seeds: int = 3) -> dict:
     from stringcast.core import settings_from_config
-    from stringcast.core.config import load_config
+    from stringcast.core import load_config
 
     config = load_config()
     settings = settings_from_config(config)

@@ -75,7 +75,7 @@ def method_config(config: dict, method: str, seed: int) -> dict:
     Raises:
         KeyError: unknown method (not in ``METHODS``).
     """
-    from stringcast.core.config import merge_config
+    from stringcast.core import merge_config
 
     cfg = merge_config(copy.deepcopy({k: v for k, v in config.items() if k != "_path"}), METHODS[method])
     cfg.setdefault("estimation", {})["seed"] = int(seed)   # the config file may leave a section to its defaults
@@ -258,7 +258,7 @@ def run(quick: bool = False, types: list[int] | None = None, seeds: list[int] | 
 
     Raises:
         ValueError: a type outside 1-7, or ``finished_only`` without ``work``."""
-    from stringcast.core.config import load_config
+    from stringcast.core import load_config
     from stringcast.core.files import write_text
 
     config = load_config()

@@ -26,7 +26,7 @@ N_POINTS, L0, DT = 15, 0.034, 1e-4
 def _case(duration: float):
     """Mid-range Table 2 coefficients, a 2 Hz swinging hand, the hanging start."""
     from stringcast.core import model_ranges, settings_from_config
-    from stringcast.core.config import load_config
+    from stringcast.core import load_config
     from stringcast.model.string_model import hanging_equilibrium
 
     lo, hi, _ = model_ranges(settings_from_config(load_config()).model)

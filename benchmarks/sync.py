@@ -65,7 +65,7 @@ def _sync_case(trial: Path, calibration_json: Path, campaign, settings, out: Pat
 def run(quick: bool = False) -> dict:
     from stringcast.calibrate.calibration import run_calibration
     from stringcast.core import settings_from_config
-    from stringcast.core.config import load_config
+    from stringcast.core import load_config
     from stringcast.core.files import read_json
 
     config = load_config()

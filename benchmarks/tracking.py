@@ -49,7 +49,7 @@ def track_string(string_type: int, config: dict, settings, calib_dir: Path, work
     """Film, calibrate, sync and track one string type's first motion; errors and timings. ``settings``:
     every stage's settings (:class:`stringcast.core.Settings`)."""
     from stringcast.campaign import tracking_errors
-    from stringcast.core.config import resolve_campaign
+    from stringcast.core import resolve_campaign
     from stringcast.sync.offset import run_sync
     from stringcast.track.tracking import run_tracking
 
@@ -95,7 +95,7 @@ def _figure(per: dict, path: Path) -> None:
 
 def run(quick: bool = False, types: list[int] | None = None, work: Path | None = None) -> dict:
     from stringcast.core import settings_from_config
-    from stringcast.core.config import load_config
+    from stringcast.core import load_config
 
     config = load_config()
     settings = settings_from_config(config)

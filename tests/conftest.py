@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from stringcast.core.config import load_config, resolve_campaign
+from stringcast.core import load_config, resolve_campaign
 from stringcast.core.settings import settings_from_config
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -34,7 +34,7 @@ def tiny_lab_trial(tmp_path, config, bands=None):
     lab = pytest.importorskip("stringcast.lab")
     from stringcast.core.arm import hand_pose
     from stringcast.calibrate.calibration import run_calibration
-    from stringcast.core.config import resolve_campaign
+    from stringcast.core import resolve_campaign
     from stringcast.sync.offset import run_sync
 
     cfg = copy.deepcopy(config)

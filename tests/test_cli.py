@@ -8,7 +8,7 @@ import yaml
 
 from stringcast.campaign import campaign_config
 from stringcast.cli import build_parser, campaign_config_paths
-from stringcast.core.config import DEFAULT_CONFIG, OURS_CONFIG, load_config
+from stringcast.core import DEFAULT_CONFIG, OURS_CONFIG, load_config
 from stringcast.core.settings import settings_from_config
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -27,8 +27,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from stringcast.core import ConfigError, load_config, load_yaml, resolve_campaign, settings_from_config
-from stringcast.core import read_parquet, write_yaml
+from stringcast.core import (ConfigError, load_config, load_yaml, read_parquet, resolve_campaign, settings_from_config,
+                             write_yaml)
 from stringcast.execute import execute
 from stringcast.lab import write_calibration_clip
 

@@ -25,7 +25,7 @@ def _calibration(truth: dict, shift_m=(0.0, 0.0)):
 def still_arm(request, tmp_path_factory, config):
     """A 768 x 768 clip of the arm holding still at one posture, string hanging: rest image, truth, campaign."""
     from stringcast.calibrate.calibration import median_frame
-    from stringcast.core.config import resolve_campaign
+    from stringcast.core import resolve_campaign
     from stringcast.lab import run_trial
     from stringcast.video.container import open_video
 
@@ -89,7 +89,7 @@ def test_edge_pair_centre_prefers_the_pair_of_the_right_width():
 def test_calibration_stage_records_the_check_and_warns(still_arm, tmp_path, settings):
     """run_calibration puts the check in calibration.json; a board pose 30 mm off in config is caught."""
     from stringcast.calibrate.calibration import run_calibration
-    from stringcast.core.config import resolve_campaign
+    from stringcast.core import resolve_campaign
     from stringcast.lab import write_calibration_clip
 
     _, _, campaign, cfg, _, trial = still_arm

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import yaml
 
-from stringcast.core.config import (PARAM_NAMES, ConfigError, StringSpec, load_campaign, load_config,
+from stringcast.core import (PARAM_NAMES, ConfigError, StringSpec, load_campaign, load_config,
                                model_ranges, resolve_campaign)
 from stringcast.core.settings import settings_from_config
 
@@ -12,7 +12,7 @@ from stringcast.core.settings import settings_from_config
 def test_default_config_resolves_every_string_and_target(config):
     for s in config["strings"]:
         spec = StringSpec.from_config(s, config["strings"][s])
-        assert 0.029 <= spec.l0 <= 0.035  # DESIGN.md: about 30-34 mm between mass points
+        assert 0.029 <= spec.l0 <= 0.035  # about 30-34 mm between mass points
     for t in config["targets"]:
         camp = resolve_campaign({"string": 1, "target": t}, config)
         assert camp.target.x > camp.arm.reach + 0.05

@@ -6,7 +6,7 @@ import pytest
 
 from stringcast.estimate import diagnostics as dg
 from stringcast.estimate import estimation as es
-from stringcast.core.config import PARAM_NAMES
+from stringcast.core import PARAM_NAMES
 from tests.estimate.test_estimation import _problem_stub
 
 NAMES = list(PARAM_NAMES) + ["mu_others", "mu_10"]

@@ -8,7 +8,7 @@ import pytest
 from stringcast.estimate import estimation as es
 from stringcast.model import parameters as prm
 from stringcast.core.arm import hand_pose, motion_start
-from stringcast.core.config import PARAM_NAMES, ConfigError, model_ranges
+from stringcast.core import PARAM_NAMES, ConfigError, model_ranges
 from stringcast.core.files import (DataError, read_joint_table, read_json, read_parquet, write_joint_table, write_json,
                               write_parquet)
 from stringcast.model.string_model import hanging_equilibrium, simulate

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from stringcast.core.arm import JointLimitError
-from stringcast.core.config import ConfigError
+from stringcast.core import ConfigError
 from stringcast.execute.executor import build_command, execute
 from stringcast.core.files import DataError, read_joint_table, write_joint_table, write_json
 

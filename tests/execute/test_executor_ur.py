@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from stringcast.core.arm import JointLimitError, motion_window
-from stringcast.core.config import ConfigError
+from stringcast.core import ConfigError
 from stringcast.execute.executor import execute
 from stringcast.core import ExecutorSettings
 from stringcast.execute.ur_rtde import StartPostureError, URMapping, URSettings

@@ -15,7 +15,7 @@ import pandas as pd
 import pytest
 
 from stringcast.core.arm import hand_pose
-from stringcast.core.config import ConfigError, resolve_campaign
+from stringcast.core import ConfigError, resolve_campaign
 from stringcast.core.files import read_joint_table, read_parquet, read_video_meta
 from stringcast.lab import (CameraModel, ChainSim, IdealCanvas, StringPhysics, build_renderer, run_trial,
                             servo_lag, write_calibration_clip)
@@ -34,7 +34,7 @@ def tiny(config):
 
 def _tiny(config, string: dict | None = None):
     cfg = copy.deepcopy(config)
-    from stringcast.core.config import ArmSpec
+    from stringcast.core import ArmSpec
 
     arm = ArmSpec.from_config("a", cfg["arms"]["ur5e_planar"])
     g = hand_pose(arm, Q0)[:2] * 1000

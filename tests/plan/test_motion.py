@@ -4,7 +4,7 @@ import pytest
 from scipy.interpolate import BPoly
 
 from stringcast.plan import motion as mo
-from stringcast.core.config import ConfigError, resolve_campaign
+from stringcast.core import ConfigError, resolve_campaign
 
 
 def test_eq1_control_points():
@@ -58,7 +58,7 @@ def test_hanging_string_clear_of_the_arm(config):
     """hang_clearance: the exact segment distance agrees with a dense brute force, and a posture whose
     gripper points up (the string hanging down over the wrist, hidden behind the arm) is refused."""
     from stringcast.core.arm import forward_kinematics
-    from stringcast.core.config import resolve_campaign
+    from stringcast.core import resolve_campaign
 
     camp = resolve_campaign({"string": 5, "target": 3}, config, "t")
     q = np.random.default_rng(0).uniform(camp.arm.q_min, camp.arm.q_max, (60, 3))

@@ -7,7 +7,7 @@ import pytest
 from stringcast.plan import motion as mo
 from stringcast.plan import planning as pn
 from stringcast.core.arm import check_limits
-from stringcast.core.config import PARAM_NAMES, ConfigError, resolve_campaign
+from stringcast.core import PARAM_NAMES, ConfigError, resolve_campaign
 from stringcast.execute.executor import execute
 from stringcast.core.files import DataError, read_joint_table, read_json, write_json
 from stringcast.model.string_model import closest_approach_batch

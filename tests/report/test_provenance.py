@@ -6,7 +6,7 @@ import subprocess
 import pytest
 
 from stringcast.report import provenance as prov
-from stringcast.core.config import DEFAULT_CONFIG, OURS_CONFIG, load_config
+from stringcast.core import DEFAULT_CONFIG, OURS_CONFIG, load_config
 from stringcast.core.settings import EstimationSettings, settings_from_config
 from stringcast.report import write_campaign_report
 
@@ -60,7 +60,7 @@ def test_git_commit_dirty_only_for_tracked_changes(tmp_path):
 @pytest.mark.parametrize("files,method", [((DEFAULT_CONFIG,), "the paper&#39;s method"),
                                           ((DEFAULT_CONFIG, OURS_CONFIG), "ours")])
 def test_campaign_page_footer_shows_provenance(tmp_path, files, method):
-    from stringcast.core.config import resolve_campaign
+    from stringcast.core import resolve_campaign
 
     config = load_config(list(files))
     campaign = resolve_campaign({"string": 1, "target": 1}, config, "c")

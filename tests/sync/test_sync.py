@@ -24,7 +24,7 @@ def _kw(settings, **sync):
 def lab_trial(tmp_path_factory, config, settings):
     """A 768 x 768, 500 fps lab clip of a short swing, with the whole arm in view; calibrated."""
     from stringcast.calibrate.calibration import run_calibration
-    from stringcast.core.config import resolve_campaign
+    from stringcast.core import resolve_campaign
     from stringcast.lab import run_trial
     from stringcast.plan.motion import joint_paths
 

@@ -127,7 +127,7 @@ def test_the_pieces_on_plain_arrays():
 def test_mode_and_bands_are_checked(config):
     import copy
 
-    from stringcast.core.config import ConfigError, validate
+    from stringcast.core import ConfigError, validate
 
     cfg = copy.deepcopy(config)
     assert settings_from_config(cfg).tracking.mode == "markerless"
@@ -155,7 +155,7 @@ def test_the_lab_draws_bands_at_the_models_points(config):
 
     pytest.importorskip("stringcast.lab")
     from stringcast.core.arm import forward_kinematics
-    from stringcast.core.config import ConfigError, resolve_campaign
+    from stringcast.core import ConfigError, resolve_campaign
     from stringcast.lab import build_renderer
 
     cfg = copy.deepcopy(config)

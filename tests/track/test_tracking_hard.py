@@ -18,7 +18,7 @@ import pytest
 
 from stringcast.core.arm import hand_pose
 from stringcast.core import settings_from_config
-from stringcast.core.config import resolve_campaign
+from stringcast.core import resolve_campaign
 from stringcast.core.files import read_joint_table, read_video_meta, write_json
 from stringcast.lab import apply_preset, build_renderer, run_trial
 from stringcast.lab.scene import arm_shapes

@@ -254,7 +254,7 @@ def check_board_to_robot(rest_image: np.ndarray, calibration, arm, q_rest: np.nd
         rest_image: (H, W) grey image (any dtype) of the arm still at ``q_rest``, e.g. the
             median of the frames before the motion.
         calibration: :class:`~stringcast.calibrate.calibration.Calibration` (robot_to_pixel).
-        arm: :class:`~stringcast.core.config.ArmSpec`, with its outline (``link_widths``,
+        arm: :class:`~stringcast.core.specs.ArmSpec`, with its outline (``link_widths``,
             ``joint_radii``, ``gripper_widths``). q_rest: (J,) rad, ``joints.csv``'s first row.
         board_check: board-check settings (:class:`~stringcast.core.BoardCheckSettings`).
 

@@ -4,9 +4,9 @@ the bad file).
 """
 from .arm import (JointLimitError, assert_within_limits, check_limits, forward_kinematics, hand_pose,
                   motion_start, motion_window)
-from .config import (DEFAULT_CONFIG, METHOD_CONFIGS, OURS_CONFIG, PARAM_NAMES, ArmSpec, BoardSpec, Campaign,
-                     ConfigError, StringSpec, load_campaign, load_config, load_yaml, merge_config, model_ranges,
-                     resolve_campaign)
+from .config import (DEFAULT_CONFIG, METHOD_CONFIGS, OURS_CONFIG, PARAM_NAMES, ConfigError, load_config, load_yaml,
+                     merge_config, model_ranges, validate)
+from .specs import ArmSpec, BoardSpec, Campaign, SetupSpec, StringSpec, TargetSpec, load_campaign, resolve_campaign
 from .files import (TRACK_COLUMNS, DataError, atomic_path, check_joint_coverage, check_joint_header, find_video,
                     read_joint_table, read_json, read_parquet, read_video_meta, tracks_arrays, write_joint_table,
                     write_json, write_parquet, write_text, write_yaml)
@@ -18,9 +18,9 @@ from .settings import (MODES, POLARITIES, SECTION_CLASSES, BoardCheckSettings, E
 __all__ = [
     "JointLimitError", "assert_within_limits", "check_limits", "forward_kinematics", "hand_pose", "motion_start",
     "motion_window",
-    "DEFAULT_CONFIG", "METHOD_CONFIGS", "OURS_CONFIG", "PARAM_NAMES", "ArmSpec", "BoardSpec", "Campaign",
-    "ConfigError", "StringSpec", "load_campaign", "load_config", "load_yaml", "merge_config", "model_ranges",
-    "resolve_campaign",
+    "DEFAULT_CONFIG", "METHOD_CONFIGS", "OURS_CONFIG", "PARAM_NAMES", "ConfigError", "load_config", "load_yaml",
+    "merge_config", "model_ranges", "validate",
+    "ArmSpec", "BoardSpec", "Campaign", "SetupSpec", "StringSpec", "TargetSpec", "load_campaign", "resolve_campaign",
     "TRACK_COLUMNS", "DataError", "atomic_path", "check_joint_coverage", "check_joint_header", "find_video",
     "read_joint_table", "read_json", "read_parquet", "read_video_meta", "tracks_arrays", "write_joint_table",
     "write_json", "write_parquet", "write_text", "write_yaml",

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .config import ArmSpec
+from .specs import ArmSpec
 
 
 class JointLimitError(ValueError):

@@ -1,4 +1,4 @@
-"""Reading and writing the data contract's files (DESIGN.md, "Data contract").
+"""Reading and writing the data contract's files (docs/data_contract.md).
 
 Every writer writes to a temporary name in the same folder and renames, so a
 failed or interrupted step never leaves a half-written file that looks finished.

@@ -1,4 +1,4 @@
-"""The evaluation value E of the paper, eqs. (4)-(6) (STRING_MODEL.md, "Evaluation value E").
+"""The evaluation value E of the paper, eqs. (4)-(6) (docs/string_model.md, "Evaluation value E").
 
 For frame k and mass point i (1..n):
 

@@ -51,9 +51,8 @@ from typing import Any
 
 import numpy as np
 
-from stringcast.core import JointLimitError, check_limits
-from stringcast.core import ArmSpec, ConfigError, ExecutorSettings
-from stringcast.core import write_joint_table, write_json
+from stringcast.core import (ArmSpec, ConfigError, ExecutorSettings, JointLimitError, check_limits, write_joint_table,
+                             write_json)
 
 UR_JOINTS = ("base", "shoulder", "elbow", "wrist1", "wrist2", "wrist3")
 Interfaces = Callable[[str, float], "tuple[Any, Any]"]

@@ -4,7 +4,7 @@ It shares no code with the string model (``stringcast.model.string_model``): the
 MuJoCo capsule chain (:mod:`.mjcf`, :mod:`.physics`) in air (:mod:`.air`), held by an arm with
 servo lag (:mod:`.servo`), filmed by a simulated pinhole camera with OpenCV lens
 distortion, motion blur and sensor noise (:mod:`.camera`, :mod:`.scene`).
-:func:`run_trial` writes a trial's raw files exactly as DESIGN.md's data
+:func:`run_trial` writes a trial's raw files exactly as docs/data_contract.md's data
 contract says (plus ground truth for tests and benchmarks);
 :func:`write_calibration_clip` films the ChArUco board for intrinsics;
 :func:`apply_preset` makes the footage harder (dim, blur, oblique, fast, lowres, flicker).

@@ -1,7 +1,7 @@
 """The virtual lab's physics: a MuJoCo capsule chain swung by a lagging planar arm.
 
 This is the stand-in for the real string, so it is deliberately *not* the string
-model of ``STRING_MODEL.md`` (and shares no code with it):
+model of ``docs/string_model.md`` (and shares no code with it):
 
 * The string is a serial chain of ``lab.links_per_point * n_points`` rigid
   capsules joined by hinges about z (the swing plane is z = 0). Links are rigid
@@ -39,7 +39,7 @@ model of ``STRING_MODEL.md`` (and shares no code with it):
 The string's description and MJCF are :mod:`stringcast.lab.mjcf`.
 
 Integrator: MuJoCo's semi-implicit Euler (joint damping implicit) at
-``lab.timestep_s`` (5e-5 s): DESIGN.md measured implicitfast 15-35x slower on
+``lab.timestep_s`` (5e-5 s): the starting design measured implicitfast 15-35x slower on
 such chains.
 """
 from __future__ import annotations

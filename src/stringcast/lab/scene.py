@@ -4,18 +4,16 @@ the arm and the string; and the per-frame renderer with motion blur.
 Everything is drawn as *reflectance* in [0, 1] on the camera's ideal (undistorted)
 canvas (:class:`~stringcast.lab.camera.IdealCanvas`), through the plane
 homography of the swing plane (so circles in the plane become the right
-ellipses). OpenCV anti-aliases only 8-bit images, so each shape is drawn as an
-8-bit coverage mask (``LINE_AA``, sub-pixel coordinates with ``shift`` bits) and
-composited: R <- R (1 - a) + r_shape a. The static background is rendered once
-per trial at 2x and area-averaged. The string (cord ~3 mm, clay lumps ~16 mm,
+ellipses). OpenCV anti-aliases only 8-bit images, so each shape is drawn as an 8-bit coverage
+mask (``LINE_AA``, sub-pixel ``shift`` bits) and composited: R <- R (1 - a) + r_shape a. The
+static background is rendered once per trial at 2x and area-averaged. The string (cord ~3 mm, clay lumps ~16 mm,
 pipes ~8 mm) is drawn at 4x in a box around it and area-averaged, so its width
 is right to a small fraction of a pixel. It is dark on a lighter wall but the
 tracker must not key on its grey level: the board's black squares, the clutter
 (a dark cable too) and the arm are as dark.
 
-Motion blur: each frame averages ``m`` sub-exposure renders spread over the
-exposure time, with m chosen so that no point moves more than ~0.7 px between
-two of them. The arm is drawn in front of the string (it can hide it).
+Motion blur: each frame averages ``m`` sub-exposure renders over the exposure time, m such that
+no point moves more than ~0.7 px between two. The arm is drawn in front of the string.
 """
 from __future__ import annotations
 
@@ -25,8 +23,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from stringcast.core import forward_kinematics
-from stringcast.core import ArmSpec, BoardSpec, Campaign
+from stringcast.core import ArmSpec, BoardSpec, Campaign, forward_kinematics
 from .camera import CameraModel, IdealCanvas, Sensor, apply_homography
 
 SHIFT = 4                      # sub-pixel bits for cv2 drawing

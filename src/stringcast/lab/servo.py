@@ -3,8 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from stringcast.core import hand_pose
-from stringcast.core import ArmSpec
+from stringcast.core import ArmSpec, hand_pose
 
 
 def servo_lag(t_cmd: np.ndarray, q_cmd: np.ndarray, lag_s: float,

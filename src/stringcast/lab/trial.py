@@ -1,4 +1,4 @@
-"""One execution in the virtual lab, written exactly as DESIGN.md's data contract.
+"""One execution in the virtual lab, written exactly as docs/data_contract.md.
 
 :func:`run_trial` plays a commanded joint trajectory on the simulated arm and
 string (:mod:`.physics`), films it with the simulated high-speed camera
@@ -24,7 +24,7 @@ from typing import Mapping
 import cv2
 import numpy as np
 
-from stringcast.core import Campaign, ConfigError, DataError, atomic_path, write_json, write_joint_table, write_yaml
+from stringcast.core import Campaign, ConfigError, DataError, atomic_path, write_joint_table, write_json, write_yaml
 from .camera import CameraModel, IdealCanvas, Sensor, camera_settings
 from .mjcf import StringPhysics
 from .physics import simulate

@@ -1,4 +1,4 @@
-"""Numba kernels of the string model (STRING_MODEL.md); the public drivers are in ``model``.
+"""Numba kernels of the string model (docs/string_model.md); the public drivers are in ``model``.
 
 Layout: one candidate's state is held in six 1-D arrays (structure of arrays)
 ``px, py, vx, vy`` (n,) and the force scratch ``fx, fy`` (n,), index j = point j+1.
@@ -93,7 +93,7 @@ def hand_state(hand_t, hand, t, k):
 @njit(cache=True, fastmath=False)
 def step(px, py, vx, vy, fx, fy, hx, hy, hvx, hvy, phi, dphi, c, inv_mu,
          l0, psi0, dt, g, lmax, relax):
-    """One semi-implicit Euler step of one candidate (STRING_MODEL.md, Table 1).
+    """One semi-implicit Euler step of one candidate (docs/string_model.md, Table 1).
 
     Forces use the state at time t and the hand (hx, hy, phi) with velocity (hvx, hvy, dphi) at t;
     then v += a dt, p += v dt in place. ``relax`` (1/s) adds a mass-proportional damping -relax * v

@@ -17,7 +17,7 @@ from typing import Mapping
 
 import numpy as np
 
-from stringcast.core import PARAM_NAMES, ConfigError, DataError, ModelSettings, MotionSettings, model_ranges
+from stringcast.core import ConfigError, DataError, ModelSettings, MotionSettings, PARAM_NAMES, model_ranges
 
 
 # ---------------------------------------------------------------------------

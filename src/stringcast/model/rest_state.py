@@ -1,6 +1,6 @@
 """The model's initial state for estimation: the tracked rest pose with its gaps filled.
 
-STRING_MODEL.md ("Initial state", estimation) starts the model at the tracked
+docs/string_model.md ("Initial state", estimation) starts the model at the tracked
 positions of the frames before the motion. Points never tracked there (hidden by the
 gripper, the arm, a weight) need a guess, and the guess must keep the model's segments
 at their rest length l0: the model's axial spring is stiff (k_s up to 1e6 N/m/kg), so a

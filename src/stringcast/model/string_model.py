@@ -1,4 +1,4 @@
-"""The string model (STRING_MODEL.md; paper Section IV.A, Tables 1-2), batched in numba.
+"""The string model (docs/string_model.md; paper Section IV.A, Tables 1-2), batched in numba.
 
 A planar chain of n mass points p_1..p_n (p_n the tip) hangs from the grasp point
 p_0, which the hand trajectory (x, y, phi_h) moves kinematically. Forces per
@@ -12,7 +12,7 @@ semi-implicit Euler (v += a dt, then p += v dt), default dt = 1e-4 s.
 Coefficient vector order: ``config.PARAM_NAMES`` =
 (k_s, c_s, k_h, c_h, k_sh, c_sh, C_c1, C_c2, k_ph, c_ph).
 
-Deviation from STRING_MODEL.md (documented here as it asks), with the reason:
+Deviation from docs/string_model.md (documented here as it asks), with the reason:
 the bending dampers (c_h, c_sh) are integrated *locally implicitly*. A node damper
 pushes its three points along one direction a (forces +-(c / l) n), so it relaxes
 at the rate c * lambda with lambda = sum_j |a_j|^2 / mu_j (~6 / (l0^2 mu)): up to

@@ -115,7 +115,7 @@ def valid_curves(arm, control_points: np.ndarray, T: float, rate: float, posture
     (1 - :data:`LIMIT_MARGIN`) of the limits, floor).
 
     Args:
-        arm: :class:`stringcast.core.config.ArmSpec`.
+        arm: :class:`stringcast.core.specs.ArmSpec`.
         control_points: (B, J, N) rad/s, V_1..V_N per joint (eq. (1)).
         T: duration, s (on the controller grid, :func:`time_grid`).
         rate: controller rate, Hz.

@@ -64,8 +64,8 @@ from pathlib import Path
 
 import numpy as np
 
-from stringcast.core import PARAM_NAMES, Campaign, ConfigError, ModelSettings, MotionSettings
-from stringcast.core import read_json, write_joint_table, write_json
+from stringcast.core import (Campaign, ConfigError, ModelSettings, MotionSettings, PARAM_NAMES, read_json,
+                             write_joint_table, write_json)
 from stringcast.model import ensemble_parameters, first_parameters, planned_parameters, prior_ensemble
 from .motion import Motion, read_motion_json, time_grid
 from .search import draw_candidates, keep_best, residual_correction, start_postures

@@ -28,8 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from stringcast.core import DataError
-from stringcast.core import tracks_arrays
+from stringcast.core import DataError, tracks_arrays
 
 ALIGN_RMS_MAX_RAD = 0.05
 """A joint log further than this (rms, rad) from the commanded motion at the best delay

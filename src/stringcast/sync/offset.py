@@ -2,7 +2,7 @@
 
 **Frame-time convention.** ``offset_s`` is the controller-clock time (the clock of
 ``joints.csv``) of the *middle of frame 0's exposure*; frame k's exposure is centred on
-``t_k = offset_s + k / fps`` (:func:`frame_times`). That is DESIGN.md's ``trigger_time_s``
+``t_k = offset_s + k / fps`` (:func:`frame_times`). That is docs/data_contract.md's ``trigger_time_s``
 ("controller-clock time of frame 0") read as the exposure centre, as the virtual lab
 writes it; a camera whose trigger marks the *start* of the exposure has a trigger time
 half an exposure earlier than ``offset_s``. With motion blur the arm seen in a frame is
@@ -293,7 +293,7 @@ def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaig
     Args:
         trial_dir: ``data/<campaign>/trial_<k>`` with ``video.yaml``, the video and ``joints.csv``.
         calibration_json: the trial's ``calibration.json`` (needed by ``method: video``).
-        campaign: :class:`~stringcast.core.config.Campaign` (the arm, with its outline).
+        campaign: :class:`~stringcast.core.specs.Campaign` (the arm, with its outline).
         out_json: where to write ``sync.json`` (None: not written).
         sync: sync settings (:class:`~stringcast.core.SyncSettings`).
         board_check: board-check settings (:class:`~stringcast.core.BoardCheckSettings`), for the
