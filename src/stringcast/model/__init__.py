@@ -1,5 +1,5 @@
-"""The string model (the paper's eqs. of motion; docs/string_model.md): numba
-kernels, their NumPy reference, the parameter sets of Table 2 and eq. (2), the rest state.
+"""The string model: numba kernels of the paper's equations of motion, their NumPy reference,
+the parameter sets of Table 2 and eq. (2), and the rest state (docs/string_model.md).
 """
 from .parameters import decode, ensemble_parameters, first_parameters, planned_parameters, prior_ensemble, start_chi
 from .rest_state import fill_rest_pose
