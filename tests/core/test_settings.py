@@ -30,7 +30,7 @@ def test_a_file_sets_some_keys_and_a_mapping_merges_over_its_default():
 @pytest.mark.parametrize("doc, match", [({"tracking": {"rest_frame": 3}}, "tracking: unknown setting.*rest_frame"),
                                         ({"estimation": {"optimizer": "bfgs"}}, "estimation.optimizer"),
                                         ({"motion": {"planner": "magic"}}, "motion.planner"),
-                                        ({"tracking": {"mode": "laser"}}, "tracking: mode"),
+                                        ({"tracking": {"mode": "laser"}}, "tracking.mode"),
                                         ({"model": {"dt_s": 0.0}}, "model.dt_s")])
 def test_a_wrong_setting_is_an_error_naming_it(doc, match):
     with pytest.raises(ConfigError, match=match):

@@ -60,6 +60,12 @@ def _plain(value):
     return value
 
 
+def _one_of(section: str, name: str, value, allowed: tuple) -> None:
+    """Raise ConfigError naming ``section.name`` unless ``value`` is one of ``allowed``."""
+    if value not in allowed:
+        raise ConfigError(f"{section}.{name} must be one of {', '.join(map(str, allowed))}, got {value!r}")
+
+
 class _Section:
     """Shared behaviour of the settings classes: built from a config section, and back."""
 
@@ -142,8 +148,7 @@ class EstimationSettings(_Section):
     cmaes_first_start: str = _f("centre", "CMA-ES on trial 1 without a first look: from the centre of the box (centre) or from chi_best (best)")
 
     def __post_init__(self):
-        if self.optimizer not in OPTIMIZERS:
-            raise ConfigError(f"estimation.optimizer must be one of {OPTIMIZERS}, got {self.optimizer!r}")
+        _one_of("estimation", "optimizer", self.optimizer, OPTIMIZERS)
 
 
 @dataclass(frozen=True)
@@ -179,10 +184,8 @@ class MotionSettings(_Section):
     first_extra_after_hit: int = _f(200, "first plan with first_ensemble: candidates searched past the first hit")
 
     def __post_init__(self):
-        if self.planner not in PLANNERS:
-            raise ConfigError(f"motion.planner must be one of {PLANNERS}, got {self.planner!r}")
-        if self.first_k_s not in ("carrying", "max"):
-            raise ConfigError(f"motion.first_k_s must be carrying or max, got {self.first_k_s!r}")
+        _one_of("motion", "planner", self.planner, PLANNERS)
+        _one_of("motion", "first_k_s", self.first_k_s, ("carrying", "max"))
 
 
 @dataclass(frozen=True)
@@ -242,8 +245,8 @@ class TrackingSettings(_Section):
     band_step_px: float = _f(0.25, "markers: sampling step along the centreline, px")
 
     def __post_init__(self):
-        if self.mode not in MODES or self.band_polarity not in POLARITIES:
-            raise ConfigError(f"tracking: mode {self.mode!r} (one of {MODES}), band_polarity {self.band_polarity!r}")
+        _one_of("tracking", "mode", self.mode, MODES)
+        _one_of("tracking", "band_polarity", self.band_polarity, POLARITIES)
 
 
 @dataclass(frozen=True)
@@ -267,8 +270,7 @@ class SyncSettings(_Section):
     recentre_ms: float = _f(1.0, "the fine search recentres until the peak lies within this of the centre, ms")
 
     def __post_init__(self):
-        if self.method not in ("video", "trigger"):
-            raise ConfigError(f"sync.method must be video or trigger, got {self.method!r}")
+        _one_of("sync", "method", self.method, ("video", "trigger"))
 
 
 @dataclass(frozen=True)
