@@ -14,6 +14,7 @@ from .settings import (MODES, POLARITIES, SECTION_CLASSES, BoardCheckSettings, E
                        EvaluationSettings, ExecutorSettings, ModelSettings, MotionSettings, Settings,
                        SyncSettings, TrackingSettings, markdown_table, sections_read, settings_digest,
                        settings_from_config, stage_kwargs)
+from .verdict import STATUSES, Verdict, worst
 
 __all__ = [
     "JointLimitError", "assert_within_limits", "check_limits", "forward_kinematics", "hand_pose", "motion_start",
