@@ -1,0 +1,199 @@
+"""Benchmark ``generalization``: the pipeline on setups it has never seen (issue 25).
+
+Each of ``--setups`` seeded draws of the lab's family (:func:`stringcast.lab.draw_setup`:
+resolution, colour, codec, fps, lens, view, light, background, board pose, the arm's look, the
+calibration set, the trigger and the joint log) gets one string type (cycling 1-7) and that
+type's first planned motion. The lab films it (and the draw's calibration shots); the
+pipeline's own stages calibrate, sync, track and estimate it with the project's settings,
+never reading the draw. Per setup, against the lab's truth (read here, by the benchmark only):
+
+* calibration: fx error (%), principal-point error (px), and its verdict;
+* sync: error of the chosen offset (ms) and its verdict;
+* tracking: median and p95 point error (mm), valid share (points 1..n);
+* the fit: E (mm) and its verdict.
+
+A **silent failure** is a setup whose every verdict says ok while tracking p95 > 5 mm, or the
+sync error > 1 ms, or the principal point is off by more than 2 % of the image width, or fx by
+more than 2 %. ``results/bench/generalization.json`` holds ``setups``, ``flagged`` (setups with
+any verdict warn or fail), ``silent_failures``, ``median_mm``/``p95_mm``/``valid_share`` pooled
+over the setups not flagged, ``sync_error_ms_max`` over those, ``per_setup`` (the draw and the
+figures), and the library versions; ``generalization.png`` beside it plots each setup's errors
+coloured by verdict.
+
+Rendering is the cost (a 1280 x 1024 clip at 2000 fps is thousands of frames): about 1-4 min per
+setup on 2 cores. ``--work DIR`` keeps each setup's files and reuses the filmed ones, and the
+JSON is rewritten after every setup (``complete: false`` until the last), so a run can be
+stopped and resumed. ``--quick``: 3 setups.
+
+Run: ``python -m benchmarks.generalization [--setups 24] [--first 0] [--work DIR] [--quick]``.
+"""
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+import traceback
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from benchmarks.common import BENCH_DIR, header, write
+
+SILENT = {"tracking_p95_mm": 5.0, "sync_error_ms": 1.0, "principal_point_share": 0.02, "fx_share": 0.02}
+"""The issue's limits beyond which an all-ok setup is a silent failure."""
+
+
+def _verdict(doc: dict | None) -> str:
+    """A stage's verdict status from its JSON (``ok`` when the stage wrote none)."""
+    return str(((doc or {}).get("verdict") or {}).get("status", "ok"))
+
+
+def _calibration_errors(cal: dict, setup) -> tuple[float | None, float | None]:
+    """(fx error %, principal-point error px) of the calibration against the draw's true camera."""
+    K = cal.get("K")
+    if K is None:
+        return None, None
+    K = np.asarray(K, float)
+    cx0 = setup.width_px / 2 - 0.5 + setup.principal_offset_px[0]
+    cy0 = setup.height_px / 2 - 0.5 + setup.principal_offset_px[1]
+    fx_err = (K[0, 0] - setup.focal_px) / setup.focal_px * 100
+    return float(fx_err), float(np.hypot(K[0, 2] - cx0, K[1, 2] - cy0))
+
+
+def run_setup(seed: int, string_type: int, config: dict, work: Path) -> dict:
+    """Film one drawn setup and run the pipeline's stages on it; its figures against the truth."""
+    from stringcast.campaign import tracking_errors
+    from stringcast.core import read_json, resolve_campaign, settings_from_config, stage_kwargs
+    from stringcast.estimate import run_estimation
+    from stringcast.execute import execute
+    from stringcast.lab import apply_setup, draw_setup, write_calibration_clip
+    from stringcast.plan import run_first_plan
+    from stringcast.calibrate import run_calibration
+    from stringcast.sync import run_sync
+    from stringcast.track import run_tracking
+
+    setup = draw_setup(seed)
+    cfg = apply_setup(config, setup)
+    settings = settings_from_config(cfg)
+    d = work / f"setup_{seed}"
+    campaign = resolve_campaign({"string": string_type, "target": 1}, cfg, f"gen_{seed}")
+    trial, calib = d / "trial_1", d / "calib"
+    t0 = time.perf_counter()
+    if not (trial / "ground_truth.json").exists():
+        run_first_plan(campaign, d / "motion.csv", d / "motion.json", seed=seed, **stage_kwargs(run_first_plan, settings))
+        execute(d / "motion.csv", "virtual", trial, campaign, settings.executor, cfg, seed=seed)
+        write_calibration_clip(campaign, cfg, calib, seed=seed)
+    filmed_s = time.perf_counter() - t0
+    row = {"seed": seed, "string_type": string_type, "draw": asdict(setup), "film_seconds": filmed_s}
+    out = d / "results"
+    out.mkdir(parents=True, exist_ok=True)
+    try:
+        run_calibration(trial, calib, campaign, out / "calibration.json", **stage_kwargs(run_calibration, settings))
+        cal_doc = read_json(out / "calibration.json")
+        row["fx_error_pct"], row["principal_point_error_px"] = _calibration_errors(cal_doc, setup)
+        row["calibration_verdict"] = _verdict(cal_doc)
+        sync_doc = run_sync(trial, out / "calibration.json", campaign, out / "sync.json", **stage_kwargs(run_sync, settings))
+        truth = read_json(trial / "ground_truth.json")
+        row["sync_error_ms"] = (sync_doc["offset_s"] - truth["trigger_time_s"]) * 1000
+        row["sync_verdict"] = _verdict(sync_doc)
+        tracks = run_tracking(trial, out / "calibration.json", out / "sync.json", campaign, out / "tracks.parquet",
+                              **stage_kwargs(run_tracking, settings))
+        e, share = tracking_errors(tracks, pd.read_parquet(trial / "ground_truth.parquet"))
+        row.update(tracking_median_mm=float(np.median(e)) if len(e) else None,
+                   tracking_p95_mm=float(np.percentile(e, 95)) if len(e) else None, valid_share=float(share))
+        row["tracking_errors_mm"] = np.asarray(e, float)
+        est = run_estimation(out / "tracks.parquet", trial / "joints.csv", campaign, None, 1, out / "params.json",
+                             out / "fit.parquet", **stage_kwargs(run_estimation, settings))
+        params = read_json(out / "params.json")
+        row["E_mm"], row["fit_verdict"] = est.E_m * 1000, _verdict(params)
+    except Exception as exc:   # a stage that refuses is a result: its message is the verdict
+        row["error"] = f"{type(exc).__name__}: {exc}"
+        row["traceback"] = traceback.format_exc(limit=3)
+    return row
+
+
+def _judge(row: dict, width_px: int) -> dict:
+    """flagged (any verdict warn/fail, or a stage refused) and silent (all ok, yet beyond a limit)."""
+    verdicts = [row.get(k, "ok") for k in ("calibration_verdict", "sync_verdict", "fit_verdict")]
+    flagged = "error" in row or any(v != "ok" for v in verdicts)
+    beyond = []
+    if (row.get("tracking_p95_mm") or 0) > SILENT["tracking_p95_mm"]:
+        beyond.append("tracking p95")
+    if abs(row.get("sync_error_ms") or 0) > SILENT["sync_error_ms"]:
+        beyond.append("sync")
+    if (row.get("principal_point_error_px") or 0) > SILENT["principal_point_share"] * width_px:
+        beyond.append("principal point")
+    if abs(row.get("fx_error_pct") or 0) > SILENT["fx_share"] * 100:
+        beyond.append("fx")
+    return {"flagged": bool(flagged), "beyond_limits": beyond, "silent_failure": bool(beyond and not flagged)}
+
+
+def summarise(rows: list[dict], complete: bool, quick: bool) -> dict:
+    """The benchmark's JSON from the per-setup rows."""
+    kept = [r for r in rows if not r["flagged"]]
+    errors = np.concatenate([r["tracking_errors_mm"] for r in kept if "tracking_errors_mm" in r] or [np.zeros(0)])
+    shares = [r["valid_share"] for r in kept if r.get("valid_share") is not None]
+    syncs = [abs(r["sync_error_ms"]) for r in kept if r.get("sync_error_ms") is not None]
+    per_setup = [{k: v for k, v in r.items() if k != "tracking_errors_mm"} for r in rows]
+    return {**header("generalization", quick), "complete": complete, "setups": len(rows),
+            "flagged": sum(r["flagged"] for r in rows), "silent_failures": sum(r["silent_failure"] for r in rows),
+            "median_mm": float(np.median(errors)) if errors.size else None,
+            "p95_mm": float(np.percentile(errors, 95)) if errors.size else None,
+            "valid_share": float(np.mean(shares)) if shares else None,
+            "sync_error_ms_max": float(max(syncs)) if syncs else None, "silent_limits": SILENT,
+            "per_setup": per_setup}
+
+
+def figure(rows: list[dict], path: Path) -> None:
+    """Each setup's tracking p95, sync error and principal-point error, coloured by its worst verdict."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    colour = {"ok": "tab:green", "warn": "tab:orange", "fail": "tab:red"}
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.6))
+    for ax, key, label in zip(axes, ("tracking_p95_mm", "sync_error_ms", "principal_point_error_px"),
+                              ("tracking p95 (mm)", "sync error (ms)", "principal point error (px)")):
+        for r in rows:
+            worst = "fail" if "error" in r else max((r.get(k, "ok") for k in (
+                "calibration_verdict", "sync_verdict", "fit_verdict")), key=("ok", "warn", "fail").index)
+            v = r.get(key)
+            ax.scatter(r["seed"], abs(v) if v is not None else np.nan, c=colour[worst], s=18)
+        ax.set_xlabel("setup (seed)")
+        ax.set_ylabel(label)
+        ax.set_yscale("symlog", linthresh=1.0)
+    fig.suptitle("generalization: each drawn setup, coloured by its worst verdict (green ok, orange warn, red fail)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv: list[str] | None = None) -> None:
+    from stringcast.core import load_config
+
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--setups", type=int, default=24, help="how many drawn setups")
+    p.add_argument("--first", type=int, default=0, help="the first setup's seed")
+    p.add_argument("--work", type=Path, default=None, help="keep (and reuse) each setup's files here")
+    p.add_argument("--quick", action="store_true", help="3 setups")
+    args = p.parse_args(argv)
+    n = 3 if args.quick else args.setups
+    config = load_config()
+    work = args.work or Path(tempfile.mkdtemp(prefix="stringcast_generalization_"))
+    rows = []
+    for i, seed in enumerate(range(args.first, args.first + n)):
+        row = run_setup(seed, 1 + i % 7, config, work)
+        row.update(_judge(row, row["draw"]["width_px"]))
+        rows.append(row)
+        print(f"setup {seed}: " + ", ".join(f"{k} {row.get(k)}" for k in (
+            "calibration_verdict", "fx_error_pct", "principal_point_error_px", "sync_verdict", "sync_error_ms",
+            "tracking_median_mm", "tracking_p95_mm", "valid_share", "E_mm", "fit_verdict", "error")), flush=True)
+        write("generalization", summarise(rows, i == n - 1, args.quick))
+        figure(rows, BENCH_DIR / "generalization.png")
+
+
+if __name__ == "__main__":
+    main()
