@@ -148,6 +148,25 @@ def lab_camera(config):
     return Calibration(H / H[2, 2], (cam.width, cam.height), cam.K, cam.dist), campaign.arm
 
 
+@pytest.mark.parametrize("q", [[-0.2, 0.1, 0.05], [-0.5, -0.1, -0.05], [0.3, -1.5, -0.4]],
+                         ids=["straight", "hanging", "reaching"])
+@pytest.mark.parametrize("blotchy", [False, True], ids=["plain_wall", "blotchy_wall"])
+def test_an_arm_without_discs_is_checked(lab_camera, q, blotchy, settings):
+    """Links nearly in line gave "too few independent features: not checked" without discs (issue 25);
+    the gripper's end along its axis now fixes the other direction. Board pose off by (12, -8) mm."""
+    cal, arm = lab_camera
+    shift = np.array([0.012, -0.008])
+    img = _plain_arm_image(cal, arm, q, np.random.default_rng(1), blotchy)
+    H = cal.H_pixel_to_robot.copy()
+    H[:2] += np.outer(shift, H[2])
+    moved = type(cal)(H, cal.image_size, cal.K, cal.dist)
+    r = check_board_to_robot(img, moved, arm, np.asarray(q), settings.board_check)
+    print(f"plain arm {q}: dx {r['dx_mm']}, dy {r['dy_mm']} mm, end {r['end_offset_mm']} mm, {r['n_used']} features")
+    assert r["residual_mm"] is not None and r["disc_offsets_mm"] == []
+    assert r["dx_mm"] == pytest.approx(12.0, abs=2.5) and r["dy_mm"] == pytest.approx(-8.0, abs=2.5)
+    assert r["verdict"]["status"] == "warn" and "board_origin_mm" in r["verdict"]["reasons"][0]  # 14 mm > 5 mm
+
+
 def test_an_arm_that_cannot_be_checked_says_why(lab_camera, settings):
     """The arm pointing down and out of the image: two links in line, no end: warn, not silence."""
     cal, arm = lab_camera

@@ -290,6 +290,8 @@ class BoardCheckSettings(_Section):
     use_discs: bool = _f(True, "use the joint discs' rims")
     disc_rays: int = _f(48, "rays around a joint disc")
     disc_reach_mm: float = _f(35.0, "a disc rim is searched this far around its expected radius, mm")
+    use_end: bool = _f(True, "use the gripper's end along its axis when the links and discs leave a direction open")
+    end_reach_mm: float = _f(35.0, "the gripper's end is searched this far either side of the outline's end, mm")
     use_string: bool = _f(False, "use the hanging string below the grasp")
     string_rows_mm: tuple = _f((20.0, 140.0), "the string's rows below the grasp, [from, to], mm")
     string_search_mm: float = _f(40.0, "the string is searched this far either side, mm")
