@@ -82,9 +82,10 @@ def judged_intrinsics(views: Views, flags: int, st: CalibrationSettings, min_vie
                                       f"determine them ({why}); {advice}")
     left = {k: v for k, v in problems.items() if k not in ("coverage", "tilt") and v[2] > st.fail_factor}
     if refused:
-        verdict = verdict.add("fail", f"intrinsics: {why}. Holding {refused[0]} would raise the reprojection error "
-                                      f"from {free.rms_px:.3f} to {refused[1]:.3f} px (> {st.hold_rms_tol:.0%}): the "
-                                      f"views place it elsewhere but do not pin it down; {advice}")
+        pre = f"holding {refused[0]} as well" if held else f"{why}. Holding {refused[0]}"
+        verdict = verdict.add("fail", f"intrinsics: {pre} would raise the reprojection error from {free.rms_px:.3f} "
+                                      f"to {refused[1]:.3f} px (> {st.hold_rms_tol:.0%}): the views place it elsewhere "
+                                      f"but do not pin it down; {advice}")
     elif left:
         pre = f"even with {' and '.join(held)} held, " if held else ""
         verdict = verdict.add("fail", f"intrinsics: {pre}{'; '.join(v[0] for v in left.values())} "
