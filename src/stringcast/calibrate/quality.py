@@ -136,7 +136,9 @@ def tilt_spread(rvecs: np.ndarray) -> dict:
 
     Returns:
         ``{"tilt_deg" (per view: arccos |n_z| of the board normal n), "min_deg", "median_deg",
-        "max_deg", "variety_deg" (rms tilt about the weaker image axis), "weak_axis"
+        "max_deg", "spread_deg" (their standard deviation), "variety_deg" (rms tilt about the
+        weaker image axis: views all tilted 30 deg about one axis have a spread of 0 and
+        a variety of 0, about random axes a spread of 0 and a variety of ~21), "weak_axis"
         ("vertical": turns about the image's vertical axis are missing, or "horizontal")}``.
     """
     n = np.array([cv2.Rodrigues(np.asarray(r, float))[0][:, 2] for r in np.asarray(rvecs, float).reshape(-1, 3)])
@@ -145,7 +147,7 @@ def tilt_spread(rvecs: np.ndarray) -> dict:
     # the normal lacks its x component (vec along x) when the board never turns left/right,
     # i.e. about the image's vertical axis
     return {"tilt_deg": [float(t) for t in tilt], "min_deg": float(tilt.min()), "median_deg": float(np.median(tilt)),
-            "max_deg": float(tilt.max()),
+            "max_deg": float(tilt.max()), "spread_deg": float(np.std(tilt)),
             "variety_deg": float(np.degrees(np.arcsin(math.sqrt(min(max(lam[0], 0.0), 1.0))))),
             "weak_axis": "vertical" if abs(vec[0, 0]) > abs(vec[1, 0]) else "horizontal"}
 
