@@ -101,7 +101,9 @@ def cmd_calibrate(args):
     cal = _run("calibrate", args, Path(args.trial_dir), calib_dir, _campaign(args), Path(args.out))
     bc = (cal.board_check or {}).get("residual_mm")
     extra = "" if bc is None else f", board-to-robot check {bc:.1f} mm"
-    print(f"calibration: reprojection error {cal.reprojection_error_px:.3f} px{extra} -> {args.out}")
+    print(f"calibration: reprojection error {cal.reprojection_error_px:.3f} px{extra}, {cal.verdict.status} -> {args.out}")
+    for reason in cal.verdict.reasons:
+        print(f"  {cal.verdict.status}: {reason}")
 
 
 def cmd_sync(args):

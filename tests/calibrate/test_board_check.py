@@ -1,6 +1,8 @@
-"""Board-to-robot check: the still arm seen in a small lab clip vs the FK under config's board pose."""
+"""Board-to-robot check: the still arm seen in a small lab clip vs the FK under config's board pose,
+and an arm drawn without joint discs."""
 import copy
 
+import cv2
 import numpy as np
 import pytest
 
@@ -106,3 +108,73 @@ def test_calibration_stage_records_the_check_and_warns(still_arm, tmp_path, sett
     doc = read_json(tmp_path / "bad.json")
     assert doc["board_check"]["dx_mm"] - ok.board_check["dx_mm"] == pytest.approx(30.0, abs=2.0)
     assert any("board-to-robot check" in w and "board_origin_mm" in w for w in doc["warnings"])
+
+
+# ------------------------------------------------------------ an arm without joint discs
+
+def _plain_arm_image(calibration, arm, q, rng, blotchy: bool):
+    """A grey image of an arm drawn as plain links and a tapered gripper (no joint discs), 60 DN on
+    a 170 DN wall (blotchy: a smooth texture of +-40 DN), through ``calibration``."""
+    from stringcast.core import forward_kinematics
+
+    h, w = calibration.image_size[1], calibration.image_size[0]
+    img = np.full((h, w), 170.0, np.float32)
+    if blotchy:
+        n = cv2.GaussianBlur(rng.normal(0, 1, img.shape).astype(np.float32), (0, 0), 25)
+        img += 40 * n / n.std()
+    pts = forward_kinematics(arm, np.asarray(q, float))
+    widths = [0.11, 0.09, 0.075, (0.06, 0.025)]           # narrower than the config's outline, as the lab's
+    for s in range(arm.n_joints + 1):
+        a, b = pts[s], pts[s + 1]
+        w0, w1 = widths[s] if s == arm.n_joints else (widths[s], widths[s])
+        e = (b - a) / np.linalg.norm(b - a)
+        n = np.array([-e[1], e[0]])
+        quad = calibration.robot_to_pixel(np.array([a + n * w0 / 2, b + n * w1 / 2, b - n * w1 / 2, a - n * w0 / 2]))
+        cv2.fillPoly(img, [np.round(quad * 16).astype(np.int32)], 60.0, lineType=cv2.LINE_AA, shift=4)
+    img = cv2.GaussianBlur(img, (0, 0), 0.7) + rng.normal(0, 1.5, img.shape).astype(np.float32)
+    return np.clip(img, 0, 255)
+
+
+@pytest.fixture(scope="module")
+def lab_camera(config):
+    """The default lab camera's true calibration (1024 x 1024) and the campaign's arm."""
+    from stringcast.calibrate.calibration import Calibration
+    from stringcast.core import resolve_campaign
+    from stringcast.lab import CameraModel
+
+    campaign = resolve_campaign({"string": 1, "target": 1}, config, "plain")
+    cam = CameraModel.from_config(campaign.setup.camera, config)
+    H = np.linalg.inv(cam.plane_homography())
+    return Calibration(H / H[2, 2], (cam.width, cam.height), cam.K, cam.dist), campaign.arm
+
+
+@pytest.mark.parametrize("q", [[-0.2, 0.1, 0.05], [-0.5, -0.1, -0.05], [0.3, -1.5, -0.4]],
+                         ids=["straight", "hanging", "reaching"])
+@pytest.mark.parametrize("blotchy", [False, True], ids=["plain_wall", "blotchy_wall"])
+def test_an_arm_without_discs_is_checked(lab_camera, q, blotchy, settings):
+    """Links nearly in line gave "too few independent features: not checked" without discs (issue 25);
+    the gripper's end along its axis now fixes the other direction. Board pose off by (12, -8) mm."""
+    cal, arm = lab_camera
+    shift = np.array([0.012, -0.008])
+    img = _plain_arm_image(cal, arm, q, np.random.default_rng(1), blotchy)
+    H = cal.H_pixel_to_robot.copy()
+    H[:2] += np.outer(shift, H[2])
+    moved = type(cal)(H, cal.image_size, cal.K, cal.dist)
+    r = check_board_to_robot(img, moved, arm, np.asarray(q), settings.board_check)
+    print(f"plain arm {q}: dx {r['dx_mm']}, dy {r['dy_mm']} mm, end {r['end_offset_mm']} mm, {r['n_used']} features")
+    assert r["residual_mm"] is not None and r["disc_offsets_mm"] == []
+    assert r["dx_mm"] == pytest.approx(12.0, abs=2.5) and r["dy_mm"] == pytest.approx(-8.0, abs=2.5)
+    assert r["verdict"]["status"] == "warn" and "board_origin_mm" in r["verdict"]["reasons"][0]  # 14 mm > 5 mm
+
+
+def test_an_arm_that_cannot_be_checked_says_why(lab_camera, settings):
+    """The arm pointing down and out of the image: two links in line, no end: warn, not silence."""
+    cal, arm = lab_camera
+    q = np.array([-1.2, -0.2, -0.1])
+    r = check_board_to_robot(_plain_arm_image(cal, arm, q, np.random.default_rng(2), False), cal, arm, q,
+                             settings.board_check)
+    assert r["residual_mm"] is None
+    assert r["verdict"]["status"] == "warn" and r["verdict"]["reasons"][0].startswith("not checked: ")
+    assert "one direction" in r["verdict"]["reasons"][0]
+    blank = check_board_to_robot(np.full((1024, 1024), 128.0), cal, arm, q, settings.board_check)
+    assert "no arm segment" in blank["verdict"]["reasons"][0]

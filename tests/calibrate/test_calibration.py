@@ -256,9 +256,13 @@ def test_run_calibration_on_trial_folder(tmp_path, campaign, settings):
         run_calibration(trial, calib, campaign, tmp_path / "out" / f"again_{i}.json", **st)
         assert (tmp_path / "out" / f"again_{i}.json").read_bytes() == (tmp_path / "out" / "calibration.json").read_bytes()
     assert cv2.getNumThreads() == threads   # restored after the stage
+    # six views of the image's middle half: judged weak (coverage), the trial's board one more view
+    assert doc["verdict"]["status"] in ("warn", "fail") and doc["intrinsics"]["n_views"] == 7
+    assert any("cover" in r and "upper and lower thirds" in r for r in doc["verdict"]["reasons"])
     # homography only (no calib/) still works but warns
     cal2 = run_calibration(trial, None, campaign, tmp_path / "out2.json", **st)
     assert cal2.K is None and any("homography only" in w for w in cal2.warnings)
+    assert cal2.verdict.status == "warn" and read_json(tmp_path / "out2.json")["verdict"]["status"] == "warn"
 
 
 def test_run_calibration_without_board(tmp_path, campaign, settings):

@@ -54,7 +54,7 @@ def test_sections_read_and_stage_kwargs_follow_the_annotations():
 def test_every_workflow_stage_names_what_it_reads():
     """The map the rules' params come from: each stage's sections, as its entry point takes them."""
     read = {cmd: stage_sections(cmd) for cmd in STAGES}
-    assert read["calibrate"] == ("board_check",)
+    assert read["calibrate"] == ("board_check", "calibration")
     assert read["sync"] == ("sync", "board_check")
     assert read["track"] == ("tracking",)
     assert set(read["estimate"]) == {"model", "evaluation", "estimation", "motion", "tracking"}

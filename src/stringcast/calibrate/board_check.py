@@ -20,6 +20,15 @@ it, from the rest image alone, with two kinds of feature (no model of the arm's 
   centre find the disc's rim (the strongest edge from 0.3 outline radii,
   the arm's ``joint_radii``, to the radius + ``disc_reach_mm``); a circle fit (Huber-reweighted) gives the centre's
   2-D offset: two equations, which a posture with all links nearly parallel needs.
+* **the gripper's end** (if ``use_end``), only when the edges and discs leave a direction
+  undetermined (links all nearly parallel, an arm without joint discs): on lines along the
+  gripper's axis, either side of its centre line (clear of the string), the edge where
+  the gripper ends (the strongest edge within ``end_reach_mm`` of the expected end, whose
+  inner side looks like the gripper and outer side does not); their consensus gives
+  ``e . d = o_e`` along the axis e. The outline ends between the grasp point and the
+  arm's ``gripper_mask_extend`` past it (a mask's margin, not a measured end): the middle
+  is expected, so the end is sure to +- half that (``end_uncertainty_mm``), less than
+  the sides; hence only when needed.
 * **the hanging string** (if ``use_string``): at rest the string hangs straight down from
   the grasp point (gravity), so its centreline x is the grasp point's x. On rows
   ``string_rows_mm`` below the grasp point (clear of the arm's outline) the darkest or
@@ -33,6 +42,10 @@ d = (dx, dy) is the least-squares (Huber-reweighted) translation between where t
 seen and where config's board pose puts it; ``residual_mm`` = |d|. A board pose shifted by
 20 mm in x makes d ~ (20, 0) mm. With the true pose d is the calibration's own error near
 the arm (about 1-2 mm with intrinsics; lens distortion uncorrected, 10-20 mm).
+
+The result carries a verdict: ``warn`` when |d| exceeds ``warn_mm``, and ``warn`` "not
+checked: <why>" when the features found do not determine d (an unchecked board pose is a
+risk the user should know of, not silence).
 """
 from __future__ import annotations
 
@@ -41,9 +54,12 @@ import math
 import numpy as np
 from scipy.ndimage import gaussian_filter1d, map_coordinates
 
-from stringcast.core import BoardCheckSettings, forward_kinematics
+from stringcast.core import BoardCheckSettings, Verdict, forward_kinematics
 
-METHOD = "rest image: link/gripper edge pairs across their FK axes, joint-disc rims"
+METHOD = "rest image: link/gripper edge pairs across their FK axes, joint-disc rims, the gripper's end"
+MIN_SINGULAR = 0.3
+"""The features' unit directions must give a 2 x 2 system whose smaller singular value reaches
+this (a second direction at least ~17 deg from the first, one feature each)."""
 
 
 def _sample(image: np.ndarray, calibration, pts: np.ndarray) -> np.ndarray:
@@ -246,6 +262,41 @@ def _string_offset(image, calibration, arm, q_rest, st: BoardCheckSettings) -> f
     return None if c is None else c[0]
 
 
+def _end_offset(image, calibration, arm, q_rest, st: BoardCheckSettings) -> tuple[np.ndarray, float] | None:
+    """(the gripper's axis e (2,), offset m of its end along e, seen minus the outline's) or None."""
+    pts = forward_kinematics(arm, np.asarray(q_rest, float))
+    a, b = pts[-2], pts[-1]
+    L = float(np.hypot(*(b - a)))
+    if L <= 0:
+        return None
+    e = (b - a) / L
+    nrm = np.array([-e[1], e[0]])
+    end = b + e * 0.5 * float(arm.gripper_mask_extend)  # the outline ends between b and b + extend
+    step, reach = st.step_mm / 1000, st.end_reach_mm / 1000
+    inner = min(reach + 0.02, 0.8 * L)  # the gripper's own grey, sampled inside it before the window
+    v = np.arange(-reach, reach + step / 2, step)
+    tip = float(arm.gripper_widths[-1])
+    offs = []
+    for s in tip * np.array([-0.35, -0.25, -0.15, 0.15, 0.25, 0.35]):  # clear of the string on the centre line
+        prof = _sample(image, calibration, end + s * nrm + v[:, None] * e)
+        ref = _sample(image, calibration, end + s * nrm - np.linspace(inner, reach, 5)[:, None] * e)
+        if not (np.all(np.isfinite(prof)) and np.all(np.isfinite(ref))):
+            continue
+        prof = gaussian_filter1d(prof, 1.0 / st.step_mm)
+        g_in, g = float(np.median(ref)), np.gradient(prof)
+        a_g = np.abs(g)
+        peaks = np.nonzero((a_g[1:-1] >= a_g[:-2]) & (a_g[1:-1] > a_g[2:]))[0] + 1
+        k = max(1, int(round(0.004 / step)))                  # 4 mm either side of an edge
+        for i in peaks[np.argsort(a_g[peaks])[::-1]][:6]:
+            if i - k < 0 or i + k >= len(prof):
+                continue
+            if abs(prof[i - k] - g_in) < 0.5 * abs(prof[i + k] - g_in):  # gripper inside, not outside
+                offs.append(v[0] + step * _refine(g, int(i)))
+                break
+    c = _consensus(np.asarray(offs), st.max_spread_mm / 1000, 3)
+    return None if c is None else (e, c[0])
+
+
 def check_board_to_robot(rest_image: np.ndarray, calibration, arm, q_rest: np.ndarray,
                          board_check: BoardCheckSettings) -> dict:
     """Translation between where the still arm is seen and where config's board pose + the FK put it.
@@ -260,9 +311,10 @@ def check_board_to_robot(rest_image: np.ndarray, calibration, arm, q_rest: np.nd
 
     Returns:
         ``{"residual_mm": |d| or None, "dx_mm", "dy_mm" (seen minus FK, robot frame),
-        "method", "n_used" (features used), "segment_offsets_mm", "string_offset_mm",
-        "fit_rms_mm", "warn_mm"}``; residual_mm None when fewer than two independent
-        features were found (no warning then, only the note in ``method``).
+        "method", "n_used" (features used), "segment_offsets_mm", "disc_offsets_mm",
+        "string_offset_mm", "end_offset_mm", "fit_rms_mm", "warn_mm", "verdict"}``;
+        residual_mm None when the features found do not determine d (verdict ``warn``,
+        "not checked: <why>", also in ``method``); verdict ``warn`` when |d| > ``warn_mm``.
 
     Raises:
         ValueError: rest_image not 2-D, or q_rest not (J,).
@@ -288,15 +340,51 @@ def check_board_to_robot(rest_image: np.ndarray, calibration, arm, q_rest: np.nd
     if x_str is not None:
         rows.append(np.array([1.0, 0.0]))
         rhs.append(x_str)
-    doc = {"method": METHOD, "n_used": len(segs) + len(discs) + (x_str is not None), "warn_mm": float(st.warn_mm),
-           "segment_offsets_mm": [float(o * 1000) for _, o, _ in segs],
+    end = None
+    if st.use_end and _weakest(rows) < MIN_SINGULAR:
+        end = _end_offset(img, calibration, arm, q_rest, st)
+        if end is not None:
+            rows.append(end[0])
+            rhs.append(end[1])
+    doc = {"method": METHOD, "n_used": len(segs) + len(discs) + (x_str is not None) + (end is not None),
+           "warn_mm": float(st.warn_mm), "segment_offsets_mm": [float(o * 1000) for _, o, _ in segs],
            "disc_offsets_mm": discs, "string_offset_mm": None if x_str is None else float(x_str * 1000),
+           "end_offset_mm": None if end is None else float(end[1] * 1000),
+           "end_uncertainty_mm": None if end is None else float(arm.gripper_mask_extend * 500),
            "residual_mm": None, "dx_mm": None, "dy_mm": None, "fit_rms_mm": None}
     A, y = np.asarray(rows, float).reshape(-1, 2), np.asarray(rhs, float)
-    if len(rows) < 2 or np.linalg.svd(A, compute_uv=False)[-1] < 0.3:
-        doc["method"] += " (too few independent features: not checked)"
+    if _weakest(rows) < MIN_SINGULAR:
+        why = _why_not(segs, arm, st)
+        doc["method"] += f" (not checked: {why})"
+        doc["verdict"] = Verdict("warn", (f"not checked: {why}",)).as_dict()
         return doc
     d, r = _huber_lstsq(A, y)
     doc.update(dx_mm=float(d[0] * 1000), dy_mm=float(d[1] * 1000), residual_mm=float(math.hypot(*d) * 1000),
                fit_rms_mm=float(np.sqrt(np.mean(r ** 2)) * 1000))
+    verdict = Verdict()
+    if doc["residual_mm"] > st.warn_mm:
+        verdict = verdict.add("warn", f"the still arm is seen {doc['residual_mm']:.1f} mm (dx {doc['dx_mm']:+.1f}, dy "
+                                      f"{doc['dy_mm']:+.1f} mm) from where the configured board pose puts it "
+                                      f"(> {st.warn_mm:g} mm): check setups.*.board_origin_mm / board_angle_deg")
+    doc["verdict"] = verdict.as_dict()
     return doc
+
+
+def _weakest(rows: list) -> float:
+    """The smaller singular value of the features' directions (0 with fewer than two)."""
+    return 0.0 if len(rows) < 2 else float(np.linalg.svd(np.asarray(rows, float).reshape(-1, 2), compute_uv=False)[-1])
+
+
+def _why_not(segs: list, arm, st: BoardCheckSettings) -> str:
+    """Why the features found do not determine the translation, in one clause."""
+    n_seg = arm.n_joints + 1
+    if not segs:
+        return (f"no arm segment showed a pair of edges of its configured width ({st.width_range[0]:g}-"
+                f"{st.width_range[1]:g} x arms.*.link_widths_mm / gripper_widths_mm) where the forward kinematics "
+                "put it; check the arm's outline in the config, and that the first frames show the arm at rest")
+    ang = np.degrees(np.arctan2([n[1] for n, _, _ in segs], [n[0] for n, _, _ in segs]))
+    spread = float(np.ptp((ang - ang[0] + 90) % 180 - 90))
+    return (f"the edges of {len(segs)} of {n_seg} arm segments were found (the others lie outside the image, "
+            f"behind clutter or are too short), all within {spread:.0f} deg of one "
+            "direction, and no joint disc nor the gripper's end was found to fix the other; a rest posture with "
+            "the links at different angles makes the check possible")

@@ -7,14 +7,17 @@
   near every part of the image, near and far, tilted several ways: Zhang 2000). Each view's
   board-to-image homography gives a pose descriptor without knowing the intrinsics yet, and
   greedy farthest-point sampling in that space keeps at most ``max_views`` of them.
-* :func:`calibrate_intrinsics`: ``board.matchImagePoints`` + ``cv2.calibrateCameraExtended``
-  (OpenCV >= 4.7: the Python ``calibrateCameraCharuco`` is gone), then views whose own
-  reprojection RMS exceeds ``max(3 x median, 0.5 px)`` (motion blur, a false corner) are
-  dropped and the calibration repeated (at most 3 times).
+* :func:`select_calibration_views` (``board.matchImagePoints`` on each frame's corners, then
+  :func:`select_views`) + :func:`fit_views` (``cv2.calibrateCameraExtended``: OpenCV >= 4.7
+  has no Python ``calibrateCameraCharuco``; views whose own reprojection RMS exceeds
+  ``max(3 x median, 0.5 px)`` (motion blur, a false corner) are dropped and the calibration
+  repeated, at most 3 times) = :func:`calibrate_intrinsics`. The fit keeps what judging it
+  needs (:mod:`stringcast.calibrate.quality`): the standard deviations, per-view errors,
+  poses and the corners used.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Iterable
 
 import cv2
@@ -116,6 +119,39 @@ def select_views(descriptors: np.ndarray, n_corners: np.ndarray, max_views: int)
 
 
 @dataclass(frozen=True)
+class Views:
+    """Calibration views: the board's points and their detected corners, view by view.
+
+    Attributes:
+        object_points: per view (N_v, 1, 3) float32 board points, m (z = 0).
+        image_points: per view (N_v, 1, 2) float32 detected corners, px (distorted image).
+        image_size: (width, height) px. found: views with the board before any selection.
+        names: a name per view (for messages), e.g. ``frame 12``.
+    """
+
+    object_points: tuple
+    image_points: tuple
+    image_size: tuple[int, int]
+    found: int = 0
+    names: tuple[str, ...] = ()
+
+    def __post_init__(self):
+        if len(self.object_points) != len(self.image_points):
+            raise ValueError("Views: object_points and image_points must have one entry per view")
+        if not self.names:
+            object.__setattr__(self, "names", tuple(f"view {k}" for k in range(len(self.object_points))))
+
+    def __len__(self) -> int:
+        return len(self.object_points)
+
+    def plus(self, obj: np.ndarray, img: np.ndarray, name: str) -> "Views":
+        """These views and one more (e.g. the trial's board in the swing plane)."""
+        return Views((*self.object_points, np.asarray(obj, np.float32).reshape(-1, 1, 3)),
+                     (*self.image_points, np.asarray(img, np.float32).reshape(-1, 1, 2)),
+                     self.image_size, self.found + 1, (*self.names, name))
+
+
+@dataclass(frozen=True)
 class Intrinsics:
     """Pinhole intrinsics with OpenCV's 5-term distortion (k1, k2, p1, p2, k3).
 
@@ -123,6 +159,12 @@ class Intrinsics:
         K: (3, 3) camera matrix, px. dist: (5,). rms_px: reprojection RMS of the views used.
         n_views: views used. image_size: (width, height) px. views_rejected: views dropped
         as reprojection outliers. views_found: views with the board found (before selection).
+        std: (9,) OpenCV's standard deviations of (fx, fy, cx, cy, k1, k2, p1, p2, k3)
+            (``cv2.calibrateCameraExtended``, 0 for a held parameter), or None.
+        per_view_rms_px: (n_views,) each used view's reprojection RMS, px.
+        rvecs, tvecs: (n_views, 3) the used views' board poses (Rodrigues; m), or None.
+        views: the :class:`Views` used (after outlier rejection), or None.
+        flags: the ``cv2.calibrateCamera`` flags of the fit.
     """
 
     K: np.ndarray
@@ -132,16 +174,99 @@ class Intrinsics:
     image_size: tuple[int, int]
     views_rejected: int = 0
     views_found: int = 0
+    std: np.ndarray | None = None
+    per_view_rms_px: tuple[float, ...] = ()
+    rvecs: np.ndarray | None = field(default=None, repr=False)
+    tvecs: np.ndarray | None = field(default=None, repr=False)
+    views: Views | None = field(default=None, repr=False)
+    flags: int = 0
 
     def __post_init__(self):
         if np.shape(self.K) != (3, 3) or np.shape(self.dist) != (5,):
             raise ValueError(f"Intrinsics: K must be (3, 3) and dist (5,), got {np.shape(self.K)}, {np.shape(self.dist)}")
 
 
+def select_calibration_views(frames: Iterable[np.ndarray], board, source: str = "calibration frames",
+                             invert: bool | None = None, min_views: int = 3, max_views: int = MAX_VIEWS) -> Views:
+    """The board's corners in each frame where it shows, at most ``max_views`` views kept.
+
+    Each frame: :func:`detect_charuco`, ``board.matchImagePoints``; a view needs
+    :data:`MIN_VIEW_CORNERS` corners, not collinear. Then :func:`select_views` keeps at most
+    ``max_views`` spread over pose space.
+
+    Args:
+        frames: iterable of (H, W) grey images (all the same size), read once.
+        board: ``cv2.aruco.CharucoBoard`` (sizes in m). source: named in errors.
+        invert: board polarity (see :func:`detect_charuco`). min_views: the fewest usable views.
+
+    Returns:
+        :class:`Views`, named by frame (``frame k``, k counting the frames given).
+
+    Raises:
+        DataError: fewer than ``min_views`` usable views, or frames of different sizes.
+    """
+    obj, img, names, size = [], [], [], None
+    for k, frame in enumerate(frames):
+        if size is None:
+            size = (frame.shape[1], frame.shape[0])
+        elif (frame.shape[1], frame.shape[0]) != size:
+            raise DataError(f"{source}: frame {k} is {frame.shape[1]}x{frame.shape[0]}, the first was {size[0]}x{size[1]}")
+        corners, ids = detect_charuco(frame, board, invert)
+        if len(ids) < MIN_VIEW_CORNERS:
+            continue
+        o, i = board.matchImagePoints(corners.astype(np.float32).reshape(-1, 1, 2), ids.reshape(-1, 1))
+        if o is None or len(o) < MIN_VIEW_CORNERS or board.checkCharucoCornersCollinear(ids.reshape(-1, 1)):
+            continue
+        obj.append(o.astype(np.float32))
+        img.append(i.astype(np.float32))
+        names.append(f"frame {k}")
+    if len(obj) < min_views:
+        raise DataError(f"{source}: the ChArUco board was found in {len(obj)} views with >= {MIN_VIEW_CORNERS} "
+                        f"corners; camera calibration needs at least {min_views}")
+    pick = select_views(pose_descriptors(obj, img, board, size), np.array([len(o) for o in obj]), max_views)
+    return Views(tuple(obj[k] for k in pick), tuple(img[k] for k in pick), (int(size[0]), int(size[1])),
+                 len(obj), tuple(names[k] for k in pick))
+
+
+def fit_views(views: Views, flags: int = 0, min_views: int = 3) -> Intrinsics:
+    """``cv2.calibrateCameraExtended`` on the views, dropping reprojection outliers.
+
+    Views whose own reprojection RMS exceeds ``max(3 x median, 0.5 px)`` (motion blur, a
+    false corner) are dropped and the fit repeated (at most 3 times, keeping >= ``min_views``).
+
+    Args:
+        views: :class:`Views`. flags: ``cv2.calibrateCamera`` flags (``CALIB_FIX_K3``,
+            ``CALIB_FIX_PRINCIPAL_POINT``: held at ((w - 1) / 2, (h - 1) / 2), ...).
+        min_views: the fewest views kept.
+
+    Returns:
+        :class:`Intrinsics` with the standard deviations, per-view errors, poses and views used.
+    """
+    obj, img = views.object_points, views.image_points
+    keep = np.arange(len(obj))
+    for _ in range(4):
+        rms, K, dist, rv, tv, std, _, per_view = cv2.calibrateCameraExtended(
+            [obj[k] for k in keep], [img[k] for k in keep], views.image_size, None, None, flags=flags)
+        per_view = per_view.ravel()
+        bad = per_view > max(3.0 * float(np.median(per_view)), 0.5)
+        if not bad.any() or len(keep) - bad.sum() < min_views:
+            break
+        keep = keep[~bad]
+    sd = np.asarray(std, float).ravel()
+    used = Views(tuple(obj[k] for k in keep), tuple(img[k] for k in keep), views.image_size, views.found,
+                 tuple(views.names[k] for k in keep))
+    return Intrinsics(np.asarray(K, float), np.asarray(dist, float).ravel()[:5], float(rms), len(keep),
+                      views.image_size, len(obj) - len(keep), views.found, np.r_[sd[:8], sd[8:9]],
+                      tuple(float(e) for e in per_view), np.asarray(rv, float).reshape(-1, 3),
+                      np.asarray(tv, float).reshape(-1, 3), used, int(flags))
+
+
 def calibrate_intrinsics(frames: Iterable[np.ndarray], board, source: str = "calibration frames",
                          invert: bool | None = None, min_views: int = 3, max_views: int = MAX_VIEWS,
                          flags: int = 0) -> Intrinsics:
-    """Camera matrix and distortion from views of a ChArUco board (``cv2.calibrateCameraExtended``).
+    """Camera matrix and distortion from views of a ChArUco board (``cv2.calibrateCameraExtended``):
+    :func:`select_calibration_views` then :func:`fit_views`, as they are (no judgement; the
+    calibration stage judges the fit with :mod:`stringcast.calibrate.quality`).
 
     Args:
         frames: iterable of (H, W) grey images (all the same size), read once.
@@ -156,34 +281,4 @@ def calibrate_intrinsics(frames: Iterable[np.ndarray], board, source: str = "cal
     Raises:
         DataError: fewer than ``min_views`` usable views, or frames of different sizes.
     """
-    obj, img, size = [], [], None
-    for k, frame in enumerate(frames):
-        if size is None:
-            size = (frame.shape[1], frame.shape[0])
-        elif (frame.shape[1], frame.shape[0]) != size:
-            raise DataError(f"{source}: frame {k} is {frame.shape[1]}x{frame.shape[0]}, the first was {size[0]}x{size[1]}")
-        corners, ids = detect_charuco(frame, board, invert)
-        if len(ids) < MIN_VIEW_CORNERS:
-            continue
-        o, i = board.matchImagePoints(corners.astype(np.float32).reshape(-1, 1, 2), ids.reshape(-1, 1))
-        if o is None or len(o) < MIN_VIEW_CORNERS or board.checkCharucoCornersCollinear(ids.reshape(-1, 1)):
-            continue
-        obj.append(o.astype(np.float32))
-        img.append(i.astype(np.float32))
-    if len(obj) < min_views:
-        raise DataError(f"{source}: the ChArUco board was found in {len(obj)} views with >= {MIN_VIEW_CORNERS} "
-                        f"corners; camera calibration needs at least {min_views}")
-    found = len(obj)
-    pick = select_views(pose_descriptors(obj, img, board, size), np.array([len(o) for o in obj]), max_views)
-    obj, img = [obj[k] for k in pick], [img[k] for k in pick]
-    keep = np.arange(len(obj))
-    for _ in range(4):
-        rms, K, dist, _, _, _, _, per_view = cv2.calibrateCameraExtended(
-            [obj[k] for k in keep], [img[k] for k in keep], size, None, None, flags=flags)
-        per_view = per_view.ravel()
-        bad = per_view > max(3.0 * float(np.median(per_view)), 0.5)
-        if not bad.any() or len(keep) - bad.sum() < min_views:
-            break
-        keep = keep[~bad]
-    return Intrinsics(np.asarray(K, float), np.asarray(dist, float).ravel()[:5], float(rms), len(keep),
-                      (int(size[0]), int(size[1])), len(obj) - len(keep), found)
+    return fit_views(select_calibration_views(frames, board, source, invert, min_views, max_views), flags, min_views)

@@ -10,9 +10,9 @@ from .specs import ArmSpec, BoardSpec, Campaign, SetupSpec, StringSpec, TargetSp
 from .files import (TRACK_COLUMNS, DataError, atomic_path, check_joint_coverage, check_joint_header, find_video,
                     read_joint_table, read_json, read_parquet, read_video_meta, tracks_arrays, write_joint_table,
                     write_json, write_parquet, write_text, write_yaml)
-from .settings import (MODES, POLARITIES, SECTION_CLASSES, BoardCheckSettings, EstimationSettings,
-                       EvaluationSettings, ExecutorSettings, ModelSettings, MotionSettings, Settings,
-                       SyncSettings, TrackingSettings, markdown_table, sections_read, settings_digest,
+from .settings import (MODES, POLARITIES, SECTION_CLASSES, BoardCheckSettings, CalibrationSettings,
+                       EstimationSettings, EvaluationSettings, ExecutorSettings, ModelSettings, MotionSettings,
+                       Settings, SyncSettings, TrackingSettings, markdown_table, sections_read, settings_digest,
                        settings_from_config, stage_kwargs)
 from .verdict import STATUSES, Verdict, worst
 
@@ -25,7 +25,8 @@ __all__ = [
     "TRACK_COLUMNS", "DataError", "atomic_path", "check_joint_coverage", "check_joint_header", "find_video",
     "read_joint_table", "read_json", "read_parquet", "read_video_meta", "tracks_arrays", "write_joint_table",
     "write_json", "write_parquet", "write_text", "write_yaml",
-    "MODES", "POLARITIES", "SECTION_CLASSES", "BoardCheckSettings", "EstimationSettings", "EvaluationSettings",
-    "ExecutorSettings", "ModelSettings", "MotionSettings", "Settings", "SyncSettings", "TrackingSettings",
+    "MODES", "POLARITIES", "SECTION_CLASSES", "BoardCheckSettings", "CalibrationSettings", "EstimationSettings",
+    "EvaluationSettings", "ExecutorSettings", "ModelSettings", "MotionSettings", "Settings", "SyncSettings",
+    "TrackingSettings",
     "markdown_table", "sections_read", "settings_digest", "settings_from_config", "stage_kwargs",
 ]

@@ -290,13 +290,39 @@ class BoardCheckSettings(_Section):
     use_discs: bool = _f(True, "use the joint discs' rims")
     disc_rays: int = _f(48, "rays around a joint disc")
     disc_reach_mm: float = _f(35.0, "a disc rim is searched this far around its expected radius, mm")
+    use_end: bool = _f(True, "use the gripper's end along its axis when the links and discs leave a direction open")
+    end_reach_mm: float = _f(35.0, "the gripper's end is searched this far either side of the outline's end, mm")
     use_string: bool = _f(False, "use the hanging string below the grasp")
     string_rows_mm: tuple = _f((20.0, 140.0), "the string's rows below the grasp, [from, to], mm")
     string_search_mm: float = _f(40.0, "the string is searched this far either side, mm")
 
 
+@dataclass(frozen=True)
+class CalibrationSettings(_Section):
+    """``calibration``: the intrinsics from the calib/ shots, and how they are judged."""
+
+    SECTION: typing.ClassVar[str] = "calibration"
+    max_candidate_frames: int = _f(240, "a calibration clip is sampled evenly to at most this many frames for board detection")
+    max_views: int = _f(40, "views kept for the fit, chosen for pose diversity")
+    coverage_grid: tuple = _f((8, 6), "columns x rows of the grid over the image in which the views' coverage is counted")
+    min_coverage: float = _f(0.6, "share of the grid's cells, and of each third of the image, that must hold corners")
+    min_tilt_variety_deg: float = _f(10.0, "the views' rms tilt about the weaker image axis must reach this, deg")
+    max_principal_point_sd: float = _f(0.01, "the principal point's standard deviation (per view) may reach this share of the image")
+    max_fx_sd: float = _f(0.01, "fx's standard deviation (per view) may reach this share of fx")
+    max_distortion_sd: float = _f(0.01, "the distortion's standard deviation at the image's corners may reach this share of the half-diagonal")
+    fail_factor: float = _f(2.0, "fail when, with what can be held held, a standard deviation still exceeds its limit this many times")
+    hold_rms_tol: float = _f(0.05, "a held principal point or k2/k3 that raises the rms by more than this share contradicts the views")
+    board_view: bool = _f(True, "the trial's board (in the swing plane) checks the intrinsics and joins the fit as one more view")
+    board_view_ratio: float = _f(2.0, "warn when the trial's board reprojects this many times worse than its own noise and the views'")
+
+    def __post_init__(self):
+        if len(self.coverage_grid) != 2 or min(self.coverage_grid) < 3:
+            raise ConfigError(f"calibration.coverage_grid must be [columns, rows], each >= 3, got {self.coverage_grid}")
+
+
 SECTION_CLASSES: tuple[type, ...] = (ModelSettings, EvaluationSettings, EstimationSettings, MotionSettings,
-                                     ExecutorSettings, TrackingSettings, SyncSettings, BoardCheckSettings)
+                                     ExecutorSettings, TrackingSettings, SyncSettings, BoardCheckSettings,
+                                     CalibrationSettings)
 """The stages' settings classes, one per config section."""
 LAB_SECTIONS: tuple[str, ...] = ("arms", "cameras", "setups", "strings", "targets")
 """Sections that describe the lab; a campaign reads only its own entries (:func:`campaign_sections`)."""
@@ -314,6 +340,7 @@ class Settings:
     tracking: TrackingSettings = field(default_factory=TrackingSettings)
     sync: SyncSettings = field(default_factory=SyncSettings)
     board_check: BoardCheckSettings = field(default_factory=BoardCheckSettings)
+    calibration: CalibrationSettings = field(default_factory=CalibrationSettings)
 
 
 def settings_from_config(config: Mapping | None) -> Settings:
