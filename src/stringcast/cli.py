@@ -130,6 +130,11 @@ def cmd_estimate(args):
                Path(args.prev) if args.prev else None, int(args.trial), Path(args.out_params), Path(args.out_fit),
                _earlier(args))
     print(f"estimation: E = {est.E_m * 1000:.2f} mm after {est.n_evaluations} evaluations -> {args.out_params}")
+    cause = f" (likely cause: {est.likely_cause})" if est.likely_cause else ""
+    usable = {"ok": "", "warn": ": doubtful", "fail": ": the estimate is not usable"}[est.verdict.status]
+    print(f"fit verdict: {est.verdict.status}{cause}{usable}")
+    for reason in est.verdict.reasons:
+        print(f"  - {reason}")
 
 
 def cmd_plan_first(args):
