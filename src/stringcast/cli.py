@@ -9,6 +9,7 @@ print one line naming the file and the problem and exit with status 2.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 from pathlib import Path
@@ -149,6 +150,13 @@ def cmd_plan(args):
          out / "motion.json", int(args.seed), Path(args.tracks) if args.tracks else None,
          Path(args.joints) if args.joints else None)
     print(f"next motion -> {out / 'motion.csv'}")
+    doc = json.loads((out / "motion.json").read_text())
+    if doc.get("planned_on_failed_fit"):
+        fit = doc.get("failed_fit") or {}
+        print(f"WARNING: planned on a failed fit (likely cause: {fit.get('likely_cause') or 'not named'}): the "
+              f"estimate in {args.params} is not usable, nor is this motion's predicted hit; check before playing it")
+        for reason in fit.get("reasons", []):
+            print(f"  - {reason}")
 
 
 def cmd_report_trial(args):
