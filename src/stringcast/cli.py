@@ -9,6 +9,7 @@ print one line naming the file and the problem and exit with status 2.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 from pathlib import Path
@@ -132,6 +133,11 @@ def cmd_estimate(args):
                Path(args.prev) if args.prev else None, int(args.trial), Path(args.out_params), Path(args.out_fit),
                _earlier(args))
     print(f"estimation: E = {est.E_m * 1000:.2f} mm after {est.n_evaluations} evaluations -> {args.out_params}")
+    cause = f" (likely cause: {est.likely_cause})" if est.likely_cause else ""
+    usable = {"ok": "", "warn": ": doubtful", "fail": ": the estimate is not usable"}[est.verdict.status]
+    print(f"fit verdict: {est.verdict.status}{cause}{usable}")
+    for reason in est.verdict.reasons:
+        print(f"  - {reason}")
 
 
 def cmd_plan_first(args):
@@ -146,6 +152,13 @@ def cmd_plan(args):
          out / "motion.json", int(args.seed), Path(args.tracks) if args.tracks else None,
          Path(args.joints) if args.joints else None)
     print(f"next motion -> {out / 'motion.csv'}")
+    doc = json.loads((out / "motion.json").read_text())
+    if doc.get("planned_on_failed_fit"):
+        fit = doc.get("failed_fit") or {}
+        print(f"WARNING: planned on a failed fit (likely cause: {fit.get('likely_cause') or 'not named'}): the "
+              f"estimate in {args.params} is not usable, nor is this motion's predicted hit; check before playing it")
+        for reason in fit.get("reasons", []):
+            print(f"  - {reason}")
 
 
 def cmd_report_trial(args):

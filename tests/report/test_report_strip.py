@@ -52,3 +52,24 @@ def test_choose_frames_spreads_over_the_fit():
     fit = pd.DataFrame({"frame": np.repeat(np.arange(10, 110), 3)})
     k = choose_frames(fit, 5)
     assert k.tolist() == [10, 35, 60, 84, 109]
+
+
+def test_strip_survives_a_grasp_outside_the_image(tmp_path):
+    """A grasp point far outside the image (the camera does not see the arm's hand) gives a note tile,
+    not a crash (cv2.resize on an empty crop); one just beyond the edge gives the part of its square
+    that is inside, black elsewhere."""
+    folder, cal, tracks, fit = _setup(tmp_path)
+    far = tracks.copy()
+    far[["x_m", "y_m"]] += [5.0, -3.0]                                   # pixel (5120, -2950): nowhere near
+    img = frame_strip(folder, cal, far, fit.assign(x_sim_m=fit['x_sim_m'] + 5.0), length_m=0.1, n_frames=3, tile_px=120, margin_m=0.01)
+    assert img.shape == (120, 120, 3) and img.max() == 255               # one note tile
+    edge = tracks.copy()
+    edge["x_m"] -= 0.2                                                   # grasp at pixel (-80, 50): off the left
+    fit_edge = fit.assign(x_sim_m=fit["x_sim_m"] - 0.2)
+    img = frame_strip(folder, cal, edge, fit_edge, length_m=0.1, n_frames=3, tile_px=220, margin_m=0.01)
+    assert img.shape == (220, 3 * 220, 3)
+    tile = img[:, :220]
+    # the square spans pixels u in [-190, 30), v in [-60, 160): only u >= 0, v >= 0 (tile columns 190-219,
+    # rows 60-219) is in the image, grey; the rest is black (the drawn points lie left of the image)
+    assert tile[25:, :185].max() == 0 and tile[25:55].max() == 0
+    assert (tile[65:215, 192:218] == 128).all()

@@ -146,9 +146,21 @@ class EstimationSettings(_Section):
     compare_after_motion_s: float | None = _f(None, "compare frames up to this long after the arm stops, s (null: the whole joint log, as the paper)")
     joint_trials: int = _f(1, "trials fitted at once: 1 the last (paper), N the last N, 0 every trial so far")
     cmaes_first_start: str = _f("centre", "CMA-ES on trial 1 without a first look: from the centre of the box (centre) or from chi_best (best)")
+    verdict_error_share: tuple = _f((0.18, 0.25), "fit verdict: [warn, fail] when the fit's median error over the moving frames exceeds these shares of the string's length")
+    verdict_skill: tuple = _f((0.45, 0.25), "fit verdict: [warn, fail] when the fit explains at most this share of the error of a string carried without swinging (1 - error / that error)")
+    verdict_shift_gain: tuple = _f((0.7, 0.5), "fit verdict: [warn, fail] (clock) when shifting the frames' times by 3 or more frame periods cuts the fit's error to this share")
+    verdict_min_valid_share: float = _f(0.5, "fit verdict: warn (tracking) when a smaller share of the string's points was tracked in the moving frames")
+    verdict_rest_gap_share: float = _f(0.05, "fit verdict: warn (geometry) when a tracked rest point hangs farther from the grasp than the string up to it plus this share of its length")
+    verdict_floor_share: float = _f(0.05, "fit verdict: skill and time shift judge only fits whose median error exceeds this share of the string's length")
 
     def __post_init__(self):
         _one_of("estimation", "optimizer", self.optimizer, OPTIMIZERS)
+        pairs = {"verdict_error_share": 1, "verdict_skill": -1, "verdict_shift_gain": -1}
+        for name, order in pairs.items():
+            pair = tuple(getattr(self, name))
+            if len(pair) != 2 or not all(0 <= v for v in pair) or order * (pair[1] - pair[0]) < 0:
+                raise ConfigError(f"estimation.{name}: [warn, fail], both >= 0, the fail value "
+                                  f"{'above' if order > 0 else 'below'} the warn value; got {list(pair)}")
 
 
 @dataclass(frozen=True)

@@ -20,8 +20,12 @@ carries its own weight, or Table 2's maximum: ``motion.first_k_s``), and chi of
 ``model.first_mu`` for the masses.
 
 params.json also holds ``top`` (the best ``estimation.top_k`` sets, best first, with
-chi: the robust planner's ensemble) and ``diagnostics`` (which parameters this
-trial's motion pins down, :mod:`stringcast.estimate.diagnostics`).
+chi: the robust planner's ensemble), ``diagnostics`` (which parameters this
+trial's motion pins down, :mod:`stringcast.estimate.diagnostics`), ``fit_check`` (how the
+fitted points follow the tracked ones, :mod:`stringcast.estimate.fitcheck`) and ``verdict``
+(ok / warn / fail, its reasons and ``likely_cause``, :mod:`stringcast.estimate.verdict`), which
+also carries the warnings and failures of the trial's calibration.json, sync.json and
+tracking.json.
 
 The settings (``estimation.*``, ``model.*``, ...) are the stage's settings objects
 (:class:`~stringcast.core.EstimationSettings`, :class:`~stringcast.core.ModelSettings`, ...).
@@ -32,21 +36,27 @@ The trial's problem and E as a function of chi (the rest state, the frames compa
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Mapping
 
 import numpy as np
 import pandas as pd
 
-from stringcast.core import (PARAM_NAMES, TRACK_COLUMNS, Campaign, ConfigError, EstimationSettings,
-                             EvaluationSettings, ModelSettings, MotionSettings, TrackingSettings, model_ranges,
-                             read_joint_table, read_json, read_parquet, tracks_arrays, write_json, write_parquet)
+from stringcast.core import (PARAM_NAMES, TRACK_COLUMNS, Campaign, ConfigError, DataError, EstimationSettings,
+                             EvaluationSettings, ModelSettings, MotionSettings, TrackingSettings, Verdict,
+                             model_ranges, motion_window, read_joint_table, read_json, read_parquet, tracks_arrays,
+                             write_json, write_parquet)
 from stringcast.model import decode, start_chi
 from .diagnostics import best_k, checked, diagnostics
+from .fitcheck import fit_figures
 from .optimizers import OPTIMIZERS, Recorder
 from .problem import (EstimationProblem, build_problem, make_joint_objective, make_objective, point_errors,
                       simulate_fit)
+from .verdict import fit_verdict
+
+UPSTREAM = ("calibration", "sync", "tracking")
+"""The earlier stages whose ``<stage>.json`` verdicts the fit's verdict carries (beside tracks.parquet)."""
 
 
 @dataclass(frozen=True)
@@ -61,6 +71,8 @@ class Estimate:
         top_chi: (<=K, D) best candidates, top_E: (<=K,) their E (m), K = ``estimation.top_k``.
         message: empty, or what went wrong (all candidates invalid, rest fallback).
         chi_evaluated: (N, D) every candidate in evaluation order; E_evaluated: (N,) its E (m).
+        verdict: the fit's verdict (:mod:`stringcast.estimate.verdict`; ok until :func:`run_estimation`
+            judges it). likely_cause: geometry, clock, tracking, model, or "" when ok.
     """
 
     coeffs: np.ndarray
@@ -79,6 +91,8 @@ class Estimate:
     message: str = ""
     chi_evaluated: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     E_evaluated: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    verdict: Verdict = field(default_factory=Verdict)
+    likely_cause: str = ""
 
     def __post_init__(self):
         n = len(self.mu)
@@ -169,7 +183,7 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign,
                    prev_params_json: Path | None, trial_index: int, out_params_json: Path,
                    out_fit_parquet: Path, earlier: tuple = (), *, model: ModelSettings,
                    evaluation: EvaluationSettings, estimation: EstimationSettings, motion: MotionSettings,
-                   tracking: TrackingSettings) -> Estimate:
+                   tracking: TrackingSettings, upstream: Mapping[str, Path] | None = None) -> Estimate:
     """Estimate the parameters of one trial and write ``params.json`` and ``fit.parquet``.
 
     Args:
@@ -184,9 +198,16 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign,
             :class:`~stringcast.core.EstimationSettings`, :class:`~stringcast.core.TrackingSettings`).
         motion: motion settings (:class:`~stringcast.core.MotionSettings`): without ``prev_params_json``
             the search starts at the first plan's set (``first_k_s``, ``first_max_strain``).
+        upstream: the earlier stages' JSON files by stage (:data:`UPSTREAM`) whose ``"verdict"`` the
+            fit's verdict carries; default: ``<stage>.json`` beside ``tracks_parquet`` (a missing file
+            or key is ok).
+
+    Returns:
+        The :class:`Estimate`, with the fit's ``verdict`` and ``likely_cause``.
 
     Raises:
-        DataError: unreadable or inconsistent inputs (named). ConfigError: bad optimizer settings.
+        DataError: unreadable or inconsistent inputs (named), or an earlier stage's malformed verdict.
+        ConfigError: bad optimizer settings.
     """
     tracks = read_parquet(tracks_parquet, TRACK_COLUMNS)
     t_j, q_j, _ = read_joint_table(joints_csv, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
@@ -203,6 +224,12 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign,
                                               **problem_settings, source=str(tr)))
     est = estimate(problem, model, estimation, chi0, k, seed, earlier=tuple(earlier_problems))
     E_trials = [float(make_objective(p, model)(est.chi[None])[0]) * 1000 for p in (*earlier_problems, problem)]
+    if upstream is None:
+        upstream = {stage: Path(tracks_parquet).parent / f"{stage}.json" for stage in UPSTREAM}
+    sim = simulate_fit(problem, model, est.chi)
+    figures, verdict, cause = judge_fit(problem, sim, campaign.string.length, motion_window(t_j, q_j)[1],
+                                        E_trials[-1], estimation, read_verdicts(upstream))
+    est = replace(est, verdict=verdict, likely_cause=cause)
 
     _, mu_groups_all = decode(est.top_chi, model, np.arange(problem.n_groups))
     top = [{"E_mm": e * 1000, "coefficients": dict(zip(PARAM_NAMES, c)), "mu_groups": m, "chi": x}
@@ -223,27 +250,57 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign,
         "optimizer": est.optimizer, "seed": est.seed, "evaluations": est.n_evaluations,
         "blown_up": est.n_blown_up, "seconds": est.seconds, "M": k, "chi": est.chi,
         "chi_start": chi0, "chi_names": names, "top": top, "diagnostics": diag, "message": est.message,
+        "verdict": {**verdict.as_dict(), "likely_cause": cause}, "fit_check": figures,
         "t_motion_start_s": problem.t_motion_start,
         "t_sim_start_s": problem.frame_t[0], "frames_compared": len(problem.frame_t),
         "rest_fallback_points": list(problem.fallback_points), "dt_s": problem.dt})
-    write_parquet(out_fit_parquet, fit_table(tracks, problem, model, est.chi, campaign.string.n_points))
+    write_parquet(out_fit_parquet, fit_table(tracks, problem, sim, campaign.string.n_points))
     return est
 
 
-def fit_table(tracks: pd.DataFrame, problem: EstimationProblem, model: ModelSettings, chi: np.ndarray,
+def judge_fit(problem: EstimationProblem, sim: tuple[np.ndarray, bool], length_m: float, t_stop: float, E_mm: float,
+              estimation: EstimationSettings, upstream: Mapping[str, Verdict]) -> tuple[dict, Verdict, str]:
+    """The fit's figures (:func:`~stringcast.estimate.fitcheck.fit_figures`), verdict and likely cause
+    (:func:`~stringcast.estimate.verdict.fit_verdict`) for :func:`simulate_fit`'s ``sim`` (NaN if it blew up)."""
+    pos = sim[0] if sim[1] else np.full_like(sim[0], np.nan)
+    figures = fit_figures(problem, pos, length_m, t_stop)
+    return (figures, *fit_verdict(figures, E_mm, estimation, upstream))
+
+
+def read_verdicts(paths: Mapping[str, Path]) -> dict[str, Verdict]:
+    """The ``"verdict"`` of each stage's JSON file, by stage; a missing file or key is ok.
+
+    Raises:
+        DataError: a file that is not JSON, or a verdict with an unknown status (named).
+    """
+    out = {}
+    for stage, path in paths.items():
+        path = Path(path)
+        if not path.exists():
+            continue
+        doc = read_json(path)
+        try:
+            out[stage] = Verdict.from_dict(doc.get("verdict") if isinstance(doc, dict) else None)
+        except (ValueError, TypeError, AttributeError) as exc:
+            raise DataError(f"{path}: malformed \"verdict\": {exc}") from exc
+    return out
+
+
+def fit_table(tracks: pd.DataFrame, problem: EstimationProblem, sim: tuple[np.ndarray, bool],
               n: int) -> pd.DataFrame:
     """``fit.parquet``: ``frame, t_s, point, x_tracked_m, y_tracked_m, valid, x_sim_m, y_sim_m``.
 
+    ``sim``: :func:`simulate_fit`'s (positions (F, n, 2) m at the compared frames, stayed valid).
     Every tracked frame and point 1..n; simulated values NaN outside the compared frames
     (or everywhere if the simulation blew up).
     """
     frames, t, xy, valid = tracks_arrays(tracks, n)
-    sim = np.full_like(xy[:, 1:], np.nan)
-    pos, ok = simulate_fit(problem, model, chi)
+    sim_xy = np.full_like(xy[:, 1:], np.nan)
+    pos, ok = sim
     idx = np.searchsorted(frames, problem.frames)
-    sim[idx] = pos if ok else np.nan
+    sim_xy[idx] = pos if ok else np.nan
     f, nn = len(frames), n
     return pd.DataFrame({
         "frame": np.repeat(frames, nn), "t_s": np.repeat(t, nn), "point": np.tile(np.arange(1, n + 1), f),
         "x_tracked_m": xy[:, 1:, 0].ravel(), "y_tracked_m": xy[:, 1:, 1].ravel(),
-        "valid": valid[:, 1:].ravel(), "x_sim_m": sim[..., 0].ravel(), "y_sim_m": sim[..., 1].ravel()})
+        "valid": valid[:, 1:].ravel(), "x_sim_m": sim_xy[..., 0].ravel(), "y_sim_m": sim_xy[..., 1].ravel()})

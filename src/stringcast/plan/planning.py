@@ -238,9 +238,11 @@ def _ensemble_scores(pl: Predictor, cands: list, q: np.ndarray, T: float, screen
 # Files and stage entry points
 # ---------------------------------------------------------------------------
 def write_motion(result: PlanResult, campaign: Campaign, motion: MotionSettings, coeffs: np.ndarray, mu: np.ndarray,
-                 seed: int, out_csv: Path, out_json: Path, kind: str, observed_miss_mm: float | None = None) -> None:
+                 seed: int, out_csv: Path, out_json: Path, kind: str, observed_miss_mm: float | None = None,
+                 failed_fit: dict | None = None) -> None:
     """Write ``motion.csv`` (t_s, q1_rad..) and its ``motion.json`` sidecar (``observed_miss_mm``: the
-    played motion's tracked tip's closest approach, when the plan read it)."""
+    played motion's tracked tip's closest approach, when the plan read it; ``failed_fit``: the
+    verdict of a failed fit the plan was made on: ``planned_on_failed_fit`` and its reasons)."""
     m = result.motion
     write_joint_table(out_csv, m.t, m.q)
     step = max(1, len(result.tip_path) // 400)
@@ -259,7 +261,8 @@ def write_motion(result: PlanResult, campaign: Campaign, motion: MotionSettings,
         "ensemble_margin_mm": None if result.margin is None else result.margin * 1000,
         "ensemble_d_min_mm": None if result.ensemble_d_min is None else np.asarray(result.ensemble_d_min) * 1000,
         "residual_correction": result.residual, "played_observed_miss_mm": observed_miss_mm,
-        "origin": result.origin, "message": result.message})
+        "origin": result.origin, "message": result.message, "planned_on_failed_fit": failed_fit is not None,
+        "failed_fit": failed_fit})
 
 
 def _rng(motion: MotionSettings, seed: int) -> np.random.Generator:
@@ -337,7 +340,10 @@ def run_plan(params_json: Path, played_motion_json: Path, campaign: Campaign, ou
     search (:func:`search` without ``previous``); motion.json's ``played_observed_miss_mm``
     is that miss; a played wide perturbation (motion.json ``origin``) that missed so is not
     perturbed again. With ``motion.replan_residual_mm`` > 0 no perturbation is played on a model
-    further than that off the played motion's tracked tip (the new search instead).
+    further than that off the played motion's tracked tip (the new search instead). On a fit
+    whose params.json verdict is ``fail`` it still plans (the person decides) and says so:
+    motion.json's ``planned_on_failed_fit`` is true, ``failed_fit`` that verdict, and the
+    message begins "planned on a failed fit".
 
     Raises:
         DataError: unreadable params.json (or, robust, one without ``top``), a played
@@ -346,6 +352,7 @@ def run_plan(params_json: Path, played_motion_json: Path, campaign: Campaign, ou
         ConfigError: residual correction without the trial's files.
     """
     params = read_json(params_json)
+    failed_fit = params.get("verdict") if (params.get("verdict") or {}).get("status") == "fail" else None
     coeffs, mu = planned_parameters(n_points=campaign.string.n_points, params=params, source=str(params_json))
     previous = read_motion_json(played_motion_json, campaign.arm.n_joints, campaign.arm.controller_rate)
     ensemble = ensemble_parameters(n_points=campaign.string.n_points, params=params, source=str(params_json)) \
@@ -375,6 +382,10 @@ def run_plan(params_json: Path, played_motion_json: Path, campaign: Campaign, ou
         if too_far:
             result = _replan(campaign, model, motion, coeffs, mu, seed, previous, ensemble, observed,
                              "the perturbation " + too_far)
+    if failed_fit is not None:
+        cause = failed_fit.get("likely_cause") or "not named"
+        result = _with_message(result, f"planned on a failed fit (likely cause: {cause}): the estimate is not "
+                                       "usable, so neither is this motion's predicted outcome")
     write_motion(result, campaign, motion, coeffs, mu, seed, out_csv, out_json, "next",
-                 observed_miss_mm=miss * 1000 if np.isfinite(miss) else None)
+                 observed_miss_mm=miss * 1000 if np.isfinite(miss) else None, failed_fit=failed_fit)
     return result

@@ -4,7 +4,10 @@ Figures are inlined as PNG data URIs (``report_figures``), the page is rendered
 with Jinja2 from ``templates/``. The trial page shows the paper's figures for the
 trial (Fig. 8a tip paths, Fig. 8b arm paths, Fig. 11 parameters, Table 4 masses),
 E over the search, a frame strip with tracked and simulated points, how often each
-point was tracked, calibration and sync, and the next motion. Every page ends with what
+point was tracked, calibration and sync, and the next motion. At its top a banner gives the
+verdicts the stages wrote (calibration.json, sync.json, tracking.json if there is one, and the
+fit's in params.json: ok green, warn amber, fail red) with their reasons; a next motion planned
+on a failed fit says so instead of "predicted hit". Every page ends with what
 produced it (:mod:`stringcast.report.provenance`: the method, the git commit, the library versions).
 
 The pages show only what the pipeline measured and computed. The virtual lab's
@@ -24,9 +27,9 @@ import pandas as pd
 
 from stringcast import __version__
 from stringcast.calibrate import Calibration
-from stringcast.core import (PARAM_NAMES, TRACK_COLUMNS, Campaign, ModelSettings, MotionSettings, Settings, find_video,
-                             hand_pose, model_ranges, motion_start, read_joint_table, read_json, read_parquet,
-                             tracks_arrays, write_text)
+from stringcast.core import (PARAM_NAMES, TRACK_COLUMNS, Campaign, ModelSettings, MotionSettings, Settings,
+                             Verdict, find_video, hand_pose, model_ranges, motion_start, read_joint_table, read_json,
+                             read_parquet, tracks_arrays, worst, write_text)
 from . import figures as figs
 from .provenance import provenance
 from .strip import frame_strip, strip_data_uri
@@ -132,10 +135,13 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, ou
                     f"(T = {nxt.get('T_s', float('nan')):.3f} s).", "src": figs.joint_curves(t_n, q_n)})
 
     summary = _trial_summary(params, diagnostics, valid, d_meas, campaign, played, nxt)
+    tracking = results_dir / "tracking.json"
+    verdicts = stage_verdicts({"calibration": calib, "sync": sync,
+                               "tracking": read_json(tracking) if tracking.exists() else None, "fit": params})
     warnings = [str(w) for w in calib.get("warnings", [])] + [str(w) for w in [params.get("message")] if w]
     cal_rows = _calibration_rows(calib, sync)
     ctx = _common(campaign, f"Campaign {campaign.name}, trial {results_dir.name.split('_')[-1]}", settings)
-    ctx.update(summary=summary, warnings=warnings, figures=figures, calib=cal_rows,
+    ctx.update(summary=summary, warnings=warnings, figures=figures, calib=cal_rows, verdicts=verdicts,
                params=[(k, v, a, b) for k, v, a, b in zip(PARAM_NAMES, values, lo, hi)])
     write_text(out, _env().get_template("trial.html.j2").render(**ctx))
 
@@ -179,8 +185,12 @@ def _trial_summary(params: dict, diagnostics: dict, valid: np.ndarray, d_meas: f
                ("measured closest approach of the tip", _fmt(d_meas * 1000, ".1f", " mm")),
                ("measured hit", "yes" if d_meas <= campaign.target.radius else "no"),
                ("played motion: predicted closest approach", _fmt(played.get("closest_approach_mm"), ".1f", " mm")),
-               ("next motion: predicted closest approach", _fmt(nxt.get("closest_approach_mm"), ".1f", " mm")),
-               ("next motion: predicted hit", str(nxt.get("hit_predicted")))]
+               ("next motion: predicted closest approach", _fmt(nxt.get("closest_approach_mm"), ".1f", " mm"))]
+    if nxt.get("planned_on_failed_fit"):
+        summary.append(("next motion", "planned on a failed fit: its predicted closest approach is not to be "
+                                       "trusted (see the fit's verdict at the top)"))
+    else:
+        summary.append(("next motion: predicted hit", str(nxt.get("hit_predicted"))))
     if nxt.get("message"):
         summary.append(("next motion: planner's note", str(nxt["message"])))
     res = nxt.get("residual_correction")
@@ -189,6 +199,34 @@ def _trial_summary(params: dict, diagnostics: dict, valid: np.ndarray, d_meas: f
                         f"{res['median_mm']:.1f} / {res['max_mm']:.1f} mm, tip tracked in "
                         f"{res['valid_share'] * 100:.0f} % of its frames"))
     return summary
+
+
+def stage_verdicts(docs: dict) -> dict:
+    """The page's verdict banner from each stage's JSON document (None: the stage wrote no file).
+
+    Args:
+        docs: stage name -> its JSON (calibration.json, sync.json, tracking.json, params.json) or None.
+
+    Returns:
+        {"status": the worst status, "rows": [{"stage", "status", "reasons", "cause"}]}: one row per
+        document given; a document without a ``"verdict"`` has status "not judged". Raises nothing:
+        a malformed verdict is shown as not judged.
+    """
+    rows, judged = [], []
+    for stage, doc in docs.items():
+        if doc is None:
+            continue
+        raw = doc.get("verdict") if isinstance(doc, dict) else None
+        try:
+            v = Verdict.from_dict(raw) if raw else None
+        except (ValueError, TypeError, AttributeError):
+            v = None
+        if v is not None:
+            judged.append(v)
+        rows.append({"stage": stage, "status": v.status if v else "not judged", "reasons": list(v.reasons) if v else [],
+                     "cause": str(raw.get("likely_cause") or "") if isinstance(raw, dict) else ""})
+    status = worst(*judged).status if judged else "not judged"
+    return {"status": status, "rows": rows}
 
 
 def _calibration_rows(calib: dict, sync: dict) -> list[tuple[str, str]]:

@@ -37,9 +37,66 @@ def choose_frames(fit: pd.DataFrame, n: int) -> np.ndarray:
     return np.unique(frames[np.linspace(0, len(frames) - 1, min(n, len(frames))).round().astype(int)])
 
 
+def note_tile(text: str, tile_px: int) -> np.ndarray:
+    """A black (tile_px, tile_px, 3) uint8 tile with ``text`` in white (a tile with nothing to show)."""
+    tile = np.zeros((tile_px, tile_px, 3), np.uint8)
+    for j, line in enumerate(text.split("\n")):
+        cv2.putText(tile, line, (10, tile_px // 2 + 18 * j), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1)
+    return tile
+
+
+def _drawable(px: np.ndarray) -> np.ndarray:
+    """Rows of (k, 2) pixel coordinates that can be drawn: finite and within +-1e5 px (OpenCV's int32
+    fixed point with 2 fractional bits overflows far beyond)."""
+    px = np.asarray(px, float).reshape(-1, 2)
+    return np.all(np.isfinite(px), axis=1) & np.all(np.abs(px) < 1e5, axis=1)
+
+
+def crop_around(img: np.ndarray, centre: np.ndarray, R: int) -> np.ndarray | None:
+    """The (2R, 2R, 3) window of ``img`` centred on pixel ``centre`` (u, v), black where it leaves the
+    image; None when no pixel of the window is inside the image (or the centre is not finite)."""
+    if not np.all(np.isfinite(centre)) or R < 1:
+        return None
+    h, w = img.shape[:2]
+    if not (-R < centre[0] < w + R and -R < centre[1] < h + R):
+        return None
+    c = np.round(centre).astype(int)
+    x0, y0 = c[0] - R, c[1] - R
+    ix0, iy0, ix1, iy1 = max(x0, 0), max(y0, 0), min(x0 + 2 * R, w), min(y0 + 2 * R, h)
+    if ix1 <= ix0 or iy1 <= iy0:
+        return None
+    out = np.zeros((2 * R, 2 * R) + img.shape[2:], img.dtype)
+    out[iy0 - y0:iy1 - y0, ix0 - x0:ix1 - x0] = img[iy0:iy1, ix0:ix1]
+    return out
+
+
+def _draw(img: np.ndarray, calibration: Calibration, grasp_xy: np.ndarray, sim_xy: np.ndarray,
+          pts: pd.DataFrame | None) -> None:
+    """Draw the simulated points (line and crosses, from the grasp) and the valid tracked points on ``img``."""
+    chain = np.vstack([grasp_xy, sim_xy])
+    sim_px = calibration.robot_to_pixel(chain[np.all(np.isfinite(chain), axis=1)])
+    sim_px = sim_px[_drawable(sim_px)]
+    if len(sim_px) > 1:
+        cv2.polylines(img, [np.round(sim_px * 4).astype(np.int32)], False, SIMULATED, 1, cv2.LINE_AA, 2)
+    for p in sim_px[1:]:
+        cv2.drawMarker(img, tuple(int(v) for v in np.round(p)), SIMULATED, cv2.MARKER_TILTED_CROSS, 9, 1, cv2.LINE_AA)
+    if pts is None:
+        return
+    good = pts[pts["valid"].astype(bool)]
+    px = calibration.robot_to_pixel(good[["x_m", "y_m"]].to_numpy()) if len(good) else np.zeros((0, 2))
+    for point, p, ok in zip(good.index, px, _drawable(px)):
+        if ok:
+            cv2.circle(img, tuple(int(v) for v in np.round(p * 4)), 16, GRASP if point == 0 else TRACKED, 1,
+                       cv2.LINE_AA, 2)
+
+
 def frame_strip(video_path: Path, calibration: Calibration, tracks: pd.DataFrame, fit: pd.DataFrame,
                 length_m: float, n_frames: int = 6, tile_px: int = 300, margin_m: float = 0.08) -> np.ndarray:
     """Tiles of frames around the grasp point with tracked and simulated points, side by side.
+
+    Each tile is the square of side 2 (L + ``margin_m``) around the grasp point, cut out of the frame
+    (black where the square leaves the image); a frame whose square misses the image altogether (the
+    grasp point far outside the camera's view) gives a note tile instead.
 
     Args:
         video_path: the trial's video (any :func:`~stringcast.video.container.open_video` source).
@@ -58,42 +115,34 @@ def frame_strip(video_path: Path, calibration: Calibration, tracks: pd.DataFrame
     chosen = choose_frames(fit, n_frames)
     tiles = []
     tr = tracks.set_index(["frame", "point"]).sort_index()
+    outside = 0
     with open_video(video_path) as video:
         for k in chosen:
             if k >= video.n_frames:
                 continue
-            img = _to_bgr(video.read(int(k)))
             grasp = tr.loc[(int(k), 0)] if (int(k), 0) in tr.index else None
             if grasp is None or not np.isfinite(grasp["x_m"]):
                 continue
-            g_px = calibration.robot_to_pixel(np.array([[grasp["x_m"], grasp["y_m"]]]))[0]
+            img = _to_bgr(video.read(int(k)))
+            grasp_xy = np.array([[grasp["x_m"], grasp["y_m"]]])
+            g_px = calibration.robot_to_pixel(grasp_xy)[0]
             sim = fit[fit["frame"] == k].sort_values("point")
-            sim_xy = np.vstack([[grasp["x_m"], grasp["y_m"]], sim[["x_sim_m", "y_sim_m"]].to_numpy()])
-            ok = np.all(np.isfinite(sim_xy), axis=1)
-            sim_px = calibration.robot_to_pixel(sim_xy[ok])
-            cv2.polylines(img, [np.round(sim_px * 4).astype(np.int32)], False, SIMULATED, 1, cv2.LINE_AA, 2)
-            for p in sim_px[1:]:
-                cv2.drawMarker(img, tuple(np.round(p).astype(int)), SIMULATED, cv2.MARKER_TILTED_CROSS, 9, 1, cv2.LINE_AA)
             pts = tr.loc[int(k)] if int(k) in tr.index.get_level_values(0) else None
-            if pts is not None:
-                good = pts[pts["valid"].astype(bool)]
-                px = calibration.robot_to_pixel(good[["x_m", "y_m"]].to_numpy())
-                for point, p in zip(good.index, px):
-                    cv2.circle(img, tuple(np.round(p * 4).astype(int)), 16, GRASP if point == 0 else TRACKED, 1,
-                               cv2.LINE_AA, 2)
-            R = max(8, int((length_m + margin_m) / float(calibration.m_per_px(g_px[None])[0])))
-            c = np.round(g_px).astype(int)
-            crop = cv2.copyMakeBorder(img, R, R, R, R, cv2.BORDER_CONSTANT)[c[1]:c[1] + 2 * R, c[0]:c[0] + 2 * R]
+            _draw(img, calibration, grasp_xy, sim[["x_sim_m", "y_sim_m"]].to_numpy(), pts)
+            scale = float(calibration.m_per_px(g_px[None])[0]) if np.all(np.isfinite(g_px)) else float("nan")
+            R = int(min(max(8, (length_m + margin_m) / scale), 2 * max(img.shape[:2]))) if scale > 0 else 0
+            crop = crop_around(img, g_px, R)
+            if crop is None:
+                outside += 1
+                continue
             tile = cv2.resize(crop, (tile_px, tile_px), interpolation=cv2.INTER_AREA)
             t = float(fit.loc[fit["frame"] == k, "t_s"].iloc[0])
             cv2.putText(tile, f"frame {k}  t={t:.3f} s", (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 255, 255), 1,
                         cv2.LINE_AA)
             tiles.append(tile)
     if not tiles:
-        tile = np.zeros((tile_px, tile_px, 3), np.uint8)
-        cv2.putText(tile, "no tracked frames to show", (10, tile_px // 2), cv2.FONT_HERSHEY_SIMPLEX, 0.5,
-                    (255, 255, 255), 1)
-        tiles = [tile]
+        text = f"the grasp point is outside\nthe image in {outside} frames" if outside else "no tracked frames to show"
+        tiles = [note_tile(text, tile_px)]
     return np.hstack(tiles)
 
 
