@@ -55,7 +55,8 @@ def estimate_offset(video, calibration, arm, t_j: np.ndarray, q_j: np.ndarray,
         sync: sync settings (:class:`~stringcast.core.SyncSettings`).
         board_check: the board check's settings (:class:`~stringcast.core.BoardCheckSettings`), for
             the check on the rest frames when the calibration has none.
-        trigger_s: the recording's trigger time, a starting guess only.
+        trigger_s: the recording's trigger time, a starting guess only (whether it or the estimate is used is
+            :func:`stringcast.sync.confidence.choose_offset`'s choice).
 
     Steps: the board check on the median of the rest frames gives the translation d
     between where the still arm is seen and its FK position; the strips are moved by d
