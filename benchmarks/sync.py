@@ -59,7 +59,8 @@ def _sync_case(trial: Path, calibration_json: Path, campaign, settings, out: Pat
             "seconds": time.perf_counter() - t0, "time_residual_ms": doc["time_residual_ms"],
             "residual_mm": doc["residual_mm"], "frames": doc["frames"], "frames_used": doc["frames_used"],
             "board_check_mm": bc["residual_mm"], "board_check_dxdy_mm": [bc["dx_mm"], bc["dy_mm"]],
-            "trigger_disagrees": doc.get("trigger_disagrees"), "warnings": doc["warnings"]}
+            "trigger_disagrees": doc.get("trigger_disagrees"), "chosen": doc.get("chosen"),
+            "verdict": doc.get("verdict"), "warnings": doc["warnings"]}
 
 
 def run(quick: bool = False) -> dict:

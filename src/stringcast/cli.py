@@ -111,7 +111,8 @@ def cmd_sync(args):
     doc = _run("sync", args, Path(args.trial_dir), Path(args.calibration), _campaign(args), Path(args.out))
     extra = "" if doc.get("time_residual_ms") is None else \
         f", time residual {doc['time_residual_ms']:.2f} ms, arm match residual {doc['residual_mm'] or float('nan'):.1f} mm"
-    print(f"sync: offset {doc['offset_s']:.6f} s ({doc['method']}{extra}) -> {args.out}")
+    print(f"sync: offset {doc['offset_s']:.6f} s ({doc['method']}{extra}), verdict {doc['verdict']['status']} "
+          f"-> {args.out}")
 
 
 def cmd_track(args):

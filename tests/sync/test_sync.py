@@ -4,6 +4,7 @@ import dataclasses
 import warnings
 
 import numpy as np
+import pandas as pd
 import pytest
 import yaml
 
@@ -92,13 +93,15 @@ def test_offset_from_the_video_within_half_a_millisecond(lab_trial, settings, tr
     assert doc["method"].startswith("video") and doc["frames_used"] > 20
     assert 0 < doc["residual_mm"] < 3.0
     assert (doc["coarse_offset_s"] is not None) == (trigger != "as written")
-    if value is None:
+    if value is None:  # no trigger: the video's estimate, and on this clean clip an ok verdict
         assert doc["trigger_disagrees"] is None and doc["trigger_minus_estimate_ms"] is None
+        assert doc["chosen"] == "video" and set(doc["candidates"]) == {"video"}
+        assert doc["verdict"] == {"status": "ok", "reasons": []}
     else:
-        gap = (value - doc["offset_s"]) * 1000
+        gap = (value - doc["candidates"]["video"]["offset_s"]) * 1000
         assert doc["trigger_minus_estimate_ms"] == pytest.approx(gap)
-        assert doc["trigger_disagrees"] == (abs(gap) > 1000 / FPS)
-        assert any("more than a frame" in w for w in doc["warnings"]) == doc["trigger_disagrees"]
+        assert doc["trigger_disagrees"] == (doc["chosen"] == "video")  # the video overruled the trigger time
+        assert any("overruled" in w for w in doc["warnings"]) == doc["trigger_disagrees"]
     if trigger == "wrong by 25 ms":
         assert doc["trigger_disagrees"]
     assert read_json(root / f"sync_{d.name}.json")["offset_s"] == doc["offset_s"]
@@ -174,3 +177,116 @@ def test_bad_inputs_name_the_file(lab_trial, settings, tmp_path):
         run_sync(tmp_path / "nope", root / "calibration.json", campaign, **_kw(settings))
     with pytest.raises(DataError, match="fps"):
         frame_times({"offset_s": 0.0, "fps": 0.0, "frames": 3})
+
+
+def _run(root, trial, campaign, settings, name, **change):
+    """run_sync on a copy of ``trial`` with video.yaml ``change``d; sync.json written beside it, warnings muted."""
+    d = _with_video_yaml(root, trial, name, **change)
+    with warnings.catch_warnings(record=True):
+        warnings.simplefilter("always")
+        doc = run_sync(d, root / "calibration.json", campaign, d / "sync.json", **_kw(settings))
+    assert read_json(d / "sync.json")["verdict"] == doc["verdict"]
+    return doc
+
+
+def test_a_trigger_30_ms_wrong_is_overruled_with_a_reason_naming_both(lab_trial, settings):
+    """The video clearly fits better: it is used, and the verdict says so, naming both offsets and
+    residuals (a recorded note on an ok verdict: the video's estimate is sound)."""
+    root, trial, campaign, cfg, truth = lab_trial
+    wrong = truth["trigger_time_s"] + 0.030
+    doc = _run(root, trial, campaign, settings, "t_wrong_30", trigger_time_s=wrong)
+    video, trig = doc["candidates"]["video"], doc["candidates"]["trigger"]
+    print(f"30 ms wrong: residual {trig['residual_mm']:.2f} mm at the trigger, {video['residual_mm']:.2f} mm at the "
+          f"video's offset, as good in {trig['excess_p']:.2%} of the resamples")
+    assert doc["chosen"] == "video" and doc["offset_s"] == video["offset_s"]
+    assert abs(doc["offset_s"] - truth["trigger_time_s"]) * 1000 <= 0.5
+    assert trig["offset_s"] == pytest.approx(wrong) and trig["residual_mm"] > 5 * video["residual_mm"]
+    assert trig["excess_p"] < trig["excess_p_needed"] == pytest.approx(0.00135, abs=1e-5)  # k = 3
+    assert doc["verdict"]["status"] == "ok"
+    reason = next(r for r in doc["verdict"]["reasons"] if "overruled" in r)
+    for number in (f"{wrong:.5f} s", f"{video['offset_s']:.5f} s", f"{trig['residual_mm']:.2f} mm",
+                   f"{video['residual_mm']:.2f} mm"):
+        assert number in reason, (number, reason)
+
+
+def test_a_right_trigger_is_kept_though_the_videos_optimum_is_a_fraction_of_a_ms_away(lab_trial, settings):
+    root, trial, campaign, cfg, truth = lab_trial
+    right = truth["trigger_time_s"]
+    doc = _run(root, trial, campaign, settings, "t_right", trigger_time_s=right)
+    video, trig = doc["candidates"]["video"], doc["candidates"]["trigger"]
+    gap_ms = (right - video["offset_s"]) * 1000
+    print(f"right trigger: video's optimum {gap_ms:+.3f} ms away, excess residual {trig['excess_mm']:+.3f} mm "
+          f"(the trigger as good in {trig['excess_p']:.1%} of the resamples)")
+    assert 0.05 < abs(gap_ms) < 1.0  # the video alone would be off by this much
+    assert doc["chosen"] == "trigger" and doc["offset_s"] == right and doc["trigger_disagrees"] is False
+    assert trig["excess_p"] > 0.05  # no evidence against it
+    assert doc["verdict"] == {"status": "ok", "reasons": []}
+    assert doc["method"].startswith("video.yaml trigger_time_s, checked")
+
+
+def test_a_video_that_gives_no_offset_leaves_the_trigger_unchecked_with_a_warning(lab_trial, settings):
+    """A board pose 5 m off puts the whole arm outside the image: no video estimate; the trigger time is used."""
+    root, trial, campaign, cfg, truth = lab_trial
+    true_calibration(truth, (5.0, 0.0)).to_json(root / "calibration_far.json")
+    written = truth["trigger_time_written_s"]
+    with warnings.catch_warnings(record=True):
+        warnings.simplefilter("always")
+        doc = run_sync(trial, root / "calibration_far.json", campaign, **_kw(settings))
+    assert doc["chosen"] == "trigger" and doc["offset_s"] == pytest.approx(written, abs=1e-8)
+    assert doc["candidates"]["video"]["offset_s"] is None and "in view" in doc["candidates"]["video"]["error"]
+    assert doc["verdict"]["status"] == "warn" and "unchecked" in doc["verdict"]["reasons"][0]
+    d = _with_video_yaml(root, trial, "far_no_trigger", trigger_time_s=None)
+    with pytest.raises(DataError, match="in view"):  # and without a trigger time, no offset at all
+        run_sync(d, root / "calibration_far.json", campaign, **_kw(settings))
+
+
+def _with_joints(root, trial, name, t_from=None, t_to=None):
+    """A copy of the trial folder whose joints.csv keeps the rows with t_from <= t_s <= t_to, and without a trigger."""
+    d = _with_video_yaml(root, trial, name, trigger_time_s=None)
+    (d / "joints.csv").unlink()
+    rows = pd.read_csv(trial / "joints.csv")
+    t = rows["t_s"].to_numpy()
+    keep = (t >= (-np.inf if t_from is None else t_from)) & (t <= (np.inf if t_to is None else t_to))
+    rows[keep].to_csv(d / "joints.csv", index=False)
+    return d
+
+
+def test_a_joint_log_that_starts_at_the_motions_start_still_syncs_and_tracks(lab_trial, settings):
+    """The pre-roll rows dropped (the log starts where the arm starts to move, 0.1 s after the first frame):
+    the arm is taken as still before the log, sync.json says so, and tracking runs on the synced clip."""
+    from stringcast.core import motion_start, read_joint_table
+    from stringcast.track.tracking import run_tracking
+
+    root, trial, campaign, cfg, truth = lab_trial
+    t_j, q_j, _ = read_joint_table(trial / "joints.csv", n_joints=campaign.arm.n_joints)
+    start = motion_start(t_j, q_j)
+    d = _with_joints(root, trial, "log_from_motion", t_from=start)
+    with warnings.catch_warnings(record=True):
+        warnings.simplefilter("always")
+        doc = run_sync(d, root / "calibration.json", campaign, d / "sync.json", **_kw(settings))
+    err_ms = (doc["offset_s"] - truth["trigger_time_s"]) * 1000
+    log = doc["joint_log"]
+    print(f"log from the motion's start ({start:.3f} s): error {err_ms:+.3f} ms, joint_log {log}")
+    assert abs(err_ms) <= 0.5 and doc["verdict"]["status"] == "ok"
+    assert log["extended"] is True and log["ends_before_video_s"] == 0.0
+    assert log["starts_after_video_s"] == pytest.approx(start - doc["offset_s"], abs=1e-9)
+    assert log["starts_after_video_s"] > 0.05 and log["first_speed_share"] <= settings.sync.still_speed_share
+    assert read_json(d / "sync.json")["joint_log"] == log
+    tracks = run_tracking(d, root / "calibration.json", d / "sync.json", campaign, d / "tracks.parquet",
+                          tracking=settings.tracking)
+    moving = tracks[(tracks["t_s"] >= start) & (tracks["point"] > 0)]
+    assert len(tracks["frame"].unique()) == doc["frames"] and moving["valid"].mean() > 0.5
+
+
+def test_a_joint_log_cut_in_the_motion_is_refused_naming_the_file(lab_trial, settings):
+    root, trial, campaign, cfg, truth = lab_trial
+    d = _with_joints(root, trial, "log_from_mid_motion", t_from=0.30)  # the arm moves at ~75 % of its speed limit
+    with pytest.raises(DataError, match=r"log_from_mid_motion/joints.csv: the joint log starts with the arm moving"):
+        run_sync(d, root / "calibration.json", campaign, **_kw(settings))
+    d = _with_joints(root, trial, "log_to_mid_motion", t_to=0.50)
+    meta = yaml.safe_load((d / "video.yaml").read_text())
+    (d / "video.yaml").unlink()
+    (d / "video.yaml").write_text(yaml.safe_dump({**meta, "trigger_time_s": truth["trigger_time_s"]}))
+    with pytest.raises(DataError, match=r"log_to_mid_motion/joints.csv: .*after it have no joint data; the log ends "
+                                        r"with the arm moving"):
+        run_sync(d, root / "calibration.json", campaign, **_kw(settings))

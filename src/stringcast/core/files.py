@@ -213,18 +213,66 @@ def read_joint_table(path: str | Path, kind: str = "joints.csv", *, n_joints: in
     return t, data[:, 1:], df
 
 
+def end_speed_shares(t_joints: np.ndarray, q_joints: np.ndarray, qd_max: np.ndarray,
+                     window_s: float) -> tuple[float, float]:
+    """How fast the arm moves at a joint log's first and at its last sample, as a share of its speed limits.
+
+    Each joint's velocity at an end is the slope, at that end, of a quadratic fitted by least
+    squares to the samples within ``window_s`` of it (at least 3): a quadratic, so that a log
+    that starts where the arm starts to accelerate reads as still there (a line's slope would
+    average the acceleration in).
+
+    Args:
+        t_joints: (K,) s, increasing; q_joints: (K, J) rad; qd_max: (J,) rad/s, the speed limits.
+        window_s: the span fitted at each end, s.
+
+    Returns:
+        (first, last): max over joints of |velocity| / qd_max at the log's first and last sample.
+    """
+    t, q = np.asarray(t_joints, float), np.asarray(q_joints, float)
+    lim = np.asarray(qd_max, float)
+
+    def share(tt: np.ndarray, qq: np.ndarray) -> float:
+        n = max(3, int(np.sum(np.abs(tt - tt[0]) <= window_s)))
+        x = tt[:n] - tt[0]
+        coef, *_ = np.linalg.lstsq(np.column_stack([np.ones(n), x, x * x]), qq[:n], rcond=None)
+        return float(np.max(np.abs(coef[1]) / lim))
+
+    if len(t) < 3:
+        return float("inf"), float("inf")
+    return share(t, q), share(t[::-1], q[::-1])
+
+
 def check_joint_coverage(t_joints: np.ndarray, t_frames: np.ndarray, joints_path: str | Path,
-                         tol_s: float | None = None) -> None:
-    """Check that the joint log covers every video frame's time.
+                         tol_s: float | None = None, *, q_joints: np.ndarray | None = None,
+                         qd_max: np.ndarray | None = None, still_share: float = 0.05,
+                         still_window_s: float = 0.02) -> dict:
+    """Check that the joint log covers every video frame's time, or that the arm was still where it does not.
+
+    A log may start after the first frame (at the motion's start) or end before the last one
+    when the arm is still at that end of the log (:func:`end_speed_shares` at most
+    ``still_share``): the arm is then taken as still, in the log's first (last) posture, over
+    the frames outside it (``np.interp`` holds the ends). A log that ends with the arm moving
+    misses part of the motion and is refused. Without ``q_joints`` and ``qd_max`` every frame must
+    lie in the log.
 
     Args:
         t_joints: (K,) joint-log times, s, controller clock (increasing).
         t_frames: (F,) frame times, s, on the same clock (after sync).
         joints_path: the joint log, named in the error.
         tol_s: slack at each end, s; default one median joint-log period.
+        q_joints: (K, J) rad, the log's joints; qd_max: (J,) rad/s, the arm's speed limits.
+        still_share, still_window_s: see :func:`end_speed_shares`.
+
+    Returns:
+        ``{"starts_after_video_s", "ends_before_video_s", "extended",
+        "first_speed_share", "last_speed_share"}``: how long the frames run before the log's
+        start and after its end (0 when covered), whether the arm is taken as still outside
+        the log, and the end speeds (None without q_joints).
 
     Raises:
-        DataError: the frames start before or end after the log (both spans in the message).
+        DataError: frames outside the log at an end where the arm moves, or without q_joints
+            at all (both spans in the message).
     """
     t_joints = np.asarray(t_joints, float)
     t_frames = np.asarray(t_frames, float)
@@ -233,11 +281,33 @@ def check_joint_coverage(t_joints: np.ndarray, t_frames: np.ndarray, joints_path
     tol = float(np.median(np.diff(t_joints))) if tol_s is None else float(tol_s)
     j0, j1, f0, f1 = t_joints[0], t_joints[-1], float(np.min(t_frames)), float(np.max(t_frames))
     before, after = j0 - f0, f1 - j1
-    if before > tol or after > tol:
-        gaps = [f"{before:.4f} s before it" if before > tol else "", f"{after:.4f} s after it" if after > tol else ""]
+    shares = (None, None)
+    if q_joints is not None and qd_max is not None:
+        shares = end_speed_shares(t_joints, q_joints, qd_max, still_window_s)
+    moving = [s is None or s > still_share for s in shares]
+    bad = (before > tol and moving[0], after > tol and moving[1])
+    if any(bad):
+        gaps = [f"{before:.4f} s before it" if bad[0] else "", f"{after:.4f} s after it" if bad[1] else ""]
+        why = "" if shares[0] is None else (
+            "; the log {} with the arm moving ({:.0%} of its speed limit, more than {:.0%}): it misses part of the "
+            "motion".format(" and ".join(w for w, b in zip(("starts", "ends"), bad) if b),
+                            max(s for s, b in zip(shares, bad) if b), still_share))
         raise DataError(f"{joints_path}: the joint log spans {j0:.4f} .. {j1:.4f} s but the video frames span "
                         f"{f0:.4f} .. {f1:.4f} s (controller clock); frames "
-                        f"{' and '.join(g for g in gaps if g)} have no joint data")
+                        f"{' and '.join(g for g in gaps if g)} have no joint data{why}")
+    return {"starts_after_video_s": max(0.0, float(before)), "ends_before_video_s": max(0.0, float(after)),
+            "extended": bool(before > tol or after > tol),
+            "first_speed_share": shares[0], "last_speed_share": shares[1]}
+
+
+def joint_log_span(t_joints: np.ndarray, joint_log: dict | None) -> tuple[float, float]:
+    """Controller times (s) between which a frame's arm posture is known: the joint log's own span, or
+    every time when ``sync.json``'s ``joint_log`` (:func:`check_joint_coverage`) says the log was
+    extended (the arm still, in its first or last logged posture, outside it; ``np.interp`` holds the
+    ends). t_joints: (K,) s. For the stages that take frames outside the log as unknown."""
+    if joint_log and joint_log.get("extended"):
+        return -np.inf, np.inf
+    return float(t_joints[0]), float(t_joints[-1])
 
 
 def write_joint_table(path: str | Path, t: np.ndarray, q: np.ndarray,

@@ -280,6 +280,10 @@ class SyncSettings(_Section):
     min_frames: int = _f(20, "fewer frames than this: no video estimate")
     segment_agree_ms: float = _f(3.0, "segments whose own peak is farther than this from the others' are left out, ms")
     recentre_ms: float = _f(1.0, "the fine search recentres until the peak lies within this of the centre, ms")
+    evidence_k: float = _f(3.0, "the video overrules a trigger time only when the arm matches the frames worse at the trigger's offset than at the video's with this many standard errors' confidence (one-sided, frames resampled in blocks); also the margin for an ambiguous peak and the offset's uncertainty")
+    match_warn_px: float = _f(1.0, "warn when the arm-match residual, or the offset's uncertainty times the arm's speed, exceeds this, px")
+    still_speed_share: float = _f(0.05, "a joint log may start after the video or end before it where every joint moves slower than this share of its speed limit (the arm taken as still outside the log)")
+    still_window_s: float = _f(0.02, "the joints' speed at each end of the log is fitted over this span, s")
 
     def __post_init__(self):
         _one_of("sync", "method", self.method, ("video", "trigger"))

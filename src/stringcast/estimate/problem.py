@@ -118,12 +118,12 @@ def build_problem(tracks_df: pd.DataFrame, t_joints: np.ndarray, q_joints: np.nd
         t_move = motion_start(t_joints, q_joints)
     except ValueError as exc:
         raise DataError(f"joints.csv: {exc}") from exc
-    rest = np.nonzero((t >= t_joints[0]) & (t < t_move))[0]
+    rest = np.nonzero(t < t_move)[0]   # frames before a log that starts at the motion: the arm still (sync.json)
     n_rest = int(tracking.rest_frames)
     rest = rest[-max(n_rest, MIN_REST_FRAMES):]
     if len(rest) < MIN_REST_FRAMES:
         raise DataError(f"{source}: only {len(rest)} frames before the motion starts at t = {t_move:.3f} s "
-                        f"(need {MIN_REST_FRAMES}) within the joint log")
+                        f"(need {MIN_REST_FRAMES})")
     use = np.arange(rest[0], len(t))
     use = use[t[use] <= t_joints[-1]]
     window_s = estimation.compare_after_motion_s

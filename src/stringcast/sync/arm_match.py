@@ -35,7 +35,7 @@ model of the renderer or of the real arm's colours:
    and the arm predicted at the estimated offset; their robust spread is the residual.
 
 The board-to-robot check (where the still arm is seen vs its FK position) is
-:func:`stringcast.calibrate.board_check.check_board_to_robot`; :func:`stringcast.sync.offset.estimate_offset`
+:func:`stringcast.calibrate.board_check.check_board_to_robot`; :func:`stringcast.sync.video_offset.estimate_offset`
 moves the strips by the translation it measures.
 """
 from __future__ import annotations

@@ -11,52 +11,68 @@ the video estimate measures the centre whatever the exposure.
 
 :func:`run_sync` with the sync setting ``method: video`` (the default) estimates the
 offset from the video: the arm seen in the frames is matched with the forward kinematics
-of the joint log (:mod:`stringcast.sync.arm_match`; the arm rather than the tracked grasp point,
-because the links are large, sharp-edged and seen in every frame, whereas the grasp point
-hides behind the gripper and blurs), sub-frame, with or without the recording's
-``trigger_time_s`` (used only as a starting guess; a wrong one is overruled and
-warned about when it disagrees by more than a frame). ``method: trigger`` takes the
+of the joint log (:mod:`stringcast.sync.arm_match`, :mod:`stringcast.sync.video_offset`; the arm
+rather than the tracked grasp point, because the links are large, sharp-edged and seen in
+every frame, whereas the grasp point hides behind the gripper and blurs), sub-frame. The
+recording's ``trigger_time_s``, when given, is never silently overruled: both candidates
+are judged by the arm-match residual at their offsets, and the video wins only with
+clearly better evidence (:mod:`stringcast.sync.confidence`). ``method: trigger`` takes the
 offset from ``video.yaml`` as it is.
 
-``sync.json`` holds: offset_s, fps, frames, method, residual_mm (robust spread, over the
-arm's segments and frames, of the distance across each segment between where the frame
-shows it and where the forward kinematics put it at the estimated offset:
+**The joint log** may start after the first frame (at the motion's start) or end before
+the last one where the arm is still at that end of the log: the arm is taken as still
+there, in the log's first (last) posture (:func:`stringcast.core.check_joint_coverage`); a
+log whose end shows the arm moving misses part of the motion and is refused.
+
+``sync.json`` holds: offset_s, fps, frames, method, chosen (``trigger`` or ``video``),
+candidates (``trigger``: offset_s, residual_mm, minus_video_ms, excess_mm (its residual
+minus the video's), excess_standard_error_mm, excess_p (the share of block resamples of
+the frames in which the trigger fits as well), excess_p_needed, resamples, block_frames; ``video``: offset_s,
+residual_mm, time_residual_ms, standard_error_ms, frames_used, segments_used, ambiguous,
+second_peak_s, block_frames, residual_px, arm_width_px, uncertainty_px; or ``error`` when
+the video gave no estimate), verdict (:class:`~stringcast.core.Verdict`), joint_log
+(starts_after_video_s, ends_before_video_s, extended, first_speed_share,
+last_speed_share), residual_mm (at the chosen offset: robust spread, over the agreeing
+segments and the frames, of the distance across each segment between where the frame
+shows it and where the forward kinematics put it:
 :func:`stringcast.sync.arm_match.match_residual`), residual_matches, arm_shift_mm (the board
 check's translation, by which the predicted arm is moved), time_residual_ms (spread of
-the frames' own best offsets), segment_offsets_s and segments_used (each arm segment's
-own peak; those that agree are used), trigger_time_s, trigger_minus_estimate_ms and
-trigger_disagrees (by more than a frame; also a warning), frames_used, dropped_frames (where the
-file has timestamps), board_check (:func:`stringcast.calibrate.board_check.check_board_to_robot`
-on the rest frames), score_curve, warnings, note.
+the frames' own best offsets), segment_offsets_s, segments_in_view and segments_used
+(each arm segment's own peak; those that agree are used), trigger_time_s,
+trigger_minus_estimate_ms, trigger_disagrees (the video overruled the trigger time),
+frames_used, dropped_frames (where the file has timestamps), board_check
+(:func:`stringcast.calibrate.board_check.check_board_to_robot` on the rest frames),
+score_curve, warnings (the verdict's reasons), note.
 """
 from __future__ import annotations
 
 import math
 import sys
 import warnings
-from functools import partial
 from pathlib import Path
 
 import numpy as np
 
-from . import arm_match as sync_arm
-from stringcast.core import motion_window
-from stringcast.calibrate import check_board_to_robot
+from .confidence import choose_offset
+from .video_offset import estimate_offset
+from stringcast.calibrate import Calibration
 from stringcast.core import (
     BoardCheckSettings,
     DataError,
     SyncSettings,
+    Verdict,
     check_joint_coverage,
+    end_speed_shares,
     find_video,
     read_joint_table,
     read_video_meta,
     write_json,
 )
-from stringcast.calibrate import Calibration
 from stringcast.video import check_frame_count, dropped_frames, open_video
 
 METHOD_TRIGGER = "video.yaml trigger_time_s"
 METHOD_VIDEO = "video: arm vs forward kinematics of joints.csv"
+METHOD_CHECKED = "video.yaml trigger_time_s, checked against the arm in the video"
 
 
 def _trigger_doc(meta: dict, video_yaml: Path) -> dict:
@@ -64,226 +80,61 @@ def _trigger_doc(meta: dict, video_yaml: Path) -> dict:
     if trig is None:
         raise DataError(f"{video_yaml}: no trigger_time_s, and config sync.method is 'trigger'; give the "
                         "controller-clock time of frame 0, or use sync.method: video")
-    return {"offset_s": float(trig), "method": METHOD_TRIGGER, "residual_mm": None,
+    return {"offset_s": float(trig), "method": METHOD_TRIGGER, "residual_mm": None, "chosen": "trigger",
+            "candidates": {"trigger": {"offset_s": float(trig), "residual_mm": None}},
             "note": "offset taken from the recording's trigger time, not estimated from the video"}
 
 
-def estimate_offset(video, calibration, arm, t_j: np.ndarray, q_j: np.ndarray,
-                    sync: SyncSettings, board_check: BoardCheckSettings, trigger_s: float | None = None) -> dict:
-    """Offset of frame 0 on the controller clock, from the arm seen in the video.
-
-    Args:
-        video: a :class:`~stringcast.video.container.VideoReader` (fps known). calibration:
-            :class:`~stringcast.calibrate.calibration.Calibration`. t_j (K,) s, q_j (K, J) rad: the
-            joint log.
-        sync: sync settings (:class:`~stringcast.core.SyncSettings`).
-        board_check: the board check's settings (:class:`~stringcast.core.BoardCheckSettings`), for
-            the check on the rest frames when the calibration has none.
-        trigger_s: the recording's trigger time, a starting guess only.
-
-    Steps: the board check on the median of the rest frames gives the translation d
-    between where the still arm is seen and its FK position; the strips are moved by d
-    (so a board pose or calibration error does not bias the timing); coarse and fine
-    search as in :mod:`stringcast.sync.arm_match`, the search window re-centred on the peak
-    until it sits within ``recentre_ms`` of the centre (on a fixed grid of candidate
-    offsets, so the result does not depend on the starting guess); each segment's NCC is
-    summed over the frames (a few bad frames only flatten their own curve), a segment
-    whose own peak is more than ``segment_agree_ms`` from the median of the segments'
-    peaks is left out (a static feature such as a cable behind it in the rest template
-    pulls its match towards the rest posture), and the peak of the others' sum is the
-    offset; the residual in mm is :func:`~stringcast.sync.arm_match.match_residual` over every
-    frame's and segment's own best offset.
-
-    Returns:
-        dict with offset_s (s, exposure centre of frame 0), residual_mm (None if too few
-        matches), residual_matches, arm_shift_mm (the board check's translation applied
-        to the strips), time_residual_ms, frames_used, board_check, coarse_offset_s (None
-        if the coarse search was not needed), segment_offsets_s, segments_used, score_curve.
-
-    Raises:
-        DataError: the video has no still frames of the arm before the motion, or no
-            frame in the motion.
-    """
-    fps, st = float(video.fps), sync
-    hw = sync_arm.segment_half_widths(arm, st.strip_margin_mm / 1000)
-    n_u, n_v, sig = int(st.strip_samples), int(st.strip_width_samples), float(st.smooth_px)
-    hw, segments = _segments_in_view(video, calibration, arm, q_j[0], hw, n_u, n_v)
-    n_rest, rest, board, shift = _rest_and_board(video, calibration, arm, q_j[0], st, board_check)
-
-    def strips(q):
-        return sync_arm.strip_points(arm, q, hw, n_u, n_v, segments) + shift
-
-    rest_pts = strips(q_j[0])
-    rest_s = sync_arm.smooth(rest, sig)
-    template = sync_arm.sample(rest_s, calibration, rest_pts)
-    try:
-        t_on, t_off = motion_window(t_j, q_j)
-    except ValueError as exc:
-        raise DataError(f"{video.path}: sync from the video needs the arm to move: {exc}") from exc
-    search, step = st.search_ms / 1000, st.step_ms / 1000
-    coarse = partial(_coarse_search, video, calibration, sig, rest_pts, rest_s, template, strips, n_rest, t_j, q_j,
-                     fps, st)
-    fine = partial(_fine_search, video, calibration, sig, template, strips, t_j, q_j, fps, (t_on, t_off), search,
-                   step, len(segments), st)
-    coarse_s, (taus, total, best, frames, tau_ks, total_seg) = _recentred_search(coarse, fine, trigger_s, step, st)
-    if not best:
-        raise DataError(f"{video.path}: the arm's motion is not visible in the frames (no frame's match with the "
-                        "forward kinematics depends on the offset)")
-    seg_peaks, keep, offset = _segment_offset(taus, total, total_seg, len(segments), st)
-    residual_mm, n_eq = _offset_residual(arm, t_j, q_j, frames, fps, offset, segments, n_u, tau_ks)
-    mad = float(np.median(np.abs(np.asarray(best) - offset))) * 1.4826
-    return {"offset_s": offset, "time_residual_ms": mad * 1000, "frames_used": len(best), "board_check": board,
-            "coarse_offset_s": coarse_s, "residual_mm": residual_mm,
-            "residual_matches": n_eq, "arm_shift_mm": (shift * 1000).tolist(),
-            "segment_offsets_s": seg_peaks.tolist(), "segments_used": [int(j) for j in segments[keep]],
-            "score_curve": {"offset_s": taus.tolist(), "ncc_sum": total.tolist()}}
+def _check_log_starts_still(t_j: np.ndarray, q_j: np.ndarray, arm, joints_csv: Path, sync: SyncSettings) -> None:
+    """Raise a DataError naming ``joints_csv`` when the log's first samples show the arm moving: the video's
+    estimate takes the log's first posture as the arm at rest in the first frames."""
+    first, _ = end_speed_shares(t_j, q_j, arm.qd_max, sync.still_window_s)
+    if first > sync.still_speed_share:
+        raise DataError(f"{joints_csv}: the joint log starts with the arm moving ({first:.0%} of its speed limit, "
+                        f"more than sync.still_speed_share {sync.still_speed_share:.0%}): it misses the start of the "
+                        "motion; the log must start with the arm still, before the motion or at its start")
 
 
-def _segments_in_view(video, calibration, arm, q0: np.ndarray, hw: np.ndarray, n_u: int,
-                      n_v: int) -> tuple[np.ndarray, np.ndarray]:
-    """The arm segments wholly in view at the start posture q0 (J,) rad: their strip half widths (S,) m
-    and their indices (S,) among all the arm's segments.
-
-    Raises:
-        DataError: no segment is.
-    """
-    rest_pts = sync_arm.strip_points(arm, q0, hw, n_u, n_v)
-    uv = calibration.robot_to_pixel(rest_pts.reshape(-1, 2)).reshape(rest_pts.shape)
-    seen = np.all((uv >= 0) & (uv <= np.array([video.width - 1, video.height - 1])), axis=(1, 2, 3))
-    if not seen.any():
-        raise DataError(f"{video.path}: no segment of the arm is wholly in view at the start posture; sync "
-                        "from the video needs one (or set sync.method: trigger)")
-    return hw[seen], np.nonzero(seen)[0]
-
-
-def _rest_and_board(video, calibration, arm, q0: np.ndarray, st: SyncSettings,
-                    board_check: BoardCheckSettings) -> tuple[int, np.ndarray, dict, np.ndarray]:
-    """The rest frames: their count n_rest, their median image (H, W) float32, the board check on it
-    (calibrate's, if it ran) and the check's translation (2,) m (zero without a check residual)."""
-    n_rest = max(1, min(int(st.rest_frames), video.n_frames))
-    rest = np.median(np.stack([video.read(k).astype(np.float32) for k in range(n_rest)]), axis=0)
-    board = calibration.board_check or check_board_to_robot(  # calibrate's, if it ran
-        rest, calibration, arm, q0, board_check)
-    shift = np.zeros(2) if board["residual_mm"] is None else np.array([board["dx_mm"], board["dy_mm"]]) / 1000
-    return n_rest, rest, board, shift
-
-
-def _coarse_search(video, calibration, sig: float, rest_pts: np.ndarray, rest_s: np.ndarray, template: np.ndarray,
-                   strips, n_rest: int, t_j: np.ndarray, q_j: np.ndarray, fps: float, st: SyncSettings) -> float:
-    """The coarse offset, s (:func:`stringcast.sync_arm.coarse_offset`): every frame's match with the rest
-    template against the predicted match of the rest image at the arm's logged postures (1 ms grid).
-    ``strips(q)``: the shifted strip points of postures q.
-
-    Raises:
-        DataError: the first frames do not show the arm still at the log's first posture.
-    """
-    rest_ncc = np.array([sync_arm.ncc(sync_arm.sample(sync_arm.smooth(f, sig), calibration, rest_pts), template)
-                         for _, f in video])
-    if np.mean(rest_ncc[:n_rest]) < 0.9:
-        raise DataError(f"{video.path}: the first frames do not show the arm still at the joint log's first "
-                        "posture; sync needs the video to start before the motion")
-    tp = np.arange(t_j[0], t_j[-1], 1e-3)
-    pred = sync_arm.ncc(sync_arm.sample(rest_s, calibration,
-                                        strips(sync_arm.joints_at(tp, t_j, q_j))),
-                        template)
-    return sync_arm.coarse_offset(rest_ncc, fps, tp, pred, st.coarse_step_ms / 1000)
-
-
-def _fine_search(video, calibration, sig: float, template: np.ndarray, strips, t_j: np.ndarray, q_j: np.ndarray,
-                 fps: float, window: tuple[float, float], search: float, step: float, n_seg: int, st: SyncSettings,
-                 tau0: float) -> tuple[np.ndarray, np.ndarray, list, np.ndarray, np.ndarray, np.ndarray]:
-    """Each motion frame's match over the candidate offsets taus = tau0 +- search (step), s.
-
-    Returns taus (T,) s, total (T,) (the summed mean NCC of the frames with contrast), best (the
-    peak offset of each such frame, s), frames (F,) (the frames used), tau_ks (F, S) s (each
-    frame's and segment's sub-step peak, NaN where flat or at an edge) and total_seg (T, S)
-    (the per-segment NCC summed over the frames with contrast).
-
-    Raises:
-        DataError: no frame falls in the motion ``window`` (t_on, t_off) s.
-    """
-    t_on, t_off = window
-    taus = tau0 + np.arange(-search, search + step / 2, step)
-    k_t = np.arange(video.n_frames) / fps
-    # frames in the motion for every candidate offset: one near the motion's start or end
-    # matches the still arm equally well for all earlier (or later) offsets, a one-sided
-    # score that pulls the peak towards the rest posture (the overlapping ones if too few)
-    frames = np.nonzero((k_t + tau0 - search >= t_on) & (k_t + tau0 + search <= t_off))[0]
-    if len(frames) < st.min_frames:
-        frames = np.nonzero((k_t + tau0 + search >= t_on) & (k_t + tau0 - search <= t_off))[0]
-    if len(frames) == 0:
-        raise DataError(f"{video.path}: no frame falls in the arm's motion ({t_on:.3f}-{t_off:.3f} s on the "
-                        f"controller clock) for an offset near {tau0:.4f} s")
-    total, best = np.zeros(len(taus)), []
-    tau_ks = np.full((len(frames), n_seg), np.nan)
-    total_seg = np.zeros((len(taus), n_seg))
-    for i, k in enumerate(frames):
-        f = sync_arm.smooth(video.read(int(k)), sig)
-        q = sync_arm.joints_at(taus + k / fps, t_j, q_j)
-        per_seg = sync_arm.ncc_segments(sync_arm.sample(f, calibration, strips(q)), template)  # (T, S)
-        score = per_seg.mean(axis=1)
-        if np.ptp(score) >= st.min_frame_contrast:
-            total += score
-            total_seg += per_seg
-            best.append(taus[int(np.argmax(score))])
-        for s_ in range(per_seg.shape[1]):
-            c = per_seg[:, s_]
-            j = int(np.argmax(c))
-            if np.ptp(c) >= st.min_frame_contrast and 1 <= j <= len(c) - 2:
-                tau_ks[i, s_] = sync_arm.parabola_peak(taus[j - 1:j + 2], c[j - 1:j + 2])
-    return taus, total, best, frames, tau_ks, total_seg
-
-
-def _on_grid(t: float, step: float) -> float:
-    """``t`` s rounded to the step grid: the same candidate offsets whatever the start."""
-    return float(np.round(t / step) * step)
-
-
-def _recentred_search(coarse, fine, trigger_s: float | None, step: float,
-                      st: SyncSettings) -> tuple[float | None, tuple]:
-    """The fine search re-centred on its peak until the peak sits within ``recentre_ms`` of the window's
-    centre (at most 5 windows; following the peak off an edge), from the trigger time, else (or when the
-    trigger time is off by more than the search) from ``coarse()``. ``fine(tau0)`` is
-    :func:`_fine_search`'s. Returns (the coarse offset s or None if not needed, the last ``fine``)."""
-    coarse_s = None if trigger_s is not None else coarse()
-    tau0 = _on_grid(trigger_s if trigger_s is not None else coarse_s, step)
-    for attempt in range(5):  # re-centre the search window on the peak (and follow it off an edge)
-        taus, total, best, frames, tau_ks, total_seg = fine(tau0)
-        i = int(np.argmax(total))
-        if best and 2 <= i <= len(taus) - 3 and abs(taus[i] - tau0) <= st.recentre_ms / 1000:
-            break
-        if attempt == 0 and coarse_s is None and not (best and 2 <= i <= len(taus) - 3):
-            coarse_s = coarse()  # the trigger time was off by more than the search
-            tau0 = _on_grid(coarse_s, step)
-        else:
-            tau0 = _on_grid(float(taus[i]), step)
-    return coarse_s, (taus, total, best, frames, tau_ks, total_seg)
-
-
-def _segment_offset(taus: np.ndarray, total: np.ndarray, total_seg: np.ndarray, n_seg: int,
-                    st: SyncSettings) -> tuple[np.ndarray, np.ndarray, float]:
-    """The offset, s, from the segments that agree: each segment's own peak (S,) s of its summed match
-    total_seg (T, S) over taus (T,) s, which agree (S,) bool (within ``segment_agree_ms`` of the
-    median peak), and the peak of their sum (of ``total`` (T,) if none agrees)."""
-    # each segment's own summed match; a segment whose peak disagrees with the others (a static
-    # feature such as a cable behind it in the rest template, the string across it) is left out
-    seg_peaks = np.array([sync_arm.parabola_peak(taus, total_seg[:, j]) for j in range(n_seg)])
-    keep = np.abs(seg_peaks - np.median(seg_peaks)) <= st.segment_agree_ms / 1000
-    offset = sync_arm.parabola_peak(taus, total_seg[:, keep].sum(axis=1)) if keep.any() else \
-        sync_arm.parabola_peak(taus, total)
-    return seg_peaks, keep, offset
-
-
-def _offset_residual(arm, t_j: np.ndarray, q_j: np.ndarray, frames: np.ndarray, fps: float, offset: float,
-                     segments: np.ndarray, n_u: int, tau_ks: np.ndarray) -> tuple[float | None, int]:
-    """:func:`~stringcast.sync_arm.match_residual` (mm, and the matches used) of the frames' and segments'
-    own best offsets tau_ks (F, S) s at ``offset`` s, with the segments' speeds across themselves at the
-    frames' times (central difference over 1 ms)."""
-    t_k = offset + frames / fps
-    dt = 1e-3
-    a, _, _ = sync_arm.normal_speeds(arm, sync_arm.joints_at(t_k - dt, t_j, q_j), sync_arm.joints_at(t_k, t_j, q_j),
-                                     sync_arm.joints_at(t_k + dt, t_j, q_j), dt, segments, n_u)
-    return sync_arm.match_residual(tau_ks, a, offset)
+def _video_doc(trial_dir: Path, calibration_json, campaign, meta: dict, video_yaml: Path, t_j: np.ndarray,
+               q_j: np.ndarray, sync: SyncSettings, board_check: BoardCheckSettings) -> tuple[dict, list[str]]:
+    """``sync.json``'s fields from the video (and the trigger time, if any), and the warnings besides the choice's."""
+    if calibration_json is None:
+        raise DataError(f"{trial_dir}: sync.method 'video' needs the trial's calibration.json")
+    _check_log_starts_still(t_j, q_j, campaign.arm, trial_dir / "joints.csv", sync)
+    trigger = meta.get("trigger_time_s")
+    cal = Calibration.from_json(calibration_json)
+    est, failure = None, None
+    with open_video(find_video(trial_dir), fps=float(meta["fps"])) as video:
+        warns = check_frame_count(video, meta, video_yaml)
+        try:
+            est = estimate_offset(video, cal, campaign.arm, t_j, q_j, sync, board_check, trigger)
+        except DataError as exc:
+            if trigger is None:
+                raise
+            failure = str(exc)
+        # the file's own frame times, where a full pass (the coarse search) has read them already
+        stamps = video.timestamps_s if est is not None and est["coarse_offset_s"] is not None else None
+    choice = choose_offset(est, failure, trigger, sync)
+    doc = {k: v for k, v in (est or {}).items() if k != "evidence"}
+    doc.update(offset_s=choice["offset_s"], chosen=choice["chosen"], candidates=choice["candidates"],
+               verdict=choice["verdict"], residual_mm=choice["candidates"][choice["chosen"]]["residual_mm"],
+               method=METHOD_VIDEO if choice["chosen"] == "video" else METHOD_CHECKED if est else METHOD_TRIGGER)
+    doc["note"] = {"video": "offset estimated from the video" + (
+        "; it overruled the trigger time" if trigger is not None else " (no trigger time)"),
+        "trigger": "the trigger time, checked against the arm in the video" if est is not None else
+        "the trigger time, unchecked: the video gave no estimate"}[choice["chosen"]]
+    doc["trigger_minus_estimate_ms"] = None if trigger is None or est is None else \
+        (float(trigger) - est["offset_s"]) * 1000
+    doc["trigger_disagrees"] = None if trigger is None else choice["chosen"] == "video"
+    doc["dropped_frames"] = None if stamps is None else [list(g) for g in dropped_frames(stamps, float(meta["fps"]))]
+    bc = doc.get("board_check")
+    if bc is not None and bc["residual_mm"] is not None and bc["residual_mm"] > sync.board_check_warn_mm:
+        warns.append(f"the still arm is seen {bc['residual_mm']:.1f} mm from where the forward kinematics and "
+                     f"the board-to-robot transform put it (> {sync.board_check_warn_mm} mm): check the "
+                     "board pose in config")
+    if doc["dropped_frames"]:
+        warns.append(f"{len(doc['dropped_frames'])} dropped frame(s) by the file's timestamps")
+    return doc, warns
 
 
 def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaign, out_json: str | Path | None = None,
@@ -293,7 +144,7 @@ def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaig
     Args:
         trial_dir: ``data/<campaign>/trial_<k>`` with ``video.yaml``, the video and ``joints.csv``.
         calibration_json: the trial's ``calibration.json`` (needed by ``method: video``).
-        campaign: :class:`~stringcast.core.specs.Campaign` (the arm, with its outline).
+        campaign: :class:`~stringcast.core.specs.Campaign` (the arm, with its outline and speed limits).
         out_json: where to write ``sync.json`` (None: not written).
         sync: sync settings (:class:`~stringcast.core.SyncSettings`).
         board_check: board-check settings (:class:`~stringcast.core.BoardCheckSettings`), for the
@@ -301,53 +152,36 @@ def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaig
 
     Raises:
         DataError: missing/malformed inputs (the file is named), no trigger time with
-            ``method: trigger``, or a video in which the arm's motion cannot be found.
+            ``method: trigger``, a video in which the arm's motion cannot be found and no trigger
+            time, or a joint log that misses part of the motion (it starts or ends with the arm
+            moving where the frames need it; ``joints.csv`` named).
     """
-
     trial_dir = Path(trial_dir)
     video_yaml = trial_dir / "video.yaml"
     meta = read_video_meta(video_yaml)
     doc = {"fps": float(meta["fps"]), "frames": int(meta["frames"]), "trigger_time_s": meta.get("trigger_time_s")}
+    joints_csv = trial_dir / "joints.csv"
+    t_j, q_j, _ = read_joint_table(joints_csv, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
     if sync.method == "trigger":
-        doc.update(_trigger_doc(meta, video_yaml))
+        doc.update(_trigger_doc(meta, video_yaml), verdict=Verdict())
+        warns = []
     else:
-        if calibration_json is None:
-            raise DataError(f"{trial_dir}: sync.method 'video' needs the trial's calibration.json")
-        t_j, q_j, _ = read_joint_table(trial_dir / "joints.csv", n_joints=campaign.arm.n_joints,
-                                        arm_name=campaign.arm.name)
-        cal = Calibration.from_json(calibration_json)
-        with open_video(find_video(trial_dir), fps=doc["fps"]) as video:
-            warns = check_frame_count(video, meta, video_yaml)
-            est = estimate_offset(video, cal, campaign.arm, t_j, q_j, sync, board_check,
-                                  doc["trigger_time_s"])
-            # the file's own frame times, where a full pass (the coarse search) has read them already
-            stamps = video.timestamps_s if est["coarse_offset_s"] is not None else None
-        check_joint_coverage(t_j, est["offset_s"] + np.arange(doc["frames"]) / doc["fps"], trial_dir / "joints.csv")
-        bc = est["board_check"]
-        doc.update(est, method=METHOD_VIDEO,
-                   note="offset estimated from the video; the trigger time was only a starting guess"
-                   if doc["trigger_time_s"] is not None else "offset estimated from the video (no trigger time)")
-        doc["trigger_minus_estimate_ms"], doc["trigger_disagrees"] = None, None
-        if doc["trigger_time_s"] is not None:
-            gap_ms = (float(doc["trigger_time_s"]) - est["offset_s"]) * 1000
-            doc["trigger_minus_estimate_ms"] = gap_ms
-            doc["trigger_disagrees"] = bool(abs(gap_ms) > 1000 / doc["fps"])
-            if doc["trigger_disagrees"]:
-                warns.append(f"video.yaml's trigger_time_s is {gap_ms:+.2f} ms from the offset the video shows "
-                             f"(more than a frame, {1000 / doc['fps']:.2f} ms): the video's estimate is used")
-        doc["dropped_frames"] = None if stamps is None else [list(g) for g in dropped_frames(stamps, doc["fps"])]
-        if bc["residual_mm"] is not None and bc["residual_mm"] > sync.board_check_warn_mm:
-            warns.append(f"the still arm is seen {bc['residual_mm']:.1f} mm from where the forward kinematics and "
-                         f"the board-to-robot transform put it (> {sync.board_check_warn_mm} mm): check the "
-                         "board pose in config")
-        if doc["dropped_frames"]:
-            warns.append(f"{len(doc['dropped_frames'])} dropped frame(s) by the file's timestamps")
-        for w in warns:
-            warnings.warn(f"{trial_dir}: {w}", stacklevel=2)
-            print(f"sync warning: {trial_dir}: {w}", file=sys.stderr)
-        doc["warnings"] = warns
+        est_doc, warns = _video_doc(trial_dir, calibration_json, campaign, meta, video_yaml, t_j, q_j, sync,
+                                    board_check)
+        doc.update(est_doc)
     if not math.isfinite(doc["offset_s"]):
         raise DataError(f"{trial_dir}: sync produced a non-finite offset")
+    doc["joint_log"] = check_joint_coverage(
+        t_j, doc["offset_s"] + np.arange(doc["frames"]) / doc["fps"], joints_csv, q_joints=q_j,
+        qd_max=campaign.arm.qd_max, still_share=sync.still_speed_share, still_window_s=sync.still_window_s)
+    verdict = doc["verdict"]
+    for w in warns:
+        verdict = verdict.add("warn", w)
+    doc["verdict"], doc["warnings"] = verdict.as_dict(), list(verdict.reasons)
+    for w in doc["warnings"]:   # an ok verdict's reasons are notes (an overruled trigger, recorded)
+        if not verdict.ok:
+            warnings.warn(f"{trial_dir}: {w}", stacklevel=2)
+        print(f"sync {'note' if verdict.ok else 'warning'}: {trial_dir}: {w}", file=sys.stderr)
     if out_json is not None:
         write_json(out_json, doc)
     return doc

@@ -52,7 +52,7 @@ from stringcast.core import TrackingSettings, forward_kinematics, motion_window
 from .arm_mask import draw_arm_mask
 from .background import background_samples, build_background
 from stringcast.calibrate import Calibration
-from stringcast.core import DataError, find_video, read_joint_table, read_json, write_parquet
+from stringcast.core import DataError, find_video, joint_log_span, read_joint_table, read_json, write_parquet
 from .frame_tracker import FrameTracker
 from .overlay import write_overlay
 from stringcast.video import prefetch
@@ -106,7 +106,8 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
     if "frames" in sync and int(sync["frames"]) != F:
         raise DataError(f"{video.path}: {F} frames, but {sync_json} (from video.yaml) says {sync['frames']}")
     t = frame_times(sync, F)
-    in_log = (t >= t_j[0]) & (t <= t_j[-1])
+    lo, hi = joint_log_span(t_j, sync.get("joint_log"))   # an extended log: the arm still outside it
+    in_log = (t >= lo) & (t <= hi)
     half = 0.5 / float(sync["fps"])  # the arm at the start, middle and end of each frame period
     jpx = np.stack([_joint_px(cal, arm, _interp_joints(t + dt, t_j, q_j)) for dt in (-half, 0.0, half)], axis=1)
     scale = float(np.median(cal.m_per_px(jpx[:, 1, -1])))

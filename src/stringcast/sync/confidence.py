@@ -1,0 +1,274 @@
+"""How far to trust the video's offset, and whether it overrules the recording's trigger time.
+
+Both candidates are judged by one measure, the arm-match residual
+(:func:`stringcast.sync.arm_match.match_residual`: the robust spread of the distance across
+each arm segment between where a frame shows it and where the forward kinematics put it),
+over the frames and agreeing segments the video's estimate rests on. Its noise is measured
+on the clip itself, by a **moving-block bootstrap** over the frames (Kuensch 1989): the
+frames' errors are not independent (a calibration or board-pose error, a shadow, biases a
+whole stretch of the motion the same way), so frames are resampled in runs whose length is
+where the autocorrelation of the frames' own match errors first reaches zero. A run of
+correlated frames then counts as one piece of evidence, as it should.
+
+* :func:`compare_residuals`: the residual at the trigger's offset minus that at the video's,
+  over the block resamples. The video overrules the trigger only when the trigger's residual
+  is as small as the video's in fewer than ``norm.sf(evidence_k)`` of them (0.13 % at k = 3):
+  a one-sided test at ``evidence_k`` standard errors' confidence, in units of the clip's own
+  noise, not a millisecond threshold tuned on one camera.
+* :func:`video_quality`: the video estimate's own standard error (the same bootstrap of the
+  summed match score's peak), a second peak of similar height (ambiguous), too few frames,
+  segments that disagree, and a residual or an uncertainty larger than ``match_warn_px``
+  pixels at the arm (edges of a sharp arm localise to a fraction of a pixel; more means the
+  calibration or the forward kinematics do not fit the images, or the frames disagree).
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.stats import norm
+
+from . import arm_match as sync_arm
+from stringcast.core import SyncSettings, Verdict
+
+BOOTSTRAP_SAMPLES = 4000
+"""Block-bootstrap resamples (seeded: the same clip gives the same verdict); enough to resolve the
+one-sided tail norm.sf(evidence_k) (0.13 % at k = 3: about 5 resamples)."""
+MIN_SPEED = 1e-3
+"""m/s: a segment slower than this across itself says nothing about the offset (as in match_residual)."""
+
+
+def block_length(series: np.ndarray) -> int:
+    """Frames per bootstrap block: the first lag at which the autocorrelation of ``series`` (N,)
+    (the frames' own match errors, in frame order) reaches zero; 1 for white noise, at most N // 2."""
+    x = np.asarray(series, float)
+    x = x[np.isfinite(x)] - np.nanmean(x)
+    den = float(np.sum(x * x))
+    if len(x) < 4 or den <= 0:
+        return 1
+    for lag in range(1, len(x) // 2):
+        if np.sum(x[:-lag] * x[lag:]) <= 0:
+            return lag
+    return max(1, len(x) // 2)
+
+
+def block_counts(n: int, length: int, samples: int = BOOTSTRAP_SAMPLES, seed: int = 0) -> np.ndarray:
+    """(samples, n) how often each of n frames is drawn in a moving-block bootstrap resample
+    (ceil(n / length) runs of ``length`` consecutive frames, starts uniform, cut to n)."""
+    length = int(min(max(1, length), n))
+    rng = np.random.default_rng(seed)
+    n_blocks = -(-n // length)
+    starts = rng.integers(0, n - length + 1, (samples, n_blocks))
+    picks = (starts[:, :, None] + np.arange(length)).reshape(samples, -1)[:, :n]
+    return np.stack([np.bincount(p, minlength=n) for p in picks])
+
+
+def _weighted_mad_mm(d: np.ndarray, frame_of: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """1.4826 x the weighted median of |d| (E,) m, each entry weighted by its frame's count
+    (B, F) (frame_of (E,) its frame) -> (B,) mm."""
+    order = np.argsort(np.abs(d))
+    w = counts[:, frame_of[order]].astype(float)
+    cum = np.cumsum(w, axis=1)
+    idx = np.argmax(cum >= 0.5 * cum[:, -1:], axis=1)
+    return 1.4826 * np.abs(d)[order][idx] * 1000
+
+
+def _equations(evidence) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The matches of the agreeing segments (all segments if none agrees): tau (F, S') s, speeds
+    (F, S') m/s, ok (F, S') bool, and each ok entry's frame (E,)."""
+    keep = evidence.keep if evidence.keep.any() else np.ones_like(evidence.keep)
+    tau, a = evidence.tau_ks[:, keep], evidence.speeds[:, keep]
+    ok = np.isfinite(tau) & np.isfinite(a) & (a > MIN_SPEED)
+    return tau, a, ok, np.nonzero(ok)[0]
+
+
+def frame_errors(evidence, offset_s: float) -> np.ndarray:
+    """(F,) m: each motion frame's mean signed distance across the agreeing segments between the
+    arm seen and the arm predicted at ``offset_s`` (NaN where no segment matched): the series
+    whose autocorrelation sets the bootstrap's block length."""
+    tau, a, ok, _ = _equations(evidence)
+    d = np.where(ok, a * (tau - offset_s), 0.0)
+    n = ok.sum(axis=1)
+    return np.where(n > 0, d.sum(axis=1) / np.maximum(n, 1), np.nan)
+
+
+def compare_residuals(evidence, video_s: float, trigger_s: float) -> dict:
+    """The arm-match residual at the video's and at the trigger's offset, and how sure the difference is.
+
+    Both from the same matches (every motion frame's and agreeing segment's own best offset,
+    times the segment's speed across itself at the video's offset: a paired comparison), as in
+    :func:`~stringcast.sync.arm_match.match_residual`. The frames are resampled in blocks
+    (:func:`block_counts`); ``p`` is the share of resamples in which the trigger's residual is no
+    larger than the video's: a one-sided bootstrap test, which assumes no normal law (at a wrong
+    offset the residual grows with the arm's speed, which varies over the motion, so the excess
+    is skewed and its standard deviation alone understates how rarely it reaches zero).
+
+    Returns:
+        ``{"video_mm", "trigger_mm", "excess_mm"`` (trigger minus video), ``"standard_error_mm"``
+        (of the excess over the resamples), ``"p"``, ``"resamples", "block_frames", "matches"}``;
+        residuals None with fewer than 3 matches.
+    """
+    tau, a, ok, frame_of = _equations(evidence)
+    out = {"video_mm": None, "trigger_mm": None, "excess_mm": None, "standard_error_mm": None, "p": None,
+           "resamples": BOOTSTRAP_SAMPLES, "block_frames": None, "matches": int(ok.sum())}
+    if ok.sum() < 3:
+        return out
+    length = block_length(frame_errors(evidence, video_s))
+    counts = block_counts(tau.shape[0], length)
+    d_v, d_t = (a * (tau - video_s))[ok], (a * (tau - trigger_s))[ok]
+    r_v = sync_arm.match_residual(tau, a, video_s)[0]
+    r_t = sync_arm.match_residual(tau, a, trigger_s)[0]
+    boot = _weighted_mad_mm(d_t, frame_of, counts) - _weighted_mad_mm(d_v, frame_of, counts)
+    out.update(video_mm=r_v, trigger_mm=r_t, excess_mm=r_t - r_v, standard_error_mm=float(np.std(boot)),
+               p=float(np.mean(boot <= 0)), block_frames=length)
+    return out
+
+
+def _score_bootstrap(evidence, offset_s: float) -> tuple[np.ndarray, np.ndarray, int]:
+    """The summed match score of the agreeing segments (T,), its block-bootstrap resamples (B, T),
+    and the block length in frames."""
+    keep = evidence.keep if evidence.keep.any() else np.ones_like(evidence.keep)
+    curves = evidence.per_frame[:, :, keep].sum(axis=2)  # (C, T)
+    length = block_length(frame_errors(evidence, offset_s))
+    return curves.sum(axis=0), block_counts(len(curves), length) @ curves, length
+
+
+def _second_peak(taus: np.ndarray, score: np.ndarray, boot: np.ndarray, k: float) -> float | None:
+    """The offset s of a second maximum of ``score`` (T,) that is a peak of its own (above the
+    valley towards the highest by more than k standard errors) and as high as the highest within
+    k standard errors (of the paired differences over the resamples ``boot`` (B, T)); else None."""
+    i = int(np.argmax(score))
+    best = None
+    for j in range(1, len(score) - 1):
+        if j == i or score[j] < score[j - 1] or score[j] < score[j + 1]:
+            continue
+        lo, hi = sorted((i, j))
+        v = lo + int(np.argmin(score[lo:hi + 1]))
+        rises = score[j] - score[v] > k * np.std(boot[:, j] - boot[:, v])
+        similar = score[i] - score[j] <= k * np.std(boot[:, i] - boot[:, j])
+        if rises and similar and (best is None or score[j] > score[best]):
+            best = j
+    return None if best is None else float(taus[best])
+
+
+def video_quality(evidence, est: dict, st: SyncSettings) -> tuple[dict, list[str]]:
+    """The video estimate's standard error and what makes it doubtful.
+
+    Args:
+        evidence: :class:`~stringcast.sync.video_offset.VideoEvidence`; est: the estimate
+            (:func:`~stringcast.sync.video_offset.estimate_offset`'s dict); st: the sync settings.
+
+    Returns:
+        (figures, reasons): figures ``{"standard_error_ms", "ambiguous", "second_peak_s",
+        "block_frames", "residual_px", "arm_width_px", "uncertainty_px"}``; reasons, one
+        sentence per cause (empty when the estimate is sound): an ambiguous or edge peak, fewer
+        than ``min_frames`` frames, agreeing segments not a majority of those with a peak of their
+        own, a residual or an uncertainty (``evidence_k`` standard errors times the arm's median
+        speed across itself) over ``match_warn_px``.
+    """
+    k, taus, px = float(st.evidence_k), evidence.taus, evidence.mm_per_px
+    score, boot, length = _score_bootstrap(evidence, est["offset_s"])
+    peaks = np.array([sync_arm.parabola_peak(taus, b) for b in boot])
+    se_s = float(np.std(peaks))
+    second = _second_peak(taus, score, boot, k)
+    _, a, ok, _ = _equations(evidence)
+    speed = float(np.median(a[ok])) if ok.any() else 0.0
+    residual = est.get("residual_mm")
+    fig = {"standard_error_ms": se_s * 1000, "ambiguous": second is not None, "second_peak_s": second,
+           "block_frames": length, "residual_px": None if residual is None else residual / px,
+           "arm_width_px": evidence.arm_width_mm / px, "uncertainty_px": k * se_s * speed * 1000 / px}
+    reasons = []
+    i = int(np.argmax(score))
+    if i in (0, len(score) - 1):
+        fig["ambiguous"] = True
+        reasons.append(f"the video's match score peaks at the edge of its search window ({taus[i]:.4f} s): the offset "
+                       "lies outside it or the arm's match does not depend on it; widen sync.search_ms or check the "
+                       "calibration")
+    if second is not None:
+        reasons.append(f"the video's match has two peaks of similar height, at {est['offset_s']:.4f} s and "
+                       f"{second:.4f} s (within {k:g} standard errors): the offset is ambiguous")
+    if est["frames_used"] < st.min_frames:
+        reasons.append(f"only {est['frames_used']} frames show the arm's match depend on the offset (sync.min_frames: "
+                       f"{st.min_frames}): film more of the motion, or a faster one")
+    seg_peaks = np.asarray(est["segment_offsets_s"])
+    inside = (seg_peaks > taus[0] + 0.5 * (taus[1] - taus[0])) & (seg_peaks < taus[-1] - 0.5 * (taus[1] - taus[0]))
+    agree = int(np.sum(inside & evidence.keep))
+    if 2 * agree <= int(inside.sum()):
+        reasons.append(f"only {agree} of the {int(inside.sum())} arm segments with a peak of their own agree on the "
+                       f"offset (within sync.segment_agree_ms): the arm's match is inconsistent along the arm")
+    if fig["residual_px"] is not None and fig["residual_px"] > st.match_warn_px:
+        reasons.append(f"the arm-match residual is {residual:.2f} mm = {fig['residual_px']:.1f} px "
+                       f"(sync.match_warn_px: {st.match_warn_px:g}; the arm is {fig['arm_width_px']:.0f} px wide): "
+                       "the arm is not where the calibration and the forward kinematics put it; check the "
+                       "calibration and the board pose")
+    if fig["uncertainty_px"] > st.match_warn_px:
+        reasons.append(f"the video's offset is uncertain by +-{k * se_s * 1000:.2f} ms ({k:g} standard errors over "
+                       f"runs of {length} frames), {fig['uncertainty_px']:.1f} px at the arm's speed "
+                       f"(sync.match_warn_px: {st.match_warn_px:g}): the frames disagree on the offset")
+    return fig, reasons
+
+
+def choose_offset(est: dict | None, failure: str | None, trigger_s: float | None, st: SyncSettings) -> dict:
+    """The offset to use: the video's estimate or the recording's trigger time, and the verdict.
+
+    * No trigger time: the video's estimate; ``warn`` with :func:`video_quality`'s reasons.
+    * The video gave no estimate (``failure``) or an ambiguous one: the trigger time, ``warn``.
+    * Otherwise the trigger time is kept unless the arm matches the frames clearly worse at it
+      (:func:`compare_residuals`: as well in fewer than ``norm.sf(evidence_k)`` of the block
+      resamples); overruled, the verdict stays ``ok`` (unless the video's quality warns) with a
+      reason naming both offsets and residuals: the choice is recorded with both candidates, never
+      silent, and a sound video estimate that clearly fits better is the better offset (a wrong
+      trigger is common: its delay, the camera's own). Kept, the verdict is ``ok`` when the video's
+      estimate is sound (it would have seen a trigger that is off), else ``warn``: not confirmed.
+
+    Args:
+        est: :func:`~stringcast.sync.video_offset.estimate_offset`'s dict (with its evidence), or None.
+        failure: why the video gave no estimate (with est None).
+        trigger_s: video.yaml's trigger time, s, or None.
+        st: the sync settings.
+
+    Returns:
+        ``{"chosen": "trigger" | "video", "offset_s", "candidates": {"trigger": {...}, "video": {...}},
+        "verdict": Verdict}``; a candidate that is absent is missing from ``candidates``.
+
+    Raises:
+        ValueError: neither an estimate nor a trigger time.
+    """
+    if est is None and trigger_s is None:
+        raise ValueError("choose_offset needs the video's estimate or a trigger time")
+    cands, v = {}, Verdict()
+    if est is None:
+        cands["video"] = {"offset_s": None, "residual_mm": None, "error": failure}
+        cands["trigger"] = {"offset_s": float(trigger_s), "residual_mm": None}
+        v = v.add("warn", f"the video gave no offset ({failure}); video.yaml's trigger time {trigger_s:.5f} s is used "
+                          "unchecked")
+        return {"chosen": "trigger", "offset_s": float(trigger_s), "candidates": cands, "verdict": v}
+    ev, video_s, k = est["evidence"], float(est["offset_s"]), float(st.evidence_k)
+    fig, reasons = video_quality(ev, est, st)
+    tau, a, _, _ = _equations(ev)
+    cands["video"] = {"offset_s": video_s, "residual_mm": sync_arm.match_residual(tau, a, video_s)[0],
+                      "time_residual_ms": est["time_residual_ms"], "frames_used": est["frames_used"],
+                      "segments_used": est["segments_used"], **fig}
+    if trigger_s is None:
+        for r in reasons:
+            v = v.add("warn", r)
+        return {"chosen": "video", "offset_s": video_s, "candidates": cands, "verdict": v}
+    cmp = compare_residuals(ev, video_s, float(trigger_s))
+    alpha = float(norm.sf(k))
+    cands["trigger"] = {"offset_s": float(trigger_s), "residual_mm": cmp["trigger_mm"],
+                        "minus_video_ms": (float(trigger_s) - video_s) * 1000, "excess_mm": cmp["excess_mm"],
+                        "excess_standard_error_mm": cmp["standard_error_mm"], "excess_p": cmp["p"],
+                        "excess_p_needed": alpha, "resamples": cmp["resamples"], "block_frames": cmp["block_frames"]}
+    overrule = not fig["ambiguous"] and cmp["p"] is not None and cmp["excess_mm"] > 0 and cmp["p"] < alpha
+    if overrule:   # clearly better evidence, recorded with both candidates: a note, not a warning
+        v = v.add("ok", f"video.yaml's trigger time {trigger_s:.5f} s is overruled by the video's offset "
+                          f"{video_s:.5f} s ({(float(trigger_s) - video_s) * 1000:+.2f} ms): the arm matches the "
+                          f"frames with a residual of {cmp['trigger_mm']:.2f} mm at the trigger's offset against "
+                          f"{cmp['video_mm']:.2f} mm at the video's, and as well in "
+                          f"{round(cmp['p'] * cmp['resamples'])} of {cmp['resamples']} block resamples of the frames "
+                          f"(fewer than {alpha:.2%} needed, sync.evidence_k: {k:g}); check the trigger's wiring "
+                          "and delay")
+        for r in reasons:
+            v = v.add("warn", r)
+        return {"chosen": "video", "offset_s": video_s, "candidates": cands, "verdict": v}
+    for r in reasons:
+        v = v.add("warn", f"video.yaml's trigger time {trigger_s:.5f} s is kept, but the video cannot confirm it: {r}")
+    return {"chosen": "trigger", "offset_s": float(trigger_s), "candidates": cands, "verdict": v}
