@@ -2,7 +2,6 @@
 line, and names the likely cause (geometry, clock, tracking, model)."""
 import dataclasses
 
-import numpy as np
 import pytest
 import yaml
 

@@ -5,11 +5,10 @@ from dataclasses import replace
 
 import cv2
 import numpy as np
-import pytest
 
 from stringcast.calibrate.calibration import Calibration
 from stringcast.core import PARAM_NAMES, read_json, write_json
-from stringcast.core.files import read_parquet, write_parquet
+from stringcast.core.files import write_parquet
 from stringcast.estimate import run_estimation
 from stringcast.model import parameters as prm
 from stringcast.plan import planning as pn

@@ -28,5 +28,6 @@ __all__ = [
     "MODES", "POLARITIES", "SECTION_CLASSES", "BoardCheckSettings", "CalibrationSettings", "EstimationSettings",
     "EvaluationSettings", "ExecutorSettings", "ModelSettings", "MotionSettings", "Settings", "SyncSettings",
     "TrackingSettings",
+    "STATUSES", "Verdict", "worst",
     "markdown_table", "sections_read", "settings_digest", "settings_from_config", "stage_kwargs",
 ]
