@@ -70,9 +70,11 @@ def _pose_for_shot(i: int, n: int, rng: np.random.Generator, cam: CameraModel, s
                    calib: Mapping, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Shot i's board pose: centred in grid cell ``cells[i]`` of a 3x3 grid over the region (the first
     nine), then anywhere in it; every corner inside the region (8 px in from the image's edge).
+    After 500 tries that do not fit (a large, steeply tilted board near a corner), the board's
+    span shrinks by 10 % every 100 tries.
 
     Raises:
-        RuntimeError: no pose fits in 500 tries.
+        RuntimeError: no pose fits in 1500 tries.
     """
     corners = np.array([[0, 0, 0], [size[0], 0, 0], [size[0], size[1], 0], [0, size[1], 0]], float)
     img_size = np.array([cam.width, cam.height], float)
@@ -81,13 +83,14 @@ def _pose_for_shot(i: int, n: int, rng: np.random.Generator, cam: CameraModel, s
     box_lo = np.maximum(lo * img_size, 8)
     box_hi = np.minimum((lo + span) * img_size, img_size - 1) - 8
     short = min(span[0] * cam.width, span[1] * cam.height)
-    for _ in range(500):
+    for attempt in range(1500):
+        shrink = 0.9 ** ((attempt - 400) // 100) if attempt >= 500 else 1.0
         if i < min(n, 9):
             cell = np.array([cells[i] % 3, cells[i] // 3]) + rng.uniform(0.15, 0.85, 2)
             uv = (lo + cell / 3 * span) * img_size
         else:
             uv = (lo + rng.uniform(0.1, 0.9, 2) * span) * img_size
-        z = cam.K[0, 0] * size.max() / (rng.uniform(*calib["board_span"]) * short)
+        z = cam.K[0, 0] * size.max() / (rng.uniform(*calib["board_span"]) * short * shrink)
         R, t = _board_pose(rng, cam, size, uv, z, tuple(calib["tilt_deg"]))
         img_c, _ = cv2.projectPoints(corners, cv2.Rodrigues(R)[0], t, cam.K, cam.dist)
         img_c = img_c.reshape(-1, 2)

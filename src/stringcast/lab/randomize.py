@@ -201,7 +201,8 @@ def _calib(g: np.random.Generator) -> dict:
         region = (0.0, 0.0, 1.0, 1.0)
     else:                                   # a band along one side: the weak set of a hurried user
         e, side = _r(g.uniform(0.4, 0.6), 3), int(g.integers(4))
-        region = ((0.0, 0.0, 1.0, e), (0.0, 1 - e, 1.0, 1.0), (0.0, 0.0, e, 1.0), (1 - e, 0.0, 1.0, 1.0))[side]
+        f = _r(1 - e, 3)
+        region = ((0.0, 0.0, 1.0, e), (0.0, f, 1.0, 1.0), (0.0, 0.0, e, 1.0), (f, 0.0, 1.0, 1.0))[side]
     span = (0.45, 0.85 if region == (0.0, 0.0, 1.0, 1.0) else 0.75) if board == "large" else (0.2, 0.4)
     return {"calib_shots": int(g.integers(6, 31)), "calib_tilt_deg": (10.0, _r(g.uniform(20, 45), 2)),
             "calib_board": board, "calib_board_span": span, "calib_region": region}

@@ -19,9 +19,10 @@ from .camera import CameraModel
 SWING_REGION_M = ((-0.30, 1.40), (-0.74, 0.92))
 """(x, y) ranges, m, that every drawn view keeps inside the image: the start box, the longest
 string (0.61 m) hanging from it down to the table's edge, and the reach of a cast to x = 1.4 m."""
-ARM_REST_ZONES_M = (((-0.45, 1.10), (-0.20, 0.95)), ((-0.15, 0.15), (-0.75, 0.0)))
-"""Plane boxes ((x0, x1), (y0, y1)), m, the arm may fill at rest (a grasp in the start box, links
-above the base) and its pedestal: the drawn board avoids them."""
+ARM_REST_ZONES_M = (((-0.45, 1.10), (-0.20, 0.95)), ((-0.15, 0.15), (-0.75, 0.0)), ((1.10, 1.50), (0.25, 0.85)))
+"""Plane boxes ((x0, x1), (y0, y1)), m, that the drawn board avoids: the arm at rest (a grasp in
+the start box, links above the base), its pedestal, and the config's targets (x 1.15-1.45 m,
+y 0.3-0.8 m), which the lab draws on the wall too."""
 FLOOR_Y_M = -0.75
 
 
