@@ -7,8 +7,8 @@ set of 30):
 * ``shots``: how many (a call's ``n_frames`` overrides it);
 * ``tilt_deg``: [min, max], the board's tilt out of the image plane about a random in-plane
   axis (default [10, 40]);
-* ``board_span``: [min, max], the board's long side as a share of the short side of the region
-  below (default [0.45, 0.85]: large; about [0.2, 0.4] is a small board);
+* ``board_span``: [min, max], the board's long side as a share of the image's short side
+  (default [0.45, 0.85]: large; about [0.3, 0.45] is a small board, whose markers still decode);
 * ``region``: [u0, v0, u1, v1], the part of the image (shares of width and height) that every
   board corner must fall in (default [0, 0, 1, 1]): a weak set that covers only part of the
   image, as a hurried user's does.
@@ -82,7 +82,7 @@ def _pose_for_shot(i: int, n: int, rng: np.random.Generator, cam: CameraModel, s
     lo, span = np.array([u0, v0]), np.array([u1 - u0, v1 - v0])
     box_lo = np.maximum(lo * img_size, 8)
     box_hi = np.minimum((lo + span) * img_size, img_size - 1) - 8
-    short = min(span[0] * cam.width, span[1] * cam.height)
+    short = min(cam.width, cam.height)
     for attempt in range(1500):
         shrink = 0.9 ** ((attempt - 400) // 100) if attempt >= 500 else 1.0
         if i < min(n, 9):
@@ -106,7 +106,7 @@ def write_calibration_clip(campaign: Campaign, config: Mapping, out_dir: str | P
 
     Poses (``lab.calibration``, module doc): board centre on a 3x3 grid of positions over the
     region (then random ones; fewer than nine shots take a random subset of the cells), at a
-    depth where the board's long side spans ``board_span`` of the region's short side, tilted
+    depth where the board's long side spans ``board_span`` of the image's short side, tilted
     ``tilt_deg`` about a random in-plane axis and rolled +-25 deg; every board corner stays
     inside the region. Same intrinsics, distortion, light, sensor and colour as the trials.
 

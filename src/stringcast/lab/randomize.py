@@ -11,8 +11,9 @@ first, never folding the image) and small tangential terms; light level, drift, 
 (100 or 120 Hz), read and shot noise, optics blur, vignetting; a plain, blotchy or cluttered
 wall; the board anywhere in view in the swing plane, clear of the arm at rest; the arm's link
 widths, shades and joint discs (or none); the calibration set (6-30 shots, tilts from 10 deg up
-to 20-45 deg, a large or small board, over the whole image or a band of it); the trigger
-(exact, +-2 ms, 30 ms wrong, absent); the joint log (from before the motion, or from its start).
+to 20-45 deg, a large (50-85 % of the image's short side) or small (30-45 %) board, over the
+whole image or, one set in five, a band of 40-60 % of it along one side); the trigger (exact,
++-2 ms, 30 ms wrong, absent); the joint log (from before the motion, or from its start).
 
 The pipeline's stages never read a draw: :func:`apply_setup` puts what a user would know (image
 size, fps, mono, the board's place, the arm's measured outline) where a user would write it
@@ -60,7 +61,7 @@ class Setup:
     ``board_angle_deg``. Arm: ``link_widths_mm``, ``joint_discs``, ``joint_radii_mm`` (the discs',
     or without discs the round caps'), ``gripper_widths_mm``, ``link_shade``, ``joint_shade``,
     ``gripper_shade``. Calibration set: ``calib_shots``, ``calib_tilt_deg`` (min, max),
-    ``calib_board`` (large | small), ``calib_board_span`` (min, max share of the region's short
+    ``calib_board`` (large | small), ``calib_board_span`` (min, max share of the image's short
     side), ``calib_region`` (u0, v0, u1, v1 shares of the image). Clocks: ``trigger`` (exact |
     jitter | wrong | absent), ``trigger_error_s`` (written minus true trigger time; None when
     absent), ``joint_log`` (before_motion | at_motion_start).
@@ -203,7 +204,9 @@ def _calib(g: np.random.Generator) -> dict:
         e, side = _r(g.uniform(0.4, 0.6), 3), int(g.integers(4))
         f = _r(1 - e, 3)
         region = ((0.0, 0.0, 1.0, e), (0.0, f, 1.0, 1.0), (0.0, 0.0, e, 1.0), (f, 0.0, 1.0, 1.0))[side]
-    span = (0.45, 0.85 if region == (0.0, 0.0, 1.0, 1.0) else 0.75) if board == "large" else (0.2, 0.4)
+    # the board's long side over the image's short side; a small board's markers (5x5 bits) still
+    # decode (a bit over 2.5 px at 0.3); in a band a large board is only as large as fits
+    span = ((0.5, 0.85) if region == (0.0, 0.0, 1.0, 1.0) else (0.45, 0.6)) if board == "large" else (0.3, 0.45)
     return {"calib_shots": int(g.integers(6, 31)), "calib_tilt_deg": (10.0, _r(g.uniform(20, 45), 2)),
             "calib_board": board, "calib_board_span": span, "calib_region": region}
 
