@@ -362,16 +362,22 @@ class Sensor:
         cv2.setRNGSeed(int(seed) & 0x7FFFFFFF)
 
     def expose(self, dn: np.ndarray) -> np.ndarray:
-        """Noise-free digital numbers (H, W) or (H, W, 3) float32 -> uint8 image of that shape with read
-        and shot noise.
+        """Noise-free digital numbers (H, W) float32 -> uint8 image with read and shot noise.
 
-        Gaussian noise of variance noise_sigma^2 + shot_gain * DN (``cv2.randn``, drawn for each
-        pixel and channel: call :meth:`seed` first for reproducible frames), rounded and saturated
-        to 0..255.
+        Gaussian noise of variance noise_sigma^2 + shot_gain * DN (``cv2.randn``: call
+        :meth:`seed` first for reproducible frames), rounded and saturated to 0..255. Colour
+        (H, W, 3) BGR: a Bayer sensor; each pixel keeps one channel (RGGB: R at even rows and
+        columns), gets its noise, and OpenCV's edge-aware demosaicing
+        (``COLOR_BayerBG2BGR_EA``) makes the (H, W, 3) uint8 BGR frame.
         """
         dn = np.asarray(dn, np.float32)
-        shape = dn.shape
-        dn = dn.reshape(shape[0], -1)            # colour: one plane of H x 3W values (cv2.randn fills one channel)
+        if dn.ndim == 3:
+            mosaic = np.empty(dn.shape[:2], np.float32)
+            mosaic[0::2, 0::2] = dn[0::2, 0::2, 2]
+            mosaic[0::2, 1::2] = dn[0::2, 1::2, 1]
+            mosaic[1::2, 0::2] = dn[1::2, 0::2, 1]
+            mosaic[1::2, 1::2] = dn[1::2, 1::2, 0]
+            return cv2.cvtColor(self.expose(mosaic), cv2.COLOR_BayerBG2BGR_EA)
         noise = np.empty_like(dn)
         cv2.randn(noise, 0.0, 1.0)
         std = dn * np.float32(self.shot_gain) + np.float32(self.sigma ** 2)
@@ -380,4 +386,4 @@ class Sensor:
         noise *= std
         noise += dn
         np.maximum(noise, 0, out=noise)
-        return cv2.convertScaleAbs(noise).reshape(shape)   # rounds and saturates at 255 (values are >= 0)
+        return cv2.convertScaleAbs(noise)        # rounds and saturates at 255 (values are >= 0)

@@ -4,8 +4,9 @@ style and the arm's outline (``lab.look``, ``lab.video.colour``).
 A mono scene is drawn in reflectance (one channel). A colour scene is drawn in BGR: each
 material's reflectance times its tint, a (3,) BGR factor scaled so that its BT.601 luma
 (0.114 B + 0.587 G + 0.299 R, what ``cv2.cvtColor(..., COLOR_BGR2GRAY)`` computes) is 1. So a
-colour frame converted to grey shows about the mono frame's grey levels (up to saturation
-and noise), whatever the tints: a colour camera and a mono one see the same scene.
+colour frame converted to grey shows about the mono frame's grey levels (up to saturation,
+noise and the colour sensor's Bayer mosaic, :meth:`~.camera.Sensor.expose`), whatever the
+tints: a colour camera and a mono one see the same scene.
 
 Backgrounds: ``clutter`` (the default lab: a faintly textured wall, a few boxes and discs and
 a hanging dark cable), ``plain`` (the wall alone) and ``blotchy`` (the wall with blotches of

@@ -1,16 +1,15 @@
-"""What the lab camera sees: wall, clutter, table, arm base, ChArUco board, target,
-the arm and the string; and the per-frame renderer with motion blur.
+"""What the lab camera sees move: the arm and the string, and the per-frame renderer with
+motion blur, over the static scene of :mod:`.background` (wall, clutter, table, arm base,
+ChArUco board, target).
 
-Everything is drawn as *reflectance* in [0, 1] on the camera's ideal (undistorted)
-canvas (:class:`~stringcast.lab.camera.IdealCanvas`), through the plane
-homography of the swing plane (so circles in the plane become the right
-ellipses). OpenCV anti-aliases only 8-bit images, so each shape is drawn as an 8-bit coverage
-mask (``LINE_AA``, sub-pixel ``shift`` bits) and composited: R <- R (1 - a) + r_shape a. The
-static background is rendered once per trial at 2x and area-averaged. The string (cord ~3 mm, clay lumps ~16 mm,
-pipes ~8 mm) is drawn at 4x in a box around it and area-averaged, so its width
-is right to a small fraction of a pixel. It is dark on a lighter wall but the
-tracker must not key on its grey level: the board's black squares, the clutter
-(a dark cable too) and the arm are as dark.
+Everything is drawn as *reflectance* in [0, 1] (mono), or BGR reflectance (colour,
+:mod:`.look`), on the camera's ideal (undistorted) canvas
+(:class:`~stringcast.lab.camera.IdealCanvas`), through the plane homography of the swing plane
+(so circles in the plane become the right ellipses), as anti-aliased coverage masks
+composited over the background (:mod:`.draw`). The string (cord ~3 mm, clay lumps ~16 mm,
+pipes ~8 mm) is drawn at 4x in a box around it and area-averaged, so its width is right to a
+small fraction of a pixel. It is dark on a lighter wall but the tracker must not key on its
+grey level: the board's black squares, the clutter (a dark cable too) and the arm are as dark.
 
 Motion blur: each frame averages ``m`` sub-exposure renders over the exposure time, m such that
 no point moves more than ~0.7 px between two. The arm is drawn in front of the string.
@@ -31,6 +30,7 @@ from .look import ArmLook, SceneLook
 
 __all__ = ["FrameRenderer", "StringLook", "arm_shapes", "board_image", "canvas_corners_world", "gain_map",
            "render_background", "supersample_homography", "warp_board"]
+
 
 def arm_shapes(arm: ArmSpec, q: np.ndarray, look: ArmLook | None = None) -> list[tuple[np.ndarray, str]]:
     """Convex polygons (world m) of the arm at joints q (J,), back to front, with reflectance names.
