@@ -69,6 +69,8 @@ def test_draws_stay_within_their_ranges(draws):
         k1, k2, _, _, k3 = s.dist_coeffs
         assert -0.25 <= k1 <= 0.1 and abs(k2) <= 0.5 * abs(k1) + 1e-5 and k3 == 0
         assert 6 <= s.calib_shots <= 30 and s.calib_tilt_deg[0] == 10 and 20 <= s.calib_tilt_deg[1] <= 45
+        assert 0.3 <= s.calib_board_span[0] <= s.calib_board_span[1] <= 0.85
+        assert (s.calib_board == "small") == (s.calib_board_span[1] <= 0.45)
         err = {"exact": lambda e: e == 0, "jitter": lambda e: abs(e) <= 0.002,
                "wrong": lambda e: abs(abs(e) - 0.03) < 1e-12, "absent": lambda e: e is None}[s.trigger]
         assert err(s.trigger_error_s)
