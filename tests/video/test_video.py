@@ -229,3 +229,29 @@ def test_container_timestamps_and_dropped_frames(tmp_path):
     list(v)  # a full pass records them too
     assert v.timestamps_s == pytest.approx(t)
     assert v.bit_depth == 8
+
+
+@pytest.mark.parametrize("colour", [False, True])
+def test_mjpeg_at_1200_fps_reads_as_grey_quietly(tmp_path, capfd, colour):
+    """Motion JPEG in AVI (OpenCV's own writer, as the lab and many cameras write it), from a mono
+    camera (equal B, G, R) or a colour one: every frame, grey within JPEG's loss, and no OpenCV
+    warning (a YUV stream read raw warned for every frame)."""
+    rng = np.random.default_rng(3)
+    base = cv2.GaussianBlur(rng.uniform(0, 255, (96, 128, 3)).astype(np.float32), (0, 0), 4)
+    frames = [np.clip((np.roll(base, 4 * k, axis=1) - 127) * 3 + 127, 0, 255).astype(np.uint8) for k in range(12)]
+    if not colour:
+        frames = [cv2.cvtColor(cv2.cvtColor(f, cv2.COLOR_BGR2GRAY), cv2.COLOR_GRAY2BGR) for f in frames]
+    vw = cv2.VideoWriter(str(tmp_path / "v.avi"), cv2.CAP_OPENCV_MJPEG, cv2.VideoWriter_fourcc(*"MJPG"), 1200.0,
+                         (128, 96), True)
+    assert vw.isOpened() and vw.set(cv2.VIDEOWRITER_PROP_QUALITY, 90)
+    for f in frames:
+        vw.write(f)
+    vw.release()
+    capfd.readouterr()
+    with open_video(tmp_path / "v.avi") as v:
+        got = [f for _, f in v]
+        assert (v.n_frames, v.width, v.height, v.fps) == (12, 128, 96, 1200.0)
+        assert v.read(7).shape == (96, 128)
+    grey = np.stack([cv2.cvtColor(f, cv2.COLOR_BGR2GRAY) for f in frames]).astype(float)
+    assert np.abs(np.stack(got).astype(float) - grey).mean() < 3.0
+    assert "unsupported picture format" not in capfd.readouterr().err

@@ -3,19 +3,26 @@
 It shares no code with the string model (``stringcast.model.string_model``): the string is a
 MuJoCo capsule chain (:mod:`.mjcf`, :mod:`.physics`) in air (:mod:`.air`), held by an arm with
 servo lag (:mod:`.servo`), filmed by a simulated pinhole camera with OpenCV lens
-distortion, motion blur and sensor noise (:mod:`.camera`, :mod:`.scene`).
+distortion, motion blur and sensor noise (:mod:`.camera`, :mod:`.scene`, :mod:`.background`),
+mono or colour (:mod:`.look`), recorded as FFV1, MJPEG or H.264 (:mod:`.encode`).
 :func:`run_trial` writes a trial's raw files exactly as docs/data_contract.md's data
 contract says (plus ground truth for tests and benchmarks);
 :func:`write_calibration_clip` films the ChArUco board for intrinsics;
-:func:`apply_preset` makes the footage harder (dim, blur, oblique, fast, lowres, flicker).
+:func:`apply_preset` makes the footage harder (dim, blur, oblique, fast, lowres, flicker);
+:func:`draw_setup` and :func:`apply_setup` (:mod:`.randomize`) make it another lab altogether:
+camera, lens, codec, light, background, board, arm, calibration set and clocks drawn from a family.
 """
+from .calib_clip import write_calibration_clip
 from .camera import PRESETS, CameraModel, IdealCanvas, Sensor, apply_preset, camera_settings
+from .encode import h264_backend
 from .mjcf import StringPhysics
 from .physics import ChainSim, Recording, simulate
+from .randomize import Setup, apply_setup, draw_setup
 from .servo import servo_lag
-from .trial import build_renderer, motion_end, run_trial, write_calibration_clip
+from .trial import build_renderer, motion_end, run_trial
 
 __all__ = [
     "PRESETS", "apply_preset", "CameraModel", "IdealCanvas", "Sensor", "camera_settings", "ChainSim",
-    "Recording", "StringPhysics", "servo_lag", "simulate", "build_renderer", "motion_end", "run_trial", "write_calibration_clip",
+    "Recording", "StringPhysics", "servo_lag", "simulate", "build_renderer", "motion_end", "run_trial",
+    "write_calibration_clip", "Setup", "apply_setup", "draw_setup", "h264_backend",
 ]

@@ -364,11 +364,20 @@ class Sensor:
     def expose(self, dn: np.ndarray) -> np.ndarray:
         """Noise-free digital numbers (H, W) float32 -> uint8 image with read and shot noise.
 
-        Gaussian noise of variance noise_sigma^2 + shot_gain * DN (``cv2.randn``:
-        call :meth:`seed` first for reproducible frames), rounded and saturated
-        to 0..255.
+        Gaussian noise of variance noise_sigma^2 + shot_gain * DN (``cv2.randn``: call
+        :meth:`seed` first for reproducible frames), rounded and saturated to 0..255. Colour
+        (H, W, 3) BGR: a Bayer sensor; each pixel keeps one channel (RGGB: R at even rows and
+        columns), gets its noise, and OpenCV's edge-aware demosaicing
+        (``COLOR_BayerBG2BGR_EA``) makes the (H, W, 3) uint8 BGR frame.
         """
         dn = np.asarray(dn, np.float32)
+        if dn.ndim == 3:
+            mosaic = np.empty(dn.shape[:2], np.float32)
+            mosaic[0::2, 0::2] = dn[0::2, 0::2, 2]
+            mosaic[0::2, 1::2] = dn[0::2, 1::2, 1]
+            mosaic[1::2, 0::2] = dn[1::2, 0::2, 1]
+            mosaic[1::2, 1::2] = dn[1::2, 1::2, 0]
+            return cv2.cvtColor(self.expose(mosaic), cv2.COLOR_BayerBG2BGR_EA)
         noise = np.empty_like(dn)
         cv2.randn(noise, 0.0, 1.0)
         std = dn * np.float32(self.shot_gain) + np.float32(self.sigma ** 2)

@@ -2,17 +2,18 @@
 
 :func:`run_trial` plays a commanded joint trajectory on the simulated arm and
 string (:mod:`.physics`), films it with the simulated high-speed camera
-(:mod:`.camera`, :mod:`.scene`) and writes ``video.mkv`` (FFV1, 8-bit mono),
-``video.yaml``, ``joints.csv`` and the ground truth that only tests and
-benchmarks read (``ground_truth.parquet`` / ``.json``).
-:func:`write_calibration_clip` films the ChArUco board in varied 3D poses with the
-same camera, for intrinsics.
+(:mod:`.camera`, :mod:`.scene`) and writes the video (``lab.video``, :mod:`.encode`: by
+default ``video.mkv``, FFV1, 8-bit mono), ``video.yaml``, ``joints.csv`` and the ground truth
+that only tests and benchmarks read (``ground_truth.parquet`` / ``.json``).
+:func:`~.calib_clip.write_calibration_clip` films the ChArUco board for intrinsics.
 
 Clocks: the joint log's controller clock is the master. The camera is triggered
 at a random 20-80 ms after t = 0; frame k's exposure is centred on
 t_trigger + k / fps; ``video.yaml`` states the trigger time off by
-U(+-lab.trigger_error_s), as a real trigger line is. Recording stops at the end
-of the log (the last whole exposure).
+U(+-lab.trigger_error_s) + lab.trigger_offset_s, as a real trigger line is (or not at all
+with ``lab.trigger_written: false``). Recording stops at the end of the log (the last
+whole exposure). ``lab.joint_log: at_motion_start`` writes only the log's rows from the
+motion's start on (a logger started with the motion; the arm still rests, filmed, before it).
 """
 from __future__ import annotations
 
@@ -21,16 +22,19 @@ import time
 from pathlib import Path
 from typing import Mapping
 
-import cv2
 import numpy as np
 
-from stringcast.core import Campaign, ConfigError, DataError, atomic_path, write_joint_table, write_json, write_yaml
+from stringcast.core import Campaign, ConfigError, atomic_path, write_joint_table, write_json, write_yaml
+from .background import gain_map, render_background
 from .camera import CameraModel, IdealCanvas, Sensor, camera_settings
+from .encode import CODECS, FFV1Writer, open_writer, video_settings
+from .look import scene_look
 from .mjcf import StringPhysics
 from .physics import simulate
-from .scene import (FrameRenderer, StringLook, gain_map, render_background, supersample_homography,
-                    warp_board)
+from .scene import FrameRenderer, StringLook
 from .truth import physics_truth, verdict, write_points
+
+__all__ = ["FFV1Writer", "build_renderer", "motion_end", "run_trial", "string_bands"]
 
 TRIGGER_DELAY_S = (0.02, 0.08)
 
@@ -46,75 +50,7 @@ def _fps(campaign: Campaign) -> float:
     return float(cam["fps"])
 
 
-def _scene(campaign: Campaign, config: Mapping, scene_seed: int, with_target: bool = True,
-           with_board: bool = True):
-    """Camera settings, model, ideal canvas, sensor, gain map and static background reflectance."""
-    settings = camera_settings(config)
-    cam = CameraModel.from_config(campaign.setup.camera, config)
-    canvas = IdealCanvas.for_camera(cam)
-    sensor = Sensor(cam, settings)
-    gain = gain_map(cam, sensor, scene_seed)
-    bg = render_background(cam, canvas, campaign, scene_seed, board=with_board, target=with_target)
-    return settings, cam, canvas, sensor, gain, bg
-
-
-class FFV1Writer:
-    """``cv2.VideoWriter`` (FFV1, 8-bit mono) fed from a background thread.
-
-    FFV1 encoding costs about as much as rendering a frame; OpenCV releases the
-    GIL while encoding, so a second thread overlaps the two. Use as a context
-    manager; :meth:`close` waits for the queue and re-raises a writer error.
-
-    Raises:
-        DataError: OpenCV cannot open an FFV1 writer for ``path``.
-    """
-
-    def __init__(self, path: Path, fps: float, width: int, height: int, queue_size: int = 8):
-        import queue
-        import threading
-
-        self.path = Path(path)
-        self._w = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*"FFV1"), fps, (width, height),
-                                  isColor=False)
-        if not self._w.isOpened():
-            raise DataError(f"{path}: OpenCV cannot open an FFV1 writer")
-        self._q: "queue.Queue" = queue.Queue(queue_size)
-        self._error: BaseException | None = None
-        self._thread = threading.Thread(target=self._run, daemon=True)
-        self._thread.start()
-        self.frames = 0
-
-    def _run(self) -> None:
-        while True:
-            frame = self._q.get()
-            if frame is None:
-                break
-            if self._error is None:
-                try:
-                    self._w.write(frame)
-                except BaseException as exc:  # keep draining; reported in close()
-                    self._error = exc
-
-    def write(self, frame: np.ndarray) -> None:
-        """Queue one (H, W) uint8 frame."""
-        if self._error is not None:
-            raise DataError(f"{self.path}: writing a frame failed: {self._error}")
-        self._q.put(frame)
-        self.frames += 1
-
-    def close(self) -> None:
-        if self._thread.is_alive():
-            self._q.put(None)
-            self._thread.join()
-        self._w.release()
-        if self._error is not None:
-            raise DataError(f"{self.path}: writing a frame failed: {self._error}")
-
-    def __enter__(self) -> "FFV1Writer":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
+JOINT_LOGS = ("full", "at_motion_start")
 
 
 def string_bands(config: Mapping, n_points: int, phys: StringPhysics) -> dict:
@@ -145,9 +81,15 @@ def string_bands(config: Mapping, n_points: int, phys: StringPhysics) -> dict:
 def build_renderer(campaign: Campaign, config: Mapping, phys: StringPhysics | None = None) -> FrameRenderer:
     """The trial camera's :class:`FrameRenderer` (same scene, light and camera as :func:`run_trial`)."""
     phys = phys or StringPhysics.from_campaign(campaign, config)
-    _, cam, canvas, sensor, gain, bg = _scene(campaign, config, int(_lab(config).get("scene_seed", 11)))
+    scene_seed = int(_lab(config).get("scene_seed", 11))
+    scene = scene_look(config)
+    cam = CameraModel.from_config(campaign.setup.camera, config)
+    canvas = IdealCanvas.for_camera(cam)
+    sensor = Sensor(cam, camera_settings(config))
+    gain = gain_map(cam, sensor, scene_seed)
+    bg = render_background(cam, canvas, campaign, scene_seed, look=scene)
     look = StringLook.from_physics(phys, **string_bands(config, campaign.string.n_points, phys))
-    return FrameRenderer(cam, canvas, sensor, bg, gain, campaign.arm, look)
+    return FrameRenderer(cam, canvas, sensor, bg, gain, campaign.arm, look, scene)
 
 
 def motion_end(t_cmd: np.ndarray, q_cmd: np.ndarray) -> float:
@@ -167,17 +109,18 @@ def run_trial(t_cmd: np.ndarray, q_cmd: np.ndarray, campaign: Campaign, config: 
         out_dir: the trial folder (created). seed: all randomness of this trial.
         motion_start_s: when the motion leaves the pre-roll hold (start of the hit window).
 
-    Writes into ``out_dir``: ``video.mkv``, ``video.yaml``, ``joints.csv``
-    (``t_s, q1_rad.. measured, q1_cmd_rad.. commanded``), ``ground_truth.parquet``
-    (``frame, t_s, point, x_m, y_m``: the n + 1 points at arc i L / n at each
-    exposure centre, true times) and ``ground_truth.json``.
+    Writes into ``out_dir``: the video (``video.mkv``, or ``video.avi`` / ``video.mp4`` for
+    ``lab.video.codec`` mjpeg / h264), ``video.yaml``, ``joints.csv`` (``t_s, q1_rad..
+    measured, q1_cmd_rad.. commanded``; from the motion's start on with ``lab.joint_log:
+    at_motion_start``), ``ground_truth.parquet`` (``frame, t_s, point, x_m, y_m``: the n + 1
+    points at arc i L / n at each exposure centre, true times) and ``ground_truth.json``.
 
     Returns:
-        The ground_truth.json dict (hit, closest_approach_mm, ...).
+        The ground_truth.json dict (hit, closest_approach_mm, ..., video: the codec written).
 
     Raises:
         ValueError: bad shapes or times; DataError: the video cannot be written;
-        FloatingPointError: the physics diverged.
+        ConfigError: bad ``lab`` settings; FloatingPointError: the physics diverged.
     """
     wall0 = time.perf_counter()
     out_dir = Path(out_dir)
@@ -185,6 +128,7 @@ def run_trial(t_cmd: np.ndarray, q_cmd: np.ndarray, campaign: Campaign, config: 
     arm = campaign.arm
     t_cmd, q_cmd = _checked_command(t_cmd, q_cmd, arm.n_joints)
     lab = _lab(config)
+    video = video_settings(config)
     ss = np.random.SeedSequence(int(seed))
     rng_trig, rng_joint, rng_noise = (np.random.default_rng(s) for s in ss.spawn(3))
     Sensor.seed(int(rng_noise.integers(2 ** 31)))
@@ -195,27 +139,25 @@ def run_trial(t_cmd: np.ndarray, q_cmd: np.ndarray, campaign: Campaign, config: 
     rec = simulate(phys, arm, t_cmd, q_cmd, float(lab.get("timestep_s", 5e-5)),
                    float(lab.get("servo_lag_s", 0.008)), float(lab.get("settle_s", 0.3)), progress=True)
     wall_physics = time.perf_counter() - wall0
-
-    # -- joint log ----------------------------------------------------------------
-    q_true = rec.arm_at(t_cmd)
-    q_meas = q_true + rng_joint.normal(0, float(lab.get("joint_noise_rad", 2e-4)), q_true.shape)
-    write_joint_table(out_dir / "joints.csv", t_cmd, q_meas,
-                      {f"q{j + 1}_cmd_rad": q_cmd[:, j] for j in range(arm.n_joints)})
+    log_start = _write_joint_log(out_dir / "joints.csv", rec, t_cmd, q_cmd, lab, rng_joint, motion_start_s,
+                                 arm.controller_rate)
 
     # -- camera ------------------------------------------------------------------
     wall1 = time.perf_counter()
-    settings = camera_settings(config)
     renderer = build_renderer(campaign, config, phys)
     cam = renderer.cam
     fps = _fps(campaign)
-    exposure, t_trigger, t_trigger_written, n_frames = _frame_clock(settings, fps, float(rec.t[-1]), lab, rng_trig)
+    exposure, t_trigger, t_trigger_written, n_frames = _frame_clock(camera_settings(config), fps, float(rec.t[-1]),
+                                                                    lab, rng_trig)
     n = campaign.string.n_points
-    gt_rows, size_mb = _film(out_dir / "video.mkv", renderer, rec, t_trigger, n_frames, exposure, fps, n, lpp)
+    name = "video" + CODECS[video["codec"]]
+    gt_rows, size_mb, written = _film(out_dir / name, video, renderer, rec, t_trigger, n_frames, exposure, fps, n, lpp)
     wall_render = time.perf_counter() - wall1
 
-    write_yaml(out_dir / "video.yaml", {
-        "file": "video.mkv", "fps": fps, "frames": n_frames, "trigger_time_s": round(t_trigger_written, 9),
-        "width_px": cam.width, "height_px": cam.height, "bit_depth": 8})
+    meta = {"file": name, "fps": fps, "frames": n_frames}
+    if t_trigger_written is not None:
+        meta["trigger_time_s"] = round(t_trigger_written, 9)
+    write_yaml(out_dir / "video.yaml", {**meta, "width_px": cam.width, "height_px": cam.height, "bit_depth": 8})
     write_points(out_dir / "ground_truth.parquet", gt_rows)
 
     # -- verdict -------------------------------------------------------------------
@@ -234,8 +176,30 @@ def run_trial(t_cmd: np.ndarray, q_cmd: np.ndarray, campaign: Campaign, config: 
         "wall_s": {"physics": wall_physics, "render": wall_render, "total": time.perf_counter() - wall0},
         "seed": int(seed),
     }
+    truth["video"] = {**video, "file": name, "codec_written": written}
+    truth["joint_log_start_s"] = log_start
     write_json(out_dir / "ground_truth.json", truth)
     return truth
+
+
+def _write_joint_log(path: Path, rec, t_cmd: np.ndarray, q_cmd: np.ndarray, lab: Mapping,
+                     rng_joint: np.random.Generator, motion_start_s: float, rate: float) -> float:
+    """Write ``joints.csv``: the arm's true joints at t_cmd (K,) s plus N(0, lab.joint_noise_rad) noise,
+    and the commands q_cmd (K, J) rad; with ``lab.joint_log: at_motion_start`` only the rows from
+    ``motion_start_s`` on (half a controller period's tolerance). Returns the log's first time, s.
+
+    Raises:
+        ConfigError: an unknown ``lab.joint_log``.
+    """
+    mode = str(lab.get("joint_log", "full"))
+    if mode not in JOINT_LOGS:
+        raise ConfigError(f"lab.joint_log = {mode!r}: expected one of {list(JOINT_LOGS)}")
+    q_true = rec.arm_at(t_cmd)
+    q_meas = q_true + rng_joint.normal(0, float(lab.get("joint_noise_rad", 2e-4)), q_true.shape)
+    keep = (t_cmd >= motion_start_s - 0.5 / rate) if mode == "at_motion_start" else np.ones(len(t_cmd), bool)
+    write_joint_table(path, t_cmd[keep], q_meas[keep],
+                      {f"q{j + 1}_cmd_rad": q_cmd[keep, j] for j in range(q_cmd.shape[1])})
+    return float(t_cmd[keep][0])
 
 
 def _checked_command(t_cmd: np.ndarray, q_cmd: np.ndarray, n_joints: int) -> tuple[np.ndarray, np.ndarray]:
@@ -253,11 +217,12 @@ def _checked_command(t_cmd: np.ndarray, q_cmd: np.ndarray, n_joints: int) -> tup
     return t_cmd, q_cmd
 
 
-def _frame_clock(settings: Mapping, fps: float, t_end: float, lab: dict,
-                 rng_trig: np.random.Generator) -> tuple[float, float, float, int]:
+def _frame_clock(settings: Mapping, fps: float, t_end: float, lab: Mapping,
+                 rng_trig: np.random.Generator) -> tuple[float, float, float | None, int]:
     """The camera's clock: exposure s, the true trigger time s (U(TRIGGER_DELAY_S), frame 0's
-    exposure centre), the trigger time video.yaml states (off by U(+-lab.trigger_error_s)) and the
-    number of whole exposures before the log ends at ``t_end`` s. Two draws from ``rng_trig``.
+    exposure centre), the trigger time video.yaml states (off by U(+-lab.trigger_error_s) +
+    lab.trigger_offset_s; None with ``lab.trigger_written: false``) and the number of whole
+    exposures before the log ends at ``t_end`` s. Two draws from ``rng_trig``, always.
 
     Raises:
         ConfigError: an exposure not within (0, 1/fps). ValueError: a log shorter than the trigger delay.
@@ -271,99 +236,33 @@ def _frame_clock(settings: Mapping, fps: float, t_end: float, lab: dict,
         raise ValueError(f"run_trial: the log ({t_end:.3f} s) is shorter than the camera's trigger delay")
     trigger_error = float(lab.get("trigger_error_s", 0.002))
     t_trigger_written = t_trigger + float(rng_trig.uniform(-trigger_error, trigger_error))
+    t_trigger_written += float(lab.get("trigger_offset_s", 0.0))
+    if not bool(lab.get("trigger_written", True)):
+        t_trigger_written = None
     return exposure, t_trigger, t_trigger_written, n_frames
 
 
-def _film(path: Path, renderer: FrameRenderer, rec, t_trigger: float, n_frames: int, exposure: float, fps: float,
-          n: int, lpp: int) -> tuple[list, float]:
-    """Render and write the video (FFV1) of the simulation ``rec``: n_frames exposures centred on
-    t_trigger + k / fps, s.
+def _film(path: Path, video: Mapping, renderer: FrameRenderer, rec, t_trigger: float, n_frames: int,
+          exposure: float, fps: float, n: int, lpp: int) -> tuple[list, float, str]:
+    """Render and write the video (``video``: :func:`~.encode.video_settings`) of the simulation
+    ``rec``: n_frames exposures centred on t_trigger + k / fps, s.
 
     Returns the ground-truth rows (per frame: frame, t_s, point, x_m, y_m, each (n + 1,): the string's
-    n + 1 points, every ``lpp``-th link end, at the exposure centre) and the video's size, MB.
+    n + 1 points, every ``lpp``-th link end, at the exposure centre), the video's size, MB, and the
+    codec written (:func:`~.encode.open_writer`).
     """
     t_frames = t_trigger + np.arange(n_frames) / fps
     gt_rows = []
     from tqdm import tqdm
 
-    with atomic_path(path) as tmp, FFV1Writer(tmp, fps, renderer.cam.width, renderer.cam.height) as writer:
-        for k, tc in enumerate(tqdm(t_frames, desc="lab frames", unit="frame", disable=None, leave=False)):
-            m = renderer.n_sub(rec.at(np.array([tc - exposure / 2, tc + exposure / 2])))
-            sub_t = tc + exposure * ((np.arange(m) + 0.5) / m - 0.5)
-            writer.write(renderer.render(rec.at(sub_t), rec.arm_at(sub_t), renderer.sensor.light(tc, exposure)))
-            pts = rec.at(np.array([tc]))[0][::lpp][: n + 1]
-            gt_rows.append((np.full(n + 1, k), np.full(n + 1, tc), np.arange(n + 1), pts[:, 0], pts[:, 1]))
-        writer.close()
+    with atomic_path(path) as tmp:
+        writer, written = open_writer(tmp, video, fps, renderer.cam.width, renderer.cam.height)
+        with writer:
+            for k, tc in enumerate(tqdm(t_frames, desc="lab frames", unit="frame", disable=None, leave=False)):
+                m = renderer.n_sub(rec.at(np.array([tc - exposure / 2, tc + exposure / 2])))
+                sub_t = tc + exposure * ((np.arange(m) + 0.5) / m - 0.5)
+                writer.write(renderer.render(rec.at(sub_t), rec.arm_at(sub_t), renderer.sensor.light(tc, exposure)))
+                pts = rec.at(np.array([tc]))[0][::lpp][: n + 1]
+                gt_rows.append((np.full(n + 1, k), np.full(n + 1, tc), np.arange(n + 1), pts[:, 0], pts[:, 1]))
         size_mb = tmp.stat().st_size / 1e6
-    return gt_rows, size_mb
-
-
-def _board_pose(rng: np.random.Generator, cam: CameraModel, board_size: np.ndarray, uv: np.ndarray,
-                z: float, max_tilt_deg: float) -> tuple[np.ndarray, np.ndarray]:
-    """A board pose (R, t: board frame -> camera frame) centred on pixel ``uv`` at depth ``z``."""
-    axis = rng.normal(size=2)
-    axis = np.array([*(axis / np.linalg.norm(axis)), 0.0]) * math.radians(rng.uniform(10, max_tilt_deg))
-    R_tilt = cv2.Rodrigues(axis)[0]
-    R_roll = cv2.Rodrigues(np.array([0, 0, math.radians(rng.uniform(-25, 25))]))[0]
-    R = R_tilt @ R_roll
-    ray = np.linalg.inv(cam.K) @ np.array([uv[0], uv[1], 1.0])
-    P = ray / ray[2] * z
-    t = P - R @ np.array([board_size[0] / 2, board_size[1] / 2, 0.0])
-    return R, t
-
-
-def write_calibration_clip(campaign: Campaign, config: Mapping, out_dir: str | Path, seed: int,
-                           n_frames: int = 30) -> Path:
-    """Film the set-up's ChArUco board in varied 3D poses with the lab camera, for intrinsics.
-
-    Poses: board centre on a 3x3 grid of image positions (then random ones), at
-    a depth where the board's long side spans 45-85 % of the image, tilted 10-40 deg
-    about a random in-plane axis and rolled +-25 deg; every board corner stays
-    inside the image. Same intrinsics, distortion, light and sensor as the trials.
-
-    Writes ``out_dir/board_XX.png`` (8-bit mono) and ``out_dir/ground_truth.json``
-    (camera truth, each view's rvec/tvec). Returns ``out_dir``.
-    """
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    rng = np.random.default_rng(int(seed) + 7919)
-    Sensor.seed(int(seed) + 7919)
-    lab = _lab(config)
-    scene_seed = int(lab.get("scene_seed", 11))
-    settings, cam, canvas, sensor, gain, bg = _scene(campaign, config, scene_seed, with_target=False,
-                                                     with_board=False)
-    board = campaign.setup.board
-    size = np.array([board.squares_x, board.squares_y]) * board.square
-    corners = np.array([[0, 0, 0], [size[0], 0, 0], [size[0], size[1], 0], [0, size[1], 0]], float)
-    bg2 = cv2.resize(bg, (canvas.width * 2, canvas.height * 2), interpolation=cv2.INTER_LINEAR)
-    views = []
-    for i in range(n_frames):
-        for _ in range(500):
-            if i < 9:
-                cell = np.array([i % 3, i // 3]) + rng.uniform(0.15, 0.85, 2)
-                uv = cell / 3 * [cam.width, cam.height]
-            else:
-                uv = rng.uniform(0.1, 0.9, 2) * [cam.width, cam.height]
-            z = cam.K[0, 0] * size.max() / (rng.uniform(0.45, 0.85) * min(cam.width, cam.height))
-            R, t = _board_pose(rng, cam, size, uv, z, 40.0)
-            img_c, _ = cv2.projectPoints(corners, cv2.Rodrigues(R)[0], t, cam.K, cam.dist)
-            img_c = img_c.reshape(-1, 2)
-            if (img_c.min() >= 8 and np.all(img_c.max(axis=0) <= [cam.width - 9, cam.height - 9])
-                    and np.all((R @ corners.T + t[:, None])[2] > 0.1)):
-                break
-        else:
-            raise RuntimeError("write_calibration_clip: no board pose fits the image; check lab.camera")
-        H = supersample_homography(canvas.K @ np.column_stack([R[:, 0], R[:, 1], t]), 2)
-        ss_img = bg2.copy()
-        warp_board(ss_img, board, H)
-        ideal = cv2.resize(ss_img, (canvas.width, canvas.height), interpolation=cv2.INTER_AREA)
-        dn = canvas.distort(sensor.blur(ideal)) * gain
-        frame = sensor.expose(dn)
-        ok, buf = cv2.imencode(".png", frame)
-        if not ok:
-            raise DataError(f"{out_dir}: PNG encoding failed")
-        with atomic_path(out_dir / f"board_{i:02d}.png") as tmp:
-            tmp.write_bytes(buf.tobytes())
-        views.append({"file": f"board_{i:02d}.png", "rvec": cv2.Rodrigues(R)[0].ravel(), "tvec": t})
-    write_json(out_dir / "ground_truth.json", {"camera": cam.truth(), "views": views, "seed": int(seed)})
-    return out_dir
+    return gt_rows, size_mb, written

@@ -66,15 +66,20 @@ class ContainerReader(VideoReader):
         cap = self._open(raw=False)
         ok, bgr = cap.read()
         self.fourcc = int(cap.get(cv2.CAP_PROP_FOURCC)).to_bytes(4, "little").decode("latin-1").upper()
+        pixel_format = int(cap.get(cv2.CAP_PROP_CODEC_PIXEL_FORMAT))
         fps = float(cap.get(cv2.CAP_PROP_FPS))
         count = int(round(cap.get(cv2.CAP_PROP_FRAME_COUNT)))
         cap.release()
         if not ok or bgr is None:
             raise DataError(f"{self.path}: no frame could be decoded (empty or unreadable video)")
-        # Mono stream: the raw frame is 2-D and equals the BGR conversion (or is 16-bit).
-        cap = self._open(raw=True)
-        ok, raw = cap.read()
-        cap.release()
+        # Mono stream: the raw frame is 2-D and equals the BGR conversion (or is 16-bit). Only a grey
+        # pixel format is read raw: OpenCV reads any other (YUV of MJPEG, H.264) raw as its luma
+        # plane with a warning for every frame, and its luma may be limited-range.
+        ok, raw = False, None
+        if _grey_pixel_format(pixel_format, bgr):
+            cap = self._open(raw=True)
+            ok, raw = cap.read()
+            cap.release()
         self._raw = bool(ok and raw is not None and raw.ndim == 2 and raw.shape == bgr.shape[:2]
                          and (raw.dtype == np.uint16 or np.array_equal(raw, to_grey(bgr))))
         first = raw if self._raw else to_grey(bgr)
@@ -170,6 +175,15 @@ class ContainerReader(VideoReader):
         if self._cap is not None:
             self._cap.release()
             self._cap = None
+
+
+def _grey_pixel_format(pixel_format: int, bgr: np.ndarray) -> bool:
+    """Whether a stream is grey: its FFmpeg pixel format as OpenCV names it (``Y800``, ``Y1`` + depth:
+    gray, gray10/12/16), or, where OpenCV does not say (<= 0), a first frame with equal channels."""
+    if pixel_format > 0:
+        tag = pixel_format.to_bytes(4, "little")
+        return tag[:1] == b"Y" and tag[1:2] in (b"8", b"1")
+    return bgr.ndim == 2 or all(np.array_equal(bgr[..., 0], bgr[..., c]) for c in range(1, bgr.shape[2]))
 
 
 def dropped_frames(timestamps_s: np.ndarray, fps: float) -> list[tuple[int, int]]:
