@@ -1,0 +1,69 @@
+"""The map from a stage to the settings it reads, and what is made from the settings classes.
+
+A stage's entry point names the settings it reads by its parameters' types;
+:func:`sections_read` reads them back (the workflow's rule params) and :func:`stage_kwargs`
+hands them over (the CLI). :func:`settings_digest` names a set of settings;
+:func:`markdown_table` documents them (config/README.md).
+"""
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import typing
+
+from .settings import SECTION_CLASSES, Settings, _plain
+
+
+def _settings_parameters(func) -> dict[str, type]:
+    """``{parameter: class}`` for ``func``'s parameters annotated with a settings class or
+    :class:`Settings` (a stage that takes every section, as the reports' provenance does)."""
+    hints = typing.get_type_hints(func)
+    known = (*SECTION_CLASSES, Settings)
+    return {name: h for name, h in hints.items() if name in inspect.signature(func).parameters and h in known}
+
+
+def sections_read(func) -> tuple[str, ...]:
+    """The config sections a stage reads: those of the settings classes among ``func``'s
+    parameter annotations (in :data:`SECTION_CLASSES` order; every section for a parameter
+    annotated :class:`Settings`).
+
+    ``stringcast.cli`` hands each stage exactly these, and the workflow makes them the rule's
+    params, so Snakemake reruns the rule when one of them changes and only then.
+    """
+    types = set(_settings_parameters(func).values())
+    return tuple(c.SECTION for c in SECTION_CLASSES if c in types or Settings in types)
+
+
+def stage_kwargs(func, settings: Settings) -> dict:
+    """The keyword arguments ``{parameter: settings}`` that ``func`` takes from ``settings``:
+    each section's object by its class, and ``settings`` itself for a :class:`Settings` one."""
+    return {name: settings if h is Settings else getattr(settings, h.SECTION)
+            for name, h in _settings_parameters(func).items()}
+
+
+def settings_digest(settings: Settings) -> str:
+    """SHA-256 (first 12 hex digits) of every section's settings as canonical JSON: two
+    configs that give the same settings give the same digest, whatever their files say."""
+    import hashlib
+    import json
+
+    doc = {s: getattr(settings, s).as_dict() for s in (c.SECTION for c in SECTION_CLASSES)}
+    return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:12]
+
+
+def markdown_table() -> str:
+    """Every setting with its default and help, one table per section (``config/README.md``)."""
+    import yaml
+
+    out = []
+    for c in SECTION_CLASSES:
+        summary = (c.__doc__ or "").strip().split("\n")[0].removeprefix(f"``{c.SECTION}``: ")
+        out += [f"### `{c.SECTION}`", "", summary[:1].upper() + summary[1:], "",
+                "| setting | default | meaning |", "| --- | --- | --- |"]
+        for f in dataclasses.fields(c):
+            value = getattr(c(), f.name)
+            text = yaml.safe_dump(_plain(value), default_flow_style=True, width=1000, sort_keys=False).strip()
+            text = text.removesuffix("\n...").removesuffix("...").strip()
+            out.append(f"| `{f.name}` | `{text}` | {f.metadata.get('help', '')} |")
+        out.append("")
+    return "\n".join(out)
