@@ -171,28 +171,35 @@ def figure(rows: list[dict], path: Path) -> None:
     plt.close(fig)
 
 
-def main(argv: list[str] | None = None) -> None:
+def run(quick: bool = False, setups: int = 24, first: int = 0, work: Path | None = None) -> dict:
+    """Run the benchmark (``benchmarks.run``'s interface); returns the JSON it wrote last."""
     from stringcast.core import load_config
 
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--setups", type=int, default=24, help="how many drawn setups")
-    p.add_argument("--first", type=int, default=0, help="the first setup's seed")
-    p.add_argument("--work", type=Path, default=None, help="keep (and reuse) each setup's files here")
-    p.add_argument("--quick", action="store_true", help="3 setups")
-    args = p.parse_args(argv)
-    n = 3 if args.quick else args.setups
+    n = 3 if quick else setups
     config = load_config()
-    work = args.work or Path(tempfile.mkdtemp(prefix="stringcast_generalization_"))
-    rows = []
-    for i, seed in enumerate(range(args.first, args.first + n)):
+    work = work or Path(tempfile.mkdtemp(prefix="stringcast_generalization_"))
+    rows, doc = [], {}
+    for i, seed in enumerate(range(first, first + n)):
         row = run_setup(seed, 1 + i % 7, config, work)
         row.update(_judge(row, row["draw"]["width_px"]))
         rows.append(row)
         print(f"setup {seed}: " + ", ".join(f"{k} {row.get(k)}" for k in (
             "calibration_verdict", "fx_error_pct", "principal_point_error_px", "sync_verdict", "sync_error_ms",
             "tracking_median_mm", "tracking_p95_mm", "valid_share", "E_mm", "fit_verdict", "error")), flush=True)
-        write("generalization", summarise(rows, i == n - 1, args.quick))
+        doc = summarise(rows, i == n - 1, quick)
+        write("generalization", doc)
         figure(rows, BENCH_DIR / "generalization.png")
+    return doc
+
+
+def main(argv: list[str] | None = None) -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--setups", type=int, default=24, help="how many drawn setups")
+    p.add_argument("--first", type=int, default=0, help="the first setup's seed")
+    p.add_argument("--work", type=Path, default=None, help="keep (and reuse) each setup's files here")
+    p.add_argument("--quick", action="store_true", help="3 setups")
+    args = p.parse_args(argv)
+    run(args.quick, args.setups, args.first, args.work)
 
 
 if __name__ == "__main__":

@@ -3,7 +3,8 @@
 Each benchmark module has ``run(quick: bool) -> dict`` and writes
 results/bench/<name>.json itself; this runner prints one line per benchmark.
 ``loop`` (whole campaigns on the lab: hours in full, about an hour with --quick on
-2 cores) is left out of the default list: name it, or add ``--with-loop``.
+2 cores) and ``generalization`` (24 drawn lab setups, about 4 min each) are left out of the
+default list: name them (``--with-loop`` adds the loop).
 """
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ import json
 import time
 
 BENCHMARKS = ("model_speed", "tracking", "sync", "estimation")
-SLOW = ("loop",)   # run only when named or with --with-loop
+SLOW = ("loop", "generalization")   # run only when named (the loop also with --with-loop)
 
 
 def main() -> None:
@@ -26,7 +27,7 @@ def main() -> None:
     unknown = sorted(set(args.names) - set(BENCHMARKS + SLOW))
     if unknown:
         ap.error(f"unknown benchmark(s) {', '.join(unknown)} (known: {', '.join(BENCHMARKS + SLOW)})")
-    names = list(args.names or BENCHMARKS) + [n for n in SLOW if args.with_loop and n not in args.names]
+    names = list(args.names or BENCHMARKS) + (["loop"] if args.with_loop and "loop" not in args.names else [])
     for name in names:
         t0 = time.perf_counter()
         doc = importlib.import_module(f"benchmarks.{name}").run(args.quick)
