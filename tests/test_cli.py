@@ -98,3 +98,18 @@ def test_jobs_read_the_config_files_the_workflow_names(tmp_path, monkeypatch):
     assert config_paths(parser.parse_args(["--config", "c.yaml", "settings"])) == ["c.yaml"]
     monkeypatch.delenv(CONFIG_ENV)
     assert config_paths(parser.parse_args(["settings"])) is None
+
+
+def test_each_config_gives_its_own_settings_in_one_process(tmp_path):
+    """The CLI builds the settings once per set of config files, not once per process: a second
+    call with another file must not reuse the first call's settings."""
+    from stringcast.cli import _settings, build_parser
+    from stringcast.plan import run_first_plan
+
+    mine = tmp_path / "mine.yaml"
+    mine.write_text(yaml.safe_dump({"motion": {"flight_window_s": 0.7}}))
+    parser = build_parser()
+    paper = _settings(run_first_plan, parser.parse_args(["--config", str(DEFAULT_CONFIG), "settings"]))
+    other = _settings(run_first_plan, parser.parse_args(["--config", str(DEFAULT_CONFIG), "--config", str(mine),
+                                                         "settings"]))
+    assert paper["motion"].flight_window_s == 0.5 and other["motion"].flight_window_s == 0.7

@@ -56,10 +56,10 @@ def _settings(func, args) -> dict:
     """The settings objects ``func`` takes (by its annotations), built once from the config."""
     from stringcast.core import settings_from_config, stage_kwargs
 
-    config = _config(args)
-    if "_settings" not in _CONFIG_CACHE:
-        _CONFIG_CACHE["_settings"] = settings_from_config(config)
-    return stage_kwargs(func, _CONFIG_CACHE["_settings"])
+    key = ("settings", str(config_paths(args)))
+    if key not in _CONFIG_CACHE:
+        _CONFIG_CACHE[key] = settings_from_config(_config(args))
+    return stage_kwargs(func, _CONFIG_CACHE[key])
 
 
 STAGES = {
