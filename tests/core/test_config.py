@@ -109,3 +109,22 @@ def test_board_to_robot_maps_board_origin(config, campaign):
     assert o[:2] == pytest.approx([ox, oy])
     down = T @ np.array([0, 0.1, 1.0])  # board y runs down the printed board
     assert down[1] < o[1]
+
+
+def test_campaign_entries_are_what_resolve_campaign_reads(config):
+    """One lookup serves the campaign's specs and the workflow's params: ids with their config
+    entries, inline entries as written, the first arm and the 'default' set-up by default."""
+    import pytest
+
+    from stringcast.core import ConfigError, campaign_entries, resolve_campaign
+
+    inline = {"length_mm": 300.0, "n_points": 10}
+    e = campaign_entries({"string": inline, "target": 1}, config)
+    assert e["string"] == (None, inline) and e["target"] == ("1", config["targets"]["1"])
+    arm_id = next(iter(config["arms"]))
+    assert e["arm"] == (arm_id, config["arms"][arm_id]) and e["setup"] == ("default", config["setups"]["default"])
+    assert e["camera"] == config["cameras"][config["setups"]["default"]["camera"]]
+    c = resolve_campaign({"string": inline, "target": 1}, config, "c")
+    assert c.string.name == "c-inline" and c.target.name == "1" and c.arm.name == arm_id and c.setup.name == "default"
+    with pytest.raises(ConfigError, match="unknown target 99"):
+        campaign_entries({"string": 1, "target": 99}, config)

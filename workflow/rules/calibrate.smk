@@ -21,7 +21,7 @@ rule calibrate:
         cli=CLI,
         calib=calib_arg,
         settings=stage_settings("calibrate"),
-        lab=campaign_entries,
+        lab=campaign_lab_entries,
     shell:
         '{params.cli} calibrate --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '{params.calib} --campaign "{input.campaign}" --out "{output}" > "{log}" 2>&1'

@@ -10,6 +10,7 @@ from stringcast.cli import stage_sections
 from stringcast.core import (
     ConfigError,
     DataError,
+    campaign_entries,
     check_joint_header,
     load_campaign,
     load_yaml,
@@ -61,23 +62,16 @@ def stage_settings(command):
     return {s: getattr(SETTINGS, s).as_dict() for s in stage_sections(command)}
 
 
-def campaign_entries(wildcards):
+def campaign_lab_entries(wildcards):
     """The config's entries this campaign resolves to (its arm, set-up, camera, string and
-    target; inline entries as written): a rule's params, so that editing one of them reruns
-    that campaign's stages and no other campaign's."""
-    doc = load_yaml(Path("data", wildcards.campaign, "campaign.yaml")) or {}
-    out = {}
-    for key, table, fallback in (
-        ("string", "strings", None),
-        ("target", "targets", None),
-        ("arm", "arms", next(iter(config["arms"]))),
-        ("setup", "setups", "default"),
-    ):
-        ref = doc.get(key, fallback)
-        out[key] = ref if isinstance(ref, dict) else config[table].get(str(ref))
-    setup = out["setup"] or {}
-    out["camera"] = config["cameras"].get(str(setup.get("camera")))
-    return out
+    target; inline entries as written; stringcast.core.campaign_entries): a rule's params, so
+    that editing one of them reruns that campaign's stages and no other campaign's."""
+    path = Path("data", wildcards.campaign, "campaign.yaml")
+    try:
+        e = campaign_entries(load_yaml(path) or {}, config, path)
+    except (ConfigError, KeyError) as exc:
+        raise WorkflowError(f"stringcast: {path}: {exc}") from exc
+    return {k: (v[1] if isinstance(v, tuple) else v) for k, v in e.items()}
 
 
 VIDEO_NAMES = ("video.mkv", "video.avi", "video.mp4", "video.cihx", "video")

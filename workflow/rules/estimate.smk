@@ -24,7 +24,7 @@ rule estimate:
         prev=prev_arg,
         earlier=earlier_arg,
         settings=stage_settings("estimate"),
-        lab=campaign_entries,
+        lab=campaign_lab_entries,
     shell:
         'NUMBA_NUM_THREADS={threads} {params.cli} estimate --tracks "{input.tracks}" '
         '--joints "{input.joints}" --campaign "{input.campaign}" {params.prev} {params.earlier} '

@@ -18,7 +18,7 @@ rule plan_first:
     params:
         cli=CLI,
         settings=stage_settings("plan-first"),
-        lab=campaign_entries,
+        lab=campaign_lab_entries,
     shell:
         'NUMBA_NUM_THREADS={threads} {params.cli} plan-first --campaign "{input.campaign}" '
         '--out-dir "results/{wildcards.campaign}/first_motion" > "{log}" 2>&1'
@@ -44,7 +44,7 @@ rule plan:
     params:
         cli=CLI,
         settings=stage_settings("plan"),
-        lab=campaign_entries,
+        lab=campaign_lab_entries,
     shell:
         'NUMBA_NUM_THREADS={threads} {params.cli} plan --params "{input.params}" --played-motion "{input.played}" '
         '--tracks "{input.tracks}" --joints "{input.joints}" --campaign "{input.campaign}" --seed {wildcards.trial} '

@@ -27,7 +27,7 @@ rule report_trial:
     params:
         cli=CLI,
         settings=stage_settings("report-trial"),
-        lab=campaign_entries,
+        lab=campaign_lab_entries,
     shell:
         '{params.cli} report-trial --data-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '--results-dir "results/{wildcards.campaign}/trial_{wildcards.trial}" '
@@ -53,7 +53,7 @@ rule report_campaign:
     params:
         cli=CLI,
         settings=stage_settings("report-campaign"),
-        lab=campaign_entries,
+        lab=campaign_lab_entries,
     shell:
         '{params.cli} report-campaign --data-dir "data/{wildcards.campaign}" '
         '--results-dir "results/{wildcards.campaign}" --campaign "{input.campaign}" '

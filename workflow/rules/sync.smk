@@ -20,7 +20,7 @@ rule sync:
     params:
         cli=CLI,
         settings=stage_settings("sync"),
-        lab=campaign_entries,
+        lab=campaign_lab_entries,
     shell:
         '{params.cli} sync --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '--calibration "{input.calibration}" --campaign "{input.campaign}" '

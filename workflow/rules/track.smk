@@ -25,7 +25,7 @@ rule track:
     params:
         cli=CLI,
         settings=stage_settings("track"),
-        lab=campaign_entries,
+        lab=campaign_lab_entries,
     shell:
         '{params.cli} track --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '--calibration "{input.calibration}" --sync "{input.sync}" '

@@ -6,7 +6,8 @@ from .arm import (JointLimitError, assert_within_limits, check_limits, forward_k
                   motion_start, motion_window)
 from .config import (DEFAULT_CONFIG, METHOD_CONFIGS, OURS_CONFIG, PARAM_NAMES, ConfigError, load_config, load_yaml,
                      merge_config, model_ranges, validate)
-from .specs import ArmSpec, BoardSpec, Campaign, SetupSpec, StringSpec, TargetSpec, load_campaign, resolve_campaign
+from .specs import (ArmSpec, BoardSpec, Campaign, SetupSpec, StringSpec, TargetSpec, campaign_entries, load_campaign,
+                    resolve_campaign)
 from .files import (TRACK_COLUMNS, DataError, atomic_path, check_joint_coverage, check_joint_header, end_speed_shares,
                     find_video, joint_log_span, read_joint_table, read_json, read_parquet, read_video_meta,
                     tracks_arrays, write_joint_table, write_json, write_parquet, write_text, write_yaml)
@@ -21,7 +22,8 @@ __all__ = [
     "motion_window",
     "DEFAULT_CONFIG", "METHOD_CONFIGS", "OURS_CONFIG", "PARAM_NAMES", "ConfigError", "load_config", "load_yaml",
     "merge_config", "model_ranges", "validate",
-    "ArmSpec", "BoardSpec", "Campaign", "SetupSpec", "StringSpec", "TargetSpec", "load_campaign", "resolve_campaign",
+    "ArmSpec", "BoardSpec", "Campaign", "SetupSpec", "StringSpec", "TargetSpec", "campaign_entries", "load_campaign",
+    "resolve_campaign",
     "TRACK_COLUMNS", "DataError", "atomic_path", "check_joint_coverage", "check_joint_header", "end_speed_shares",
     "find_video", "joint_log_span", "read_joint_table", "read_json", "read_parquet", "read_video_meta",
     "tracks_arrays", "write_joint_table", "write_json", "write_parquet", "write_text", "write_yaml",

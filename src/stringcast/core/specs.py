@@ -259,6 +259,27 @@ def _lookup(table: Mapping, key, what: str, source) -> Mapping:
     return table[k]
 
 
+def campaign_entries(doc: Mapping, config: Mapping, source: str | Path = "campaign.yaml") -> dict:
+    """The config's entries a campaign mapping (``campaign.yaml``) names.
+
+    Returns:
+        ``{"string", "target", "arm", "setup"}``: each ``(id, entry)``, the id None for an inline
+        entry (the mapping as written); the arm defaults to the config's first, the set-up to
+        ``default``. ``"camera"``: the set-up's camera entry (None if the config has none by
+        that name: :class:`SetupSpec` says so).
+
+    Raises:
+        ConfigError: an id the config does not know (named, with the known ones).
+    """
+    out = {}
+    for key, table, ref in (("string", "strings", doc["string"]), ("target", "targets", doc["target"]),
+                            ("arm", "arms", doc.get("arm", next(iter(config["arms"])))),
+                            ("setup", "setups", doc.get("setup", "default"))):
+        out[key] = (None, ref) if isinstance(ref, Mapping) else (str(ref), _lookup(config[table], ref, key, source))
+    out["camera"] = config["cameras"].get(str(out["setup"][1].get("camera")))
+    return out
+
+
 def resolve_campaign(doc: Mapping, config: Mapping, name: str = "campaign",
                      source: str | Path = "campaign.yaml") -> Campaign:
     """Turn a campaign mapping (``campaign.yaml``) into a :class:`Campaign`.
@@ -268,22 +289,15 @@ def resolve_campaign(doc: Mapping, config: Mapping, name: str = "campaign",
             string could reach without casting (unless ``allow_reachable: true``).
     """
     validate(dict(doc), "campaign.schema.json", source)
-    s = doc["string"]
-    sid = None
-    if isinstance(s, Mapping):
-        string = StringSpec.from_config(f"{name}-inline", s)
-    else:
-        sid = str(s)
-        string = StringSpec.from_config(sid, _lookup(config["strings"], s, "string", source))
-    t = doc["target"]
-    td = t if isinstance(t, Mapping) else _lookup(config["targets"], t, "target", source)
-    target = TargetSpec(str(t) if not isinstance(t, Mapping) else "inline",
-                        td["x_mm"] / 1000, td["y_mm"] / 1000, td.get("radius_mm", 20.0) / 1000)
-    arm_id = doc.get("arm", next(iter(config["arms"])))
-    arm = ArmSpec.from_config(arm_id, _lookup(config["arms"], arm_id, "arm", source))
-    su = doc.get("setup", "default")
-    sd = su if isinstance(su, Mapping) else _lookup(config["setups"], su, "setup", source)
-    setup = SetupSpec.from_config(su if isinstance(su, str) else "inline", sd, config["cameras"])
+    e = campaign_entries(doc, config, source)
+    sid, sd = e["string"]
+    string = StringSpec.from_config(f"{name}-inline" if sid is None else sid, sd)
+    tid, td = e["target"]
+    target = TargetSpec(tid or "inline", td["x_mm"] / 1000, td["y_mm"] / 1000, td.get("radius_mm", 20.0) / 1000)
+    arm_id, ad = e["arm"]
+    arm = ArmSpec.from_config(arm_id, ad)
+    su, sd = e["setup"]
+    setup = SetupSpec.from_config(su or "inline", sd, config["cameras"])
     if not doc.get("allow_reachable", False) and target.x <= arm.reach + 0.05:
         raise ConfigError(
             f"{source}: target x = {target.x * 1000:.0f} mm is within the grasp's reach "
