@@ -1,5 +1,6 @@
 # Helpers shared by the rules: paths, input functions, the CLI command.
 # No lambdas in rules: every input function is a named def here.
+import functools
 import os
 import sys
 from pathlib import Path
@@ -66,7 +67,13 @@ def campaign_lab_entries(wildcards):
     """The config's entries this campaign resolves to (its arm, set-up, camera, string and
     target; inline entries as written; stringcast.core.campaign_entries): a rule's params, so
     that editing one of them reruns that campaign's stages and no other campaign's."""
-    path = Path("data", wildcards.campaign, "campaign.yaml")
+    return _lab_entries(wildcards.campaign)
+
+
+@functools.cache
+def _lab_entries(campaign):
+    """campaign_lab_entries, read once per campaign (every rule of every trial asks)."""
+    path = Path("data", campaign, "campaign.yaml")
     try:
         e = campaign_entries(load_yaml(path) or {}, config, path)
     except (ConfigError, KeyError) as exc:
