@@ -7,7 +7,8 @@ type's first planned motion. The lab films it (and the draw's calibration shots)
 pipeline's own stages calibrate, sync, track and estimate it with the project's settings,
 never reading the draw. Per setup, against the lab's truth (read here, by the benchmark only):
 
-* calibration: fx error (%), principal-point error (px), and its verdict;
+* calibration: fx error (%), principal-point error (px), the pixel -> swing-plane mapping's
+  error over the swing region (median and max, mm), and its verdict;
 * sync: error of the chosen offset (ms) and its verdict;
 * tracking: median and p95 point error (mm), valid share (points 1..n);
 * the fit: E (mm) and its verdict.
@@ -25,7 +26,8 @@ setup on 2 cores. ``--work DIR`` keeps each setup's files and reuses the filmed 
 JSON is rewritten after every setup (``complete: false`` until the last), so a run can be
 stopped and resumed. ``--quick``: 3 setups.
 
-Run: ``python -m benchmarks.generalization [--setups 24] [--first 0] [--work DIR] [--quick]``.
+Run: ``python -m benchmarks.generalization [--setups 24] [--first 0] [--work DIR] [--jobs 2]
+[--until film|calibrate|sync|track|estimate] [--quick]``.
 """
 from __future__ import annotations
 
@@ -62,8 +64,30 @@ def _calibration_errors(cal: dict, setup) -> tuple[float | None, float | None]:
     return float(fx_err), float(np.hypot(K[0, 2] - cx0, K[1, 2] - cy0))
 
 
-def run_setup(seed: int, string_type: int, config: dict, work: Path) -> dict:
-    """Film one drawn setup and run the pipeline's stages on it; its figures against the truth."""
+STAGES = ("film", "calibrate", "sync", "track", "estimate")
+"""The steps of one setup, in order; ``--until`` stops after one of them."""
+
+
+def _plane_errors(calibration_json: Path, camera: dict) -> tuple[float, float]:
+    """(median, max) mm of the calibration's pixel -> swing-plane mapping over the swing region,
+    at the pixels where the lab's true camera sees a 13 x 13 grid of the region's points."""
+    import cv2
+
+    from stringcast.calibrate import Calibration
+    from stringcast.lab.view import SWING_REGION_M
+
+    (x0, x1), (y0, y1) = SWING_REGION_M
+    g = np.stack(np.meshgrid(np.linspace(x0, x1, 13), np.linspace(y0, y1, 13)), -1).reshape(-1, 2)
+    uv = cv2.projectPoints(np.c_[g, np.zeros(len(g))], np.asarray(camera["rvec"], float),
+                           np.asarray(camera["tvec"], float), np.asarray(camera["K"], float),
+                           np.asarray(camera["dist"], float))[0].reshape(-1, 2)
+    e = np.linalg.norm(Calibration.from_json(calibration_json).pixel_to_robot(uv) - g, axis=1) * 1000
+    return float(np.median(e)), float(np.max(e))
+
+
+def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str = "estimate") -> dict:
+    """Film one drawn setup and run the pipeline's stages on it, up to ``until`` (:data:`STAGES`);
+    its figures against the truth."""
     from stringcast.campaign import tracking_errors
     from stringcast.core import read_json, resolve_campaign, settings_from_config, stage_kwargs
     from stringcast.estimate import run_estimation
@@ -81,12 +105,14 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path) -> dict:
     campaign = resolve_campaign({"string": string_type, "target": 1}, cfg, f"gen_{seed}")
     trial, calib = d / "trial_1", d / "calib"
     t0 = time.perf_counter()
-    if not (trial / "ground_truth.json").exists():
+    if not (trial / "ground_truth.json").exists() or not calib.exists():
         run_first_plan(campaign, d / "motion.csv", d / "motion.json", seed=seed, **stage_kwargs(run_first_plan, settings))
         execute(d / "motion.csv", "virtual", trial, campaign, settings.executor, cfg, seed=seed)
         write_calibration_clip(campaign, cfg, calib, seed=seed)
     filmed_s = time.perf_counter() - t0
     row = {"seed": seed, "string_type": string_type, "draw": asdict(setup), "film_seconds": filmed_s}
+    if until == "film":
+        return row
     out = d / "results"
     out.mkdir(parents=True, exist_ok=True)
     try:
@@ -94,16 +120,25 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path) -> dict:
         cal_doc = read_json(out / "calibration.json")
         row["fx_error_pct"], row["principal_point_error_px"] = _calibration_errors(cal_doc, setup)
         row["calibration_verdict"] = _verdict(cal_doc)
-        sync_doc = run_sync(trial, out / "calibration.json", campaign, out / "sync.json", **stage_kwargs(run_sync, settings))
+        row["calibration_reasons"] = list(((cal_doc.get("verdict") or {}).get("reasons") or []))
         truth = read_json(trial / "ground_truth.json")
+        row["plane_error_median_mm"], row["plane_error_max_mm"] = _plane_errors(out / "calibration.json", truth["camera"])
+        if until == "calibrate":
+            return row
+        sync_doc = run_sync(trial, out / "calibration.json", campaign, out / "sync.json", **stage_kwargs(run_sync, settings))
         row["sync_error_ms"] = (sync_doc["offset_s"] - truth["trigger_time_s"]) * 1000
         row["sync_verdict"] = _verdict(sync_doc)
+        if until == "sync":
+            return row
         tracks = run_tracking(trial, out / "calibration.json", out / "sync.json", campaign, out / "tracks.parquet",
                               **stage_kwargs(run_tracking, settings))
         e, share = tracking_errors(tracks, pd.read_parquet(trial / "ground_truth.parquet"))
         row.update(tracking_median_mm=float(np.median(e)) if len(e) else None,
                    tracking_p95_mm=float(np.percentile(e, 95)) if len(e) else None, valid_share=float(share))
         row["tracking_errors_mm"] = np.asarray(e, float)
+        row["tracking_verdict"] = _verdict(read_json(out / "tracking.json")) if (out / "tracking.json").exists() else "ok"
+        if until == "track":
+            return row
         est = run_estimation(out / "tracks.parquet", trial / "joints.csv", campaign, None, 1, out / "params.json",
                              out / "fit.parquet", **stage_kwargs(run_estimation, settings))
         params = read_json(out / "params.json")
@@ -116,7 +151,7 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path) -> dict:
 
 def _judge(row: dict, width_px: int) -> dict:
     """flagged (any verdict warn/fail, or a stage refused) and silent (all ok, yet beyond a limit)."""
-    verdicts = [row.get(k, "ok") for k in ("calibration_verdict", "sync_verdict", "fit_verdict")]
+    verdicts = [row.get(k, "ok") for k in ("calibration_verdict", "sync_verdict", "tracking_verdict", "fit_verdict")]
     flagged = "error" in row or any(v != "ok" for v in verdicts)
     beyond = []
     if (row.get("tracking_p95_mm") or 0) > SILENT["tracking_p95_mm"]:
@@ -159,7 +194,7 @@ def figure(rows: list[dict], path: Path) -> None:
                               ("tracking p95 (mm)", "sync error (ms)", "principal point error (px)")):
         for r in rows:
             worst = "fail" if "error" in r else max((r.get(k, "ok") for k in (
-                "calibration_verdict", "sync_verdict", "fit_verdict")), key=("ok", "warn", "fail").index)
+                "calibration_verdict", "sync_verdict", "tracking_verdict", "fit_verdict")), key=("ok", "warn", "fail").index)
             v = r.get(key)
             ax.scatter(r["seed"], abs(v) if v is not None else np.nan, c=colour[worst], s=18)
         ax.set_xlabel("setup (seed)")
@@ -171,24 +206,38 @@ def figure(rows: list[dict], path: Path) -> None:
     plt.close(fig)
 
 
-def run(quick: bool = False, setups: int = 24, first: int = 0, work: Path | None = None) -> dict:
-    """Run the benchmark (``benchmarks.run``'s interface); returns the JSON it wrote last."""
+def run(quick: bool = False, setups: int = 24, first: int = 0, work: Path | None = None, jobs: int = 1,
+        until: str = "estimate") -> dict:
+    """Run the benchmark (``benchmarks.run``'s interface); returns the JSON it wrote last.
+
+    ``jobs`` setups run side by side (processes); the JSON is rewritten as each one ends, its
+    rows in seed order. ``until`` (:data:`STAGES`) stops every setup after that step (``film``
+    only fills ``work``; the JSON then holds no figures)."""
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
     from stringcast.core import load_config
 
     n = 3 if quick else setups
     config = load_config()
     work = work or Path(tempfile.mkdtemp(prefix="stringcast_generalization_"))
+    seeds = list(range(first, first + n))
     rows, doc = [], {}
-    for i, seed in enumerate(range(first, first + n)):
-        row = run_setup(seed, 1 + i % 7, config, work)
-        row.update(_judge(row, row["draw"]["width_px"]))
-        rows.append(row)
-        print(f"setup {seed}: " + ", ".join(f"{k} {row.get(k)}" for k in (
-            "calibration_verdict", "fx_error_pct", "principal_point_error_px", "sync_verdict", "sync_error_ms",
-            "tracking_median_mm", "tracking_p95_mm", "valid_share", "E_mm", "fit_verdict", "error")), flush=True)
-        doc = summarise(rows, i == n - 1, quick)
-        write("generalization", doc)
-        figure(rows, BENCH_DIR / "generalization.png")
+    with ProcessPoolExecutor(max_workers=max(1, jobs)) as pool:
+        futures = [pool.submit(run_setup, seed, 1 + i % 7, config, work, until) for i, seed in enumerate(seeds)]
+        for k, fut in enumerate(as_completed(futures)):
+            row = fut.result()
+            row.update(_judge(row, row["draw"]["width_px"]))
+            rows.append(row)
+            rows.sort(key=lambda r: r["seed"])
+            print(f"setup {row['seed']}: " + ", ".join(f"{key} {row.get(key)}" for key in (
+                "film_seconds", "calibration_verdict", "fx_error_pct", "principal_point_error_px", "plane_error_median_mm",
+                "plane_error_max_mm", "sync_verdict",
+                "sync_error_ms", "tracking_median_mm", "tracking_p95_mm", "valid_share", "E_mm", "fit_verdict",
+                "error") if key in row), flush=True)
+            doc = summarise(rows, k == n - 1, quick)
+            doc["until"] = until
+            write("generalization", doc)
+            figure(rows, BENCH_DIR / "generalization.png")
     return doc
 
 
@@ -198,8 +247,10 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--first", type=int, default=0, help="the first setup's seed")
     p.add_argument("--work", type=Path, default=None, help="keep (and reuse) each setup's files here")
     p.add_argument("--quick", action="store_true", help="3 setups")
+    p.add_argument("--jobs", type=int, default=1, help="setups run side by side (processes)")
+    p.add_argument("--until", choices=STAGES, default="estimate", help="stop each setup after this step")
     args = p.parse_args(argv)
-    run(args.quick, args.setups, args.first, args.work)
+    run(args.quick, args.setups, args.first, args.work, args.jobs, args.until)
 
 
 if __name__ == "__main__":

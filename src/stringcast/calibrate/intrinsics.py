@@ -6,8 +6,8 @@ determine is held, one step at a time, each refit on the same views:
 
 1. k3 at 0 (``cv2.CALIB_FIX_K3``) when the coverage is poor or the distortion uncertain;
 2. the principal point at the image centre ((w - 1) / 2, (h - 1) / 2,
-   ``cv2.CALIB_FIX_PRINCIPAL_POINT``) when the coverage or the tilt variety is poor, or the
-   principal point or fx is uncertain;
+   ``cv2.CALIB_FIX_PRINCIPAL_POINT``) when the coverage is poor, or the principal point or
+   fx is uncertain;
 3. k2 at 0 (``cv2.CALIB_FIX_K2``) when the distortion is still uncertain.
 
 The limits (``calibration.max_*``) are shares of the image or of fx, the standard
@@ -16,11 +16,12 @@ deviations per view (:mod:`~stringcast.calibrate.quality`).
 A held value must fit the views: holding two parameters at their true values raises the
 rms by a share of the order of 1 / (2 N) (N the corners, hundreds), so a rise beyond
 ``hold_rms_tol`` says the views place the parameter elsewhere; the step is undone and the
-calibration fails (the views contradict the hold but do not pin the parameter down).
-A held calibration is ``warn`` (the held values are assumptions, and say so), as is one
-poorly determined with nothing left to hold; one whose standard deviations stay above
-``fail_factor`` times their limits after holding is ``fail``; each reason says which
-shots to add.
+free fit kept (``refused_hold``). A held calibration is ``warn`` (the held values are
+assumptions, and say so), as is one poorly determined (or covering the image poorly) with
+nothing held; one whose standard deviations stay above ``fail_factor`` times their limits
+is ``fail``; each reason says which shots to add. Little tilt variety alone is no problem
+when the deviations (a jackknife over the views) are within their limits: it is named as
+the likely cause, and the shots to add, when they are not.
 
 :func:`board_view_check` reads the trial's board (in the swing plane) under the
 intrinsics: its reprojection error with the board's pose as the only freedom
@@ -38,7 +39,7 @@ from stringcast.core import CalibrationSettings, Verdict
 from .charuco import Intrinsics, Views, fit_views
 from .quality import assess
 
-_PP_KINDS = ("coverage", "tilt", "principal_point", "fx")
+_PP_KINDS = ("coverage", "principal_point", "fx")
 _DIST_KINDS = ("coverage", "distortion")
 _STEPS = ((cv2.CALIB_FIX_K3, "k3 at 0", _DIST_KINDS), (cv2.CALIB_FIX_PRINCIPAL_POINT,
           "the principal point at the image centre", _PP_KINDS), (cv2.CALIB_FIX_K2, "k2 at 0", ("distortion",)))
@@ -80,18 +81,18 @@ def judged_intrinsics(views: Views, flags: int, st: CalibrationSettings, min_vie
         doc["free_fit"] = {"K": free.K.tolist(), "dist": free.dist.tolist(), "rms_px": free.rms_px}
         verdict = verdict.add("warn", f"intrinsics: {' and '.join(held)} held, as the calibration views do not "
                                       f"determine them ({why}); {advice}")
-    left = {k: v for k, v in problems.items() if k not in ("coverage", "tilt") and v[2] > st.fail_factor}
+    over = {k: v for k, v in problems.items() if k not in ("coverage", "tilt")}
+    left = {k: v for k, v in over.items() if v[2] > st.fail_factor}
     if refused:
-        pre = f"holding {refused[0]} as well" if held else f"{why}. Holding {refused[0]}"
-        verdict = verdict.add("fail", f"intrinsics: {pre} would raise the reprojection error from {free.rms_px:.3f} "
-                                      f"to {refused[1]:.3f} px (> {st.hold_rms_tol:.0%}): the views place it elsewhere "
-                                      f"but do not pin it down; {advice}")
-    elif left:
+        doc["refused_hold"] = {"what": refused[0], "rms_px": refused[1]}
+    if left:
         pre = f"even with {' and '.join(held)} held, " if held else ""
+        why_not = (f" (holding {refused[0]} would raise the reprojection error from {free.rms_px:.3f} to "
+                   f"{refused[1]:.3f} px, > {st.hold_rms_tol:.0%}: the views place it elsewhere)") if refused else ""
         verdict = verdict.add("fail", f"intrinsics: {pre}{'; '.join(v[0] for v in left.values())} "
-                                      f"(over {st.fail_factor:g} times the limit); "
+                                      f"(over {st.fail_factor:g} times the limit){why_not}; "
                                       f"{'; '.join(_unique(v[1] for v in left.values()))}")
-    elif problems and not held:
+    elif problems and not held and (over or "coverage" in problems):
         verdict = verdict.add("warn", f"intrinsics: {why}; {advice}")
     return fit, doc, verdict
 

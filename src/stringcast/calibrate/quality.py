@@ -5,15 +5,18 @@ the views pin the model down: 12 shots covering only the top 45 % of an image ga
 principal point 24 / 52 px off at 0.30 px rms, with standard deviations 4-13 times smaller
 than the errors (issue 25). So a fit is judged three ways (:func:`assess`):
 
-* **Standard deviations**, per view. ``cv2.calibrateCameraExtended``'s standard deviations
-  treat every corner's error as independent. The corners of one view share that view's
-  blur, lighting, board flatness and detection bias, so a view is closer to one
-  measurement than to N: the covariance is scaled by N (the mean corners per view;
-  sqrt(40) = 6.3 on a 40-corner board, in the 4-13 the issue measured). The full covariance
-  of the intrinsics comes from the Jacobian (``cv2.projectPoints``), the views' poses
-  eliminated by the Schur complement, sigma^2 = SSE / (residuals - parameters): its
-  diagonal is OpenCV's. It gives the lens distortion's uncertainty at the image's corners,
-  where k1, k2 and k3 are strongly correlated and their separate deviations say little.
+* **Standard deviations**, from the views themselves. ``cv2.calibrateCameraExtended``'s
+  standard deviations treat every corner's error as independent, but the corners of one
+  view share its blur, lighting, board flatness and detection bias, so they are too small
+  by an unknown factor (4-13 in the issue's weak set, < 1 on a clean set of the lab's). A
+  delete-a-group jackknife over the views (:func:`jackknife_covariance`: the fit repeated
+  with each of up to ``jackknife_groups`` groups of views left out, Efron & Stein 1981)
+  measures how far the views disagree, whatever their errors' correlation; each
+  parameter's deviation is the larger of the jackknife's and OpenCV's. The full covariance
+  of the intrinsics (OpenCV's from the Jacobian, ``cv2.projectPoints``, the views' poses
+  eliminated by the Schur complement; the jackknife's from its refits) gives the lens
+  distortion's uncertainty at the image's corners, where k1, k2 and k3 are strongly
+  correlated and their separate deviations say little.
 * **Coverage**: the share of a coarse grid over the image (``coverage_grid``) whose cells
   hold a corner of some view, and the same share in each third of the image's rows and
   columns. Distortion grows towards the edges; a model fitted to corners in one part of the
@@ -84,9 +87,51 @@ def intrinsics_covariance(intr: Intrinsics) -> np.ndarray:
     return C
 
 
-def per_view_scale(intr: Intrinsics) -> float:
-    """sqrt(mean corners per view): the factor from corner-independent to view-independent deviations."""
-    return math.sqrt(float(np.mean([len(o) for o in intr.views.object_points])))
+def jackknife_covariance(intr: Intrinsics, groups: int = 10) -> np.ndarray:
+    """(9, 9) delete-a-group jackknife covariance of :data:`INTRINSIC_NAMES` over the views.
+
+    The views used by ``intr`` are dealt round-robin into g = min(V, ``groups``) groups; the
+    fit (``cv2.calibrateCamera``, ``intr``'s flags, no outlier rejection) is repeated with
+    each group left out, theta_j, and C = (g - 1) / g sum_j (theta_j - mean)(theta_j - mean)^T
+    (Efron & Stein 1981). Held parameters have rows of 0. A refit that fails (too few views
+    left for OpenCV) makes the covariance infinite on the diagonal.
+
+    Raises:
+        ValueError: ``intr`` has no views (not from :func:`~stringcast.calibrate.charuco.fit_views`).
+    """
+    if intr.views is None:
+        raise ValueError("jackknife_covariance: the intrinsics carry no views (use charuco.fit_views)")
+    obj, img = intr.views.object_points, intr.views.image_points
+    V = len(obj)
+    g = min(V, int(groups))
+    if g < 3:
+        return np.diag(np.full(9, np.inf))
+    thetas = []
+    for j in range(g):
+        keep = [k for k in range(V) if k % g != j]
+        try:
+            _, K, dist, _, _ = cv2.calibrateCamera([obj[k] for k in keep], [img[k] for k in keep], intr.image_size,
+                                                   intr.K.copy(), intr.dist.copy(), flags=intr.flags)
+        except cv2.error:
+            return np.diag(np.full(9, np.inf))
+        d = np.asarray(dist, float).ravel()[:5]
+        thetas.append([K[0, 0], K[1, 1], K[0, 2], K[1, 2], *d])
+    th = np.asarray(thetas, float)
+    dev = th - th.mean(axis=0)
+    return (g - 1) / g * dev.T @ dev
+
+
+def _combined_covariance(C_cv: np.ndarray, C_jk: np.ndarray) -> np.ndarray:
+    """The jackknife's covariance with each deviation raised to at least OpenCV's (correlations
+    kept from the jackknife where it is finite, else OpenCV's)."""
+    if not np.all(np.isfinite(C_jk)):
+        return np.where(np.eye(9, dtype=bool), np.inf, 0.0)
+    sd_cv, sd_jk = np.sqrt(np.maximum(np.diag(C_cv), 0)), np.sqrt(np.maximum(np.diag(C_jk), 0))
+    sd = np.maximum(sd_cv, sd_jk)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        R = np.where(np.outer(sd_jk, sd_jk) > 0, C_jk / np.outer(sd_jk, sd_jk), 0.0)
+    np.fill_diagonal(R, 1.0)
+    return R * np.outer(sd, sd)
 
 
 def coverage(image_points, image_size: tuple[int, int], grid: tuple[int, int]) -> dict:
@@ -182,8 +227,8 @@ def assess(intr: Intrinsics, st: CalibrationSettings) -> tuple[dict, dict[str, t
         ``principal_point``, ``fx``, ``distortion``).
     """
     w, h = intr.image_size
-    scale = per_view_scale(intr)
-    C = intrinsics_covariance(intr) * scale ** 2
+    C_cv = intrinsics_covariance(intr)
+    C = _combined_covariance(C_cv, jackknife_covariance(intr, st.jackknife_groups))
     sd = np.sqrt(np.maximum(np.diag(C), 0))
     cov = coverage(intr.views.image_points, intr.image_size, st.coverage_grid)
     tilt = tilt_spread(intr.rvecs)
@@ -193,8 +238,8 @@ def assess(intr: Intrinsics, st: CalibrationSettings) -> tuple[dict, dict[str, t
     fx_sd = float(sd[0] / intr.K[0, 0])
     doc = {"rms_px": intr.rms_px, "n_views": intr.n_views, "views_found": intr.views_found,
            "views_rejected": intr.views_rejected, "held": list(held_parameters(intr.flags)),
-           "std": dict(zip(INTRINSIC_NAMES, map(float, intr.std))), "std_per_view_scale": scale,
-           "std_per_view": dict(zip(INTRINSIC_NAMES, map(float, sd))),
+           "std": dict(zip(INTRINSIC_NAMES, map(float, intr.std))),
+           "std_used": dict(zip(INTRINSIC_NAMES, map(float, sd))),
            "principal_point_sd_share": list(pp), "fx_sd_share": fx_sd,
            "distortion_sd_px": d_sd, "distortion_sd_share": d_sd / half_diag,
            "per_view_rms_px": dict(zip(intr.views.names, intr.per_view_rms_px)),
@@ -216,10 +261,10 @@ def assess(intr: Intrinsics, st: CalibrationSettings) -> tuple[dict, dict[str, t
                             lo / max(tilt["variety_deg"], 1e-9))
     if "cx" not in doc["held"] and max(pp) > st.max_principal_point_sd:
         problems["principal_point"] = (f"the principal point is uncertain by {sd[2]:.1f} / {sd[3]:.1f} px "
-                                       f"({max(pp):.1%} of the image, standard deviations per view)", tilt_advice,
+                                       f"({max(pp):.1%} of the image, standard deviations, jackknife over the views)", tilt_advice,
                                        max(pp) / st.max_principal_point_sd)
     if fx_sd > st.max_fx_sd:
-        problems["fx"] = (f"fx is uncertain by {fx_sd:.1%} (standard deviation per view)", tilt_advice,
+        problems["fx"] = (f"fx is uncertain by {fx_sd:.1%} (standard deviation, jackknife over the views)", tilt_advice,
                           fx_sd / st.max_fx_sd)
     if d_sd / half_diag > st.max_distortion_sd:
         problems["distortion"] = (f"the lens distortion at the image's corners is uncertain by {d_sd:.1f} px "

@@ -322,8 +322,9 @@ class CalibrationSettings(_Section):
     coverage_grid: tuple = _f((8, 6), "columns x rows of the grid over the image in which the views' coverage is counted")
     min_coverage: float = _f(0.6, "share of the grid's cells, and of each third of the image, that must hold corners")
     min_tilt_variety_deg: float = _f(10.0, "the views' rms tilt about the weaker image axis must reach this, deg")
-    max_principal_point_sd: float = _f(0.01, "the principal point's standard deviation (per view) may reach this share of the image")
-    max_fx_sd: float = _f(0.01, "fx's standard deviation (per view) may reach this share of fx")
+    jackknife_groups: int = _f(10, "the intrinsics' deviations come from refits with each of this many groups of views left out")
+    max_principal_point_sd: float = _f(0.01, "the principal point's standard deviation may reach this share of the image")
+    max_fx_sd: float = _f(0.01, "fx's standard deviation may reach this share of fx")
     max_distortion_sd: float = _f(0.01, "the distortion's standard deviation at the image's corners may reach this share of the half-diagonal")
     fail_factor: float = _f(2.0, "fail when, with what can be held held, a standard deviation still exceeds its limit this many times")
     hold_rms_tol: float = _f(0.05, "a held principal point or k2/k3 that raises the rms by more than this share contradicts the views")
@@ -331,6 +332,8 @@ class CalibrationSettings(_Section):
     board_view_ratio: float = _f(2.0, "warn when the trial's board reprojects this many times worse than its own noise and the views'")
 
     def __post_init__(self):
+        if self.jackknife_groups < 3:
+            raise ConfigError(f"calibration.jackknife_groups must be >= 3, got {self.jackknife_groups}")
         if len(self.coverage_grid) != 2 or min(self.coverage_grid) < 3:
             raise ConfigError(f"calibration.coverage_grid must be [columns, rows], each >= 3, got {self.coverage_grid}")
 
