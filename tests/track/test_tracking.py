@@ -113,6 +113,9 @@ def test_tracking_synthetic_curve(tmp_path, campaign, settings):
     e = err[:, 1:][valid[:, 1:]] * 1000
     assert valid[:, 1:].mean() > 0.9, valid[:, 1:].mean()
     assert np.median(e) < 1.0 and np.percentile(e, 95) < 3.0, (np.median(e), np.percentile(e, 95))
+    quality = read_json(tmp_path / "out" / "tracking.json")       # a good track says so
+    assert quality["verdict"]["status"] == "ok", quality["verdict"]
+    assert quality["valid_share"] > 0.9 and quality["length_mismatch_mm"]["frames"] > 0
 
 
 def test_string_leaving_the_image_is_invalid_not_invented(tmp_path, campaign, settings):
@@ -226,6 +229,7 @@ def test_tracking_on_a_tiny_lab_render(tmp_path, config, settings):
     assert pts["valid"].mean() > 0.7, pts["valid"].mean()
     # measured 0.88 / 1.91 mm at 1.3 mm per px; the margin absorbs changes to the lab's renderer
     assert np.median(e) < 1.5 and np.percentile(e, 95) < 4.0, (np.median(e), np.percentile(e, 95))
+    assert read_json(res / "tracking.json")["verdict"]["status"] == "ok"   # within the goals: no false alarm
 
 
 @pytest.mark.parametrize("end", ["plain", "ball", "sleeve"])

@@ -11,6 +11,7 @@ rule track:
         campaign="data/{campaign}/campaign.yaml",
     output:
         tracks="results/{campaign}/trial_{trial}/tracks.parquet",
+        quality="results/{campaign}/trial_{trial}/tracking.json",
         overlay=report(
             "results/{campaign}/trial_{trial}/tracking_overlay.png",
             caption="../report/overlay.rst",

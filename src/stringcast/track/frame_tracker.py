@@ -32,11 +32,14 @@ from .markers import band_points, path_contrast
 @dataclass(frozen=True)
 class FrameTrack:
     """One frame's result: positions (n, 2) m of points 1..n (NaN where invalid), valid (n,),
-    and the centreline in image px (M, 2) (x, y), grasp first (empty if none was found)."""
+    the centreline in image px (M, 2) (x, y), grasp first (empty if none was found), and
+    ``length_mismatch_m``: L minus the centreline's length from the grasp to a trusted free end
+    (the tip), m, NaN without one or with the string's start hidden (:mod:`stringcast.track.quality` reads it)."""
 
     positions: np.ndarray
     valid: np.ndarray
     path_px: np.ndarray
+    length_mismatch_m: float = math.nan
 
     def __post_init__(self):
         n = len(self.valid)
@@ -154,7 +157,7 @@ class FrameTracker:
             pos, valid = band_points(frame, px, obs & (np.arange(len(obs)) >= len(head)), s_poly, s_t, trusted,
                                      free_end, path_contrast(absd, pts), cal, st)
         pos[~valid] = np.nan
-        return FrameTrack(pos, valid, px)
+        return FrameTrack(pos, valid, px, D if free_end and not hidden_start else math.nan)
 
     def _segment(self, img: np.ndarray, bg: np.ndarray, sigma: np.ndarray, arm: np.ndarray):
         """Smoothed |I - g B| (gain g for flicker) and its hysteresis foreground outside the arm."""

@@ -36,7 +36,10 @@ Settings: tracking settings (:class:`~stringcast.core.TrackingSettings`).
    joining the walk, a guess at a crossing, a bridged gap) and, for a missing length D, not
    within D past the hidden head (a loop at the fingers); without a free end, at the grasp, valid before the
    first ambiguity. Invalid points keep NaN positions: never a guess.
-6. **Markers** (``mode: markers``, :mod:`stringcast.track.markers`): strings with a band at each mass
+6. **Verdict** (:mod:`stringcast.track.quality`, ``tracking.json``): the valid share, the
+   measured length against L (bias and spread over the frames), consecutive points farther
+   apart than the string between them, the hanging string's jitter; warn with the likely cause.
+7. **Markers** (``mode: markers``, :mod:`stringcast.track.markers`): strings with a band at each mass
    point; a point's position is its band's centre on the centreline, valid where step 5 trusts
    the order along the path and the band is found whole and unambiguous.
 """
@@ -52,9 +55,11 @@ from stringcast.core import TrackingSettings, forward_kinematics, motion_window
 from .arm_mask import draw_arm_mask
 from .background import background_samples, build_background
 from stringcast.calibrate import Calibration
-from stringcast.core import DataError, find_video, joint_log_span, read_joint_table, read_json, write_parquet
+from stringcast.core import (DataError, find_video, joint_log_span, read_joint_table, read_json, write_json,
+                             write_parquet)
 from .frame_tracker import FrameTracker
 from .overlay import write_overlay
+from .quality import frames_judged, tracking_quality
 from stringcast.video import prefetch
 from stringcast.sync import frame_times
 from stringcast.video import open_video
@@ -71,7 +76,8 @@ def _interp_joints(t: np.ndarray, t_j: np.ndarray, q_j: np.ndarray) -> np.ndarra
 
 def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, overlay_png=None, *,
                  tracking: TrackingSettings) -> pd.DataFrame:
-    """Track the string in one trial; write ``tracks.parquet`` (and the overlay PNG).
+    """Track the string in one trial; write ``tracks.parquet``, ``tracking.json`` beside it (the
+    tracking's self-measures and verdict, :mod:`stringcast.track.quality`) and the overlay PNG.
 
     Args:
         trial_dir: holds the video (``files.find_video``) and ``joints.csv``.
@@ -134,6 +140,7 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
 
     xy = np.full((F, n + 1, 2), np.nan)
     valid = np.zeros((F, n + 1), bool)
+    mismatch = np.full(F, np.nan)
     xy[:, 0] = forward_kinematics(arm, _interp_joints(t, t_j, q_j))[:, -1]  # point 0: the grasp
     valid[:, 0] = in_log
     xy[~in_log, 0] = np.nan
@@ -143,7 +150,7 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
         if not in_log[k]:
             continue
         ft = tracker.track(frame, jpx[k])
-        xy[k, 1:], valid[k, 1:] = ft.positions, ft.valid
+        xy[k, 1:], valid[k, 1:], mismatch[k] = ft.positions, ft.valid, ft.length_mismatch_m
         if k in shows:
             shown.append((k, frame, ft.path_px, cal.robot_to_pixel(np.nan_to_num(xy[k])), valid[k].copy()))
     video.close()
@@ -155,6 +162,9 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
         "valid": valid.ravel(),
     })
     write_parquet(out_parquet, df)
+    moving, rest = frames_judged(t, in_log, t_start, t_end)
+    write_json(Path(out_parquet).with_name("tracking.json"),
+               tracking_quality(df, mismatch, campaign.string.length, n, moving, rest, st))
     if overlay_png is not None:
         write_overlay(overlay_png, shown, t, scale, campaign.string.length)
     return df
