@@ -7,7 +7,10 @@ rule estimate:
         unpack(earlier_trials),
         tracks="results/{campaign}/trial_{trial}/tracks.parquet",
         # the earlier stages' verdicts, carried into the fit's (read beside tracks.parquet)
-        verdicts=expand("results/{{campaign}}/trial_{{trial}}/{stage}.json", stage=("calibration", "sync", "tracking")),
+        verdicts=expand(
+            "results/{{campaign}}/trial_{{trial}}/{stage}.json",
+            stage=("calibration", "sync", "tracking"),
+        ),
         joints="data/{campaign}/trial_{trial}/joints.csv",
         campaign="data/{campaign}/campaign.yaml",
         prev=previous_params,
