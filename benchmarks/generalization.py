@@ -110,7 +110,8 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str 
         execute(d / "motion.csv", "virtual", trial, campaign, settings.executor, cfg, seed=seed)
         write_calibration_clip(campaign, cfg, calib, seed=seed)
     filmed_s = time.perf_counter() - t0
-    row = {"seed": seed, "string_type": string_type, "draw": asdict(setup), "film_seconds": filmed_s}
+    row = {"seed": seed, "string_type": string_type, "draw": asdict(setup), "film_seconds": filmed_s,
+           "codec_written": read_json(trial / "ground_truth.json")["video"].get("codec_written")}
     if until == "film":
         return row
     out = d / "results"
