@@ -6,6 +6,7 @@ rule report_trial:
         calibration="results/{campaign}/trial_{trial}/calibration.json",
         sync="results/{campaign}/trial_{trial}/sync.json",
         tracks="results/{campaign}/trial_{trial}/tracks.parquet",
+        tracking="results/{campaign}/trial_{trial}/tracking.json",
         video=trial_video,
         params="results/{campaign}/trial_{trial}/params.json",
         fit="results/{campaign}/trial_{trial}/fit.parquet",
