@@ -1,5 +1,5 @@
-"""The tracking's verdict: a clean track is ok; lost points, a length that disagrees with L, points
-misplaced along the string and jitter at rest each warn and name their cause."""
+"""The tracking's verdict: a clean track is ok; lost points, points misplaced along the string and
+jitter at rest each warn and name their cause; the seen length against L is reported."""
 import numpy as np
 import pandas as pd
 import pytest
@@ -52,15 +52,12 @@ def test_lost_points_warn():
     assert doc["verdict"]["status"] == "warn" and "tracked in the moving frames" in doc["verdict"]["reasons"][0]
 
 
-def test_a_length_that_disagrees_with_L_names_the_tip_and_the_image_scale():
+def test_the_seen_length_is_reported_not_judged():
     doc = _judge(_swing(), mismatch=np.full(F, 0.008))               # 8 mm short in every frame
-    text = " ".join(doc["verdict"]["reasons"])
-    assert doc["verdict"]["status"] == "warn" and "8.0 mm shorter" in text and "tip" in text and "image scale" in text
-    noisy = np.array([-0.012, 0.0, 0.012])[np.arange(F) % 3]        # +-12 mm about 0: reported, not judged
+    assert doc["length_mismatch_mm"]["median"] == pytest.approx(8.0) and doc["verdict"]["status"] == "ok"
+    noisy = np.array([-0.012, 0.0, 0.012])[np.arange(F) % 3]        # +-12 mm from frame to frame
     doc = _judge(_swing(), mismatch=noisy)
     assert doc["length_mismatch_mm"]["spread_p95"] == pytest.approx(12.0) and doc["verdict"]["status"] == "ok"
-    few = np.where(np.arange(F) < 45, np.nan, 0.008)                # too few whole frames to judge the bias
-    assert _judge(_swing(), mismatch=few)["verdict"]["status"] == "ok"
 
 
 def test_points_misplaced_along_the_string_and_jitter_at_rest_warn():

@@ -231,6 +231,17 @@ def test_container_timestamps_and_dropped_frames(tmp_path):
     assert v.bit_depth == 8
 
 
+def test_a_coarse_time_base_is_no_dropped_frame():
+    """940 fps in a 1 ms time base: the stamps step by 1 or 2 ms (a single 2 ms step is 1.9 frame
+    periods), yet no frame is missing; a frame taken out still shows, at its place."""
+    from stringcast.video.container import dropped_frames
+
+    t = np.round(np.arange(1914) / 940.0, 3)
+    assert np.diff(t).max() == pytest.approx(0.002)
+    assert dropped_frames(t, 940.0) == []
+    assert dropped_frames(np.delete(t, [300, 301]), 940.0) == [(299, 2)]
+
+
 @pytest.mark.parametrize("colour", [False, True])
 def test_mjpeg_at_1200_fps_reads_as_grey_quietly(tmp_path, capfd, colour):
     """Motion JPEG in AVI (OpenCV's own writer, as the lab and many cameras write it), from a mono

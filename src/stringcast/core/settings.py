@@ -248,7 +248,6 @@ class TrackingSettings(_Section):
     background_bursts: int = _f(5, "the background samples are decoded in this many short runs")
     prefetch_frames: int = _f(48, "frames decoded ahead of the tracker")
     verdict_min_valid_share: float = _f(0.7, "warn when fewer of the string's points are tracked in the moving frames")
-    verdict_length_bias_mm: float = _f(3.0, "warn when the tracked string's length differs from L by more, at the median frame, mm")
     verdict_segment_excess_mm: float = _f(3.0, "warn when consecutive points lie farther apart than L / n by more (p95), mm")
     verdict_rest_jitter_mm: float = _f(1.0, "warn when the hanging string's points jitter more (p95 of their deviations at rest), mm")
     mode: str = _f("markerless", "markerless: points by arc length from the grasp; markers: a band at each mass point")

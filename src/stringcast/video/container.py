@@ -189,11 +189,19 @@ def _grey_pixel_format(pixel_format: int, bgr: np.ndarray) -> bool:
 def dropped_frames(timestamps_s: np.ndarray, fps: float) -> list[tuple[int, int]]:
     """Gaps in per-frame timestamps: ``[(index, n_missing), ...]``.
 
-    ``index`` is the frame after which ``n_missing = round(dt * fps) - 1 >= 1`` frames are
-    missing, ``dt`` the gap to the next frame (s). Empty list: no frame dropped.
+    ``index`` is the frame after which ``n_missing >= 1`` frames are missing. Each frame's
+    place on the frame clock, ``rint((t_k - t_0) fps)``, less its index is its offset; a frame
+    dropped raises the offset of every later frame for good, while a container's coarse time
+    base (Matroska's 1 ms against a 1.06 ms period at 940 fps) only moves single frames by one
+    and back. So a gap is a step up of the smallest offset from there on (the last frame's
+    step is taken as read). Empty list: no frame dropped.
     """
-    dt = np.diff(np.asarray(timestamps_s, float))
-    missing = np.rint(dt * float(fps)).astype(int) - 1
+    t = np.asarray(timestamps_s, float)
+    if len(t) < 2:
+        return []
+    offset = np.rint((t - t[0]) * float(fps)).astype(int) - np.arange(len(t))
+    floor = np.minimum.accumulate(offset[::-1])[::-1]
+    missing = np.diff(floor)
     return [(int(i), int(missing[i])) for i in np.flatnonzero(missing >= 1)]
 
 
