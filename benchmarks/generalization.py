@@ -21,13 +21,14 @@ over the setups not flagged, ``sync_error_ms_max`` over those, ``per_setup`` (th
 figures), and the library versions; ``generalization.png`` beside it plots each setup's errors
 coloured by verdict.
 
-Rendering is the cost (a 1280 x 1024 clip at 2000 fps is thousands of frames): about 1-4 min per
-setup on 2 cores. ``--work DIR`` keeps each setup's files and reuses the filmed ones, and the
-JSON is rewritten after every setup (``complete: false`` until the last), so a run can be
-stopped and resumed. ``--quick``: 3 setups.
+Rendering is the cost (a 1280 x 1024 clip at 2000 fps is thousands of frames): about 1-6 min per
+setup to film and 3-5 min to process, with two setups side by side on 2 cores. ``--work DIR``
+keeps each setup's files and reuses the filmed ones, and the JSON is rewritten after every
+setup (``complete: false`` until the last), so a run can be stopped and ``--resume``d.
+``--quick``: 3 setups.
 
 Run: ``python -m benchmarks.generalization [--setups 24] [--first 0] [--work DIR] [--jobs 2]
-[--until film|calibrate|sync|track|estimate] [--quick]``.
+[--until film|calibrate|sync|track|estimate] [--resume] [--quick]``.
 """
 from __future__ import annotations
 
@@ -207,13 +208,39 @@ def figure(rows: list[dict], path: Path) -> None:
     plt.close(fig)
 
 
+def _resumed(work: Path, seeds: list[int], until: str) -> dict[int, dict]:
+    """The rows of ``seeds`` that the last JSON holds for the same ``work`` and ``until`` (their
+    tracking errors read back from each setup's files), by seed."""
+    from stringcast.campaign import tracking_errors
+
+    path = BENCH_DIR / "generalization.json"
+    if not path.exists():
+        return {}
+    import json
+
+    doc = json.loads(path.read_text())
+    if doc.get("work", str(work)) != str(work) or doc.get("until", "estimate") != until:
+        return {}
+    rows = {}
+    for r in doc.get("per_setup", []):
+        d = work / f"setup_{r['seed']}"
+        if r["seed"] not in seeds or "error" in r or not (d / "results" / "tracks.parquet").exists():
+            continue
+        r = {k: v for k, v in r.items() if k not in ("flagged", "beyond_limits", "silent_failure")}
+        r["tracking_errors_mm"] = tracking_errors(pd.read_parquet(d / "results" / "tracks.parquet"),
+                                                  pd.read_parquet(d / "trial_1" / "ground_truth.parquet"))[0]
+        rows[r["seed"]] = r
+    return rows
+
+
 def run(quick: bool = False, setups: int = 24, first: int = 0, work: Path | None = None, jobs: int = 1,
-        until: str = "estimate") -> dict:
+        until: str = "estimate", resume: bool = False) -> dict:
     """Run the benchmark (``benchmarks.run``'s interface); returns the JSON it wrote last.
 
     ``jobs`` setups run side by side (processes); the JSON is rewritten as each one ends, its
     rows in seed order. ``until`` (:data:`STAGES`) stops every setup after that step (``film``
-    only fills ``work``; the JSON then holds no figures)."""
+    only fills ``work``; the JSON then holds no figures). ``resume``: the setups that the last
+    JSON (same ``work`` and ``until``) holds without an error are taken from it, not rerun."""
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     from stringcast.core import load_config
@@ -222,11 +249,13 @@ def run(quick: bool = False, setups: int = 24, first: int = 0, work: Path | None
     config = load_config()
     work = work or Path(tempfile.mkdtemp(prefix="stringcast_generalization_"))
     seeds = list(range(first, first + n))
+    done = _resumed(work, seeds, until) if resume else {}
     rows, doc = [], {}
     with ProcessPoolExecutor(max_workers=max(1, jobs)) as pool:
-        futures = [pool.submit(run_setup, seed, 1 + i % 7, config, work, until) for i, seed in enumerate(seeds)]
-        for k, fut in enumerate(as_completed(futures)):
-            row = fut.result()
+        futures = [pool.submit(run_setup, seed, 1 + i % 7, config, work, until) for i, seed in enumerate(seeds)
+                   if seed not in done]
+        for k, fut in enumerate([*done.values(), *as_completed(futures)]):
+            row = fut if isinstance(fut, dict) else fut.result()
             row.update(_judge(row, row["draw"]["width_px"]))
             rows.append(row)
             rows.sort(key=lambda r: r["seed"])
@@ -236,7 +265,7 @@ def run(quick: bool = False, setups: int = 24, first: int = 0, work: Path | None
                 "sync_error_ms", "tracking_median_mm", "tracking_p95_mm", "valid_share", "E_mm", "fit_verdict",
                 "error") if key in row), flush=True)
             doc = summarise(rows, k == n - 1, quick)
-            doc["until"] = until
+            doc["until"], doc["work"] = until, str(work)
             write("generalization", doc)
             figure(rows, BENCH_DIR / "generalization.png")
     return doc
@@ -250,8 +279,9 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--quick", action="store_true", help="3 setups")
     p.add_argument("--jobs", type=int, default=1, help="setups run side by side (processes)")
     p.add_argument("--until", choices=STAGES, default="estimate", help="stop each setup after this step")
+    p.add_argument("--resume", action="store_true", help="take the setups the last JSON holds (same --work) from it")
     args = p.parse_args(argv)
-    run(args.quick, args.setups, args.first, args.work, args.jobs, args.until)
+    run(args.quick, args.setups, args.first, args.work, args.jobs, args.until, args.resume)
 
 
 if __name__ == "__main__":
