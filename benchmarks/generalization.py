@@ -33,6 +33,7 @@ Run: ``python -m benchmarks.generalization [--setups 24] [--first 0] [--work DIR
 from __future__ import annotations
 
 import argparse
+import json
 import tempfile
 import time
 import traceback
@@ -138,7 +139,7 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str 
         row.update(tracking_median_mm=float(np.median(e)) if len(e) else None,
                    tracking_p95_mm=float(np.percentile(e, 95)) if len(e) else None, valid_share=float(share))
         row["tracking_errors_mm"] = np.asarray(e, float)
-        row["tracking_verdict"] = _verdict(read_json(out / "tracking.json")) if (out / "tracking.json").exists() else "ok"
+        row["tracking_verdict"] = _verdict(read_json(out / "tracking.json"))
         if until == "track":
             return row
         est = run_estimation(out / "tracks.parquet", trial / "joints.csv", campaign, None, 1, out / "params.json",
@@ -216,8 +217,6 @@ def _resumed(work: Path, seeds: list[int], until: str) -> dict[int, dict]:
     path = BENCH_DIR / "generalization.json"
     if not path.exists():
         return {}
-    import json
-
     doc = json.loads(path.read_text())
     if doc.get("work", str(work)) != str(work) or doc.get("until", "estimate") != until:
         return {}

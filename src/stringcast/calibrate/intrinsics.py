@@ -92,7 +92,7 @@ def judged_intrinsics(views: Views, flags: int, st: CalibrationSettings, min_vie
         verdict = verdict.add("fail", f"intrinsics: {pre}{'; '.join(v[0] for v in left.values())} "
                                       f"(over {st.fail_factor:g} times the limit){why_not}; "
                                       f"{'; '.join(_unique(v[1] for v in left.values()))}")
-    elif problems and not held and (over or "coverage" in problems):
+    elif not held and (over or "coverage" in problems):
         verdict = verdict.add("warn", f"intrinsics: {why}; {advice}")
     return fit, doc, verdict
 

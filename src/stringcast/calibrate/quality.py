@@ -122,8 +122,8 @@ def jackknife_covariance(intr: Intrinsics, groups: int = 10) -> np.ndarray:
 
 
 def _combined_covariance(C_cv: np.ndarray, C_jk: np.ndarray) -> np.ndarray:
-    """The jackknife's covariance with each deviation raised to at least OpenCV's (correlations
-    kept from the jackknife where it is finite, else OpenCV's)."""
+    """The jackknife's covariance with each deviation raised to at least OpenCV's, its
+    correlations kept; infinite on the diagonal (and 0 off it) where the jackknife is not finite."""
     if not np.all(np.isfinite(C_jk)):
         return np.where(np.eye(9, dtype=bool), np.inf, 0.0)
     sd_cv, sd_jk = np.sqrt(np.maximum(np.diag(C_cv), 0)), np.sqrt(np.maximum(np.diag(C_jk), 0))

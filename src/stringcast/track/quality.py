@@ -81,20 +81,20 @@ def tracking_quality(tracks: pd.DataFrame, mismatch_m: np.ndarray, L: float, n: 
     still = np.asarray(rest, bool)
     jitter = None
     if still.sum() >= 5:
-        seen = ok[still, 1:].sum(axis=0) >= 5
+        xs, oks = xy[still, 1:], ok[still, 1:]
+        seen = oks.sum(axis=0) >= 5                      # points seen in at least 5 still frames
         if seen.any():
-            a = xy[still][:, 1:][:, seen]
-            sd = np.sqrt(np.nanvar(np.where(ok[still][:, 1:][:, seen, None], a, np.nan), axis=0).sum(axis=1)) * 1000
-            jitter = _p95(sd)
+            at_rest = np.where(oks[:, seen, None], xs[:, seen], np.nan)
+            jitter = _p95(np.sqrt(np.nanvar(at_rest, axis=0).sum(axis=1)) * 1000)
     doc = {"valid_share": share, "moving_frames": int(mov.sum()),
            "length_mismatch_mm": {"frames": int(D.size), "median": med,
                                   "spread_p95": _p95(np.abs(D - med)) if D.size else None, "abs_p95": _p95(np.abs(D))},
            "segment_excess_p95_mm": _p95(excess) if excess.size else None, "rest_jitter_p95_mm": jitter}
-    doc["verdict"] = tracking_verdict(doc, L, st).as_dict()
+    doc["verdict"] = tracking_verdict(doc, st).as_dict()
     return doc
 
 
-def tracking_verdict(doc: dict, L: float, st: TrackingSettings) -> Verdict:
+def tracking_verdict(doc: dict, st: TrackingSettings) -> Verdict:
     """Warn, naming the likely cause, where :func:`tracking_quality`'s figures pass their limits."""
     v = Verdict()
     share = doc["valid_share"]

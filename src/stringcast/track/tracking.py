@@ -36,9 +36,9 @@ Settings: tracking settings (:class:`~stringcast.core.TrackingSettings`).
    joining the walk, a guess at a crossing, a bridged gap) and, for a missing length D, not
    within D past the hidden head (a loop at the fingers); without a free end, at the grasp, valid before the
    first ambiguity. Invalid points keep NaN positions: never a guess.
-6. **Verdict** (:mod:`stringcast.track.quality`, ``tracking.json``): the valid share, the
-   measured length against L (bias and spread over the frames), consecutive points farther
-   apart than the string between them, the hanging string's jitter; warn with the likely cause.
+6. **Verdict** (:mod:`stringcast.track.quality`, ``tracking.json``): the valid share,
+   consecutive points farther apart than the string between them and the hanging string's
+   jitter, judged (warn with the likely cause); the measured length against L, reported.
 7. **Markers** (``mode: markers``, :mod:`stringcast.track.markers`): strings with a band at each mass
    point; a point's position is its band's centre on the centreline, valid where step 5 trusts
    the order along the path and the band is found whole and unambiguous.
