@@ -63,10 +63,19 @@ def detect_plane_board(image: np.ndarray, board, source: str = "image", invert: 
                        ) -> tuple[np.ndarray, np.ndarray]:
     """The board's corners (N, 2) px and ids (N,) in a trial image (:func:`detect_charuco`).
 
+    When fewer than half the board's corners are found, the image is searched again enlarged
+    2x (a board far from the camera: markers too small to decode at scale 1); the search
+    that finds more wins.
+
     Raises:
         DataError: fewer than :data:`MIN_PLANE_CORNERS` corners, naming ``source``.
     """
     corners, ids = detect_charuco(image, board, invert)
+    sx, sy = board.getChessboardSize()
+    if len(ids) < (sx - 1) * (sy - 1) / 2:
+        enlarged = detect_charuco(image, board, invert, upscale=2)
+        if len(enlarged[1]) > len(ids):
+            corners, ids = enlarged
     if len(ids) < MIN_PLANE_CORNERS:
         raise DataError(f"{source}: {'no ChArUco board found' if len(ids) == 0 else f'only {len(ids)} board corners found'}"
                         f" (the plane homography needs >= {MIN_PLANE_CORNERS})")

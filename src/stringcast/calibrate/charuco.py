@@ -31,7 +31,8 @@ MAX_VIEWS = 40
 """Views kept for ``cv2.calibrateCamera`` by default (its cost grows with the views)."""
 
 
-def detect_charuco(image: np.ndarray, board, invert: bool | None = None) -> tuple[np.ndarray, np.ndarray]:
+def detect_charuco(image: np.ndarray, board, invert: bool | None = None, upscale: int = 1
+                   ) -> tuple[np.ndarray, np.ndarray]:
     """ChArUco chessboard corners in a grey image.
 
     Args:
@@ -39,11 +40,16 @@ def detect_charuco(image: np.ndarray, board, invert: bool | None = None) -> tupl
         board: ``cv2.aruco.CharucoBoard``.
         invert: True/False forces the polarity; None tries the plain image, then the
             inverted one if the plain one gives fewer than :data:`MIN_VIEW_CORNERS`.
+        upscale: detect on the image enlarged this many times (``cv2.INTER_CUBIC``), the
+            corners mapped back: a board far away has markers of 2-3 px per bit, too few
+            for the ArUco bit sampling at scale 1, yet decodable once enlarged.
 
     Returns:
         corners (N, 2) float64 px (sub-pixel, distorted image), ids (N,) int; N may be 0.
     """
     img = image if image.dtype == np.uint8 else cv2.convertScaleAbs(image, alpha=255.0 / max(1, int(image.max())))
+    if upscale != 1:
+        img = cv2.resize(img, None, fx=upscale, fy=upscale, interpolation=cv2.INTER_CUBIC)
     det = cv2.aruco.CharucoDetector(board)
     best = (np.zeros((0, 2)), np.zeros(0, int))
     for inv in ((False, True) if invert is None else (invert,)):
@@ -52,6 +58,8 @@ def detect_charuco(image: np.ndarray, board, invert: bool | None = None) -> tupl
             best = (cc.reshape(-1, 2).astype(float), ci.ravel().astype(int))
         if len(best[1]) >= MIN_VIEW_CORNERS:
             break
+    if upscale != 1:   # pixel centres: x = (x_up + 0.5) / s - 0.5
+        best = ((best[0] + 0.5) / upscale - 0.5, best[1])
     return best
 
 
