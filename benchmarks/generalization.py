@@ -33,6 +33,7 @@ Run: ``python -m benchmarks.generalization [--setups 24] [--first 0] [--work DIR
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import tempfile
 import time
@@ -253,7 +254,7 @@ def run(quick: bool = False, setups: int = 24, first: int = 0, work: Path | None
     with ProcessPoolExecutor(max_workers=max(1, jobs)) as pool:
         futures = [pool.submit(run_setup, seed, 1 + i % 7, config, work, until) for i, seed in enumerate(seeds)
                    if seed not in done]
-        for k, fut in enumerate([*done.values(), *as_completed(futures)]):
+        for k, fut in enumerate(itertools.chain(done.values(), as_completed(futures))):   # lazily: each as it ends
             row = fut if isinstance(fut, dict) else fut.result()
             row.update(_judge(row, row["draw"]["width_px"]))
             rows.append(row)
