@@ -10,7 +10,9 @@ never reading the draw. Per setup, against the lab's truth (read here, by the be
 * calibration: fx error (%), principal-point error (px), the pixel -> swing-plane mapping's
   error over the swing region (median and max, mm), and its verdict;
 * sync: error of the chosen offset (ms) and its verdict;
-* tracking: median and p95 point error (mm), valid share (points 1..n);
+* tracking: median and p95 point error (mm), valid share (points 1..n, every frame), and the
+  valid share of the moving frames that ``tracking.json`` judges (a string that hangs behind the
+  board after the motion is invisible, not mistracked: the two shares tell these apart);
 * the fit: E (mm) and its verdict.
 
 A **silent failure** is a setup whose every verdict says ok while tracking p95 > 5 mm, or the
@@ -141,6 +143,7 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str 
                    tracking_p95_mm=float(np.percentile(e, 95)) if len(e) else None, valid_share=float(share))
         row["tracking_errors_mm"] = np.asarray(e, float)
         row["tracking_verdict"] = _verdict(read_json(out / "tracking.json"))
+        row["valid_share_moving"] = read_json(out / "tracking.json").get("valid_share")
         if until == "track":
             return row
         est = run_estimation(out / "tracks.parquet", trial / "joints.csv", campaign, None, 1, out / "params.json",
@@ -175,12 +178,14 @@ def summarise(rows: list[dict], complete: bool, quick: bool) -> dict:
     errors = np.concatenate([r["tracking_errors_mm"] for r in kept if "tracking_errors_mm" in r] or [np.zeros(0)])
     shares = [r["valid_share"] for r in kept if r.get("valid_share") is not None]
     syncs = [abs(r["sync_error_ms"]) for r in kept if r.get("sync_error_ms") is not None]
+    moving = [r["valid_share_moving"] for r in kept if r.get("valid_share_moving") is not None]
     per_setup = [{k: v for k, v in r.items() if k != "tracking_errors_mm"} for r in rows]
     return {**header("generalization", quick), "complete": complete, "setups": len(rows),
             "flagged": sum(r["flagged"] for r in rows), "silent_failures": sum(r["silent_failure"] for r in rows),
             "median_mm": float(np.median(errors)) if errors.size else None,
             "p95_mm": float(np.percentile(errors, 95)) if errors.size else None,
             "valid_share": float(np.mean(shares)) if shares else None,
+            "valid_share_moving": float(np.mean(moving)) if moving else None,
             "sync_error_ms_max": float(max(syncs)) if syncs else None, "silent_limits": SILENT,
             "per_setup": per_setup}
 
@@ -227,6 +232,8 @@ def _resumed(work: Path, seeds: list[int], until: str) -> dict[int, dict]:
         if r["seed"] not in seeds or "error" in r or not (d / "results" / "tracks.parquet").exists():
             continue
         r = {k: v for k, v in r.items() if k not in ("flagged", "beyond_limits", "silent_failure")}
+        if "valid_share_moving" not in r and (d / "results" / "tracking.json").exists():   # rows of older runs
+            r["valid_share_moving"] = json.loads((d / "results" / "tracking.json").read_text()).get("valid_share")
         r["tracking_errors_mm"] = tracking_errors(pd.read_parquet(d / "results" / "tracks.parquet"),
                                                   pd.read_parquet(d / "trial_1" / "ground_truth.parquet"))[0]
         rows[r["seed"]] = r
