@@ -1,0 +1,186 @@
+"""The swing plane's mapping checked across the image by the moving arm (issue 25).
+
+The calibration maps pixels to the swing plane through one view of the board; away from the
+board that mapping extrapolates, and a weak calibration set bends it (2-7 mm at the far side
+of the swing region on the band-shot setups of the generalization benchmark). The arm sweeps
+the same plane with known forward kinematics, so every synced frame says where the arm's
+links are. Across each link (rows normal to its FK axis, as in
+:mod:`~stringcast.calibrate.board_check`) the pair of edges of its outline gives the link's
+centre line as the calibration sees it; its offset o along the link's normal n, at the row's
+point p on the FK axis, is one equation
+
+    n . e(p) = o,      e(p) = (the calibration's plane point of the pixel that sees p) - p,
+
+on the mapping's error field e. Rows are kept only where the arm moves slowly along n (a
+sync error of dt moves the edge by v_n dt) and where the row agrees with the link's other
+rows (clutter behind the link). :func:`sweep_rows` collects the rows of the frames,
+:func:`fit_error_field` fits e as a plane-to-plane homography's displacement (8 parameters,
+the error a wrong board pose or focal length makes) by Huber-reweighted least squares.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.ndimage import gaussian_filter1d
+
+from stringcast.core import BoardCheckSettings, forward_kinematics
+
+from .board_check import _consensus, _sample, edge_pair_centre
+
+ROW_FIELDS = ("frame", "px_m", "py_m", "nx", "ny", "offset_m", "speed_m_s")
+"""The columns of :func:`sweep_rows`'s table."""
+
+
+def _link_rows(image, calibration, arm, q, st: BoardCheckSettings) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Per link (and gripper) whose rows agree: (points (R, 2) m on the FK axis, normal (2,),
+    offsets (R,) m) of the agreeing rows."""
+    pts = forward_kinematics(arm, np.asarray(q, float))
+    J = arm.n_joints
+    out = []
+    for s in range(J + 1):
+        a, b = pts[s], pts[s + 1]
+        L = float(np.hypot(*(b - a)))
+        if s < J:
+            w0 = w1 = float(arm.link_widths[min(s, len(arm.link_widths) - 1)])
+            r_a = float(arm.joint_radii[min(s, len(arm.joint_radii) - 1)])
+            r_b = float(arm.joint_radii[min(s + 1, len(arm.joint_radii) - 1)])
+        else:
+            w0, w1 = (float(w) for w in arm.gripper_widths)
+            r_a, r_b = float(arm.joint_radii[min(J, len(arm.joint_radii) - 1)]), 0.0
+        if L <= 0:
+            continue
+        clear = st.clear_mm / 1000
+        u0, u1 = (r_a + clear) / L, 1 - (r_b + clear) / L
+        if s == J:
+            u1 = min(u1, 0.9)
+        if (u1 - u0) * L < 0.02:
+            continue
+        e = (b - a) / L
+        nrm = np.array([-e[1], e[0]])
+        step = st.step_mm / 1000
+        us = np.linspace(u0, u1, int(st.rows))
+        found = []
+        for u in us:
+            w = w0 + (w1 - w0) * u
+            half = w / 2 + st.margin_mm / 1000
+            v = np.arange(-half, half + step / 2, step)
+            prof = _sample(image, calibration, a + u * (b - a) + v[:, None] * nrm)
+            if not np.all(np.isfinite(prof)):
+                continue
+            c = edge_pair_centre(gaussian_filter1d(prof, 1.0 / st.step_mm), step, v[0],
+                                 st.width_range[0] * w, st.width_range[1] * w)
+            if c is not None:
+                found.append((u, c))
+        if not found:
+            continue
+        u_c = np.asarray(found)
+        c = _consensus(u_c[:, 1], st.max_spread_mm / 1000, max(int(st.min_rows), int(np.ceil(st.min_share * len(us)))))
+        if c is None:
+            continue
+        keep = np.abs(u_c[:, 1] - c[0]) <= st.max_spread_mm / 1000
+        out.append((a + u_c[keep, :1] * (b - a), nrm, u_c[keep, 1]))
+    return out
+
+
+def sweep_rows(frames, calibration, arm, t_frames: np.ndarray, t_j: np.ndarray, q_j: np.ndarray,
+               st: BoardCheckSettings, dt_s: float = 5e-3) -> np.ndarray:
+    """The arm's link rows in the given frames.
+
+    Args:
+        frames: iterable of (frame index, (H, W) grey image).
+        calibration: :class:`~stringcast.calibrate.mapping.Calibration` (robot_to_pixel).
+        arm: :class:`~stringcast.core.specs.ArmSpec` with its outline.
+        t_frames: (N,) s, every frame's controller-clock time (:func:`stringcast.sync.frame_times`).
+        t_j, q_j: (M,) s, (M, J) rad: the joint log.
+        st: the board check's profile settings (:class:`~stringcast.core.BoardCheckSettings`).
+        dt_s: the half-step of the rows' speed (central difference of the FK), s: a few of the
+            log's samples, so that its encoder noise does not read as speed.
+
+    Returns:
+        (K, 7) array, columns :data:`ROW_FIELDS`: frame, the row's point on the FK axis (m,
+        robot frame), the link's unit normal, the seen centre's offset along it (m), and the
+        point's speed along the normal (m/s).
+    """
+    qa = lambda t: np.array([np.interp(t, t_j, q_j[:, j]) for j in range(q_j.shape[1])])   # noqa: E731
+    out = []
+    for k, image in frames:
+        t = float(t_frames[k])
+        img = np.asarray(image, np.float32)
+        for pts, nrm, off in _link_rows(img, calibration, arm, qa(t), st):
+            # the same material points a little earlier and later: their motion along the normal
+            speed = []
+            for p in pts:
+                move = _point_motion(arm, qa(t - dt_s), qa(t + dt_s), qa(t), p) / (2 * dt_s)
+                speed.append(abs(float(move @ nrm)))
+            out += [[k, p[0], p[1], nrm[0], nrm[1], o, v] for p, o, v in zip(pts, off, speed)]
+    return np.asarray(out, float).reshape(-1, len(ROW_FIELDS))
+
+
+def _point_motion(arm, q_minus, q_plus, q_mid, p) -> np.ndarray:
+    """Displacement (2,) m of the arm's material point at p (pose q_mid) from pose q_minus to q_plus:
+    the point is carried by the link nearest to it."""
+    mid = forward_kinematics(arm, q_mid)
+    seg = int(np.argmin([_dist_to_segment(p, mid[s], mid[s + 1]) for s in range(len(mid) - 1)]))
+    ends = []
+    for q in (q_minus, q_plus):
+        f = forward_kinematics(arm, q)
+        a0, b0, a1, b1 = mid[seg], mid[seg + 1], f[seg], f[seg + 1]
+        e0, e1 = (b0 - a0) / np.linalg.norm(b0 - a0), (b1 - a1) / np.linalg.norm(b1 - a1)
+        r = p - a0
+        lon, lat = r @ e0, r @ np.array([-e0[1], e0[0]])
+        ends.append(a1 + lon * e1 + lat * np.array([-e1[1], e1[0]]))
+    return ends[1] - ends[0]
+
+
+def _dist_to_segment(p, a, b) -> float:
+    ab = b - a
+    u = np.clip((p - a) @ ab / max(ab @ ab, 1e-12), 0, 1)
+    return float(np.linalg.norm(p - a - u * ab))
+
+
+def fit_error_field(rows: np.ndarray, max_speed_m_s: float = 0.3, scale_m: float = 0.5,
+                    huber_m: float = 0.0005, iters: int = 10) -> dict:
+    """The mapping's error field e(p) as a homography's displacement, fitted to the rows.
+
+    e(p) = H(p) - p with H = I + the 8 small parameters (a plane-to-plane homography near the
+    identity, linearised: e = (h0 x + h1 y + h2 - x (h6 x + h7 y), h3 x + h4 y + h5 - y (h6 x +
+    h7 y)) with x, y in units of ``scale_m``); each row gives n . e(p) = offset. Rows moving
+    faster than ``max_speed_m_s`` along their normal are left out. Huber weights
+    (``huber_m``) keep a few wrong rows from pulling the fit.
+
+    Returns:
+        ``{"params" (8,), "rows" (used), "rms_mm" (of the rows after the fit), "raw_rms_mm"
+        (before), "frames" (distinct frames used), "scale_m"}``; ``params`` None when the
+        rows do not determine the field (fewer than 16 rows or a rank-deficient system).
+    """
+    use = rows[rows[:, 6] <= max_speed_m_s]
+    out = {"rows": int(len(use)), "frames": int(len(np.unique(use[:, 0]))) if len(use) else 0, "scale_m": scale_m,
+           "params": None, "raw_rms_mm": float(np.sqrt(np.mean(use[:, 5] ** 2)) * 1000) if len(use) else None,
+           "rms_mm": None}
+    if len(use) < 16:
+        return out
+    A, y = _design(use, scale_m), use[:, 5]
+    if np.linalg.matrix_rank(A) < A.shape[1]:
+        return out
+    w = np.ones(len(y))
+    for _ in range(iters):
+        h = np.linalg.lstsq(A * w[:, None], y * w, rcond=None)[0]
+        r = y - A @ h
+        w = np.sqrt(np.minimum(1.0, huber_m / np.maximum(np.abs(r), 1e-12)))
+    out.update(params=h, rms_mm=float(np.sqrt(np.mean(r ** 2)) * 1000))
+    return out
+
+
+def _design(rows: np.ndarray, scale_m: float) -> np.ndarray:
+    x, y, nx, ny = rows[:, 1] / scale_m, rows[:, 2] / scale_m, rows[:, 3], rows[:, 4]
+    ex = np.stack([x, y, np.ones_like(x), 0 * x, 0 * x, 0 * x, -x * x, -x * y], 1)
+    ey = np.stack([0 * x, 0 * x, 0 * x, x, y, np.ones_like(x), -x * y, -y * y], 1)
+    return (ex * nx[:, None] + ey * ny[:, None]) * scale_m
+
+
+def error_field(params: np.ndarray, p: np.ndarray, scale_m: float) -> np.ndarray:
+    """e(p) (N, 2) m of a fitted field (:func:`fit_error_field`) at points p (N, 2) m."""
+    x, y = p[:, 0] / scale_m, p[:, 1] / scale_m
+    h = np.asarray(params, float)
+    ex = h[0] * x + h[1] * y + h[2] - x * (h[6] * x + h[7] * y)
+    ey = h[3] * x + h[4] * y + h[5] - y * (h[6] * x + h[7] * y)
+    return np.stack([ex, ey], 1) * scale_m

@@ -1,0 +1,90 @@
+"""The arm sweep: the calibration's plane-mapping error seen by the arm's links at several postures."""
+import copy
+
+import numpy as np
+import pytest
+
+from stringcast.calibrate.arm_sweep import error_field, fit_error_field, sweep_rows
+from stringcast.core.files import read_joint_table, read_json
+
+POSTURES = ([0.3, -1.5, -0.4], [2.0, -1.6, -1.5], [1.2, -0.6, -0.9], [0.6, -2.2, 0.5])
+
+
+def _bent(truth: dict, D: np.ndarray):
+    """The lab camera's own calibration, its plane points moved by the robot-plane homography D."""
+    from stringcast.calibrate.calibration import Calibration
+
+    cam = truth["camera"]
+    K, dist, R, t = (np.asarray(cam[k], float) for k in ("K", "dist", "R", "tvec"))
+    H = D @ np.linalg.inv(K @ np.column_stack([R[:, 0], R[:, 1], t]))
+    return Calibration(H / H[2, 2], (int(cam["width_px"]), int(cam["height_px"])), K, dist)
+
+
+@pytest.fixture(scope="module")
+def postures(tmp_path_factory, config):
+    """Four 768 x 768 clips of the arm holding still, one per posture: [(rest image, q, truth)], campaign."""
+    from stringcast.calibrate.calibration import median_frame
+    from stringcast.core import resolve_campaign
+    from stringcast.lab import run_trial
+    from stringcast.video.container import open_video
+
+    cfg = copy.deepcopy({k: v for k, v in config.items() if k != "_path"})
+    cfg["cameras"]["sw_small"] = {"width_px": 768, "height_px": 768, "fps": 500.0, "bit_depth": 8, "mono": True}
+    cfg["setups"]["default"]["camera"] = "sw_small"
+    cfg["lab"] = dict(cfg["lab"], links_per_point=2, settle_s=0.1)
+    cfg["lab"]["camera"] = dict(cfg["lab"]["camera"], focal_px=1390.0 * 768 / 1024)
+    campaign = resolve_campaign({"string": 1, "target": 1}, cfg, "sw")
+    rate = campaign.arm.controller_rate
+    out = []
+    for i, p in enumerate(POSTURES):
+        q = np.repeat(np.asarray(p)[None], int(0.08 * rate), 0)
+        trial = tmp_path_factory.mktemp(f"sweep_{i}") / "trial_1"
+        run_trial(np.arange(len(q)) / rate, q, campaign, cfg, trial, seed=i, motion_start_s=0.06)
+        with open_video(trial / "video.mkv") as v:
+            rest = median_frame(v, 5)
+        t_j, q_log, _ = read_joint_table(trial / "joints.csv")
+        out.append((rest, t_j, q_log, read_json(trial / "ground_truth.json")))
+    return out, campaign
+
+
+def _rows(postures, D, settings):
+    shots, campaign = postures
+    rows = []
+    for k, (img, t_j, q_log, truth) in enumerate(shots):
+        r = sweep_rows([(0, img)], _bent(truth, D), campaign.arm, np.array([t_j[0]]), t_j, q_log, settings.board_check)
+        r[:, 0] = k
+        rows.append(r)
+    return np.concatenate(rows)
+
+
+def test_a_bent_mapping_is_measured_and_fitted(postures, settings):
+    """A mapping bent by a homography (up to ~6 mm over the arm's reach) is read from the links
+    within 1 mm; the true mapping reads near zero."""
+    D = np.array([[1.004, 0.002, 0.003], [-0.001, 0.997, -0.002], [0.003, -0.002, 1.0]])
+    rows = _rows(postures, D, settings)
+    assert len(np.unique(rows[:, 0])) == len(POSTURES) and np.all(rows[:, 6] < 0.1)   # still (the log's encoder noise)
+    p = rows[:, 1:3]
+    bent = np.c_[p, np.ones(len(p))] @ D.T
+    e_true = bent[:, :2] / bent[:, 2:] - p
+    fit = fit_error_field(rows)
+    e_fit = error_field(fit["params"], p, fit["scale_m"])
+    print(f"rows {len(rows)}: true |e| max {np.abs(e_true).max() * 1000:.1f} mm, fit off by "
+          f"{np.max(np.linalg.norm(e_fit - e_true, axis=1)) * 1000:.2f} mm, rms {fit['raw_rms_mm']:.2f} -> {fit['rms_mm']:.2f}")
+    assert np.max(np.linalg.norm(e_true, axis=1)) > 0.004
+    assert np.max(np.linalg.norm(e_fit - e_true, axis=1)) < 0.001
+    assert fit["rms_mm"] < 0.3 * fit["raw_rms_mm"]
+    straight = fit_error_field(_rows(postures, np.eye(3), settings))
+    e_straight = error_field(straight["params"], p, straight["scale_m"])
+    print(f"true mapping: rms {straight['raw_rms_mm']:.2f} mm, field max {np.abs(e_straight).max() * 1000:.2f} mm")
+    assert straight["raw_rms_mm"] < 1.5 * fit["rms_mm"] and np.max(np.linalg.norm(e_straight, axis=1)) < 0.001
+
+
+def test_too_few_or_fast_rows_do_not_fit():
+    rows = np.zeros((40, 7))
+    rows[:, 1:3] = np.random.default_rng(0).uniform(-0.5, 0.5, (40, 2))
+    rows[:, 3] = 1.0
+    rows[:, 6] = 2.0                     # all moving fast along their normal
+    assert fit_error_field(rows)["params"] is None
+    rows[:, 6] = 0.0                     # still, but every normal along x: y's terms undetermined
+    assert fit_error_field(rows)["params"] is None
+
