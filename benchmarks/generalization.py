@@ -30,7 +30,7 @@ setup (``complete: false`` until the last), so a run can be stopped and ``--resu
 ``--quick``: 3 setups.
 
 Run: ``python -m benchmarks.generalization [--setups 24] [--first 0] [--work DIR] [--jobs 2]
-[--until film|calibrate|sync|track|estimate] [--resume] [--quick]``.
+[--until film|calibrate|sync|track|estimate] [--from calibrate|sync|track|estimate] [--resume] [--quick]``.
 """
 from __future__ import annotations
 
@@ -90,8 +90,9 @@ def _plane_errors(calibration_json: Path, camera: dict) -> tuple[float, float]:
     return float(np.median(e)), float(np.max(e))
 
 
-def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str = "estimate") -> dict:
-    """Film one drawn setup and run the pipeline's stages on it, up to ``until`` (:data:`STAGES`);
+def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str = "estimate", start: str = "film") -> dict:
+    """Film one drawn setup and run the pipeline's stages on it, from ``start`` up to ``until``
+    (:data:`STAGES`; a stage before ``start`` whose output is in ``work`` is read, not rerun);
     its figures against the truth."""
     from stringcast.campaign import tracking_errors
     from stringcast.core import read_json, resolve_campaign, settings_from_config, stage_kwargs
@@ -122,7 +123,8 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str 
     out = d / "results"
     out.mkdir(parents=True, exist_ok=True)
     try:
-        run_calibration(trial, calib, campaign, out / "calibration.json", **stage_kwargs(run_calibration, settings))
+        if not _kept("calibrate", start, out / "calibration.json"):
+            run_calibration(trial, calib, campaign, out / "calibration.json", **stage_kwargs(run_calibration, settings))
         cal_doc = read_json(out / "calibration.json")
         row["fx_error_pct"], row["principal_point_error_px"] = _calibration_errors(cal_doc, setup)
         row["calibration_verdict"] = _verdict(cal_doc)
@@ -131,7 +133,8 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str 
         row["plane_error_median_mm"], row["plane_error_max_mm"] = _plane_errors(out / "calibration.json", truth["camera"])
         if until == "calibrate":
             return row
-        sync_doc = run_sync(trial, out / "calibration.json", campaign, out / "sync.json", **stage_kwargs(run_sync, settings))
+        sync_doc = (read_json(out / "sync.json") if _kept("sync", start, out / "sync.json") else
+                    run_sync(trial, out / "calibration.json", campaign, out / "sync.json", **stage_kwargs(run_sync, settings)))
         row["sync_error_ms"] = (sync_doc["offset_s"] - truth["trigger_time_s"]) * 1000
         row["sync_verdict"] = _verdict(sync_doc)
         if until == "sync":
@@ -154,6 +157,11 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str 
         row["error"] = f"{type(exc).__name__}: {exc}"
         row["traceback"] = traceback.format_exc(limit=3)
     return row
+
+
+def _kept(stage: str, start: str, output: Path) -> bool:
+    """Whether ``stage`` comes before ``start`` and its output is there to be read instead."""
+    return STAGES.index(stage) < STAGES.index(start) and output.exists()
 
 
 def _judge(row: dict, width_px: int) -> dict:
@@ -241,13 +249,15 @@ def _resumed(work: Path, seeds: list[int], until: str) -> dict[int, dict]:
 
 
 def run(quick: bool = False, setups: int = 24, first: int = 0, work: Path | None = None, jobs: int = 1,
-        until: str = "estimate", resume: bool = False) -> dict:
+        until: str = "estimate", resume: bool = False, start: str = "film") -> dict:
     """Run the benchmark (``benchmarks.run``'s interface); returns the JSON it wrote last.
 
     ``jobs`` setups run side by side (processes); the JSON is rewritten as each one ends, its
     rows in seed order. ``until`` (:data:`STAGES`) stops every setup after that step (``film``
     only fills ``work``; the JSON then holds no figures). ``resume``: the setups that the last
-    JSON (same ``work`` and ``until``) holds without an error are taken from it, not rerun."""
+    JSON (same ``work`` and ``until``) holds without an error are taken from it, not rerun. ``start``:
+    the stages before it read their outputs from ``work`` where there (a tracking change measured
+    on the same calibrations and syncs)."""
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     from stringcast.core import load_config
@@ -259,7 +269,7 @@ def run(quick: bool = False, setups: int = 24, first: int = 0, work: Path | None
     done = _resumed(work, seeds, until) if resume else {}
     rows, doc = [], {}
     with ProcessPoolExecutor(max_workers=max(1, jobs)) as pool:
-        futures = [pool.submit(run_setup, seed, 1 + i % 7, config, work, until) for i, seed in enumerate(seeds)
+        futures = [pool.submit(run_setup, seed, 1 + i % 7, config, work, until, start) for i, seed in enumerate(seeds)
                    if seed not in done]
         for k, fut in enumerate(itertools.chain(done.values(), as_completed(futures))):   # lazily: each as it ends
             row = fut if isinstance(fut, dict) else fut.result()
@@ -272,7 +282,7 @@ def run(quick: bool = False, setups: int = 24, first: int = 0, work: Path | None
                 "sync_error_ms", "tracking_median_mm", "tracking_p95_mm", "valid_share", "E_mm", "fit_verdict",
                 "error") if key in row), flush=True)
             doc = summarise(rows, k == n - 1, quick)
-            doc["until"], doc["work"] = until, str(work)
+            doc["until"], doc["work"], doc["start"] = until, str(work), start
             write("generalization", doc)
             figure(rows, BENCH_DIR / "generalization.png")
     return doc
@@ -287,8 +297,10 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--jobs", type=int, default=1, help="setups run side by side (processes)")
     p.add_argument("--until", choices=STAGES, default="estimate", help="stop each setup after this step")
     p.add_argument("--resume", action="store_true", help="take the setups the last JSON holds (same --work) from it")
+    p.add_argument("--from", dest="start", choices=STAGES, default="film",
+                   help="read the outputs of the stages before this one from --work where they are there")
     args = p.parse_args(argv)
-    run(args.quick, args.setups, args.first, args.work, args.jobs, args.until, args.resume)
+    run(args.quick, args.setups, args.first, args.work, args.jobs, args.until, args.resume, args.start)
 
 
 if __name__ == "__main__":

@@ -169,7 +169,14 @@ class FrameTracker:
         if st.smooth_px > 0:
             diff = cv2.GaussianBlur(diff, (0, 0), st.smooth_px)
         absd = np.abs(diff)
-        z = absd / np.maximum(sigma * math.sqrt(max(gain, 1e-3)), 0.05)
+        # the noise model comes from the still frames before the motion; a lossy codec that
+        # codes a still scene identically, light drift or compression around moving things
+        # leave it far below the differences the moving frames show. The frame's own robust
+        # spread of the difference (MAD, the string and arm being a small share of the ROI) is
+        # a floor under it.
+        r = diff[sub][use] if use.sum() > 100 else diff[sub].ravel()
+        floor = 1.4826 * float(np.median(np.abs(r - np.median(r)))) if r.size else 0.0
+        z = absd / np.maximum(np.maximum(sigma * math.sqrt(max(gain, 1e-3)), floor), 0.05)
         weak = (z > st.threshold_low) & ~arm
         nlab, lab = cv2.connectedComponents(weak.astype(np.uint8), connectivity=8)
         keep = np.zeros(nlab, bool)
