@@ -353,3 +353,20 @@ def test_overlay_with_the_grasp_out_of_view(tmp_path):
     img = cv2.imread(str(tmp_path / "o.png"))
     assert img.shape == (64, 3 * 64, 3)
     assert all(img[:, 64 * k:64 * (k + 1)].max() >= 90 for k in range(3))  # every tile shows the frame
+
+
+def test_segment_noise_floor_from_the_frame_itself(campaign, settings):
+    """A noise model far below the frame's real noise (a codec that coded the still frames
+    identically: the model's 0.01 floor) must not make every pixel foreground: the frame's own
+    robust spread of |I - B| is a floor, so the string alone stands out."""
+    from stringcast.track.frame_tracker import FrameTracker
+
+    bg = np.full((200, 200), 100, np.float32)
+    tracker = FrameTracker(bg, (0.01, 0.0), _calibration(), campaign, settings.tracking)
+    frame = bg + np.random.default_rng(0).normal(0, 2.0, bg.shape).astype(np.float32)
+    cv2.line(frame, (100, 20), (100, 180), 60.0, 2)                 # the string, 40 grey levels darker
+    _, fg = tracker._segment(frame, bg, tracker.sigma, np.zeros(bg.shape, bool))
+    string = np.zeros(bg.shape, bool)
+    string[:, 95:106] = True
+    assert fg[20:180, 100].mean() > 0.9                            # the string is found ...
+    assert fg[~string].mean() < 0.01                               # ... and the noise is not
