@@ -24,6 +24,20 @@ def campaign(config):
     return resolve_campaign({"string": 1, "target": 1}, config, "test")
 
 
+def small_camera_config(config: dict, name: str) -> dict:
+    """A copy of config whose default set-up films with a 768 x 768, 500 fps mono camera ``name``
+    (the lab's lens scaled to it) and a coarse, quickly settled string: arm stills for the
+    calibration tests."""
+    import copy
+
+    cfg = copy.deepcopy({k: v for k, v in config.items() if k != "_path"})
+    cfg["cameras"][name] = {"width_px": 768, "height_px": 768, "fps": 500.0, "bit_depth": 8, "mono": True}
+    cfg["setups"]["default"]["camera"] = name
+    cfg["lab"] = dict(cfg["lab"], links_per_point=2, settle_s=0.1)
+    cfg["lab"]["camera"] = dict(cfg["lab"]["camera"], focal_px=1390.0 * 768 / 1024)
+    return cfg
+
+
 def tiny_lab_trial(tmp_path, config, bands=None):
     """A 0.35 s lab clip (320 x 240 px, 1.3 mm per px, 87 frames) of a 150 mm string of 5 points swung
     by the wrist, with ``lab.string_bands`` = bands (None: a plain string); calibrated

@@ -1,9 +1,8 @@
 """The arm sweep: the calibration's plane-mapping error seen by the arm's links at several postures."""
-import copy
-
 import numpy as np
 import pytest
 
+from conftest import small_camera_config
 from stringcast.calibrate.arm_sweep import error_field, fit_error_field, sweep_rows
 from stringcast.core.files import read_joint_table, read_json
 
@@ -28,11 +27,7 @@ def postures(tmp_path_factory, config):
     from stringcast.lab import run_trial
     from stringcast.video.container import open_video
 
-    cfg = copy.deepcopy({k: v for k, v in config.items() if k != "_path"})
-    cfg["cameras"]["sw_small"] = {"width_px": 768, "height_px": 768, "fps": 500.0, "bit_depth": 8, "mono": True}
-    cfg["setups"]["default"]["camera"] = "sw_small"
-    cfg["lab"] = dict(cfg["lab"], links_per_point=2, settle_s=0.1)
-    cfg["lab"]["camera"] = dict(cfg["lab"]["camera"], focal_px=1390.0 * 768 / 1024)
+    cfg = small_camera_config(config, "sw_small")
     campaign = resolve_campaign({"string": 1, "target": 1}, cfg, "sw")
     rate = campaign.arm.controller_rate
     out = []

@@ -6,6 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
+from conftest import small_camera_config
 from stringcast.calibrate.board_check import check_board_to_robot, edge_pair_centre
 from stringcast.core.files import read_joint_table, read_json
 
@@ -32,11 +33,7 @@ def still_arm(request, tmp_path_factory, config):
     from stringcast.video.container import open_video
 
     root = tmp_path_factory.mktemp(f"board_{request.param}")
-    cfg = copy.deepcopy({k: v for k, v in config.items() if k != "_path"})
-    cfg["cameras"]["bc_small"] = {"width_px": 768, "height_px": 768, "fps": 500.0, "bit_depth": 8, "mono": True}
-    cfg["setups"]["default"]["camera"] = "bc_small"
-    cfg["lab"] = dict(cfg["lab"], links_per_point=2, settle_s=0.1)
-    cfg["lab"]["camera"] = dict(cfg["lab"]["camera"], focal_px=1390.0 * 768 / 1024)
+    cfg = small_camera_config(config, "bc_small")
     campaign = resolve_campaign({"string": 1, "target": 1}, cfg, "bc")
     rate = campaign.arm.controller_rate
     q = np.repeat(np.asarray(POSTURES[request.param])[None], int(0.12 * rate), 0)

@@ -20,11 +20,9 @@ the error a wrong board pose or focal length makes) by Huber-reweighted least sq
 from __future__ import annotations
 
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
-
 from stringcast.core import BoardCheckSettings, forward_kinematics
 
-from .board_check import _consensus, _sample, edge_pair_centre
+from .board_check import _consensus, link_profiles
 
 ROW_FIELDS = ("frame", "px_m", "py_m", "nx", "ny", "offset_m", "speed_m_s")
 """The columns of :func:`sweep_rows`'s table."""
@@ -32,52 +30,14 @@ ROW_FIELDS = ("frame", "px_m", "py_m", "nx", "ny", "offset_m", "speed_m_s")
 
 def _link_rows(image, calibration, arm, q, st: BoardCheckSettings) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Per link (and gripper) whose rows agree: (points (R, 2) m on the FK axis, normal (2,),
-    offsets (R,) m) of the agreeing rows."""
-    pts = forward_kinematics(arm, np.asarray(q, float))
-    J = arm.n_joints
+    offsets (R,) m) of the agreeing rows (:func:`~stringcast.calibrate.board_check.link_profiles`)."""
     out = []
-    for s in range(J + 1):
-        a, b = pts[s], pts[s + 1]
-        L = float(np.hypot(*(b - a)))
-        if s < J:
-            w0 = w1 = float(arm.link_widths[min(s, len(arm.link_widths) - 1)])
-            r_a = float(arm.joint_radii[min(s, len(arm.joint_radii) - 1)])
-            r_b = float(arm.joint_radii[min(s + 1, len(arm.joint_radii) - 1)])
-        else:
-            w0, w1 = (float(w) for w in arm.gripper_widths)
-            r_a, r_b = float(arm.joint_radii[min(J, len(arm.joint_radii) - 1)]), 0.0
-        if L <= 0:
-            continue
-        clear = st.clear_mm / 1000
-        u0, u1 = (r_a + clear) / L, 1 - (r_b + clear) / L
-        if s == J:
-            u1 = min(u1, 0.9)
-        if (u1 - u0) * L < 0.02:
-            continue
-        e = (b - a) / L
-        nrm = np.array([-e[1], e[0]])
-        step = st.step_mm / 1000
-        us = np.linspace(u0, u1, int(st.rows))
-        found = []
-        for u in us:
-            w = w0 + (w1 - w0) * u
-            half = w / 2 + st.margin_mm / 1000
-            v = np.arange(-half, half + step / 2, step)
-            prof = _sample(image, calibration, a + u * (b - a) + v[:, None] * nrm)
-            if not np.all(np.isfinite(prof)):
-                continue
-            c = edge_pair_centre(gaussian_filter1d(prof, 1.0 / st.step_mm), step, v[0],
-                                 st.width_range[0] * w, st.width_range[1] * w)
-            if c is not None:
-                found.append((u, c))
-        if not found:
-            continue
-        u_c = np.asarray(found)
-        c = _consensus(u_c[:, 1], st.max_spread_mm / 1000, max(int(st.min_rows), int(np.ceil(st.min_share * len(us)))))
+    for a, b, nrm, u, centres, tried in link_profiles(image, calibration, arm, q, st):
+        c = _consensus(centres, st.max_spread_mm / 1000, max(int(st.min_rows), int(np.ceil(st.min_share * tried))))
         if c is None:
             continue
-        keep = np.abs(u_c[:, 1] - c[0]) <= st.max_spread_mm / 1000
-        out.append((a + u_c[keep, :1] * (b - a), nrm, u_c[keep, 1]))
+        keep = np.abs(centres - c[0]) <= st.max_spread_mm / 1000
+        out.append((a + u[keep, None] * (b - a), nrm, centres[keep]))
     return out
 
 

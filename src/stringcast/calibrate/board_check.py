@@ -111,9 +111,20 @@ def edge_pair_centre(profile: np.ndarray, step: float, v0: float, width_lo: floa
     return centre
 
 
-def _segment_offsets(image, calibration, arm, q_rest, st: BoardCheckSettings) -> list[tuple[np.ndarray, float, float]]:
-    """[(normal (2,), offset m, spread m)] for each link/gripper whose edges were found."""
-    pts = forward_kinematics(arm, np.asarray(q_rest, float))
+def link_profiles(image, calibration, arm, q, st: BoardCheckSettings) -> list[tuple]:
+    """The arm's links (and gripper) at pose q, each read on ``st.rows`` profiles across its FK axis.
+
+    Args:
+        image: (H, W) float grey image. calibration: robot_to_pixel. arm: the arm with its outline.
+        q: (J,) rad. st: the profiles' settings (:class:`~stringcast.core.BoardCheckSettings`).
+
+    Returns:
+        per link long enough to show its sides clear of the joint discs: (a, b (2,) its FK ends, m;
+        its unit normal (2,); u (R,) the places along a -> b of the profiles where an edge pair of
+        the outline's width was found (:func:`edge_pair_centre`); their centres (R,) m along the
+        normal; the profiles tried).
+    """
+    pts = forward_kinematics(arm, np.asarray(q, float))
     J = arm.n_joints
     links, radii = arm.link_widths, arm.joint_radii
     out = []
@@ -136,7 +147,7 @@ def _segment_offsets(image, calibration, arm, q_rest, st: BoardCheckSettings) ->
         nrm = np.array([-e[1], e[0]])
         step = st.step_mm / 1000
         us = np.linspace(u0, u1, int(st.rows))
-        centres = []
+        found = []
         for u in us:
             w = w0 + (w1 - w0) * u
             half = w / 2 + st.margin_mm / 1000
@@ -145,9 +156,17 @@ def _segment_offsets(image, calibration, arm, q_rest, st: BoardCheckSettings) ->
             prof = gaussian_filter1d(prof, 1.0 / st.step_mm) if np.all(np.isfinite(prof)) else prof
             c = edge_pair_centre(prof, step, v[0], st.width_range[0] * w, st.width_range[1] * w)
             if c is not None:
-                centres.append(c)
-        c = _consensus(np.asarray(centres), st.max_spread_mm / 1000,
-                       max(int(st.min_rows), int(np.ceil(st.min_share * len(us)))))
+                found.append((u, c))
+        u_c = np.asarray(found, float).reshape(-1, 2)
+        out.append((a, b, nrm, u_c[:, 0], u_c[:, 1], len(us)))
+    return out
+
+
+def _segment_offsets(image, calibration, arm, q_rest, st: BoardCheckSettings) -> list[tuple[np.ndarray, float, float]]:
+    """[(normal (2,), offset m, spread m)] for each link/gripper whose edges were found."""
+    out = []
+    for _, _, nrm, _, centres, tried in link_profiles(image, calibration, arm, q_rest, st):
+        c = _consensus(centres, st.max_spread_mm / 1000, max(int(st.min_rows), int(np.ceil(st.min_share * tried))))
         if c is not None:
             out.append((nrm, *c))
     return out
