@@ -16,7 +16,7 @@ benchmark only) it records, per setup:
 
 ``results/bench/arm_sweep.json`` holds the rows and their medians over the setups.
 
-Run: ``python -m benchmarks.arm_sweep --work DIR [--frames 40] [--jobs 2]`` after
+Run: ``python -m benchmarks.arm_sweep --work DIR [--frames 40] [--jobs 2] [--seeds 3,5,6]`` after
 ``python -m benchmarks.generalization --work DIR``.
 """
 from __future__ import annotations
@@ -96,8 +96,9 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, n_frames: i
     return row
 
 
-def run(quick: bool = False, setups: int = 24, work: Path | None = None, frames: int = 40, jobs: int = 1) -> dict:
-    """Run the experiment on the setups of ``work`` that have ``results/sync.json``."""
+def run(quick: bool = False, setups: int = 24, work: Path | None = None, frames: int = 40, jobs: int = 1,
+        seeds: list[int] | None = None) -> dict:
+    """Run the experiment on the setups of ``work`` (``seeds``, default 0..setups-1) that have ``results/sync.json``."""
     from concurrent.futures import ProcessPoolExecutor
 
     from stringcast.core import load_config
@@ -105,7 +106,7 @@ def run(quick: bool = False, setups: int = 24, work: Path | None = None, frames:
     if work is None:
         raise SystemExit("arm_sweep: --work DIR (a generalization run's work directory) is needed")
     config = load_config()
-    seeds = [s for s in range(3 if quick else setups) if (work / f"setup_{s}" / "results" / "sync.json").exists()]
+    seeds = [s for s in (seeds or range(3 if quick else setups)) if (work / f"setup_{s}" / "results" / "sync.json").exists()]
     with ProcessPoolExecutor(max_workers=max(1, jobs)) as pool:
         rows = list(pool.map(run_setup, seeds, [1 + s % 7 for s in seeds], [config] * len(seeds), [work] * len(seeds),
                              [frames] * len(seeds)))
@@ -126,9 +127,10 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--setups", type=int, default=24, help="setups 0..N-1 (those processed)")
     p.add_argument("--frames", type=int, default=40, help="frames per trial, spread evenly")
     p.add_argument("--jobs", type=int, default=1, help="setups side by side (processes)")
+    p.add_argument("--seeds", type=lambda t: [int(x) for x in t.split(",")], default=None, help="these setups only, e.g. 3,5,6")
     p.add_argument("--quick", action="store_true", help="the first 3 setups")
     args = p.parse_args(argv)
-    run(args.quick, args.setups, args.work, args.frames, args.jobs)
+    run(args.quick, args.setups, args.work, args.frames, args.jobs, args.seeds)
 
 
 if __name__ == "__main__":
