@@ -26,9 +26,10 @@ error into space.
 from __future__ import annotations
 
 import numpy as np
-from stringcast.core import BoardCheckSettings, forward_kinematics
 
-from .board_check import _consensus, link_profiles
+from stringcast.core import BoardCheckSettings, forward_kinematics, joints_at
+
+from .board_check import link_consensus, link_profiles
 
 ROW_FIELDS = ("frame", "px_m", "py_m", "nx", "ny", "offset_m", "speed_m_s")
 """The columns of :func:`sweep_rows`'s table."""
@@ -39,7 +40,7 @@ def _link_rows(image, calibration, arm, q, st: BoardCheckSettings) -> list[tuple
     offsets (R,) m) of the agreeing rows (:func:`~stringcast.calibrate.board_check.link_profiles`)."""
     out = []
     for a, b, nrm, u, centres, tried in link_profiles(image, calibration, arm, q, st):
-        c = _consensus(centres, st.max_spread_mm / 1000, max(int(st.min_rows), int(np.ceil(st.min_share * tried))))
+        c = link_consensus(centres, tried, st)
         if c is None:
             continue
         keep = np.abs(centres - c[0]) <= st.max_spread_mm / 1000
@@ -66,35 +67,30 @@ def sweep_rows(frames, calibration, arm, t_frames: np.ndarray, t_j: np.ndarray, 
         robot frame), the link's unit normal, the seen centre's offset along it (m), and the
         point's speed along the normal (m/s).
     """
-    qa = lambda t: np.array([np.interp(t, t_j, q_j[:, j]) for j in range(q_j.shape[1])])   # noqa: E731
     out = []
     for k, image in frames:
         t = float(t_frames[k])
-        img = np.asarray(image, np.float32)
-        for pts, nrm, off in _link_rows(img, calibration, arm, qa(t), st):
+        q_minus, q_mid, q_plus = joints_at(np.array([t - dt_s, t, t + dt_s]), t_j, q_j)
+        mid, ends = forward_kinematics(arm, q_mid), (forward_kinematics(arm, q_minus), forward_kinematics(arm, q_plus))
+        for pts, nrm, off in _link_rows(np.asarray(image, np.float32), calibration, arm, q_mid, st):
             # the same material points a little earlier and later: their motion along the normal
-            speed = []
-            for p in pts:
-                move = _point_motion(arm, qa(t - dt_s), qa(t + dt_s), qa(t), p) / (2 * dt_s)
-                speed.append(abs(float(move @ nrm)))
+            speed = [abs(float(_point_motion(mid, ends, p) @ nrm)) / (2 * dt_s) for p in pts]
             out += [[k, p[0], p[1], nrm[0], nrm[1], o, v] for p, o, v in zip(pts, off, speed)]
     return np.asarray(out, float).reshape(-1, len(ROW_FIELDS))
 
 
-def _point_motion(arm, q_minus, q_plus, q_mid, p) -> np.ndarray:
-    """Displacement (2,) m of the arm's material point at p (pose q_mid) from pose q_minus to q_plus:
-    the point is carried by the link nearest to it."""
-    mid = forward_kinematics(arm, q_mid)
+def _point_motion(mid: np.ndarray, ends: tuple[np.ndarray, np.ndarray], p) -> np.ndarray:
+    """Displacement (2,) m of the arm's material point at p on the posture ``mid`` (FK points
+    (J + 2, 2) m) from the posture ends[0] to ends[1]: the point is carried by the link nearest to it."""
     seg = int(np.argmin([_dist_to_segment(p, mid[s], mid[s + 1]) for s in range(len(mid) - 1)]))
-    ends = []
-    for q in (q_minus, q_plus):
-        f = forward_kinematics(arm, q)
+    moved = []
+    for f in ends:
         a0, b0, a1, b1 = mid[seg], mid[seg + 1], f[seg], f[seg + 1]
         e0, e1 = (b0 - a0) / np.linalg.norm(b0 - a0), (b1 - a1) / np.linalg.norm(b1 - a1)
         r = p - a0
         lon, lat = r @ e0, r @ np.array([-e0[1], e0[0]])
-        ends.append(a1 + lon * e1 + lat * np.array([-e1[1], e1[0]]))
-    return ends[1] - ends[0]
+        moved.append(a1 + lon * e1 + lat * np.array([-e1[1], e1[0]]))
+    return moved[1] - moved[0]
 
 
 def _dist_to_segment(p, a, b) -> float:

@@ -162,11 +162,17 @@ def link_profiles(image, calibration, arm, q, st: BoardCheckSettings) -> list[tu
     return out
 
 
+def link_consensus(centres: np.ndarray, tried: int, st: BoardCheckSettings) -> tuple[float, float] | None:
+    """(median, spread) m of a link's profile centres (:func:`link_profiles`) that agree within
+    ``max_spread_mm``: at least ``min_rows`` of them and ``min_share`` of the ``tried``; else None."""
+    return _consensus(centres, st.max_spread_mm / 1000, max(int(st.min_rows), int(np.ceil(st.min_share * tried))))
+
+
 def _segment_offsets(image, calibration, arm, q_rest, st: BoardCheckSettings) -> list[tuple[np.ndarray, float, float]]:
     """[(normal (2,), offset m, spread m)] for each link/gripper whose edges were found."""
     out = []
     for _, _, nrm, _, centres, tried in link_profiles(image, calibration, arm, q_rest, st):
-        c = _consensus(centres, st.max_spread_mm / 1000, max(int(st.min_rows), int(np.ceil(st.min_share * tried))))
+        c = link_consensus(centres, tried, st)
         if c is not None:
             out.append((nrm, *c))
     return out

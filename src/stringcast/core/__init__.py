@@ -2,7 +2,7 @@
 (forward kinematics, joint limits) and the data files (atomic writers, readers that name
 the bad file).
 """
-from .arm import (JointLimitError, assert_within_limits, check_limits, forward_kinematics, hand_pose,
+from .arm import (JointLimitError, assert_within_limits, check_limits, forward_kinematics, hand_pose, joints_at,
                   motion_start, motion_window)
 from .config import (DEFAULT_CONFIG, METHOD_CONFIGS, OURS_CONFIG, PARAM_NAMES, ConfigError, load_config, load_yaml,
                      merge_config, model_ranges, validate)
@@ -18,8 +18,8 @@ from .settings import (MODES, POLARITIES, SECTION_CLASSES, BoardCheckSettings, C
 from .verdict import STATUSES, Verdict, worst
 
 __all__ = [
-    "JointLimitError", "assert_within_limits", "check_limits", "forward_kinematics", "hand_pose", "motion_start",
-    "motion_window",
+    "JointLimitError", "assert_within_limits", "check_limits", "forward_kinematics", "hand_pose", "joints_at",
+    "motion_start", "motion_window",
     "DEFAULT_CONFIG", "METHOD_CONFIGS", "OURS_CONFIG", "PARAM_NAMES", "ConfigError", "load_config", "load_yaml",
     "merge_config", "model_ranges", "validate",
     "ArmSpec", "BoardSpec", "Campaign", "SetupSpec", "StringSpec", "TargetSpec", "campaign_entries", "load_campaign",

@@ -40,6 +40,13 @@ def forward_kinematics(arm: ArmSpec, q: np.ndarray) -> np.ndarray:
     return np.concatenate([base, pts], axis=-2)
 
 
+def joints_at(t, t_j: np.ndarray, q_j: np.ndarray) -> np.ndarray:
+    """Joint angles at times t (scalar or (...,) s) from a joint log t_j (K,) s, q_j (K, J) rad,
+    by linear interpolation, held at the log's ends (``np.interp``): (..., J) rad."""
+    t = np.asarray(t, float)
+    return np.stack([np.interp(t, t_j, q_j[:, j]) for j in range(q_j.shape[1])], axis=-1)
+
+
 def hand_pose(arm: ArmSpec, q: np.ndarray) -> np.ndarray:
     """Grasp point and hand angle: (..., 3) = (x_m, y_m, phi_h_rad) for q (..., J)."""
     pts = forward_kinematics(arm, q)

@@ -139,12 +139,6 @@ def match_residual(tau_ks: np.ndarray, a: np.ndarray, offset_s: float) -> tuple[
     return float(1.4826 * np.median(np.abs(d)) * 1000), int(ok.sum())
 
 
-def joints_at(t: np.ndarray, t_j: np.ndarray, q_j: np.ndarray) -> np.ndarray:
-    """Joint angles at times t (...,) by linear interpolation, held at the log's ends: (..., J)."""
-    t = np.asarray(t, float)
-    return np.stack([np.interp(t, t_j, q_j[:, j]) for j in range(q_j.shape[1])], axis=-1)
-
-
 def coarse_offset(rest_ncc: np.ndarray, fps: float, predicted_t: np.ndarray, predicted: np.ndarray,
                   step_s: float) -> float:
     """Offset s that best lines up the frames' rest-strip NCC (F,) with its prediction.

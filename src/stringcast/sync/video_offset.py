@@ -14,7 +14,7 @@ import numpy as np
 
 from . import arm_match as sync_arm
 from stringcast.calibrate import check_board_to_robot
-from stringcast.core import BoardCheckSettings, DataError, SyncSettings, motion_window
+from stringcast.core import BoardCheckSettings, DataError, SyncSettings, joints_at, motion_window
 
 
 @dataclass(frozen=True)
@@ -168,7 +168,7 @@ def _coarse_search(video, calibration, sig: float, rest_pts: np.ndarray, rest_s:
                         "posture; sync needs the video to start before the motion")
     tp = np.arange(t_j[0], t_j[-1], 1e-3)
     pred = sync_arm.ncc(sync_arm.sample(rest_s, calibration,
-                                        strips(sync_arm.joints_at(tp, t_j, q_j))),
+                                        strips(joints_at(tp, t_j, q_j))),
                         template)
     return sync_arm.coarse_offset(rest_ncc, fps, tp, pred, st.coarse_step_ms / 1000)
 
@@ -203,7 +203,7 @@ def _fine_search(video, calibration, sig: float, template: np.ndarray, strips, t
     per_frame = []
     for i, k in enumerate(frames):
         f = sync_arm.smooth(video.read(int(k)), sig)
-        q = sync_arm.joints_at(taus + k / fps, t_j, q_j)
+        q = joints_at(taus + k / fps, t_j, q_j)
         per_seg = sync_arm.ncc_segments(sync_arm.sample(f, calibration, strips(q)), template)  # (T, S)
         score = per_seg.mean(axis=1)
         if np.ptp(score) >= st.min_frame_contrast:
@@ -271,6 +271,6 @@ def _speeds(arm, t_j: np.ndarray, q_j: np.ndarray, frames: np.ndarray, fps: floa
     :func:`~stringcast.sync.arm_match.match_residual`."""
     t_k = offset + frames / fps
     dt = 1e-3
-    a, _, _ = sync_arm.normal_speeds(arm, sync_arm.joints_at(t_k - dt, t_j, q_j), sync_arm.joints_at(t_k, t_j, q_j),
-                                     sync_arm.joints_at(t_k + dt, t_j, q_j), dt, segments, n_u)
+    a, _, _ = sync_arm.normal_speeds(arm, joints_at(t_k - dt, t_j, q_j), joints_at(t_k, t_j, q_j),
+                                     joints_at(t_k + dt, t_j, q_j), dt, segments, n_u)
     return a

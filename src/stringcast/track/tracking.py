@@ -51,7 +51,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from stringcast.core import TrackingSettings, forward_kinematics, motion_window
+from stringcast.core import TrackingSettings, forward_kinematics, joints_at, motion_window
 from .arm_mask import draw_arm_mask
 from .background import background_samples, build_background
 from stringcast.calibrate import Calibration
@@ -68,10 +68,6 @@ from stringcast.video import open_video
 def _joint_px(cal: Calibration, arm, q: np.ndarray) -> np.ndarray:
     pts = forward_kinematics(arm, q)  # (F, J + 2, 2)
     return cal.robot_to_pixel(pts.reshape(-1, 2)).reshape(pts.shape)
-
-
-def _interp_joints(t: np.ndarray, t_j: np.ndarray, q_j: np.ndarray) -> np.ndarray:
-    return np.column_stack([np.interp(t, t_j, q_j[:, j]) for j in range(q_j.shape[1])])
 
 
 def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, overlay_png=None, *,
@@ -115,7 +111,7 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
     lo, hi = joint_log_span(t_j, sync.get("joint_log"))   # an extended log: the arm still outside it
     in_log = (t >= lo) & (t <= hi)
     half = 0.5 / float(sync["fps"])  # the arm at the start, middle and end of each frame period
-    jpx = np.stack([_joint_px(cal, arm, _interp_joints(t + dt, t_j, q_j)) for dt in (-half, 0.0, half)], axis=1)
+    jpx = np.stack([_joint_px(cal, arm, joints_at(t + dt, t_j, q_j)) for dt in (-half, 0.0, half)], axis=1)
     scale = float(np.median(cal.m_per_px(jpx[:, 1, -1])))
     try:
         t_start, t_end = motion_window(t_j, q_j)
@@ -128,7 +124,8 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
     early = win if span is None else win[t[win] <= t[win[0]] + span]
     bwin = early if len(early) >= 9 else win
     samples = background_samples(bwin, int(st.background_samples), int(st.background_bursts))
-    pre = np.nonzero(t < t_start - 0.02)[0][-int(st.rest_frames):]
+    moving, rest = frames_judged(t, in_log, t_start, t_end)   # the frames tracking.json judges
+    pre = np.nonzero(rest)[0][-int(st.rest_frames):]
     frames = prefetch(video, int(st.prefetch_frames))  # the main pass decodes while the background is built
     second = open_video(vpath)
     try:
@@ -141,7 +138,7 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
     xy = np.full((F, n + 1, 2), np.nan)
     valid = np.zeros((F, n + 1), bool)
     mismatch = np.full(F, np.nan)
-    xy[:, 0] = forward_kinematics(arm, _interp_joints(t, t_j, q_j))[:, -1]  # point 0: the grasp
+    xy[:, 0] = forward_kinematics(arm, joints_at(t, t_j, q_j))[:, -1]  # point 0: the grasp
     valid[:, 0] = in_log
     xy[~in_log, 0] = np.nan
     shows = set(np.round(np.linspace(win[0], win[-1], int(st.overlay_frames))).astype(int)) if overlay_png else set()
@@ -162,7 +159,6 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
         "valid": valid.ravel(),
     })
     write_parquet(out_parquet, df)
-    moving, rest = frames_judged(t, in_log, t_start, t_end)
     write_json(Path(out_parquet).with_name("tracking.json"),
                tracking_quality(df, mismatch, campaign.string.length, n, moving, rest, st))
     if overlay_png is not None:
