@@ -23,11 +23,13 @@ from __future__ import annotations
 
 import argparse
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 from benchmarks.common import header, write
+from benchmarks.generalization import mapping_error, swing_grid
 
 
 def _frames(path: Path, keep: set[int]):
@@ -37,17 +39,17 @@ def _frames(path: Path, keep: set[int]):
 
     from stringcast.video import open_video
 
+    last = max(keep)
     with open_video(path) as video:
         for i, f in video:
             if i in keep:
                 yield i, (cv2.cvtColor(f, cv2.COLOR_BGR2GRAY) if f.ndim == 3 else f)
-            if i >= max(keep):
+            if i >= last:
                 break
 
 
 def run_setup(seed: int, string_type: int, config: dict, work: Path, n_frames: int) -> dict:
     """The sweep's rows and fitted field on one filmed and processed setup, against the truth."""
-    import cv2
     import pandas as pd
 
     from stringcast.calibrate import Calibration
@@ -55,7 +57,6 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, n_frames: i
     from stringcast.core import find_video, read_json, resolve_campaign, settings_from_config
     from stringcast.core.files import read_joint_table
     from stringcast.lab import apply_setup, draw_setup
-    from stringcast.lab.view import SWING_REGION_M
     from stringcast.sync import frame_times
 
     d = work / f"setup_{seed}"
@@ -67,19 +68,14 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, n_frames: i
     t_j, q_j, _ = read_joint_table(d / "trial_1" / "joints.csv", n_joints=campaign.arm.n_joints)
     cam = read_json(d / "trial_1" / "ground_truth.json")["camera"]
 
-    def e_true(p):
-        uv = cv2.projectPoints(np.c_[p, np.zeros(len(p))], *(np.asarray(cam[k], float) for k in ("rvec", "tvec", "K", "dist"))
-                               )[0].reshape(-1, 2)
-        return cal.pixel_to_robot(uv) - p
-
+    e_true = partial(mapping_error, cal, cam)
     t0 = time.perf_counter()
     keep = set(np.linspace(0, len(t_frames) - 1, n_frames).astype(int).tolist())
     rows = sweep_rows(_frames(find_video(d / "trial_1"), keep), cal, campaign.arm, t_frames, t_j, q_j, st.board_check)
     seconds = time.perf_counter() - t0
     fit = fit_error_field(rows)
     slow = rows[rows[:, 6] <= 0.3]
-    (x0, x1), (y0, y1) = SWING_REGION_M
-    grid = np.stack(np.meshgrid(np.linspace(x0, x1, 13), np.linspace(y0, y1, 13)), -1).reshape(-1, 2)
+    grid = swing_grid()
     gt = pd.read_parquet(d / "trial_1" / "ground_truth.parquet")
     string = gt[gt["point"] > 0][["x_m", "y_m"]].to_numpy()[::7]
     row = {"seed": seed, "string_type": string_type, "seconds": seconds, "rows": int(len(rows)), "rows_used": fit["rows"],

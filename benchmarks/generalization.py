@@ -73,20 +73,31 @@ STAGES = ("film", "calibrate", "sync", "track", "estimate")
 """The steps of one setup, in order; ``--until`` stops after one of them."""
 
 
-def _plane_errors(calibration_json: Path, camera: dict) -> tuple[float, float]:
-    """(median, max) mm of the calibration's pixel -> swing-plane mapping over the swing region,
-    at the pixels where the lab's true camera sees a 13 x 13 grid of the region's points."""
-    import cv2
-
-    from stringcast.calibrate import Calibration
+def swing_grid(n: int = 13) -> np.ndarray:
+    """(n * n, 2) m: a grid over the lab's swing region (robot frame)."""
     from stringcast.lab.view import SWING_REGION_M
 
     (x0, x1), (y0, y1) = SWING_REGION_M
-    g = np.stack(np.meshgrid(np.linspace(x0, x1, 13), np.linspace(y0, y1, 13)), -1).reshape(-1, 2)
-    uv = cv2.projectPoints(np.c_[g, np.zeros(len(g))], np.asarray(camera["rvec"], float),
-                           np.asarray(camera["tvec"], float), np.asarray(camera["K"], float),
-                           np.asarray(camera["dist"], float))[0].reshape(-1, 2)
-    e = np.linalg.norm(Calibration.from_json(calibration_json).pixel_to_robot(uv) - g, axis=1) * 1000
+    return np.stack(np.meshgrid(np.linspace(x0, x1, n), np.linspace(y0, y1, n)), -1).reshape(-1, 2)
+
+
+def mapping_error(cal, camera: dict, points: np.ndarray) -> np.ndarray:
+    """(N, 2) m: where the calibration ``cal`` maps the pixels at which the lab's true ``camera``
+    (``ground_truth.json``'s, read by the benchmarks only) sees the swing-plane ``points`` (N, 2) m,
+    less those points."""
+    import cv2
+
+    uv = cv2.projectPoints(np.c_[points, np.zeros(len(points))], *(np.asarray(camera[k], float) for k in (
+        "rvec", "tvec", "K", "dist")))[0].reshape(-1, 2)
+    return cal.pixel_to_robot(uv) - points
+
+
+def _plane_errors(calibration_json: Path, camera: dict) -> tuple[float, float]:
+    """(median, max) mm of the calibration's pixel -> swing-plane mapping over the swing region,
+    at the pixels where the lab's true camera sees a 13 x 13 grid of the region's points."""
+    from stringcast.calibrate import Calibration
+
+    e = np.linalg.norm(mapping_error(Calibration.from_json(calibration_json), camera, swing_grid()), axis=1) * 1000
     return float(np.median(e)), float(np.max(e))
 
 
