@@ -1,8 +1,12 @@
 """Camera calibration: intrinsics from a ChArUco clip, the board's pose in the trial's video
 (pixel <-> swing-plane homography), and the still-arm check of the board-to-robot transform
-(the paper's Fig. 2, 'camera calibration').
+(the paper's Fig. 2, 'camera calibration'), and the mapping refined by the arm's sweep of a
+trial (its link rows, :mod:`.arm_sweep`; the fit, :mod:`.refine`).
 """
+from .arm_sweep import sweep_rows
 from .board_check import check_board_to_robot
 from .calibration import Calibration, run_calibration
+from .refine import board_corner_points, mapping_standard_error, refine_mapping
 
-__all__ = ["Calibration", "check_board_to_robot", "run_calibration"]
+__all__ = ["Calibration", "board_corner_points", "check_board_to_robot", "mapping_standard_error", "refine_mapping",
+           "run_calibration", "sweep_rows"]

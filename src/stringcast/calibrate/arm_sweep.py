@@ -65,7 +65,8 @@ def sweep_rows(frames, calibration, arm, t_frames: np.ndarray, t_j: np.ndarray, 
     Returns:
         (K, 7) array, columns :data:`ROW_FIELDS`: frame, the row's point on the FK axis (m,
         robot frame), the link's unit normal, the seen centre's offset along it (m), and the
-        point's speed along the normal (m/s).
+        point's velocity along the normal (m/s, signed: a clock error of dt s adds velocity * dt
+        to the offset).
     """
     out = []
     for k, image in frames:
@@ -74,7 +75,7 @@ def sweep_rows(frames, calibration, arm, t_frames: np.ndarray, t_j: np.ndarray, 
         mid, ends = forward_kinematics(arm, q_mid), (forward_kinematics(arm, q_minus), forward_kinematics(arm, q_plus))
         for pts, nrm, off in _link_rows(np.asarray(image, np.float32), calibration, arm, q_mid, st):
             # the same material points a little earlier and later: their motion along the normal
-            speed = [abs(float(_point_motion(mid, ends, p) @ nrm)) / (2 * dt_s) for p in pts]
+            speed = [float(_point_motion(mid, ends, p) @ nrm) / (2 * dt_s) for p in pts]
             out += [[k, p[0], p[1], nrm[0], nrm[1], o, v] for p, o, v in zip(pts, off, speed)]
     return np.asarray(out, float).reshape(-1, len(ROW_FIELDS))
 
@@ -114,7 +115,7 @@ def fit_error_field(rows: np.ndarray, max_speed_m_s: float = 0.3, scale_m: float
         (before), "frames" (distinct frames used), "scale_m"}``; ``params`` None when the
         rows do not determine the field (fewer than 16 rows or a rank-deficient system).
     """
-    use = rows[rows[:, 6] <= max_speed_m_s]
+    use = rows[np.abs(rows[:, 6]) <= max_speed_m_s]
     out = {"rows": int(len(use)), "frames": int(len(np.unique(use[:, 0]))) if len(use) else 0, "scale_m": scale_m,
            "params": None, "raw_rms_mm": float(np.sqrt(np.mean(use[:, 5] ** 2)) * 1000) if len(use) else None,
            "rms_mm": None}

@@ -1,0 +1,145 @@
+"""The swing plane's mapping refined by the arm's sweep and the trial's board (issue 25).
+
+The calibration maps a recorded pixel to the swing plane by undistorting it (K, dist from the
+calib/ shots) and one homography H fitted to the trial's board. Away from the board both
+extrapolate: a distortion a weak shot set got wrong bends the far side of the swing region by
+2-7 mm, while the board's corners stay right. The arm's link rows
+(:func:`~stringcast.calibrate.arm_sweep.sweep_rows`) say, across the region the arm sweeps,
+where the mapping puts each link's centre line against forward kinematics.
+
+:func:`refine_mapping` re-estimates the mapping's parameters that a plane's view depends on,
+the distortion (k1, k2), its centre (cx, cy, with the camera matrix's) and H, from both:
+
+* each row: n . (map(u) - p) = v dt, with u the pixel where the calibration saw the link's
+  centre, p the FK point, n the link's normal, v the point's velocity along n and dt the
+  clock's error (fitted too, when asked: the moving rows then measure the sync);
+* each board corner the calibration used: map(u_c) = its robot-frame point, within the
+  board's reprojection error.
+
+``scipy.optimize.least_squares`` with a Huber loss solves it; the rows' noise scale is taken
+from the rows themselves (their median absolute deviation after a first fit), not set.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from .mapping import Calibration, apply_homography
+
+SCALE_M = 0.5
+"""Robot-frame coordinates are divided by this inside the fit (the swing region is ~1 m)."""
+
+
+def _calibration(base: Calibration, theta: np.ndarray) -> Calibration:
+    """The mapping of parameters theta = (h (8), dk1, dk2, dcx px, dcy px[, dt]) around ``base``."""
+    h = theta[:8]
+    S = np.diag([SCALE_M, SCALE_M, 1.0])
+    C = S @ np.array([[1 + h[0], h[1], h[2]], [h[3], 1 + h[4], h[5]], [h[6], h[7], 1.0]]) @ np.linalg.inv(S)
+    K, dist = base.K.copy(), base.dist.copy()
+    dist[0] += theta[8]
+    dist[1] += theta[9]
+    K[0, 2] += theta[10]
+    K[1, 2] += theta[11]
+    # the old undistorted pixels move with the new centre: H' maps the new undistorted pixels
+    return replace(base, H_pixel_to_robot=C @ base.H_pixel_to_robot, K=K, dist=dist)
+
+
+PARAMETERS = ("h0", "h1", "h2", "h3", "h4", "h5", "h6", "h7", "k1", "k2", "cx", "cy", "dt")
+"""The fit's parameters: the homography's correction, the distortion's, its centre's, the clock's."""
+GROUPS = {"H": PARAMETERS[:8], "k1": ("k1",), "k2": ("k2",), "c": ("cx", "cy"), "dt": ("dt",)}
+
+
+def _residuals(free_theta, free, base, u_rows, rows, u_corners, xy_corners, sigma_rows, sigma_corners, fit_dt):
+    theta = np.zeros(len(PARAMETERS))
+    theta[free] = free_theta
+    cal = _calibration(base, theta)
+    dt = theta[12] if fit_dt else 0.0
+    m = cal.pixel_to_robot(u_rows) - rows[:, 1:3]
+    r_rows = (np.sum(m * rows[:, 3:5], 1) - rows[:, 6] * dt) / sigma_rows
+    r_corners = ((cal.pixel_to_robot(u_corners) - xy_corners) / sigma_corners).ravel()
+    return np.concatenate([r_rows, r_corners])
+
+
+def refine_mapping(calibration: Calibration, rows: np.ndarray, corners_xy: np.ndarray,
+                   max_speed_m_s: float | None = None, fit: tuple[str, ...] = ("H", "dt"),
+                   huber: float = 2.0) -> dict:
+    """Refit the mapping (and the clock) to the arm's rows and the board's corners.
+
+    Args:
+        calibration: the trial's :class:`~stringcast.calibrate.mapping.Calibration` (with K, dist).
+        rows: (K, 7) :func:`~stringcast.calibrate.arm_sweep.sweep_rows` table, measured under it.
+        corners_xy: (C, 2) m, robot-frame points of the board corners the calibration used.
+        max_speed_m_s: rows faster than this along their normal are left out (None: all; the
+            moving rows are what measure the clock).
+        fit: the parameter groups fitted (:data:`GROUPS`). The default, the homography and the
+            clock, did best on the generalization setups (docs/results.md, 2026-11-25): freeing the
+            distortion too let it bend where the arm does not reach.
+        huber: the Huber loss's scale, in units of the rows' own noise.
+
+    Returns:
+        ``{"calibration" (refined), "theta" (13,), "covariance" (P, P) of the free parameters,
+        "free" (P,) their indices in :data:`PARAMETERS`, "dt_s" and "dt_standard_error_s" (None
+        unless fitted), "rows", "sigma_rows_mm", "rms_before_mm", "rms_after_mm"}``: the rms of
+        the used rows' offsets before, and of their residuals after.
+
+    Raises:
+        ValueError: a calibration without intrinsics, or fewer than 4 rows per parameter.
+    """
+    if calibration.K is None:
+        raise ValueError("refine_mapping: the calibration has no intrinsics (K, dist) to refine")
+    use = rows if max_speed_m_s is None else rows[np.abs(rows[:, 6]) <= max_speed_m_s]
+    free = np.array([PARAMETERS.index(n) for g in fit for n in GROUPS[g]])
+    fit_dt = "dt" in fit
+    if len(use) < 4 * len(free):
+        raise ValueError(f"refine_mapping: {len(use)} rows, need >= {4 * len(free)}")
+    u_rows = calibration.robot_to_pixel(use[:, 1:3] + use[:, 5:6] * use[:, 3:5])
+    u_corners = calibration.robot_to_pixel(corners_xy)
+    sigma_corners = max(calibration.reprojection_error_px, 0.1) * float(np.median(calibration.m_per_px(u_corners)))
+    x = np.zeros(len(free))
+    sigma = max(float(1.4826 * np.median(np.abs(use[:, 5] - np.median(use[:, 5])))), 1e-5)
+    for _ in range(2):  # the rows' noise from the residuals of the previous fit
+        used = sigma
+        sol = least_squares(_residuals, x, loss="huber", f_scale=huber, x_scale="jac",
+                            args=(free, calibration, u_rows, use, u_corners, corners_xy, used, sigma_corners, fit_dt))
+        x = sol.x
+        r = sol.fun[:len(use)] * used
+        sigma = max(float(1.4826 * np.median(np.abs(r - np.median(r)))), 1e-5)
+    J = sol.jac
+    cov = np.linalg.pinv(J.T @ J) * (sigma / used) ** 2
+    theta = np.zeros(len(PARAMETERS))
+    theta[free] = x
+    k = list(free).index(PARAMETERS.index("dt")) if fit_dt else None
+    return {"calibration": _calibration(calibration, theta), "theta": theta, "covariance": cov, "free": free,
+            "dt_s": float(theta[12]) if fit_dt else None,
+            "dt_standard_error_s": float(np.sqrt(cov[k, k])) if fit_dt else None,
+            "rows": int(len(use)), "sigma_rows_mm": sigma * 1000,
+            "rms_before_mm": float(np.sqrt(np.mean(use[:, 5] ** 2)) * 1000),
+            "rms_after_mm": float(np.sqrt(np.mean(r ** 2)) * 1000)}
+
+
+def mapping_standard_error(calibration: Calibration, result: dict, points: np.ndarray, eps: float = 1e-6) -> np.ndarray:
+    """(N,) m: the standard error of where the refined mapping puts the swing-plane points (N, 2) m,
+    from the fit's covariance (first order: the mapping's derivative by each free parameter, by
+    finite differences of step ``eps``). ``calibration`` is the one :func:`refine_mapping` started from."""
+    refined = result["calibration"]
+    u = refined.robot_to_pixel(np.asarray(points, float).reshape(-1, 2))
+    base = refined.pixel_to_robot(u)
+    G = np.zeros((len(u), 2, len(result["free"])))
+    for j, i in enumerate(result["free"]):
+        if PARAMETERS[i] == "dt":
+            continue
+        theta = result["theta"].copy()
+        theta[i] += eps
+        G[:, :, j] = (_calibration(calibration, theta).pixel_to_robot(u) - base) / eps
+    var = np.einsum("nap,pq,naq->n", G, result["covariance"], G)
+    return np.sqrt(np.maximum(var, 0.0))
+
+
+def board_corner_points(calibration: Calibration, board) -> np.ndarray:
+    """(C, 2) m: robot-frame points of the board corners the calibration used (``corner_ids``)
+    of the ``cv2.aruco.CharucoBoard`` ``board``, through ``board_to_robot``."""
+    ids = np.asarray(calibration.corner_ids, int)
+    xy = np.asarray(board.getChessboardCorners(), float)[ids, :2]
+    return apply_homography(np.asarray(calibration.board_to_robot, float), xy)
