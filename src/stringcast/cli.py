@@ -65,6 +65,7 @@ def _settings(func, args) -> dict:
 STAGES = {
     "calibrate": "stringcast.calibrate:run_calibration",
     "sync": "stringcast.sync:run_sync",
+    "sweep": "stringcast.sync:run_sweep",
     "track": "stringcast.track:run_tracking",
     "estimate": "stringcast.estimate:run_estimation",
     "plan-first": "stringcast.plan:run_first_plan",
@@ -113,6 +114,19 @@ def cmd_sync(args):
         f", time residual {doc['time_residual_ms']:.2f} ms, arm match residual {doc['residual_mm'] or float('nan'):.1f} mm"
     print(f"sync: offset {doc['offset_s']:.6f} s ({doc['method']}{extra}), verdict {doc['verdict']['status']} "
           f"-> {args.out}")
+
+
+def cmd_sweep(args):
+    geo, clock = _run("sweep", args, Path(args.trial_dir), Path(args.calibration), Path(args.sync), _campaign(args),
+                      Path(args.out_geometry), Path(args.out_clock))
+    sw = geo.get("sweep", {})
+    if sw.get("applied"):
+        print(f"sweep: {sw['rows_used']} link rows in {sw['frames']} frames; mapping moved up to {sw['moved_p95_mm']:.2f} mm "
+              f"(p95), known to {sw['uncertainty_p95_mm']:.2f} mm; clock {sw['clock_correction_ms']:+.2f} ms, known to "
+              f"{sw['clock_uncertainty_ms']:.2f} ms; verdicts {geo['verdict']['status']} / {clock['verdict']['status']} "
+              f"-> {args.out_geometry}, {args.out_clock}")
+    else:
+        print(f"sweep: not applied ({sw.get('reason')}) -> {args.out_geometry}, {args.out_clock}")
 
 
 def cmd_track(args):
@@ -259,7 +273,7 @@ SEED_HELP = "random seed of {}"
 
 
 def _add_analysis_commands(add) -> None:
-    """calibrate, sync, track, estimate: one trial's analysis, stage by stage (the rules call them)."""
+    """calibrate, sync, sweep, track, estimate: one trial's analysis, stage by stage (the rules call them)."""
     campaign_help, trial_help = CAMPAIGN_HELP, TRIAL_HELP
     sp = add("calibrate", cmd_calibrate, "ChArUco calibration of one trial -> calibration.json")
     sp.add_argument("--trial-dir", required=True, help=trial_help)
@@ -274,10 +288,18 @@ def _add_analysis_commands(add) -> None:
     sp.add_argument("--campaign", required=True, help=campaign_help)
     sp.add_argument("--out", required=True, help="sync.json to write (offset in s: controller time of frame 0)")
 
-    sp = add("track", cmd_track, "markerless tracking -> tracks.parquet")
+    sp = add("sweep", cmd_sweep, "the mapping and the clock refined by the arm's sweep -> geometry.json, clock.json")
     sp.add_argument("--trial-dir", required=True, help=trial_help)
     sp.add_argument("--calibration", required=True, help="the trial's calibration.json")
     sp.add_argument("--sync", required=True, help="the trial's sync.json")
+    sp.add_argument("--campaign", required=True, help=campaign_help)
+    sp.add_argument("--out-geometry", required=True, help="geometry.json to write (calibration.json's schema, refined)")
+    sp.add_argument("--out-clock", required=True, help="clock.json to write (sync.json's schema, the offset corrected)")
+
+    sp = add("track", cmd_track, "markerless tracking -> tracks.parquet")
+    sp.add_argument("--trial-dir", required=True, help=trial_help)
+    sp.add_argument("--calibration", required=True, help="the trial's geometry.json (or calibration.json)")
+    sp.add_argument("--sync", required=True, help="the trial's clock.json (or sync.json)")
     sp.add_argument("--campaign", required=True, help=campaign_help)
     sp.add_argument("--out", required=True, help="tracks.parquet to write: frame, t_s, point, x_m, y_m, valid "
                                                  "(m, robot frame; point 0 the grasp)")

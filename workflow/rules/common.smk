@@ -193,6 +193,8 @@ def all_targets():
     stages = (
         "calibration.json",
         "sync.json",
+        "geometry.json",
+        "clock.json",
         "tracks.parquet",
         "params.json",
         "motion.csv",

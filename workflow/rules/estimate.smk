@@ -9,7 +9,7 @@ rule estimate:
         # the earlier stages' verdicts, carried into the fit's (read beside tracks.parquet)
         verdicts=expand(
             "results/{{campaign}}/trial_{{trial}}/{stage}.json",
-            stage=("calibration", "sync", "tracking"),
+            stage=("geometry", "clock", "tracking"),
         ),
         joints="data/{campaign}/trial_{trial}/joints.csv",
         campaign="data/{campaign}/campaign.yaml",

@@ -3,8 +3,8 @@
 
 rule report_trial:
     input:
-        calibration="results/{campaign}/trial_{trial}/calibration.json",
-        sync="results/{campaign}/trial_{trial}/sync.json",
+        calibration="results/{campaign}/trial_{trial}/geometry.json",
+        sync="results/{campaign}/trial_{trial}/clock.json",
         tracks="results/{campaign}/trial_{trial}/tracks.parquet",
         tracking="results/{campaign}/trial_{trial}/tracking.json",
         video=trial_video,

@@ -25,3 +25,33 @@ rule sync:
         '{params.cli} sync --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '--calibration "{input.calibration}" --campaign "{input.campaign}" '
         '--out "{output}" > "{log}" 2>&1'
+
+
+# The arm's sweep: the swing plane's mapping and the clock refined together by the arm's
+# links read across the trial (forward kinematics) and the board's corners.
+
+
+rule sweep:
+    input:
+        video=trial_video,
+        joints="data/{campaign}/trial_{trial}/joints.csv",
+        calibration="results/{campaign}/trial_{trial}/calibration.json",
+        sync="results/{campaign}/trial_{trial}/sync.json",
+        campaign="data/{campaign}/campaign.yaml",
+    output:
+        geometry="results/{campaign}/trial_{trial}/geometry.json",
+        clock="results/{campaign}/trial_{trial}/clock.json",
+    log:
+        "results/{campaign}/logs/sweep_{trial}.log",
+    benchmark:
+        "results/{campaign}/benchmarks/sweep_{trial}.tsv"
+    conda:
+        "../envs/stringcast.yaml"
+    params:
+        cli=CLI,
+        settings=stage_settings("sweep"),
+        lab=campaign_lab_entries,
+    shell:
+        '{params.cli} sweep --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
+        '--calibration "{input.calibration}" --sync "{input.sync}" --campaign "{input.campaign}" '
+        '--out-geometry "{output.geometry}" --out-clock "{output.clock}" > "{log}" 2>&1'

@@ -6,8 +6,8 @@ rule track:
     input:
         video=trial_video,
         joints="data/{campaign}/trial_{trial}/joints.csv",
-        calibration="results/{campaign}/trial_{trial}/calibration.json",
-        sync="results/{campaign}/trial_{trial}/sync.json",
+        calibration="results/{campaign}/trial_{trial}/geometry.json",
+        sync="results/{campaign}/trial_{trial}/clock.json",
         campaign="data/{campaign}/campaign.yaml",
     output:
         tracks="results/{campaign}/trial_{trial}/tracks.parquet",

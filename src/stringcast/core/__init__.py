@@ -14,7 +14,7 @@ from .files import (TRACK_COLUMNS, DataError, atomic_path, check_joint_coverage,
 from .sections import markdown_table, sections_read, settings_digest, stage_kwargs
 from .settings import (MODES, POLARITIES, SECTION_CLASSES, BoardCheckSettings, CalibrationSettings,
                        EstimationSettings, EvaluationSettings, ExecutorSettings, ModelSettings, MotionSettings,
-                       Settings, SyncSettings, TrackingSettings, settings_from_config)
+                       Settings, SweepSettings, SyncSettings, TrackingSettings, settings_from_config)
 from .verdict import STATUSES, Verdict, worst
 
 __all__ = [
@@ -28,7 +28,8 @@ __all__ = [
     "find_video", "joint_log_span", "read_joint_table", "read_json", "read_parquet", "read_video_meta",
     "tracks_arrays", "write_joint_table", "write_json", "write_parquet", "write_text", "write_yaml",
     "MODES", "POLARITIES", "SECTION_CLASSES", "BoardCheckSettings", "CalibrationSettings", "EstimationSettings",
-    "EvaluationSettings", "ExecutorSettings", "ModelSettings", "MotionSettings", "Settings", "SyncSettings",
+    "EvaluationSettings", "ExecutorSettings", "ModelSettings", "MotionSettings", "Settings", "SweepSettings",
+    "SyncSettings",
     "TrackingSettings",
     "STATUSES", "Verdict", "worst",
     "markdown_table", "sections_read", "settings_digest", "settings_from_config", "stage_kwargs",

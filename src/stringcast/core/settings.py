@@ -316,6 +316,26 @@ class BoardCheckSettings(_Section):
 
 
 @dataclass(frozen=True)
+class SweepSettings(_Section):
+    """``sweep``: the swing plane's mapping and the clock refined by the arm's sweep of the trial."""
+
+    SECTION: typing.ClassVar[str] = "sweep"
+    frames: int = _f(40, "frames spread over the trial whose arm links are read (0: no sweep; the calibration and sync pass through)")
+    min_rows: int = _f(200, "fewer agreeing link rows than this: not refined, and the verdict says so")
+    passes: int = _f(3, "at most this many passes, each reading the links at the clock of the last (the rows' clock model is linear)")
+    huber: float = _f(2.0, "the fit's Huber loss scale, in units of the rows' own noise (their median absolute deviation)")
+    tolerance_mm: float = _f(1.0, "the mapping must be known to this over where the string can be (the tracking's median goal), mm")
+    clock_tolerance_ms: float = _f(0.5, "the clock must be known to this (the sync goal), ms")
+
+    def __post_init__(self):
+        if self.frames < 0 or self.passes < 1 or self.min_rows < 20:
+            raise ConfigError(f"sweep: frames >= 0, passes >= 1 and min_rows >= 20 needed, got {self.frames}, "
+                              f"{self.passes}, {self.min_rows}")
+        if self.huber <= 0 or self.tolerance_mm <= 0 or self.clock_tolerance_ms <= 0:
+            raise ConfigError("sweep: huber, tolerance_mm and clock_tolerance_ms must be > 0")
+
+
+@dataclass(frozen=True)
 class CalibrationSettings(_Section):
     """``calibration``: the intrinsics from the calib/ shots, and how they are judged."""
 
@@ -343,7 +363,7 @@ class CalibrationSettings(_Section):
 
 SECTION_CLASSES: tuple[type, ...] = (ModelSettings, EvaluationSettings, EstimationSettings, MotionSettings,
                                      ExecutorSettings, TrackingSettings, SyncSettings, BoardCheckSettings,
-                                     CalibrationSettings)
+                                     CalibrationSettings, SweepSettings)
 """The stages' settings classes, one per config section."""
 LAB_SECTIONS: tuple[str, ...] = ("arms", "cameras", "setups", "strings", "targets")
 """Sections that describe the lab; a campaign reads only its own entries (:func:`campaign_sections`)."""
@@ -362,6 +382,7 @@ class Settings:
     sync: SyncSettings = field(default_factory=SyncSettings)
     board_check: BoardCheckSettings = field(default_factory=BoardCheckSettings)
     calibration: CalibrationSettings = field(default_factory=CalibrationSettings)
+    sweep: SweepSettings = field(default_factory=SweepSettings)
 
 
 def settings_from_config(config: Mapping | None) -> Settings:

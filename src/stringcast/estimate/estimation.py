@@ -55,8 +55,18 @@ from .problem import (EstimationProblem, build_problem, make_joint_objective, ma
                       simulate_fit)
 from .verdict import fit_verdict
 
-UPSTREAM = ("calibration", "sync", "tracking")
-"""The earlier stages whose ``<stage>.json`` verdicts the fit's verdict carries (beside tracks.parquet)."""
+UPSTREAM = ("geometry", "clock", "tracking")
+"""The earlier stages whose ``<stage>.json`` verdicts the fit's verdict carries (beside tracks.parquet):
+the sweep's ``geometry.json`` and ``clock.json``, which judge the calibration and the sync with the
+trial's own evidence (results made before the sweep existed: ``calibration.json``, ``sync.json``)."""
+_BEFORE_SWEEP = {"geometry": "calibration", "clock": "sync"}
+
+
+def _upstream_file(results: Path, stage: str) -> tuple[str, Path]:
+    """(the stage whose file is read, its path): the sweep's file, else the one before it."""
+    if (results / f"{stage}.json").exists() or stage not in _BEFORE_SWEEP:
+        return stage, results / f"{stage}.json"
+    return _BEFORE_SWEEP[stage], results / f"{_BEFORE_SWEEP[stage]}.json"
 
 
 @dataclass(frozen=True)
@@ -225,7 +235,7 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign,
     est = estimate(problem, model, estimation, chi0, k, seed, earlier=tuple(earlier_problems))
     E_trials = [float(make_objective(p, model)(est.chi[None])[0]) * 1000 for p in (*earlier_problems, problem)]
     if upstream is None:
-        upstream = {stage: Path(tracks_parquet).parent / f"{stage}.json" for stage in UPSTREAM}
+        upstream = dict(_upstream_file(Path(tracks_parquet).parent, stage) for stage in UPSTREAM)
     sim = simulate_fit(problem, model, est.chi)
     figures, verdict, cause = judge_fit(problem, sim, campaign.string.length, motion_window(t_j, q_j)[1],
                                         E_trials[-1], estimation, read_verdicts(upstream))

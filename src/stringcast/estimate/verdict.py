@@ -89,7 +89,8 @@ REST_RATIO = 0.5
 EARLY_RATIO = 0.5
 """Model: the early frames' error is at most this share of the late frames'."""
 CAUSES = ("geometry", "clock", "tracking", "model")
-UPSTREAM_CAUSE = {"calibration": "geometry", "sync": "clock", "tracking": "tracking"}
+UPSTREAM_CAUSE = {"calibration": "geometry", "geometry": "geometry", "sync": "clock", "clock": "clock",
+                  "tracking": "tracking"}
 CAUSE_WORDS = {"geometry": "geometry (the camera calibration or board pose)", "clock": "the clock (sync)",
                "tracking": "tracking", "model": "the model (it could not follow this motion)"}
 

@@ -93,8 +93,9 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, ou
     """
     n = campaign.string.n_points
     params = read_json(results_dir / "params.json")
-    calib = read_json(results_dir / "calibration.json")
-    sync = read_json(results_dir / "sync.json")
+    swept = (results_dir / "geometry.json").exists()  # the sweep's refinement, when the trial has one
+    calib = read_json(results_dir / ("geometry.json" if swept else "calibration.json"))
+    sync = read_json(results_dir / ("clock.json" if swept else "sync.json"))
     nxt = read_json(results_dir / "motion.json")
     tracks = read_parquet(results_dir / "tracks.parquet", TRACK_COLUMNS)
     fit = read_parquet(results_dir / "fit.parquet")
@@ -120,7 +121,7 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, ou
                                           tgt, campaign.target.radius)})
     model_figures, values, lo, hi, diagnostics = _parameter_figures(params, settings.model)
     figures += model_figures
-    strip = frame_strip(find_video(data_dir), Calibration.from_json(results_dir / "calibration.json"), tracks, fit,
+    strip = frame_strip(find_video(data_dir), Calibration.from_json(results_dir / ("geometry.json" if swept else "calibration.json")), tracks, fit,
                         campaign.string.length)
     figures.append({"id": "fig-overlay", "caption": "Frames of the motion with the tracked points (green circles; "
                     "red: the grasp from forward kinematics) and the model's points simulated with the estimate "
@@ -136,7 +137,7 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, ou
 
     summary = _trial_summary(params, diagnostics, valid, d_meas, campaign, played, nxt)
     tracking = results_dir / "tracking.json"
-    verdicts = stage_verdicts({"calibration": calib, "sync": sync,
+    verdicts = stage_verdicts({"geometry" if swept else "calibration": calib, "clock" if swept else "sync": sync,
                                "tracking": read_json(tracking) if tracking.exists() else None, "fit": params})
     warnings = [str(w) for w in calib.get("warnings", [])] + [str(w) for w in [params.get("message")] if w]
     cal_rows = _calibration_rows(calib, sync)
@@ -248,6 +249,16 @@ def _calibration_rows(calib: dict, sync: dict) -> list[tuple[str, str]]:
                  "not checked" if not calib.get("board_check") else
                  f"{_fmt(calib['board_check'].get('residual_mm'), '.1f', ' mm')} (dx "
                  f"{_fmt(calib['board_check'].get('dx_mm'), '+.1f')}, dy {_fmt(calib['board_check'].get('dy_mm'), '+.1f')} mm)")]
+    sw = calib.get("sweep") or {}
+    if sw.get("applied"):
+        cal_rows += [("arm's sweep: link rows (frames), rms before -> after",
+                      f"{sw['rows_used']} ({sw['frames']}), {sw['rms_before_mm']:.2f} -> {sw['rms_after_mm']:.2f} mm"),
+                     ("arm's sweep: mapping moved (p95) / known to, where the string can be",
+                      f"{sw['moved_p95_mm']:.2f} / {sw['uncertainty_p95_mm']:.2f} mm"),
+                     ("arm's sweep: clock correction / known to",
+                      f"{sw['clock_correction_ms']:+.2f} / {sw['clock_uncertainty_ms']:.2f} ms")]
+    elif sw:
+        cal_rows.append(("arm's sweep", f"not applied: {sw.get('reason')}"))
     for w in sync.get("warnings") or []:
         cal_rows.append(("sync warning", w))
     if sync.get("note"):

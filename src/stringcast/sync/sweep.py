@@ -1,0 +1,196 @@
+"""The arm's sweep: the swing plane's mapping and the clock, refined by the trial itself (issue 25).
+
+The calibration maps pixels to the swing plane through one view of the board, and the sync
+puts the frames on the controller clock; both are estimates, and a weak calibration set or
+a mapping bent far from the board biases the sync too (2-7 mm plane errors, up to 1.1 ms on
+the generalization setups). Every trial offers more: the arm sweeps the plane with known
+forward kinematics. :func:`run_sweep` reads the arm's links in ``sweep.frames`` frames spread
+over the trial (:func:`stringcast.calibrate.arm_sweep.sweep_rows`), fits the mapping's homography
+and the clock's error to them and to the board's corners
+(:func:`stringcast.calibrate.refine.refine_mapping`), and writes:
+
+* ``geometry.json``: the refined mapping, in ``calibration.json``'s schema, with a ``sweep``
+  block (rows, their noise and residuals, how far the mapping moved, its uncertainty where the
+  string can be) and its own verdict;
+* ``clock.json``: ``sync.json`` with ``offset_s`` corrected by the measured clock error, a
+  ``sweep`` block (the correction, its standard error, the two halves of the frames' own
+  estimates) and its own verdict.
+
+The later stages read these two. A verdict is ``ok`` when the sweep pins the mapping to
+``sweep.tolerance_mm`` over where the string can be and the clock to
+``sweep.clock_tolerance_ms`` (both the accuracy the trial needs, not the lab's figures); the
+calibration's and sync's own reasons are kept as notes then, since the sweep measured
+directly what they judged by proxies (coverage of the shots, agreement of the arm's
+segments). Otherwise it warns with the reason, and where the sweep cannot run (no
+intrinsics, too few rows) both files pass the inputs through with their verdicts and say so.
+
+Two splits check the fit beyond its own covariance: the even and the odd frames are fitted
+apart, and their difference (mapping and clock) is part of the uncertainty.
+"""
+from __future__ import annotations
+
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .offset import frame_times
+from stringcast.calibrate import (Calibration, board_corner_points, mapping_standard_error, refine_mapping,
+                                  sweep_rows)
+from stringcast.core import (BoardCheckSettings, DataError, SweepSettings, Verdict, find_video, forward_kinematics,
+                             read_joint_table, read_json, write_json)
+from stringcast.video import open_video
+
+
+def _frames(path: Path, keep: np.ndarray) -> list[tuple[int, np.ndarray]]:
+    """(index, grey image) of the frames ``keep``, the video decoded once, in order."""
+    want, out = set(int(k) for k in keep), []
+    with open_video(path) as video:
+        for i, f in video:
+            if i in want:
+                out.append((i, cv2.cvtColor(f, cv2.COLOR_BGR2GRAY) if f.ndim == 3 else f))
+            if i >= max(want):
+                break
+    return out
+
+
+def reach_points(campaign, q_j: np.ndarray, calibration: Calibration, step_m: float = 0.02) -> np.ndarray:
+    """(N, 2) m: swing-plane points within the string's length of a grasp point the log passes
+    through, and inside the image: where the string can be in this trial."""
+    grasp = forward_kinematics(campaign.arm, q_j[:: max(1, len(q_j) // 200)])[:, -1]
+    L = campaign.string.length
+    lo, hi = grasp.min(0) - L, grasp.max(0) + L
+    g = np.stack(np.meshgrid(np.arange(lo[0], hi[0], step_m), np.arange(lo[1], hi[1], step_m)), -1).reshape(-1, 2)
+    near = np.min(np.linalg.norm(g[:, None] - grasp[None], axis=2), axis=1) <= L
+    uv = calibration.robot_to_pixel(g[near])
+    w, h = calibration.image_size
+    inside = (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
+    return g[near][inside]
+
+
+def _fit(calibration, frames, campaign, t_frames, t_j, q_j, corners, sweep, board_check):
+    """Passes of rows and fit, each at the clock of the last; (fit, rows, the total clock correction s)."""
+    total = 0.0
+    for _ in range(sweep.passes):
+        rows = sweep_rows(frames, calibration, campaign.arm, t_frames + total, t_j, q_j, board_check)
+        if len(rows) < sweep.min_rows:
+            return None, rows, total
+        fit = refine_mapping(calibration, rows, corners, huber=sweep.huber)
+        total += fit["dt_s"]
+        if abs(fit["dt_s"]) * 1000 < 0.1 * sweep.clock_tolerance_ms:
+            break
+    fit["dt_s"] = total
+    return fit, rows, total
+
+
+def _halves(calibration, rows, corners, sweep, points) -> tuple[float, float]:
+    """The even and the odd frames fitted apart: (p95 of their mappings' distance at ``points``, m;
+    their clocks' difference, s)."""
+    frames = np.unique(rows[:, 0])
+    fits = [refine_mapping(calibration, rows[np.isin(rows[:, 0], frames[h::2])], corners, huber=sweep.huber)
+            for h in (0, 1)]
+    uv = calibration.robot_to_pixel(points)
+    d = np.linalg.norm(fits[0]["calibration"].pixel_to_robot(uv) - fits[1]["calibration"].pixel_to_robot(uv), axis=1)
+    return float(np.percentile(d, 95)), abs(fits[0]["dt_s"] - fits[1]["dt_s"])
+
+
+def _passed_through(calibration, sync_doc, reason):
+    geo = calibration.to_dict()
+    geo["sweep"] = {"applied": False, "reason": reason}
+    geo["verdict"] = calibration.verdict.add("warn", f"not refined by the arm's sweep: {reason}").as_dict()
+    clock = dict(sync_doc, sweep={"applied": False, "reason": reason})
+    clock["verdict"] = Verdict.from_dict(sync_doc.get("verdict")).add(
+        "warn", f"not checked by the arm's sweep: {reason}").as_dict()
+    return geo, clock
+
+
+def run_sweep(trial_dir: str | Path, calibration_json: str | Path, sync_json: str | Path, campaign,
+              out_geometry: str | Path | None = None, out_clock: str | Path | None = None, *,
+              sweep: SweepSettings, board_check: BoardCheckSettings) -> tuple[dict, dict]:
+    """Refine one trial's mapping and clock by the arm's sweep; write ``geometry.json`` and ``clock.json``.
+
+    Args:
+        trial_dir: ``data/<campaign>/trial_<k>`` with the video and ``joints.csv``.
+        calibration_json, sync_json: the trial's ``calibration.json`` and ``sync.json``.
+        campaign: :class:`~stringcast.core.specs.Campaign` (the arm's outline, the board, the string).
+        out_geometry, out_clock: where to write them (None: not written).
+        sweep, board_check: settings (:class:`~stringcast.core.SweepSettings`; the link profiles').
+
+    Returns:
+        (geometry, clock) documents (module docstring).
+
+    Raises:
+        DataError: unreadable inputs (named).
+    """
+    trial_dir = Path(trial_dir)
+    calibration, sync_doc = Calibration.from_json(calibration_json), read_json(sync_json)
+    t_j, q_j, _ = read_joint_table(trial_dir / "joints.csv", n_joints=campaign.arm.n_joints)
+    t_frames = frame_times(sync_doc)
+    if sweep.frames == 0 or calibration.K is None or not calibration.corner_ids:
+        why = ("switched off (sweep.frames: 0)" if sweep.frames == 0
+               else "the calibration has no intrinsics or board corners to refine")
+        geo, clock = _passed_through(calibration, sync_doc, why)
+    else:
+        keep = np.unique(np.linspace(0, len(t_frames) - 1, sweep.frames).astype(int))
+        frames = _frames(find_video(trial_dir), keep)
+        corners = board_corner_points(calibration, campaign.setup.board.make())
+        fit, rows, total = _fit(calibration, frames, campaign, t_frames, t_j, q_j, corners, sweep, board_check)
+        if fit is None:
+            geo, clock = _passed_through(calibration, sync_doc, f"{len(rows)} agreeing link rows in {len(frames)} "
+                                         f"frames, fewer than sweep.min_rows = {sweep.min_rows}")
+        else:
+            geo, clock = _refined_docs(calibration, sync_doc, fit, rows, total, campaign, q_j, corners, sweep)
+    for name, doc, out in (("geometry", geo, out_geometry), ("clock", clock, out_clock)):
+        for r in doc["verdict"]["reasons"]:
+            print(f"sweep {name} {doc['verdict']['status']}: {trial_dir}: {r}", file=sys.stderr)
+        if out is not None:
+            write_json(out, doc)
+    return geo, clock
+
+
+def _refined_docs(calibration, sync_doc, fit, rows, total, campaign, q_j, corners, sweep):
+    points = reach_points(campaign, q_j, calibration)
+    if len(points) == 0:
+        raise DataError("sweep: no swing-plane point the string can reach is in the image")
+    refined = fit["calibration"]
+    se = mapping_standard_error(calibration, fit, points)
+    halves_m, halves_s = _halves(calibration, rows, corners, sweep, points)
+    moved = np.linalg.norm(refined.pixel_to_robot(calibration.robot_to_pixel(points)) - points, axis=1)
+    uncert_mm = max(2 * float(np.percentile(se, 95)), halves_m) * 1000
+    clock_se_ms = fit["dt_standard_error_s"] * 1000
+    clock_uncert_ms = max(2 * clock_se_ms, halves_s * 1000)
+    block = {"applied": True, "frames": int(len(np.unique(rows[:, 0]))), "rows": int(len(rows)), "rows_used": fit["rows"],
+             "sigma_rows_mm": fit["sigma_rows_mm"], "rms_before_mm": fit["rms_before_mm"],
+             "rms_after_mm": fit["rms_after_mm"], "reach_points": int(len(points)),
+             "moved_p95_mm": float(np.percentile(moved, 95) * 1000), "moved_max_mm": float(moved.max() * 1000),
+             "uncertainty_p95_mm": uncert_mm, "standard_error_p95_mm": float(np.percentile(se, 95) * 1000),
+             "halves_p95_mm": halves_m * 1000, "clock_correction_ms": total * 1000,
+             "clock_standard_error_ms": clock_se_ms, "clock_halves_ms": halves_s * 1000,
+             "clock_uncertainty_ms": clock_uncert_ms}
+    what = (f"the arm's sweep ({block['rows_used']} link rows in {block['frames']} frames, {fit['rms_before_mm']:.2f} -> "
+            f"{fit['rms_after_mm']:.2f} mm rms) moved the mapping by up to {block['moved_p95_mm']:.1f} mm (p95) where the "
+            f"string can be")
+    if uncert_mm <= sweep.tolerance_mm:
+        gv = Verdict("ok", (f"{what}; known there to {uncert_mm:.2f} mm",
+                            *(f"calibration ({calibration.verdict.status}, now measured by the sweep): {r}"
+                              for r in calibration.verdict.reasons)))
+    else:
+        gv = calibration.verdict.add("warn", f"{what}, but it is known there only to {uncert_mm:.2f} mm "
+                                             f"(> sweep.tolerance_mm {sweep.tolerance_mm:g}): the arm does not reach "
+                                             f"far enough, or its rows disagree; add calibration shots there")
+    geo = replace(refined, verdict=gv, warnings=() if gv.ok else gv.reasons).to_dict()
+    geo["sweep"] = block
+    sv = Verdict.from_dict(sync_doc.get("verdict"))
+    cwhat = f"the arm's sweep corrected the clock by {total * 1000:+.2f} ms"
+    if clock_uncert_ms <= sweep.clock_tolerance_ms:
+        cv = Verdict("ok", (f"{cwhat}, known to {clock_uncert_ms:.2f} ms",
+                            *(f"sync ({sv.status}, now measured by the sweep): {r}" for r in sv.reasons)))
+    else:
+        cv = sv.add("warn", f"{cwhat}, but known only to {clock_uncert_ms:.2f} ms (> sweep.clock_tolerance_ms "
+                            f"{sweep.clock_tolerance_ms:g}): the arm's rows disagree on the clock")
+    clock = dict(sync_doc, offset_s=float(sync_doc["offset_s"]) + total, offset_before_sweep_s=sync_doc["offset_s"],
+                 sweep=block, verdict=cv.as_dict())
+    clock["warnings"] = list(cv.reasons) if cv.status != "ok" else []
+    return geo, clock
