@@ -4,12 +4,15 @@ Each of ``--setups`` seeded draws of the lab's family (:func:`stringcast.lab.dra
 resolution, colour, codec, fps, lens, view, light, background, board pose, the arm's look, the
 calibration set, the trigger and the joint log) gets one string type (cycling 1-7) and that
 type's first planned motion. The lab films it (and the draw's calibration shots); the
-pipeline's own stages calibrate, sync, track and estimate it with the project's settings,
-never reading the draw. Per setup, against the lab's truth (read here, by the benchmark only):
+pipeline's own stages calibrate, sync, sweep, track and estimate it with the project's
+settings, never reading the draw. Per setup, against the lab's truth (read here, by the
+benchmark only):
 
 * calibration: fx error (%), principal-point error (px), the pixel -> swing-plane mapping's
-  error over the swing region (median and max, mm), and its verdict;
-* sync: error of the chosen offset (ms) and its verdict;
+  error over the swing region (median and max, mm), and its verdict: those of the mapping the
+  later stages use, the sweep's ``geometry.json`` (``*_before_sweep``: ``calibration.json``'s);
+* sync: error of the offset the later stages use (``clock.json``'s) and its verdict
+  (``*_before_sweep``: ``sync.json``'s);
 * tracking: median and p95 point error (mm), valid share (points 1..n, every frame), and the
   valid share of the moving frames that ``tracking.json`` judges (a string that hangs behind the
   board after the motion is invisible, not mistracked: the two shares tell these apart);
@@ -30,7 +33,7 @@ setup (``complete: false`` until the last), so a run can be stopped and ``--resu
 ``--quick``: 3 setups.
 
 Run: ``python -m benchmarks.generalization [--setups 24] [--first 0] [--work DIR] [--jobs 2]
-[--until film|calibrate|sync|track|estimate] [--from calibrate|sync|track|estimate] [--resume] [--quick]``.
+[--until film|calibrate|sync|sweep|track|estimate] [--from calibrate|sync|sweep|track|estimate] [--resume] [--quick]``.
 """
 from __future__ import annotations
 
@@ -69,7 +72,7 @@ def _calibration_errors(cal: dict, setup) -> tuple[float | None, float | None]:
     return float(fx_err), float(np.hypot(K[0, 2] - cx0, K[1, 2] - cy0))
 
 
-STAGES = ("film", "calibrate", "sync", "track", "estimate")
+STAGES = ("film", "calibrate", "sync", "sweep", "track", "estimate")
 """The steps of one setup, in order; ``--until`` stops after one of them."""
 
 
@@ -112,7 +115,7 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str 
     from stringcast.lab import apply_setup, draw_setup, write_calibration_clip
     from stringcast.plan import run_first_plan
     from stringcast.calibrate import run_calibration
-    from stringcast.sync import run_sync
+    from stringcast.sync import run_sync, run_sweep
     from stringcast.track import run_tracking
 
     setup = draw_setup(seed)
@@ -150,7 +153,22 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str 
         row["sync_verdict"] = _verdict(sync_doc)
         if until == "sync":
             return row
-        tracks = run_tracking(trial, out / "calibration.json", out / "sync.json", campaign, out / "tracks.parquet",
+        geo, clock = ((read_json(out / "geometry.json"), read_json(out / "clock.json"))
+                      if _kept("sweep", start, out / "clock.json") else
+                      run_sweep(trial, out / "calibration.json", out / "sync.json", campaign, out / "geometry.json",
+                                out / "clock.json", **stage_kwargs(run_sweep, settings)))
+        # what the later stages use and plan on: the sweep's mapping and clock, and their verdicts
+        for k in ("calibration_verdict", "calibration_reasons", "plane_error_median_mm", "plane_error_max_mm",
+                  "sync_error_ms", "sync_verdict"):
+            row[f"{k}_before_sweep"] = row[k]
+        row["calibration_verdict"], row["calibration_reasons"] = _verdict(geo), list(geo["verdict"]["reasons"])
+        row["plane_error_median_mm"], row["plane_error_max_mm"] = _plane_errors(out / "geometry.json", truth["camera"])
+        row["sync_error_ms"] = (clock["offset_s"] - truth["trigger_time_s"]) * 1000
+        row["sync_verdict"] = _verdict(clock)
+        row["sweep"] = geo.get("sweep")
+        if until == "sweep":
+            return row
+        tracks = run_tracking(trial, out / "geometry.json", out / "clock.json", campaign, out / "tracks.parquet",
                               **stage_kwargs(run_tracking, settings))
         e, share = tracking_errors(tracks, pd.read_parquet(trial / "ground_truth.parquet"))
         row.update(tracking_median_mm=float(np.median(e)) if len(e) else None,
