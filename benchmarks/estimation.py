@@ -74,7 +74,7 @@ def prepare(string_type: int, config: dict, settings, calib_dir: Path, work: Pat
     Returns (campaign, d): ``d`` holds tracks.parquet and trial_1/joints.csv."""
     from stringcast.core import stage_kwargs
     from stringcast.core import resolve_campaign
-    from stringcast.sync.offset import run_sync
+    from stringcast.sync import run_sweep, run_sync
     from stringcast.track.tracking import run_tracking
 
     d = work / f"string_{string_type}"
@@ -82,7 +82,9 @@ def prepare(string_type: int, config: dict, settings, calib_dir: Path, work: Pat
         return resolve_campaign({"string": string_type, "target": 1}, config, f"bench_{string_type}"), d
     campaign, d, trial = film_first_motion(string_type, config, work, seed, calib_dir)
     run_sync(trial, d / "calibration.json", campaign, d / "sync.json", **stage_kwargs(run_sync, settings))
-    run_tracking(trial, d / "calibration.json", d / "sync.json", campaign, d / "tracks.parquet",
+    run_sweep(trial, d / "calibration.json", d / "sync.json", campaign, d / "geometry.json", d / "clock.json",
+              **stage_kwargs(run_sweep, settings))
+    run_tracking(trial, d / "geometry.json", d / "clock.json", campaign, d / "tracks.parquet",
                  **stage_kwargs(run_tracking, settings))
     return campaign, d
 

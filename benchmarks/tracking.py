@@ -46,24 +46,26 @@ def _decode_fps(video: Path) -> float:
 
 
 def track_string(string_type: int, config: dict, settings, calib_dir: Path, work: Path, seed: int) -> dict:
-    """Film, calibrate, sync and track one string type's first motion; errors and timings. ``settings``:
-    every stage's settings (:class:`stringcast.core.Settings`)."""
+    """Film, calibrate, sync, sweep and track one string type's first motion; errors and timings.
+    ``settings``: every stage's settings (:class:`stringcast.core.Settings`)."""
     from stringcast.campaign import tracking_errors
-    from stringcast.core import resolve_campaign
-    from stringcast.sync.offset import run_sync
+    from stringcast.core import resolve_campaign, stage_kwargs
+    from stringcast.sync import run_sweep, run_sync
     from stringcast.track.tracking import run_tracking
 
     d = work / f"string_{string_type}"
     trial = d / "trial_1"
-    if (d / "sync.json").exists() and (trial / "ground_truth.parquet").exists():
+    if (d / "clock.json").exists() and (trial / "ground_truth.parquet").exists():
         campaign = resolve_campaign({"string": string_type, "target": 1}, config, f"bench_{string_type}")
     else:
         campaign, d, trial = film_first_motion(string_type, config, work, seed, calib_dir)
         run_sync(trial, d / "calibration.json", campaign, d / "sync.json", sync=settings.sync,
                  board_check=settings.board_check)
+        run_sweep(trial, d / "calibration.json", d / "sync.json", campaign, d / "geometry.json", d / "clock.json",
+                  **stage_kwargs(run_sweep, settings))
     decode = _decode_fps(trial / "video.mkv")
     t0 = time.perf_counter()
-    tracks = run_tracking(trial, d / "calibration.json", d / "sync.json", campaign, d / "tracks.parquet",
+    tracks = run_tracking(trial, d / "geometry.json", d / "clock.json", campaign, d / "tracks.parquet",
                           tracking=settings.tracking)
     seconds = time.perf_counter() - t0
     frames = int(tracks["frame"].nunique())
