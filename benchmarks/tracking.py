@@ -55,12 +55,13 @@ def track_string(string_type: int, config: dict, settings, calib_dir: Path, work
 
     d = work / f"string_{string_type}"
     trial = d / "trial_1"
-    if (d / "clock.json").exists() and (trial / "ground_truth.parquet").exists():
+    if (d / "sync.json").exists() and (trial / "ground_truth.parquet").exists():
         campaign = resolve_campaign({"string": string_type, "target": 1}, config, f"bench_{string_type}")
     else:
         campaign, d, trial = film_first_motion(string_type, config, work, seed, calib_dir)
         run_sync(trial, d / "calibration.json", campaign, d / "sync.json", sync=settings.sync,
                  board_check=settings.board_check)
+    if not (d / "clock.json").exists() or (d / "clock.json").stat().st_mtime < (d / "sync.json").stat().st_mtime:
         run_sweep(trial, d / "calibration.json", d / "sync.json", campaign, d / "geometry.json", d / "clock.json",
                   **stage_kwargs(run_sweep, settings))
     decode = _decode_fps(trial / "video.mkv")
