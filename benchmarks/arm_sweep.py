@@ -1,18 +1,17 @@
-"""Benchmark ``arm_sweep``: can the moving arm measure (and undo) the swing plane's mapping error?
+"""Benchmark ``arm_sweep``: how well the moving arm measures (and undoes) the swing plane's mapping error.
 
-An experiment for issue 25, not yet a pipeline stage. On the setups a ``generalization`` run
-left in its ``--work`` directory (each with the pipeline's ``calibration.json`` and
-``sync.json``), :func:`stringcast.calibrate.arm_sweep.sweep_rows` reads the arm's links in
-``--frames`` frames spread over the trial, and :func:`~stringcast.calibrate.arm_sweep.fit_error_field`
-fits the mapping's error field from them. Against the lab's true camera (read here, by the
-benchmark only) it records, per setup:
+The sweep stage's fit in isolation (issue 25). On the setups a ``generalization`` run left in
+its ``--work`` directory (each with the pipeline's ``calibration.json`` and ``sync.json``),
+:func:`stringcast.calibrate.sweep_rows` reads the arm's links in ``--frames`` frames spread over
+the trial (cached beside ``sync.json``), and :func:`stringcast.calibrate.refine_mapping` fits the
+mapping's homography and the clock to them and the board's corners. Against the lab's true
+camera (read here, by the benchmark only) it records, per setup:
 
 * ``rows_vs_truth_mm``: median |row offset - n . e_true| over the slow rows (how well one row
   measures the error along its normal);
 * the true mapping error over the swing region (13 x 13 grid; median, max mm) and at the
-  string's true points (every 7th; median, p95 mm), before and after the fitted field is
-  taken off;
-* the rows used, their rms before and after the fit.
+  string's true points (every 7th; median, p95 mm), before and after the refinement;
+* the rows used, their rms before and after the fit, and the clock correction (ms).
 
 ``results/bench/arm_sweep.json`` holds the rows and their medians over the setups.
 
@@ -53,7 +52,7 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, n_frames: i
     import pandas as pd
 
     from stringcast.calibrate import Calibration
-    from stringcast.calibrate.arm_sweep import error_field, fit_error_field, sweep_rows
+    from stringcast.calibrate import board_corner_points, refine_mapping, sweep_rows
     from stringcast.core import find_video, read_json, resolve_campaign, settings_from_config
     from stringcast.core.files import read_joint_table
     from stringcast.lab import apply_setup, draw_setup
@@ -79,17 +78,16 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, n_frames: i
                           st.board_check)
         np.save(cache, rows)
     seconds = time.perf_counter() - t0
-    fit = fit_error_field(rows)
+    fit = refine_mapping(cal, rows, board_corner_points(cal, campaign.setup.board.make()))
     slow = rows[np.abs(rows[:, 6]) <= 0.3]
     grid = swing_grid()
     gt = pd.read_parquet(d / "trial_1" / "ground_truth.parquet")
     string = gt[gt["point"] > 0][["x_m", "y_m"]].to_numpy()[::7]
     row = {"seed": seed, "string_type": string_type, "seconds": seconds, "rows": int(len(rows)), "rows_used": fit["rows"],
-           "rms_before_mm": fit["raw_rms_mm"], "rms_after_mm": fit["rms_mm"],
+           "rms_before_mm": fit["rms_before_mm"], "rms_after_mm": fit["rms_after_mm"], "clock_ms": fit["dt_s"] * 1000,
            "rows_vs_truth_mm": float(np.median(np.abs(slow[:, 5] - np.sum(e_true(slow[:, 1:3]) * slow[:, 3:5], 1))) * 1000)}
     for name, pts in (("region", grid), ("string", string)):
-        e = e_true(pts)
-        after = e - error_field(fit["params"], pts, fit["scale_m"]) if fit["params"] is not None else e
+        e, after = e_true(pts), mapping_error(fit["calibration"], cam, pts)
         for when, v in (("before", e), ("after", after)):
             n = np.linalg.norm(v, axis=1) * 1000
             row[f"{name}_{when}_median_mm"] = float(np.median(n))

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from conftest import small_camera_config
-from stringcast.calibrate.board_check import check_board_to_robot, edge_pair_centre
+from stringcast.calibrate.board_check import check_board_to_robot
+from stringcast.calibrate.link_profiles import edge_pair_centre
 from stringcast.core.files import read_joint_table, read_json
 
 POSTURES = {"reaching": [0.3, -1.5, -0.4], "folded": [2.0, -1.6, -1.5]}

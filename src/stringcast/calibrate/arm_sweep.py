@@ -5,23 +5,18 @@ board that mapping extrapolates, and a weak calibration set bends it (2-7 mm at 
 of the swing region on the band-shot setups of the generalization benchmark). The arm sweeps
 the same plane with known forward kinematics, so every synced frame says where the arm's
 links are. Across each link (rows normal to its FK axis, as in
-:mod:`~stringcast.calibrate.board_check`) the pair of edges of its outline gives the link's
+:mod:`~stringcast.calibrate.link_profiles`) the pair of edges of its outline gives the link's
 centre line as the calibration sees it; its offset o along the link's normal n, at the row's
 point p on the FK axis, is one equation
 
     n . e(p) = o,      e(p) = (the calibration's plane point of the pixel that sees p) - p,
 
-on the mapping's error field e. Rows are kept only where the arm moves slowly along n (a
-sync error of dt moves the edge by v_n dt) and where the row agrees with the link's other
-rows (clutter behind the link). :func:`sweep_rows` collects the rows of the frames,
-:func:`fit_error_field` fits e as a plane-to-plane homography's displacement (8 parameters,
-the error a wrong board pose or focal length makes) by Huber-reweighted least squares.
-
-An experiment, not applied by the pipeline (``benchmarks/arm_sweep.py``, docs/results.md,
-2026-11-24): the rows measure the error to 0.1-0.4 mm, and taking the fitted field off cut the
-string points' mapping error several-fold on 6 of 10 setups, but the homography extrapolates
-badly beyond the arm's reach (one setup's region max 4 -> 20 mm), and moving rows carry a sync
-error into space.
+on the mapping's error field e, plus v_n dt where the frame's clock is dt off and the point
+moves at v_n along n. Rows are kept only where the row agrees with the link's other rows
+(clutter behind the link). :func:`sweep_rows` collects the rows of the frames;
+:func:`stringcast.calibrate.refine.refine_mapping` fits the mapping and the clock to them, in
+the sweep stage (:mod:`stringcast.sync.sweep`). On the generalization setups the rows measure
+the error to 0.1-0.4 mm (``benchmarks/arm_sweep.py``, docs/results.md).
 """
 from __future__ import annotations
 
@@ -29,7 +24,7 @@ import numpy as np
 
 from stringcast.core import BoardCheckSettings, forward_kinematics, joints_at
 
-from .board_check import link_consensus, link_profiles
+from .link_profiles import link_consensus, link_profiles
 
 ROW_FIELDS = ("frame", "px_m", "py_m", "nx", "ny", "offset_m", "speed_m_s")
 """The columns of :func:`sweep_rows`'s table."""
@@ -37,7 +32,7 @@ ROW_FIELDS = ("frame", "px_m", "py_m", "nx", "ny", "offset_m", "speed_m_s")
 
 def _link_rows(image, calibration, arm, q, st: BoardCheckSettings) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Per link (and gripper) whose rows agree: (points (R, 2) m on the FK axis, normal (2,),
-    offsets (R,) m) of the agreeing rows (:func:`~stringcast.calibrate.board_check.link_profiles`)."""
+    offsets (R,) m) of the agreeing rows (:func:`~stringcast.calibrate.link_profiles.link_profiles`)."""
     out = []
     for a, b, nrm, u, centres, tried in link_profiles(image, calibration, arm, q, st):
         c = link_consensus(centres, tried, st)
@@ -98,52 +93,3 @@ def _dist_to_segment(p, a, b) -> float:
     ab = b - a
     u = np.clip((p - a) @ ab / max(ab @ ab, 1e-12), 0, 1)
     return float(np.linalg.norm(p - a - u * ab))
-
-
-def fit_error_field(rows: np.ndarray, max_speed_m_s: float = 0.3, scale_m: float = 0.5,
-                    huber_m: float = 0.0005, iters: int = 10) -> dict:
-    """The mapping's error field e(p) as a homography's displacement, fitted to the rows.
-
-    e(p) = H(p) - p with H = I + the 8 small parameters (a plane-to-plane homography near the
-    identity, linearised: e = (h0 x + h1 y + h2 - x (h6 x + h7 y), h3 x + h4 y + h5 - y (h6 x +
-    h7 y)) with x, y in units of ``scale_m``); each row gives n . e(p) = offset. Rows moving
-    faster than ``max_speed_m_s`` along their normal are left out. Huber weights
-    (``huber_m``) keep a few wrong rows from pulling the fit.
-
-    Returns:
-        ``{"params" (8,), "rows" (used), "rms_mm" (of the rows after the fit), "raw_rms_mm"
-        (before), "frames" (distinct frames used), "scale_m"}``; ``params`` None when the
-        rows do not determine the field (fewer than 16 rows or a rank-deficient system).
-    """
-    use = rows[np.abs(rows[:, 6]) <= max_speed_m_s]
-    out = {"rows": int(len(use)), "frames": int(len(np.unique(use[:, 0]))) if len(use) else 0, "scale_m": scale_m,
-           "params": None, "raw_rms_mm": float(np.sqrt(np.mean(use[:, 5] ** 2)) * 1000) if len(use) else None,
-           "rms_mm": None}
-    if len(use) < 16:
-        return out
-    A, y = _design(use, scale_m), use[:, 5]
-    if np.linalg.matrix_rank(A) < A.shape[1]:
-        return out
-    w = np.ones(len(y))
-    for _ in range(iters):
-        h = np.linalg.lstsq(A * w[:, None], y * w, rcond=None)[0]
-        r = y - A @ h
-        w = np.sqrt(np.minimum(1.0, huber_m / np.maximum(np.abs(r), 1e-12)))
-    out.update(params=h, rms_mm=float(np.sqrt(np.mean(r ** 2)) * 1000))
-    return out
-
-
-def _design(rows: np.ndarray, scale_m: float) -> np.ndarray:
-    x, y, nx, ny = rows[:, 1] / scale_m, rows[:, 2] / scale_m, rows[:, 3], rows[:, 4]
-    ex = np.stack([x, y, np.ones_like(x), 0 * x, 0 * x, 0 * x, -x * x, -x * y], 1)
-    ey = np.stack([0 * x, 0 * x, 0 * x, x, y, np.ones_like(x), -x * y, -y * y], 1)
-    return (ex * nx[:, None] + ey * ny[:, None]) * scale_m
-
-
-def error_field(params: np.ndarray, p: np.ndarray, scale_m: float) -> np.ndarray:
-    """e(p) (N, 2) m of a fitted field (:func:`fit_error_field`) at points p (N, 2) m."""
-    x, y = p[:, 0] / scale_m, p[:, 1] / scale_m
-    h = np.asarray(params, float)
-    ex = h[0] * x + h[1] * y + h[2] - x * (h[6] * x + h[7] * y)
-    ey = h[3] * x + h[4] * y + h[5] - y * (h[6] * x + h[7] * y)
-    return np.stack([ex, ey], 1) * scale_m

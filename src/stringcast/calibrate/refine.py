@@ -74,7 +74,7 @@ def refine_mapping(calibration: Calibration, rows: np.ndarray, corners_xy: np.nd
         max_speed_m_s: rows faster than this along their normal are left out (None: all; the
             moving rows are what measure the clock).
         fit: the parameter groups fitted (:data:`GROUPS`). The default, the homography and the
-            clock, did best on the generalization setups (docs/results.md, 2026-11-25): freeing the
+            clock, did best on the generalization setups (docs/results.md, "The arm's sweep"): freeing the
             distortion too let it bend where the arm does not reach.
         huber: the Huber loss's scale, in units of the rows' own noise.
 
