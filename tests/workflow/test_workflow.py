@@ -98,8 +98,8 @@ def test_campaign_end_to_end(tmp_path, finished):
     k = summary["executions"]
     assert 1 <= k <= 2
     res = root / "results" / "e2e"
-    for name in ("calibration.json", "sync.json", "tracks.parquet", "params.json", "fit.parquet",
-                 "motion.csv", "motion.json", "report.html"):
+    for name in ("calibration.json", "sync.json", "geometry.json", "clock.json", "tracks.parquet", "params.json",
+                 "fit.parquet", "motion.csv", "motion.json", "report.html"):
         assert (res / "trial_1" / name).stat().st_size > 0, name
     tracks = pd.read_parquet(res / "trial_1" / "tracks.parquet")
     assert list(tracks.columns) == ["frame", "t_s", "point", "x_m", "y_m", "valid"]
@@ -139,7 +139,7 @@ def test_campaign_end_to_end(tmp_path, finished):
     (res / "trial_1" / "tracks.parquet").unlink()
     rules = planned_rules(snakemake(root, "-n"))
     assert {"track", "estimate", "plan", "report_trial", "report_campaign"} <= rules
-    assert not rules & {"calibrate", "sync", "plan_first"}
+    assert not rules & {"calibrate", "sync", "sweep", "plan_first"}
 
     # a run killed hard in the middle of tracking, then started again, ends with the same results
     proc = subprocess.Popen([sys.executable, "-m", "snakemake", "--cores", "2", "--directory", str(root)],
@@ -174,8 +174,10 @@ def _edit_config(root: Path, section: str, key: str, value) -> dict:
 @pytest.mark.slow
 @pytest.mark.parametrize("section, key, value, reruns, spared", [
     ("evaluation", "w", 0.5, {"estimate", "plan", "report_trial", "report_campaign"},
-     {"calibrate", "sync", "track", "plan_first"}),
+     {"calibrate", "sync", "sweep", "track", "plan_first"}),
     ("tracking", "rest_frames", 30, {"track", "estimate", "plan", "report_trial", "report_campaign"},
+     {"calibrate", "sync", "sweep", "plan_first"}),
+    ("sweep", "tolerance_mm", 2.0, {"sweep", "track", "estimate", "plan", "report_trial", "report_campaign"},
      {"calibrate", "sync", "plan_first"}),
 ])
 def test_a_changed_setting_reruns_exactly_what_reads_it(finished, section, key, value, reruns, spared):

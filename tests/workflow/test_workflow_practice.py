@@ -65,7 +65,8 @@ def test_profiles_plan_every_stage(project, profile):
                  "--cores", "8"], project)
     out = proc.stdout + proc.stderr
     assert proc.returncode == 0, out
-    for rule in ("plan_first", "calibrate", "sync", "track", "estimate", "plan", "report_trial", "report_campaign"):
+    for rule in ("plan_first", "calibrate", "sync", "sweep", "track", "estimate", "plan", "report_trial",
+                 "report_campaign"):
         assert re.search(rf"^rule {rule}:", out, re.M), (rule, out[-2000:])
     if profile == "slurm":  # per-rule resources from the profile reach the jobs
         est = out[out.index("rule estimate:"):]
