@@ -31,22 +31,6 @@ from benchmarks.common import header, write
 from benchmarks.generalization import mapping_error, swing_grid
 
 
-def _frames(path: Path, keep: set[int]):
-    """(index, grey image) of the frames in ``keep``, decoding the video once in order (seeking in
-    H.264 decodes from the last key frame each time)."""
-    import cv2
-
-    from stringcast.video import open_video
-
-    last = max(keep)
-    with open_video(path) as video:
-        for i, f in video:
-            if i in keep:
-                yield i, (cv2.cvtColor(f, cv2.COLOR_BGR2GRAY) if f.ndim == 3 else f)
-            if i >= last:
-                break
-
-
 def run_setup(seed: int, string_type: int, config: dict, work: Path, n_frames: int) -> dict:
     """The sweep's rows and fitted field on one filmed and processed setup, against the truth."""
     import pandas as pd
@@ -57,6 +41,7 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, n_frames: i
     from stringcast.core.files import read_joint_table
     from stringcast.lab import apply_setup, draw_setup
     from stringcast.sync import frame_times
+    from stringcast.sync.sweep import read_frames
 
     d = work / f"setup_{seed}"
     cfg = apply_setup(config, draw_setup(seed))
@@ -74,8 +59,8 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, n_frames: i
     if cache.exists() and cache.stat().st_mtime > (d / "results" / "sync.json").stat().st_mtime:
         rows = np.load(cache)
     else:
-        rows = sweep_rows(_frames(find_video(d / "trial_1"), keep), cal, campaign.arm, t_frames, t_j, q_j,
-                          st.board_check)
+        rows = sweep_rows(read_frames(find_video(d / "trial_1"), sorted(keep)), cal, campaign.arm, t_frames, t_j,
+                          q_j, st.board_check)
         np.save(cache, rows)
     seconds = time.perf_counter() - t0
     fit = refine_mapping(cal, rows, board_corner_points(cal, campaign.setup.board.make()))

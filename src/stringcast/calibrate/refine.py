@@ -49,15 +49,20 @@ def _calibration(base: Calibration, theta: np.ndarray) -> Calibration:
 PARAMETERS = ("h0", "h1", "h2", "h3", "h4", "h5", "h6", "h7", "k1", "k2", "cx", "cy", "dt")
 """The fit's parameters: the homography's correction, the distortion's, its centre's, the clock's."""
 GROUPS = {"H": PARAMETERS[:8], "k1": ("k1",), "k2": ("k2",), "c": ("cx", "cy"), "dt": ("dt",)}
+DT = PARAMETERS.index("dt")
 
 
-def _residuals(free_theta, free, base, u_rows, rows, u_corners, xy_corners, sigma_rows, sigma_corners, fit_dt):
+def _robust_sigma(r: np.ndarray) -> float:
+    """1.4826 x the median absolute deviation of r, floored at 1e-5 (m)."""
+    return max(float(1.4826 * np.median(np.abs(r - np.median(r)))), 1e-5)
+
+
+def _residuals(free_theta, free, base, u_rows, rows, u_corners, xy_corners, sigma_rows, sigma_corners):
     theta = np.zeros(len(PARAMETERS))
-    theta[free] = free_theta
+    theta[free] = free_theta   # dt stays 0 unless it is free
     cal = _calibration(base, theta)
-    dt = theta[12] if fit_dt else 0.0
     m = cal.pixel_to_robot(u_rows) - rows[:, 1:3]
-    r_rows = (np.sum(m * rows[:, 3:5], 1) - rows[:, 6] * dt) / sigma_rows
+    r_rows = (np.sum(m * rows[:, 3:5], 1) - rows[:, 6] * theta[DT]) / sigma_rows
     r_corners = ((cal.pixel_to_robot(u_corners) - xy_corners) / sigma_corners).ravel()
     return np.concatenate([r_rows, r_corners])
 
@@ -98,21 +103,21 @@ def refine_mapping(calibration: Calibration, rows: np.ndarray, corners_xy: np.nd
     u_corners = calibration.robot_to_pixel(corners_xy)
     sigma_corners = max(calibration.reprojection_error_px, 0.1) * float(np.median(calibration.m_per_px(u_corners)))
     x = np.zeros(len(free))
-    sigma = max(float(1.4826 * np.median(np.abs(use[:, 5] - np.median(use[:, 5])))), 1e-5)
+    sigma = _robust_sigma(use[:, 5])
     for _ in range(2):  # the rows' noise from the residuals of the previous fit
         used = sigma
         sol = least_squares(_residuals, x, loss="huber", f_scale=huber, x_scale="jac",
-                            args=(free, calibration, u_rows, use, u_corners, corners_xy, used, sigma_corners, fit_dt))
+                            args=(free, calibration, u_rows, use, u_corners, corners_xy, used, sigma_corners))
         x = sol.x
         r = sol.fun[:len(use)] * used
-        sigma = max(float(1.4826 * np.median(np.abs(r - np.median(r)))), 1e-5)
+        sigma = _robust_sigma(r)
     J = sol.jac
     cov = np.linalg.pinv(J.T @ J) * (sigma / used) ** 2
     theta = np.zeros(len(PARAMETERS))
     theta[free] = x
-    k = list(free).index(PARAMETERS.index("dt")) if fit_dt else None
+    k = list(free).index(DT) if fit_dt else None
     return {"calibration": _calibration(calibration, theta), "theta": theta, "covariance": cov, "free": free,
-            "dt_s": float(theta[12]) if fit_dt else None,
+            "dt_s": float(theta[DT]) if fit_dt else None,
             "dt_standard_error_s": float(np.sqrt(cov[k, k])) if fit_dt else None,
             "rows": int(len(use)), "sigma_rows_mm": sigma * 1000,
             "rms_before_mm": float(np.sqrt(np.mean(use[:, 5] ** 2)) * 1000),
@@ -128,7 +133,7 @@ def mapping_standard_error(calibration: Calibration, result: dict, points: np.nd
     base = refined.pixel_to_robot(u)
     G = np.zeros((len(u), 2, len(result["free"])))
     for j, i in enumerate(result["free"]):
-        if PARAMETERS[i] == "dt":
+        if i == DT:
             continue
         theta = result["theta"].copy()
         theta[i] += eps

@@ -10,7 +10,7 @@ from .specs import (ArmSpec, BoardSpec, Campaign, SetupSpec, StringSpec, TargetS
                     resolve_campaign)
 from .files import (TRACK_COLUMNS, DataError, atomic_path, check_joint_coverage, check_joint_header, end_speed_shares,
                     find_video, joint_log_span, read_joint_table, read_json, read_parquet, read_video_meta,
-                    tracks_arrays, write_joint_table, write_json, write_parquet, write_text, write_yaml)
+                    tracks_arrays, trial_result, write_joint_table, write_json, write_parquet, write_text, write_yaml)
 from .sections import markdown_table, sections_read, settings_digest, stage_kwargs
 from .settings import (MODES, POLARITIES, SECTION_CLASSES, BoardCheckSettings, CalibrationSettings,
                        EstimationSettings, EvaluationSettings, ExecutorSettings, ModelSettings, MotionSettings,
@@ -26,7 +26,7 @@ __all__ = [
     "resolve_campaign",
     "TRACK_COLUMNS", "DataError", "atomic_path", "check_joint_coverage", "check_joint_header", "end_speed_shares",
     "find_video", "joint_log_span", "read_joint_table", "read_json", "read_parquet", "read_video_meta",
-    "tracks_arrays", "write_joint_table", "write_json", "write_parquet", "write_text", "write_yaml",
+    "tracks_arrays", "trial_result", "write_joint_table", "write_json", "write_parquet", "write_text", "write_yaml",
     "MODES", "POLARITIES", "SECTION_CLASSES", "BoardCheckSettings", "CalibrationSettings", "EstimationSettings",
     "EvaluationSettings", "ExecutorSettings", "ModelSettings", "MotionSettings", "Settings", "SweepSettings",
     "SyncSettings",

@@ -336,6 +336,20 @@ def read_video_meta(path: str | Path) -> dict:
     return doc
 
 
+BEFORE_SWEEP = {"geometry": "calibration", "clock": "sync"}
+"""The sweep's outputs and the files they refine (``geometry.json`` <- ``calibration.json``, ...)."""
+
+
+def trial_result(results_dir: str | Path, stage: str) -> tuple[str, Path]:
+    """(the stage whose file is read, its path) for one trial's ``<stage>.json``: the sweep's
+    ``geometry.json`` / ``clock.json`` where the trial has them, else (results made before the
+    sweep existed) the ``calibration.json`` / ``sync.json`` they refine (:data:`BEFORE_SWEEP`)."""
+    results_dir = Path(results_dir)
+    if (results_dir / f"{stage}.json").exists() or stage not in BEFORE_SWEEP:
+        return stage, results_dir / f"{stage}.json"
+    return BEFORE_SWEEP[stage], results_dir / f"{BEFORE_SWEEP[stage]}.json"
+
+
 def find_video(trial_dir: str | Path) -> Path:
     """The trial's video: ``video.<ext>`` file, a ``video/`` frame folder, or a ``.cihx``."""
     trial_dir = Path(trial_dir)

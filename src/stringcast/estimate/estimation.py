@@ -46,7 +46,7 @@ import pandas as pd
 from stringcast.core import (PARAM_NAMES, TRACK_COLUMNS, Campaign, ConfigError, DataError, EstimationSettings,
                              EvaluationSettings, ModelSettings, MotionSettings, TrackingSettings, Verdict,
                              model_ranges, motion_window, read_joint_table, read_json, read_parquet, tracks_arrays,
-                             write_json, write_parquet)
+                             trial_result, write_json, write_parquet)
 from stringcast.model import decode, start_chi
 from .diagnostics import best_k, checked, diagnostics
 from .fitcheck import fit_figures
@@ -58,15 +58,8 @@ from .verdict import fit_verdict
 UPSTREAM = ("geometry", "clock", "tracking")
 """The earlier stages whose ``<stage>.json`` verdicts the fit's verdict carries (beside tracks.parquet):
 the sweep's ``geometry.json`` and ``clock.json``, which judge the calibration and the sync with the
-trial's own evidence (results made before the sweep existed: ``calibration.json``, ``sync.json``)."""
-_BEFORE_SWEEP = {"geometry": "calibration", "clock": "sync"}
-
-
-def _upstream_file(results: Path, stage: str) -> tuple[str, Path]:
-    """(the stage whose file is read, its path): the sweep's file, else the one before it."""
-    if (results / f"{stage}.json").exists() or stage not in _BEFORE_SWEEP:
-        return stage, results / f"{stage}.json"
-    return _BEFORE_SWEEP[stage], results / f"{_BEFORE_SWEEP[stage]}.json"
+trial's own evidence (results made before the sweep existed: ``calibration.json``, ``sync.json``;
+:func:`stringcast.core.trial_result`)."""
 
 
 @dataclass(frozen=True)
@@ -235,7 +228,7 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign,
     est = estimate(problem, model, estimation, chi0, k, seed, earlier=tuple(earlier_problems))
     E_trials = [float(make_objective(p, model)(est.chi[None])[0]) * 1000 for p in (*earlier_problems, problem)]
     if upstream is None:
-        upstream = dict(_upstream_file(Path(tracks_parquet).parent, stage) for stage in UPSTREAM)
+        upstream = dict(trial_result(Path(tracks_parquet).parent, stage) for stage in UPSTREAM)
     sim = simulate_fit(problem, model, est.chi)
     figures, verdict, cause = judge_fit(problem, sim, campaign.string.length, motion_window(t_j, q_j)[1],
                                         E_trials[-1], estimation, read_verdicts(upstream))

@@ -29,7 +29,7 @@ from stringcast import __version__
 from stringcast.calibrate import Calibration
 from stringcast.core import (PARAM_NAMES, TRACK_COLUMNS, Campaign, ModelSettings, MotionSettings, Settings,
                              Verdict, find_video, hand_pose, model_ranges, motion_start, read_joint_table, read_json,
-                             read_parquet, tracks_arrays, worst, write_text)
+                             read_parquet, tracks_arrays, trial_result, worst, write_text)
 from . import figures as figs
 from .provenance import provenance
 from .strip import frame_strip, strip_data_uri
@@ -93,9 +93,9 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, ou
     """
     n = campaign.string.n_points
     params = read_json(results_dir / "params.json")
-    swept = (results_dir / "geometry.json").exists()  # the sweep's refinement, when the trial has one
-    calib = read_json(results_dir / ("geometry.json" if swept else "calibration.json"))
-    sync = read_json(results_dir / ("clock.json" if swept else "sync.json"))
+    calib_stage, calib_json = trial_result(results_dir, "geometry")  # the sweep's, when the trial has one
+    sync_stage, sync_json = trial_result(results_dir, "clock")
+    calib, sync = read_json(calib_json), read_json(sync_json)
     nxt = read_json(results_dir / "motion.json")
     tracks = read_parquet(results_dir / "tracks.parquet", TRACK_COLUMNS)
     fit = read_parquet(results_dir / "fit.parquet")
@@ -121,7 +121,7 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, ou
                                           tgt, campaign.target.radius)})
     model_figures, values, lo, hi, diagnostics = _parameter_figures(params, settings.model)
     figures += model_figures
-    strip = frame_strip(find_video(data_dir), Calibration.from_json(results_dir / ("geometry.json" if swept else "calibration.json")), tracks, fit,
+    strip = frame_strip(find_video(data_dir), Calibration.from_json(calib_json), tracks, fit,
                         campaign.string.length)
     figures.append({"id": "fig-overlay", "caption": "Frames of the motion with the tracked points (green circles; "
                     "red: the grasp from forward kinematics) and the model's points simulated with the estimate "
@@ -137,7 +137,7 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, ou
 
     summary = _trial_summary(params, diagnostics, valid, d_meas, campaign, played, nxt)
     tracking = results_dir / "tracking.json"
-    verdicts = stage_verdicts({"geometry" if swept else "calibration": calib, "clock" if swept else "sync": sync,
+    verdicts = stage_verdicts({calib_stage: calib, sync_stage: sync,
                                "tracking": read_json(tracking) if tracking.exists() else None, "fit": params})
     warnings = [str(w) for w in calib.get("warnings", [])] + [str(w) for w in [params.get("message")] if w]
     cal_rows = _calibration_rows(calib, sync)

@@ -33,7 +33,6 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from .offset import frame_times
@@ -44,16 +43,12 @@ from stringcast.core import (BoardCheckSettings, DataError, SweepSettings, Verdi
 from stringcast.video import open_video
 
 
-def _frames(path: Path, keep: np.ndarray) -> list[tuple[int, np.ndarray]]:
-    """(index, grey image) of the frames ``keep``, the video decoded once, in order."""
-    want, out = set(int(k) for k in keep), []
+def read_frames(path: Path, keep: np.ndarray) -> list[tuple[int, np.ndarray]]:
+    """(index, (H, W) grey image) of the frames ``keep`` (increasing), read in one forward pass
+    (:meth:`stringcast.video.base.VideoReader.read`: grabs without decoding over short gaps, seeks
+    over long ones where the codec allows)."""
     with open_video(path) as video:
-        for i, f in video:
-            if i in want:
-                out.append((i, cv2.cvtColor(f, cv2.COLOR_BGR2GRAY) if f.ndim == 3 else f))
-            if i >= max(want):
-                break
-    return out
+        return [(int(k), video.read(int(k))) for k in keep]
 
 
 def reach_points(campaign, q_j: np.ndarray, calibration: Calibration, step_m: float = 0.02) -> np.ndarray:
@@ -71,18 +66,19 @@ def reach_points(campaign, q_j: np.ndarray, calibration: Calibration, step_m: fl
 
 
 def _fit(calibration, frames, campaign, t_frames, t_j, q_j, corners, sweep, board_check):
-    """Passes of rows and fit, each at the clock of the last; (fit, rows, the total clock correction s)."""
+    """Passes of rows and fit, each at the clock of the last: (fit, with ``dt_s`` the total clock
+    correction, s; rows of the last pass), or (None, rows) when a pass has too few rows."""
     total = 0.0
     for _ in range(sweep.passes):
         rows = sweep_rows(frames, calibration, campaign.arm, t_frames + total, t_j, q_j, board_check)
         if len(rows) < sweep.min_rows:
-            return None, rows, total
+            return None, rows
         fit = refine_mapping(calibration, rows, corners, huber=sweep.huber)
         total += fit["dt_s"]
         if abs(fit["dt_s"]) * 1000 < 0.1 * sweep.clock_tolerance_ms:
             break
     fit["dt_s"] = total
-    return fit, rows, total
+    return fit, rows
 
 
 def _halves(calibration, rows, corners, sweep, points) -> tuple[float, float]:
@@ -122,7 +118,8 @@ def run_sweep(trial_dir: str | Path, calibration_json: str | Path, sync_json: st
         (geometry, clock) documents (module docstring).
 
     Raises:
-        DataError: unreadable inputs (named).
+        DataError: unreadable inputs, or a calibration under which no point the string can reach
+            is in the image (the files named).
     """
     trial_dir = Path(trial_dir)
     calibration, sync_doc = Calibration.from_json(calibration_json), read_json(sync_json)
@@ -133,15 +130,19 @@ def run_sweep(trial_dir: str | Path, calibration_json: str | Path, sync_json: st
                else "the calibration has no intrinsics or board corners to refine")
         geo, clock = _passed_through(calibration, sync_doc, why)
     else:
+        points = reach_points(campaign, q_j, calibration)
+        if len(points) == 0:
+            raise DataError(f"{calibration_json}: no swing-plane point the string can reach (from {trial_dir}/joints.csv)"
+                            " maps into the image")
         keep = np.unique(np.linspace(0, len(t_frames) - 1, sweep.frames).astype(int))
-        frames = _frames(find_video(trial_dir), keep)
+        frames = read_frames(find_video(trial_dir), keep)
         corners = board_corner_points(calibration, campaign.setup.board.make())
-        fit, rows, total = _fit(calibration, frames, campaign, t_frames, t_j, q_j, corners, sweep, board_check)
+        fit, rows = _fit(calibration, frames, campaign, t_frames, t_j, q_j, corners, sweep, board_check)
         if fit is None:
             geo, clock = _passed_through(calibration, sync_doc, f"{len(rows)} agreeing link rows in {len(frames)} "
                                          f"frames, fewer than sweep.min_rows = {sweep.min_rows}")
         else:
-            geo, clock = _refined_docs(calibration, sync_doc, fit, rows, total, campaign, q_j, corners, sweep)
+            geo, clock = _refined_docs(calibration, sync_doc, fit, rows, points, corners, sweep)
     for name, doc, out in (("geometry", geo, out_geometry), ("clock", clock, out_clock)):
         for r in doc["verdict"]["reasons"]:
             print(f"sweep {name} {doc['verdict']['status']}: {trial_dir}: {r}", file=sys.stderr)
@@ -150,11 +151,9 @@ def run_sweep(trial_dir: str | Path, calibration_json: str | Path, sync_json: st
     return geo, clock
 
 
-def _refined_docs(calibration, sync_doc, fit, rows, total, campaign, q_j, corners, sweep):
-    points = reach_points(campaign, q_j, calibration)
-    if len(points) == 0:
-        raise DataError("sweep: no swing-plane point the string can reach is in the image")
-    refined = fit["calibration"]
+def _refined_docs(calibration, sync_doc, fit, rows, points, corners, sweep):
+    """The refined geometry and clock documents, judged where the string can be (``points`` (N, 2) m)."""
+    refined, total = fit["calibration"], fit["dt_s"]
     se = mapping_standard_error(calibration, fit, points)
     halves_m, halves_s = _halves(calibration, rows, corners, sweep, points)
     moved = np.linalg.norm(refined.pixel_to_robot(calibration.robot_to_pixel(points)) - points, axis=1)
