@@ -50,6 +50,14 @@ class FrameTrack:
             raise ValueError("FrameTrack: valid points need positions and invalid ones NaN")
 
 
+def _near(mask: np.ndarray, p: np.ndarray, r: float) -> bool:
+    """Whether any pixel of mask (H, W) bool lies within r px of p (row, col)."""
+    r0, c0 = max(0, int(p[0] - r)), max(0, int(p[1] - r))
+    win = mask[r0:int(p[0] + r) + 1, c0:int(p[1] + r) + 1]
+    rr, cc = np.nonzero(win)
+    return bool(len(rr)) and bool(np.any(np.hypot(rr + r0 - p[0], cc + c0 - p[1]) <= r))
+
+
 class FrameTracker:
     """Segmentation and centreline of single frames, given the background and calibration.
 
@@ -97,9 +105,11 @@ class FrameTracker:
             return none()
         pts, bridged, branch = found
         end = pts[-1].astype(int)
-        e0, e1 = np.maximum(end - 3, 0), end + 4
-        free_end = bool(3 <= end[0] + y0 < H - 3 and 3 <= end[1] + x0 < W - 3
-                        and not arm[e0[0]:e1[0], e0[1]:e1[1]].any() and np.hypot(*(end - g)) > 2 * rho
+        # an end cut by the arm or the image's edge: its skeleton stops about a width short of the
+        # foreground's end, which stops at the guarded mask; blur and fading take up to another width
+        cut = math.ceil(2 * self._width) + 2
+        free_end = bool(cut <= end[0] + y0 < H - cut and cut <= end[1] + x0 < W - cut
+                        and not _near(arm, end, cut) and np.hypot(*(end - g)) > 2 * rho
                         and clean_end(pts, self._skel, self._skel_at, absd, self._bg, st,
                                       st.end_touch_mm / 1000 / scale))
         hidden_start = np.hypot(*(pts[0] - g)) > rho + 3 or self._fallback
