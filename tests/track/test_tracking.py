@@ -370,3 +370,32 @@ def test_segment_noise_floor_from_the_frame_itself(campaign, settings):
     string[:, 95:106] = True
     assert fg[20:180, 100].mean() > 0.9                            # the string is found ...
     assert fg[~string].mean() < 0.01                               # ... and the noise is not
+
+
+@pytest.mark.parametrize("occluded", [True, False])
+def test_an_end_at_the_arm_is_cut_not_free(campaign, settings, occluded):
+    """A blurred 4 px string whose lower part passes behind a link: the foreground stops at the
+    guarded mask and the skeleton about a width short of it, 5-7 px from the mask (generalization
+    seed 11 took such ends for the free tip, and its tip-anchored points slid ~100 mm). The same
+    string ending in open space, clear of the link, is free."""
+    from stringcast.track.frame_tracker import FrameTracker, end_cut
+
+    st = settings.tracking
+    bg = np.full((200, 200), 120, np.float32)
+    tracker = FrameTracker(bg, (4.0, 0.0), _calibration(), campaign, st)
+    frame = bg.copy()
+    cv2.line(frame, (100, 10), (100, 190 if occluded else 110), 70.0, 4)
+    frame = cv2.GaussianBlur(frame, (0, 0), 1.2) + np.random.default_rng(1).normal(0, 2.0, bg.shape).astype(np.float32)
+    arm = np.zeros(bg.shape, bool)
+    arm[150:, 40:160] = True                                  # the link, masked (with its margin)
+    frame[arm] = 60.0
+    _, fg = tracker._segment(frame, bg, tracker.sigma, arm)
+    k = 2 * round(st.arm_guard_px) + 1                         # the guard band, as FrameTracker.track
+    guarded = cv2.dilate(arm.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))) > 0
+    pts = tracker._centreline(fg & ~guarded, np.array([10.0, 100.0]), 30.0, 5.0)[0]
+    end = pts[-1].astype(int)
+    gap = 150 - end[0]
+    assert (gap > 3) if occluded else (gap > 30)               # the old 3 px window saw no arm
+    old = guarded[max(end[0] - 3, 0):end[0] + 4, max(end[1] - 3, 0):end[1] + 4].any()   # the former 7 x 7 window
+    assert not old and end_cut(end, guarded, (0, 0), bg.shape, tracker._width) == occluded
+    assert end_cut(np.array([3, 100]), guarded, (0, 0), bg.shape, tracker._width)  # by the image's edge

@@ -50,12 +50,25 @@ class FrameTrack:
             raise ValueError("FrameTrack: valid points need positions and invalid ones NaN")
 
 
-def _near(mask: np.ndarray, p: np.ndarray, r: float) -> bool:
-    """Whether any pixel of mask (H, W) bool lies within r px of p (row, col)."""
-    r0, c0 = max(0, int(p[0] - r)), max(0, int(p[1] - r))
-    win = mask[r0:int(p[0] + r) + 1, c0:int(p[1] + r) + 1]
-    rr, cc = np.nonzero(win)
-    return bool(len(rr)) and bool(np.any(np.hypot(rr + r0 - p[0], cc + c0 - p[1]) <= r))
+def end_cut(end, arm: np.ndarray, origin, image_shape, width_px: float) -> bool:
+    """Whether a skeleton walk's end may be cut by the arm or the image's edge, not the string's own.
+
+    The skeleton stops about a string's width short of the foreground's end, and the foreground
+    stops at the guarded arm mask or the image's edge; blur and fading take up to another width.
+    An end within ``2 width_px + 2`` px of either is therefore taken as cut.
+
+    Args:
+        end: (row, col) of the end in the ROI, px. arm: (h, w) bool guarded arm mask of the ROI.
+        origin: (row, col) of the ROI in the image. image_shape: (H, W). width_px: the string's
+            width in the foreground, px.
+    """
+    r = math.ceil(2 * width_px) + 2
+    row, col = end[0] + origin[0], end[1] + origin[1]
+    if not (r <= row < image_shape[0] - r and r <= col < image_shape[1] - r):
+        return True
+    r0, c0 = max(0, int(end[0] - r)), max(0, int(end[1] - r))
+    rr, cc = np.nonzero(arm[r0:int(end[0] + r) + 1, c0:int(end[1] + r) + 1])
+    return bool(len(rr)) and bool(np.any(np.hypot(rr + r0 - end[0], cc + c0 - end[1]) <= r))
 
 
 class FrameTracker:
@@ -105,11 +118,7 @@ class FrameTracker:
             return none()
         pts, bridged, branch = found
         end = pts[-1].astype(int)
-        # an end cut by the arm or the image's edge: its skeleton stops about a width short of the
-        # foreground's end, which stops at the guarded mask; blur and fading take up to another width
-        cut = math.ceil(2 * self._width) + 2
-        free_end = bool(cut <= end[0] + y0 < H - cut and cut <= end[1] + x0 < W - cut
-                        and not _near(arm, end, cut) and np.hypot(*(end - g)) > 2 * rho
+        free_end = bool(not end_cut(end, arm, (y0, x0), (H, W), self._width) and np.hypot(*(end - g)) > 2 * rho
                         and clean_end(pts, self._skel, self._skel_at, absd, self._bg, st,
                                       st.end_touch_mm / 1000 / scale))
         hidden_start = np.hypot(*(pts[0] - g)) > rho + 3 or self._fallback
