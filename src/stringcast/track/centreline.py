@@ -186,6 +186,43 @@ def _fwhm_across(absdiff: np.ndarray, p: np.ndarray, t: np.ndarray) -> float:
     return 0.25 * float(np.count_nonzero(v > v.min() + 0.5 * (v.max() - v.min())))
 
 
+def string_continues(absdiff: np.ndarray, pts: np.ndarray, extension: float, width_px: float, share: float,
+                     n_tangent: int = 6) -> bool:
+    """Whether string-like contrast goes on past a walk's end: the end is then where the string
+    fades below the segmentation's threshold (a faint stretch, the light behind it changing),
+    not its free end.
+
+    Past the end's half-contrast edge (``extension`` px beyond the last vertex) by one string
+    width, and for two widths + 4 px more, ``absdiff`` is sampled along 9 directions within
+    +-40 deg of the end tangent (over its last ``n_tangent`` px), but not within a width of the
+    walk itself; the string goes on when the best direction's mean reaches ``share``
+    (``end_contrast_min``) of the contrast along the path.
+
+    Args:
+        absdiff: (H, W) smoothed contrast. pts: (M, 2) (row, col) centreline, the end last.
+        extension: px from the last vertex to the end's edge (:func:`free_end_extension`).
+        width_px: the string's width in the foreground. share: of the path's median contrast.
+    """
+    if len(pts) < 4:
+        return False
+    cum = arc_length(pts)
+    a = int(np.searchsorted(cum, cum[-1] - n_tangent))
+    t = pts[-1] - pts[min(a, len(pts) - 2)]
+    nt = float(np.hypot(*t))
+    if nt < 1e-6:
+        return False
+    phi = np.arctan2(t[1], t[0]) + np.radians(np.linspace(-40.0, 40.0, 9))
+    d = extension + width_px + np.arange(0.0, 2 * width_px + 4 + 1e-9, 0.5)
+    ray = pts[-1] + d[None, :, None] * np.stack([np.cos(phi), np.sin(phi)], axis=-1)[:, None, :]  # (9, K, 2)
+    v = map_coordinates(absdiff, [ray[..., 0].ravel(), ray[..., 1].ravel()], order=1, mode="constant",
+                        cval=0.0).reshape(ray.shape[:2])   # nothing is seen outside the image
+    near = np.min(np.hypot(ray[..., None, 0] - pts[None, None, :, 0], ray[..., None, 1] - pts[None, None, :, 1]), axis=-1)
+    v[near < width_px] = 0.0   # the string's own walked stretch (a tip curled back onto it) goes on nowhere
+    ij = np.round(pts).astype(int)
+    along = float(np.median(absdiff[ij[:, 0], ij[:, 1]]))
+    return bool(along > 0 and float(np.max(v.mean(axis=1))) >= share * along)
+
+
 def free_end_extension(absdiff: np.ndarray, pts: np.ndarray, n_tangent: int = 6, reach: float = 8.0) -> float:
     """How far (px) the string's free end lies past the last vertex of its centreline.
 

@@ -24,6 +24,7 @@ from .centreline import (
     odd_smooth,
     refine_centreline,
     resample_by_arc,
+    string_continues,
 )
 from .junctions import Zones, walk_skeleton
 from .markers import band_points, path_contrast
@@ -53,16 +54,18 @@ class FrameTrack:
 def end_cut(end, arm: np.ndarray, origin, image_shape, width_px: float) -> bool:
     """Whether a skeleton walk's end may be cut by the arm or the image's edge, not the string's own.
 
-    The skeleton stops about a string's width short of the foreground's end, and the foreground
-    stops at the guarded arm mask or the image's edge; blur and fading take up to another width.
-    An end within ``2 width_px + 2`` px of either is therefore taken as cut.
+    The skeleton stops about half a string's width short of the foreground's end, and the
+    foreground stops at the guarded arm mask or the image's edge; blur and fading take up to
+    another half width and a few px. An end within ``width_px + 4`` px of either is therefore
+    taken as cut (ends of generalization seed 11 cut by a joint disc lay 4.6-6.7 px from it at a
+    3.8 px width; seed 2's free tip 12.9 px from a disc at 5.5 px must stay free).
 
     Args:
         end: (row, col) of the end in the ROI, px. arm: (h, w) bool guarded arm mask of the ROI.
         origin: (row, col) of the ROI in the image. image_shape: (H, W). width_px: the string's
             width in the foreground, px.
     """
-    r = math.ceil(2 * width_px) + 2
+    r = math.ceil(width_px) + 4
     row, col = end[0] + origin[0], end[1] + origin[1]
     if not (r <= row < image_shape[0] - r and r <= col < image_shape[1] - r):
         return True
@@ -126,6 +129,8 @@ class FrameTracker:
         pts = odd_smooth(refine_centreline(absd, pts), 1.5, twice=True)
         if free_end:  # the skeleton stops short of a free end: move the end to the string's end
             ext = free_end_extension(absd, pts)
+            free_end = not string_continues(absd, pts, ext, self._width, st.end_contrast_min)
+        if free_end:
             if ext > 0.05:
                 t = pts[-1] - pts[-2]
                 pts = np.vstack([pts, pts[-1] + ext * t / max(float(np.hypot(*t)), 1e-9)])
