@@ -399,3 +399,27 @@ def test_an_end_at_the_arm_is_cut_not_free(campaign, settings, occluded):
     old = guarded[max(end[0] - 3, 0):end[0] + 4, max(end[1] - 3, 0):end[1] + 4].any()   # the former 7 x 7 window
     assert not old and end_cut(end, guarded, (0, 0), bg.shape, tracker._width) == occluded
     assert end_cut(np.array([3, 100]), guarded, (0, 0), bg.shape, tracker._width)  # by the image's edge
+
+
+def test_string_continues_past_a_faint_stretch_not_past_a_tip():
+    """A walk that ends where the string fades under the threshold (contrast 37 past the end
+    against 40 along the path, generalization seed 11) is not at the free end; a string that ends
+    there is; and a tip curled back beside its own walk does not read as going on."""
+    from stringcast.track.centreline import string_continues
+
+    def scene(length, hook=False):
+        a = np.zeros((120, 200), np.float32)
+        cv2.line(a, (20, 60), (20 + length, 60), 40.0, 3)
+        if hook:      # the walked string curls back under itself: its own earlier stretch lies ahead
+            cv2.line(a, (120, 60), (120, 66), 40.0, 3)
+            cv2.line(a, (120, 66), (100, 66), 40.0, 3)
+        return cv2.GaussianBlur(a, (0, 0), 1.0)
+
+    walk = np.column_stack([np.full(81, 60.0), np.arange(20.0, 101.0)])     # (row, col), ends at col 100
+    faint = scene(160)
+    faint[:, 102:] *= 37.0 / 40.0
+    assert string_continues(faint, walk, 1.5, 3.0, 0.4)
+    assert not string_continues(scene(80), walk, 1.5, 3.0, 0.4)              # the string ends at col 100
+    hook = np.vstack([walk, [[60.0, c] for c in range(101, 121)], [[r, 120.0] for r in range(61, 67)],
+                      [[66.0, c] for c in range(119, 99, -1)]])              # the walk goes round, ends at col 100
+    assert not string_continues(scene(100, hook=True), hook, 1.5, 3.0, 0.4)
