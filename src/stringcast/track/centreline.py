@@ -186,6 +186,15 @@ def _fwhm_across(absdiff: np.ndarray, p: np.ndarray, t: np.ndarray) -> float:
     return 0.25 * float(np.count_nonzero(v > v.min() + 0.5 * (v.max() - v.min())))
 
 
+def _end_tangent(pts: np.ndarray, cum: np.ndarray, n_tangent: float):
+    """Unit tangent (2,) of a path (M, 2) at its end, over its last ``n_tangent`` px of arc
+    ``cum`` (M,); None where those vertices coincide."""
+    a = int(np.searchsorted(cum, cum[-1] - n_tangent))
+    t = pts[-1] - pts[min(a, len(pts) - 2)]
+    nt = float(np.hypot(*t))
+    return None if nt < 1e-6 else t / nt
+
+
 def string_continues(absdiff: np.ndarray, pts: np.ndarray, extension: float, width_px: float, share: float,
                      n_tangent: int = 6) -> bool:
     """Whether string-like contrast goes on past a walk's end: the end is then where the string
@@ -205,18 +214,16 @@ def string_continues(absdiff: np.ndarray, pts: np.ndarray, extension: float, wid
     """
     if len(pts) < 4:
         return False
-    cum = arc_length(pts)
-    a = int(np.searchsorted(cum, cum[-1] - n_tangent))
-    t = pts[-1] - pts[min(a, len(pts) - 2)]
-    nt = float(np.hypot(*t))
-    if nt < 1e-6:
+    t = _end_tangent(pts, arc_length(pts), n_tangent)
+    if t is None:
         return False
     phi = np.arctan2(t[1], t[0]) + np.radians(np.linspace(-40.0, 40.0, 9))
     d = extension + width_px + np.arange(0.0, 2 * width_px + 4 + 1e-9, 0.5)
     ray = pts[-1] + d[None, :, None] * np.stack([np.cos(phi), np.sin(phi)], axis=-1)[:, None, :]  # (9, K, 2)
     v = map_coordinates(absdiff, [ray[..., 0].ravel(), ray[..., 1].ravel()], order=1, mode="constant",
                         cval=0.0).reshape(ray.shape[:2])   # nothing is seen outside the image
-    near = np.min(np.hypot(ray[..., None, 0] - pts[None, None, :, 0], ray[..., None, 1] - pts[None, None, :, 1]), axis=-1)
+    own = pts[np.hypot(*(pts - pts[-1]).T) <= d[-1] + width_px]   # the walk's vertices a sample can be near
+    near = np.min(np.hypot(ray[..., None, 0] - own[:, 0], ray[..., None, 1] - own[:, 1]), axis=-1)
     v[near < width_px] = 0.0   # the string's own walked stretch (a tip curled back onto it) goes on nowhere
     ij = np.round(pts).astype(int)
     along = float(np.median(absdiff[ij[:, 0], ij[:, 1]]))
@@ -243,12 +250,9 @@ def free_end_extension(absdiff: np.ndarray, pts: np.ndarray, n_tangent: int = 6,
     if len(pts) < 8:
         return 0.0
     cum = arc_length(pts)
-    a = int(np.searchsorted(cum, cum[-1] - n_tangent))
-    t = pts[-1] - pts[min(a, len(pts) - 2)]
-    nt = float(np.hypot(*t))
-    if nt < 1e-6:
+    t = _end_tangent(pts, cum, n_tangent)
+    if t is None:
         return 0.0
-    t /= nt
     off = np.arange(-2.0, reach + 1e-9, 0.25)
     ray = pts[-1] + off[:, None] * t
     prof = map_coordinates(absdiff, [ray[:, 0], ray[:, 1]], order=1, mode="nearest")
