@@ -232,9 +232,12 @@ def test_tracking_on_a_tiny_lab_render(tmp_path, config, settings):
     assert read_json(res / "tracking.json")["verdict"]["status"] == "ok"   # within the goals: no false alarm
 
 
-@pytest.mark.parametrize("end", ["plain", "ball", "sleeve"])
+@pytest.mark.parametrize("end", ["plain", "ball", "small ball", "sleeve"])
 def test_free_end_extension_finds_where_the_string_ends(end):
-    """A plain end and a pipe (sleeve) end at their far edge; a clay ball ends at its centre."""
+    """A plain end and a pipe (sleeve) end at their far edge; a clay ball ends at its centre, also
+    a small blurred one whose width is back to the string's 2 px behind the walk's last vertex
+    (generalization seed 17's clay tip, ~6 px across a 3 px string, read as a plain end in
+    every other frame)."""
     from stringcast.track.centreline import free_end_extension
 
     img = np.zeros((60, 120), np.float32)
@@ -242,13 +245,16 @@ def test_free_end_extension_finds_where_the_string_ends(end):
     if end == "ball":
         cv2.circle(img, (80, 30), 5, 1.0, -1)    # 11 px ball centred on the string's end (column 80)
         want = 80.0
+    elif end == "small ball":
+        cv2.circle(img, (80, 30), 3, 1.0, -1)    # 7 px ball, blurred more below
+        want = 80.0
     elif end == "sleeve":
         img[25:36, 60:86] = 1.0                  # 11 px wide, 26 px long pipe over the last part
         want = 85.5
     else:
         want = 79.5
-    img = cv2.GaussianBlur(img, (0, 0), 1.0)
-    last = 78.0 if end != "ball" else 79.0      # a skeleton stops short of the end
+    img = cv2.GaussianBlur(img, (0, 0), 1.5 if end == "small ball" else 1.0)
+    last = 79.0 if end.endswith("ball") else 78.0   # a skeleton stops short of the end
     pts = np.column_stack([np.full(70, 30.0), np.linspace(10.0, last, 70)])
     ext = free_end_extension(img, pts)
     assert last + ext == pytest.approx(want, abs=1.0), (end, last + ext)
@@ -404,7 +410,8 @@ def test_an_end_at_the_arm_is_cut_not_free(campaign, settings, occluded):
 def test_string_continues_past_a_faint_stretch_not_past_a_tip():
     """A walk that ends where the string fades under the threshold (contrast 37 past the end
     against 40 along the path, generalization seed 11) is not at the free end; a string that ends
-    there is; and a tip curled back beside its own walk does not read as going on."""
+    there is; a clay ball's far half is not string going on; and a tip curled back beside its own
+    walk does not read as going on."""
     from stringcast.track.centreline import string_continues
 
     def scene(length, hook=False):
@@ -418,8 +425,12 @@ def test_string_continues_past_a_faint_stretch_not_past_a_tip():
     walk = np.column_stack([np.full(81, 60.0), np.arange(20.0, 101.0)])     # (row, col), ends at col 100
     faint = scene(160)
     faint[:, 102:] *= 37.0 / 40.0
-    assert string_continues(faint, walk, 1.5, 3.0, 0.4)
-    assert not string_continues(scene(80), walk, 1.5, 3.0, 0.4)              # the string ends at col 100
+    assert string_continues(faint, walk, 3.0, 0.4)
+    assert not string_continues(scene(80), walk, 3.0, 0.4)              # the string ends at col 100
     hook = np.vstack([walk, [[60.0, c] for c in range(101, 121)], [[r, 120.0] for r in range(61, 67)],
                       [[66.0, c] for c in range(119, 99, -1)]])              # the walk goes round, ends at col 100
-    assert not string_continues(scene(100, hook=True), hook, 1.5, 3.0, 0.4)
+    assert not string_continues(scene(100, hook=True), hook, 3.0, 0.4)
+    ball = np.zeros((120, 200), np.float32)      # a clay ball ends the string (generalization seed 17):
+    cv2.line(ball, (20, 60), (100, 60), 40.0, 3)  # the walk stops at its centre, its far edge 6 px on
+    cv2.circle(ball, (100, 60), 6, 50.0, -1)
+    assert not string_continues(cv2.GaussianBlur(ball, (0, 0), 1.0), walk, 3.0, 0.4)

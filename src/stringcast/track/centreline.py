@@ -195,30 +195,28 @@ def _end_tangent(pts: np.ndarray, cum: np.ndarray, n_tangent: float):
     return None if nt < 1e-6 else t / nt
 
 
-def string_continues(absdiff: np.ndarray, pts: np.ndarray, extension: float, width_px: float, share: float,
-                     n_tangent: int = 6) -> bool:
+def string_continues(absdiff: np.ndarray, pts: np.ndarray, width_px: float, share: float,
+                     n_tangent: int = 6, reach: float = 8.0) -> bool:
     """Whether string-like contrast goes on past a walk's end: the end is then where the string
     fades below the segmentation's threshold (a faint stretch, the light behind it changing),
     not its free end.
 
-    Past the end's half-contrast edge (``extension`` px beyond the last vertex) by one string
-    width, and for two widths + 4 px more, ``absdiff`` is sampled along 9 directions within
+    Past the end's far half-contrast edge (:func:`end_edge`; ``reach`` px where the contrast
+    does not fall within it) by one string width, and for two widths + 4 px more, ``absdiff`` is sampled along 9 directions within
     +-40 deg of the end tangent (over its last ``n_tangent`` px), but not within a width of the
     walk itself; the string goes on when the best direction's mean reaches ``share``
     (``end_contrast_min``) of the contrast along the path.
 
     Args:
         absdiff: (H, W) smoothed contrast. pts: (M, 2) (row, col) centreline, the end last.
-        extension: px from the last vertex to the end's edge (:func:`free_end_extension`).
         width_px: the string's width in the foreground. share: of the path's median contrast.
     """
-    if len(pts) < 4:
-        return False
-    t = _end_tangent(pts, arc_length(pts), n_tangent)
+    edge, t = end_edge(absdiff, pts, n_tangent, reach)
     if t is None:
         return False
+    edge = reach if edge is None else edge   # past a lump (a clay ball), not from inside it
     phi = np.arctan2(t[1], t[0]) + np.radians(np.linspace(-40.0, 40.0, 9))
-    d = extension + width_px + np.arange(0.0, 2 * width_px + 4 + 1e-9, 0.5)
+    d = edge + width_px + np.arange(0.0, 2 * width_px + 4 + 1e-9, 0.5)
     ray = pts[-1] + d[None, :, None] * np.stack([np.cos(phi), np.sin(phi)], axis=-1)[:, None, :]  # (9, K, 2)
     v = map_coordinates(absdiff, [ray[..., 0].ravel(), ray[..., 1].ravel()], order=1, mode="constant",
                         cval=0.0).reshape(ray.shape[:2])   # nothing is seen outside the image
@@ -230,16 +228,47 @@ def string_continues(absdiff: np.ndarray, pts: np.ndarray, extension: float, wid
     return bool(along > 0 and float(np.max(v.mean(axis=1))) >= share * along)
 
 
+def end_edge(absdiff: np.ndarray, pts: np.ndarray, n_tangent: int = 6, reach: float = 8.0):
+    """Where the contrast past a walk's end falls to half: the end's far edge.
+
+    Along the path's end tangent (over its last ``n_tangent`` px), the smoothed contrast
+    ``absdiff`` is sampled every 0.25 px from 2 px before the last vertex to ``reach`` px past
+    it; the edge is where it falls to half way between the contrast on the centreline just
+    before the end and the ray's floor (linear interpolation between samples).
+
+    Args:
+        absdiff: (H, W) contrast image. pts: (M, 2) (row, col) centreline, the end last.
+
+    Returns:
+        ``(edge, t)``: the edge's distance past the last vertex, px (``None`` where the contrast
+        does not fall within ``reach`` px or the path is too short or flat), and the unit end
+        tangent (2,) (``None`` with it where there is none).
+    """
+    t = _end_tangent(pts, arc_length(pts), n_tangent) if len(pts) >= 8 else None
+    if t is None:
+        return None, None
+    off = np.arange(-2.0, reach + 1e-9, 0.25)
+    ray = pts[-1] + off[:, None] * t
+    prof = map_coordinates(absdiff, [ray[:, 0], ray[:, 1]], order=1, mode="nearest")
+    peak, floor = float(np.max(prof[off <= 0])), float(np.min(prof))
+    if peak - floor <= 0:
+        return None, t
+    half = floor + 0.5 * (peak - floor)
+    below = np.nonzero((off > 0) & (prof < half))[0]
+    if len(below) == 0:
+        return None, t
+    i = int(below[0])
+    return float(off[i - 1] + (prof[i - 1] - half) / max(prof[i - 1] - prof[i], 1e-9) * (off[i] - off[i - 1])), t
+
+
 def free_end_extension(absdiff: np.ndarray, pts: np.ndarray, n_tangent: int = 6, reach: float = 8.0) -> float:
     """How far (px) the string's free end lies past the last vertex of its centreline.
 
     A skeleton stops short of a free end (by about the foreground's half-width, more under
-    blur). Along the path's end tangent (over its last ``n_tangent`` px), the smoothed
-    contrast ``absdiff`` is sampled every 0.25 px; the end is where it falls to half the
-    contrast on the centreline just before the end. Where the string is wider at its end
-    than along its length, a lump ends it: a ball (clay: the end is its centre, half its
-    width back) or a sleeve longer than wide (a pipe: the end is its far edge); widths are
-    full widths at half contrast across the path.
+    blur). The end is the half-contrast edge along the end tangent (:func:`end_edge`). Where
+    the string is wider at its end than along its length, a lump ends it: a ball (clay: the
+    end is its centre, half its width back) or a sleeve longer than wide (a pipe: the end is
+    its far edge); widths are full widths at half contrast across the path.
 
     Args:
         absdiff: (H, W) contrast image. pts: (M, 2) (row, col) centreline, the free end last.
@@ -247,38 +276,34 @@ def free_end_extension(absdiff: np.ndarray, pts: np.ndarray, n_tangent: int = 6,
     Returns:
         Extension in px (>= 0; 0 where the profile gives no edge within ``reach`` px).
     """
-    if len(pts) < 8:
+    edge, t = end_edge(absdiff, pts, n_tangent, reach)
+    if edge is None:
         return 0.0
     cum = arc_length(pts)
-    t = _end_tangent(pts, cum, n_tangent)
-    if t is None:
-        return 0.0
-    off = np.arange(-2.0, reach + 1e-9, 0.25)
-    ray = pts[-1] + off[:, None] * t
-    prof = map_coordinates(absdiff, [ray[:, 0], ray[:, 1]], order=1, mode="nearest")
-    peak, floor = float(np.max(prof[off <= 0])), float(np.min(prof))
-    if peak - floor <= 0:
-        return 0.0
-    half = floor + 0.5 * (peak - floor)
-    below = np.nonzero((off > 0) & (prof < half))[0]
-    if len(below) == 0 or below[0] == 0:
-        return 0.0
-    i = int(below[0])
-    edge = off[i - 1] + (prof[i - 1] - half) / max(prof[i - 1] - prof[i], 1e-9) * (off[i] - off[i - 1])
     mids = [int(np.searchsorted(cum, f * cum[-1])) for f in (1 / 3, 2 / 3)]
     w_mid = min(_fwhm_across(absdiff, pts[j], pts[min(j + 2, len(pts) - 1)] - pts[max(j - 2, 0)]) for j in mids)
-    w_end = _fwhm_across(absdiff, pts[-1] - 2.0 * t, t)
-    if w_end - w_mid <= 0.5:  # a plain end: the string ends at its half-contrast edge
+    # widths across the path every 0.5 px back from its last vertex (3-sample running median)
+    back = np.arange(0.0, min(float(cum[-1]) - 1.0, 6.0 * w_mid + 8.0), 0.5)
+    if len(back) < 4:
+        return max(0.0, float(edge))
+    at = cum[-1] - back
+    P = np.column_stack([np.interp(at, cum, pts[:, 0]), np.interp(at, cum, pts[:, 1])])
+    T = np.column_stack([np.interp(at + 1, cum, pts[:, 0]) - np.interp(at - 1, cum, pts[:, 0]),
+                         np.interp(at + 1, cum, pts[:, 1]) - np.interp(at - 1, cum, pts[:, 1])])
+    w = np.array([_fwhm_across(absdiff, P[i], T[i]) for i in range(len(back))])
+    w = np.median(np.stack([w, np.r_[w[:1], w[:-1]], np.r_[w[1:], w[-1:]]]), axis=0)
+    w_lump = float(np.max(w[back <= 2.0 * w_mid + 4.0]))
+    if w_lump - w_mid <= 0.5:  # a plain end: the string ends at its half-contrast edge
         return max(0.0, float(edge))
     # A lump at the end: a ball (as long as wide: the end is its centre, half its width back from
-    # the far edge) or a sleeve (longer than wide, e.g. a pipe: the end is its far edge). One lump
-    # width and a quarter back from the far edge, a ball is over; a sleeve is still as wide.
-    back = cum[-1] + float(edge) - 1.25 * w_end
-    j = int(np.clip(np.searchsorted(cum, back), 1, len(pts) - 2))
-    w_back = _fwhm_across(absdiff, pts[j], pts[j + 1] - pts[j - 1])
-    if w_back > w_mid + 0.5 * (w_end - w_mid):
+    # the far edge) or a sleeve (longer than wide, e.g. a pipe: the end is its far edge). The lump
+    # ends where its width falls half way back to the string's; a ball's length from there to
+    # the far edge is under 1.5 of its widths (a blurred disc: ~0.95), a sleeve's is more.
+    narrow = np.nonzero(w < w_mid + 0.5 * (w_lump - w_mid))[0]
+    length = float(edge) + (float(back[narrow[0]]) if len(narrow) else float(back[-1]))
+    if length > 1.5 * w_lump:
         return max(0.0, float(edge))
-    return max(0.0, float(edge) - w_end / 2)
+    return max(0.0, float(edge) - w_lump / 2)
 
 
 def mismatch_split(D: float, sigmas) -> np.ndarray:

@@ -119,7 +119,7 @@ class FrameTracker:
         found = self._centreline(fg, g, st.grasp_search_mm / 1000 / scale, rho)
         if found is None:
             return none()
-        pts, bridged, branch = found
+        pts, bridged, branch, fold = found
         end = pts[-1].astype(int)
         free_end = bool(not end_cut(end, arm, (y0, x0), (H, W), self._width) and np.hypot(*(end - g)) > 2 * rho
                         and clean_end(pts, self._skel, self._skel_at, absd, self._bg, st,
@@ -129,7 +129,10 @@ class FrameTracker:
         pts = odd_smooth(refine_centreline(absd, pts), 1.5, twice=True)
         if free_end:  # the skeleton stops short of a free end: move the end to the string's end
             ext = free_end_extension(absd, pts)
-            free_end = not string_continues(absd, pts, ext, self._width, st.end_contrast_min)
+            free_end = not string_continues(absd, pts, self._width, st.end_contrast_min)
+        if free_end:  # a spur within two widths of a free end is its lump's (a clay ball forks the skeleton)
+            fold &= arc_length(pts) < arc_length(pts)[-1] - 2 * self._width
+        branch = branch | fold
         if free_end:
             if ext > 0.05:
                 t = pts[-1] - pts[-2]
@@ -209,7 +212,8 @@ class FrameTracker:
         return absd, keep[lab]
 
     def _centreline(self, fg: np.ndarray, g: np.ndarray, r0: float, rho: float):
-        """Skeleton path from near the grasp g (row, col): (M, 2) (row, col), (M,) bridged; or None.
+        """Skeleton path from near the grasp g (row, col): (M, 2) (row, col), and (M,) bool each of
+        bridged, ambiguous (a branch joins) and folded (a spur joins); or None.
 
         Seeds: the skeleton pixel nearest the grasp in each skeleton component within r0 px
         (at most 6), and up to 4 of the component's pixels just outside rho (a string that leaves
@@ -228,7 +232,7 @@ class FrameTracker:
         dist = cv2.distanceTransform(box.astype(np.uint8), cv2.DIST_L2, 3)  # the string's width: twice the
         self._width = 2.0 * float(np.median(dist[skel])) if skel.any() else 1.0  # skeleton's distance to the rim
         found = self._walk(skel, g - b, r0, rho)
-        return None if found is None else (found[0] + b, found[1], found[2])
+        return None if found is None else (found[0] + b, *found[1:])
 
     def _walk(self, skel: np.ndarray, g: np.ndarray, r0: float, rho: float):
         """:meth:`_centreline` inside the foreground's box: skel (h, w) bool, g (row, col) in the box."""
@@ -281,5 +285,6 @@ class FrameTracker:
         # a branch joining the walk near the grasp: a loop there, the ordering is ambiguous; a fold there
         head = np.hypot(*(walk - g).T) <= 2 * rho  # (a spur) is the fingertips' tangle, or the loop at
         self._head_clutter = bool(np.any(ev & head))  # the fingers that a missing length is anchored for
-        return best[0], best[1], (ev | (best[7] & ~head))[len(best[3]) - len(best[0]):]
+        k = len(best[3]) - len(best[0])
+        return best[0], best[1], ev[k:], (best[7] & ~head & ~ev)[k:]
 

@@ -16,7 +16,8 @@ least in total. The path crosses the zone along its skeleton. Zones are never ma
 visited, so the second pass through a crossing finds its way too (the one exit left).
 
 A choice is *ambiguous* (the ordering beyond it is a guess) when the runner-up bends less
-than ``margin`` more; every pass through a zone where a choice was ambiguous, or where a real
+than ``margin`` more, unless every exit left is a spur (the string ends or folds there, which
+ever is taken: the spur not taken marks a fold); every pass through a zone where a choice was ambiguous, or where a real
 branch is never walked (something joins there), is marked ambiguous; one by a spur never
 walked (1 px or more out of the zone) is marked *folded*: a fold of the string (a hairpin,
 a collapsed loop) leaves only a short spur and may hold length the walk does not measure.
@@ -272,7 +273,9 @@ def walk_skeleton(skel: np.ndarray, start, max_gap: float, direction=None, width
                 p0, t0 = Z.core[z], _unit(Z.core[z] - p0)
             elif t0 is None:
                 t0 = _unit(d)
-        real = [k for k in free if Z.arm(z, k)[2]] or free
+        real = [k for k in free if Z.arm(z, k)[2]]
+        spurs = not real   # only spurs left: the string ends (or folds) here whichever is taken, a fold, not a guess
+        real = real or free
         pairing = bool(entry) and sum(Z.arm(z, k)[2] for k in range(len(groups))) == 4 and len(real) == 3
         cost = {}
         for k in real:
@@ -284,7 +287,7 @@ def walk_skeleton(skel: np.ndarray, start, max_gap: float, direction=None, width
                 cost[k] += bending(py, -vy, pw, vw)
         order = sorted(cost, key=cost.get)
         k = order[0]
-        unsure = len(order) > 1 and (t0 is None or cost[order[1]] - cost[k] < margin)
+        unsure = not spurs and len(order) > 1 and (t0 is None or cost[order[1]] - cost[k] < margin)
         first, v = Z.arm(z, k)[:2]
         line = _through(Z.id, z, path[-1], first)
         visited[first[0], first[1]] = True
