@@ -109,3 +109,21 @@ def test_pixel_walk_matches_its_numpy_reference():
     start = np.argwhere(skel)[0]
     p, _ = trace_path(skel, start, 6.0, (0, 1))
     assert p[-1][1] >= 145
+
+
+def test_a_fork_of_two_spurs_at_the_end_is_a_fold_not_a_guess():
+    """A stroke whose end splits into two short spurs (a small clay ball's skeleton, generalization
+    seed 17): the string ends there whichever spur is taken, so the choice is no ambiguity (which
+    refused the free end); the spur not taken marks a fold. Longer arms stay a guess."""
+    def forked(arm):
+        skel = np.zeros((120, 160), bool)
+        skel[60, 10:81] = True
+        for k in range(1, arm + 1):
+            skel[60 - k, 80 + k] = skel[60 + k, 80 + k] = True
+        return skel
+    start = np.array([60, 10])
+    pts, _, ambiguous, folded, _ = walk_skeleton(forked(3), start, 6.0, (0, 1), width_px=3.0)
+    assert pts[-1][1] >= 82 and not ambiguous.any()
+    assert folded.any() and np.all(pts[folded, 1] >= 78)   # at the fork only
+    pts, _, ambiguous, _, _ = walk_skeleton(forked(20), start, 6.0, (0, 1), width_px=3.0)
+    assert ambiguous.any() and np.all(pts[ambiguous, 1] >= 78)
