@@ -427,6 +427,9 @@ def test_string_continues_past_a_faint_stretch_not_past_a_tip():
     faint[:, 102:] *= 37.0 / 40.0
     assert string_continues(faint, walk, 3.0, 0.4)
     assert not string_continues(scene(80), walk, 3.0, 0.4)              # the string ends at col 100
+    sharp = np.zeros((120, 200), np.float32)    # the walk overshoots a sharp end: the contrast is 0 from
+    cv2.line(sharp, (20, 60), (96, 60), 40.0, 3)  # its last vertex on (the edge is there, not -inf)
+    assert not string_continues(sharp, walk, 3.0, 0.4)
     hook = np.vstack([walk, [[60.0, c] for c in range(101, 121)], [[r, 120.0] for r in range(61, 67)],
                       [[66.0, c] for c in range(119, 99, -1)]])              # the walk goes round, ends at col 100
     assert not string_continues(scene(100, hook=True), hook, 3.0, 0.4)

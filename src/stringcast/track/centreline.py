@@ -240,7 +240,7 @@ def end_edge(absdiff: np.ndarray, pts: np.ndarray, n_tangent: int = 6, reach: fl
         absdiff: (H, W) contrast image. pts: (M, 2) (row, col) centreline, the end last.
 
     Returns:
-        ``(edge, t)``: the edge's distance past the last vertex, px (``None`` where the contrast
+        ``(edge, t)``: the edge's distance past the last vertex, px (>= 0; ``None`` where the contrast
         does not fall within ``reach`` px or the path is too short or flat), and the unit end
         tangent (2,) (``None`` with it where there is none).
     """
@@ -258,7 +258,9 @@ def end_edge(absdiff: np.ndarray, pts: np.ndarray, n_tangent: int = 6, reach: fl
     if len(below) == 0:
         return None, t
     i = int(below[0])
-    return float(off[i - 1] + (prof[i - 1] - half) / max(prof[i - 1] - prof[i], 1e-9) * (off[i] - off[i - 1])), t
+    a, b = float(prof[i - 1]), float(prof[i])
+    frac = (a - half) / (a - b) if a > half else 0.0   # already below half at the last vertex: the edge is there
+    return max(0.0, float(off[i - 1] + frac * (off[i] - off[i - 1]))), t
 
 
 def free_end_extension(absdiff: np.ndarray, pts: np.ndarray, n_tangent: int = 6, reach: float = 8.0) -> float:
