@@ -437,3 +437,27 @@ def test_string_continues_past_a_faint_stretch_not_past_a_tip():
     cv2.line(ball, (20, 60), (100, 60), 40.0, 3)  # the walk stops at its centre, its far edge 6 px on
     cv2.circle(ball, (100, 60), 6, 50.0, -1)
     assert not string_continues(cv2.GaussianBlur(ball, (0, 0), 1.0), walk, 3.0, 0.4)
+
+
+def test_end_ball_is_the_same_whichever_spur_the_walk_ends_on():
+    """A skeleton forks inside a clay ball and the walk ends on either spur, frame by frame
+    (generalization seeds 0 and 7: the still tip jittered by ~1 mm); the ball's centre comes from
+    its contrast and is the same for both. A lump barely wider than the string is no ball."""
+    from stringcast.track.centreline import end_ball
+
+    img = np.zeros((60, 120), np.float32)
+    img[29:32, 10:80] = 1.0
+    cv2.circle(img, (80, 30), 4, 1.0, -1)                 # 9 px ball on a 3 px string, centre (30, 80)
+    img = cv2.GaussianBlur(img, (0, 0), 1.0)
+    line = np.column_stack([np.full(66, 30.0), np.arange(10.0, 76.0)])
+    straight = np.vstack([line, [[30.0, c] for c in (76.0, 77.0, 78.0, 79.0, 80.0, 81.0, 82.0)]])
+    bent = np.vstack([line, [[30.0, 76.0], [30.0, 77.0], [30.0, 78.0], [29.5, 79.0], [29.0, 80.0], [28.5, 81.0]]])
+    centres = [end_ball(img, p) for p in (straight, bent)]
+    assert all(c is not None for c in centres)
+    for c, r in centres:   # (the string's own stretch inside the disc pulls it ~0.4 px its way)
+        assert np.hypot(c[0] - 30.0, c[1] - 80.0) < 0.7 and 3.5 < r < 6.0, (c, r)
+    assert np.hypot(*(centres[0][0] - centres[1][0])) < 0.3, centres
+    band = np.zeros((60, 120), np.float32)
+    band[29:32, 10:80] = 1.0
+    band[28:33, 76:80] = 1.0                              # 5 px against 3 px: a band of tape, not a ball
+    assert end_ball(cv2.GaussianBlur(band, (0, 0), 1.0), straight[:-3]) is None

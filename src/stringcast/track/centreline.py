@@ -268,9 +268,9 @@ def free_end_extension(absdiff: np.ndarray, pts: np.ndarray, n_tangent: int = 6,
 
     A skeleton stops short of a free end (by about the foreground's half-width, more under
     blur). The end is the half-contrast edge along the end tangent (:func:`end_edge`). Where
-    the string is wider at its end than along its length, a lump ends it: a ball (clay: the
-    end is its centre, half its width back) or a sleeve longer than wide (a pipe: the end is
-    its far edge); widths are full widths at half contrast across the path.
+    the string is wider at its end than along its length, a lump ends it (:func:`end_lump`): a
+    ball (clay: the end is its centre, half its width back) or a sleeve longer than wide (a
+    pipe: the end is its far edge).
 
     Args:
         absdiff: (H, W) contrast image. pts: (M, 2) (row, col) centreline, the free end last.
@@ -281,13 +281,26 @@ def free_end_extension(absdiff: np.ndarray, pts: np.ndarray, n_tangent: int = 6,
     edge, t = end_edge(absdiff, pts, n_tangent, reach)
     if edge is None:
         return 0.0
+    kind, w_lump = end_lump(absdiff, pts, edge, t)
+    return max(0.0, float(edge) - (w_lump / 2 if kind == "ball" else 0.0))
+
+
+def end_lump(absdiff: np.ndarray, pts: np.ndarray, edge: float, t: np.ndarray):
+    """What ends the string: ``("plain" | "sleeve" | "ball", lump width px)``.
+
+    Widths across the path (full widths at half contrast) every 0.5 px back from its last
+    vertex, 3-sample running median. The lump's width is the widest within 2 string widths +
+    4 px of the end; it is a lump if 0.5 px wider than the string at a third and two thirds
+    of its length. It ends where its width falls half way back to the string's; a ball's length
+    from there to the far edge (``edge`` px past the last vertex along the unit tangent ``t``,
+    :func:`end_edge`) is under 1.5 of its widths (a blurred disc: ~0.95), a sleeve's is more.
+    """
     cum = arc_length(pts)
     mids = [int(np.searchsorted(cum, f * cum[-1])) for f in (1 / 3, 2 / 3)]
     w_mid = min(_fwhm_across(absdiff, pts[j], pts[min(j + 2, len(pts) - 1)] - pts[max(j - 2, 0)]) for j in mids)
-    # widths across the path every 0.5 px back from its last vertex (3-sample running median)
     back = np.arange(0.0, min(float(cum[-1]) - 1.0, 6.0 * w_mid + 8.0), 0.5)
     if len(back) < 4:
-        return max(0.0, float(edge))
+        return "plain", w_mid
     at = cum[-1] - back
     P = np.column_stack([np.interp(at, cum, pts[:, 0]), np.interp(at, cum, pts[:, 1])])
     T = np.column_stack([np.interp(at + 1, cum, pts[:, 0]) - np.interp(at - 1, cum, pts[:, 0]),
@@ -295,17 +308,43 @@ def free_end_extension(absdiff: np.ndarray, pts: np.ndarray, n_tangent: int = 6,
     w = np.array([_fwhm_across(absdiff, P[i], T[i]) for i in range(len(back))])
     w = np.median(np.stack([w, np.r_[w[:1], w[:-1]], np.r_[w[1:], w[-1:]]]), axis=0)
     w_lump = float(np.max(w[back <= 2.0 * w_mid + 4.0]))
-    if w_lump - w_mid <= 0.5:  # a plain end: the string ends at its half-contrast edge
-        return max(0.0, float(edge))
-    # A lump at the end: a ball (as long as wide: the end is its centre, half its width back from
-    # the far edge) or a sleeve (longer than wide, e.g. a pipe: the end is its far edge). The lump
-    # ends where its width falls half way back to the string's; a ball's length from there to
-    # the far edge is under 1.5 of its widths (a blurred disc: ~0.95), a sleeve's is more.
+    if w_lump - w_mid <= 0.5:
+        return "plain", w_mid
     narrow = np.nonzero(w < w_mid + 0.5 * (w_lump - w_mid))[0]
     length = float(edge) + (float(back[narrow[0]]) if len(narrow) else float(back[-1]))
-    if length > 1.5 * w_lump:
-        return max(0.0, float(edge))
-    return max(0.0, float(edge) - w_lump / 2)
+    return ("sleeve" if length > 1.5 * w_lump else "ball"), w_lump
+
+
+def end_ball(absdiff: np.ndarray, pts: np.ndarray, n_tangent: int = 6, reach: float = 8.0):
+    """The centre (2,) (row, col) and radius (px) of a ball that ends the path, or None.
+
+    A skeleton forks inside a ball, and the walk ends on one spur or the other, frame by frame
+    (generalization seeds 0 and 7: the tip jittered by ~1 mm across and along the string). The
+    centre is found from the contrast, not the walk: near half the ball's width back from its
+    far edge (:func:`end_edge`, :func:`end_lump`), the deepest point of the foreground at half
+    the contrast there (the maximum of its distance transform, ``cv2.distanceTransform``; the
+    centroid of the top 1 px of it). None also where that centre is farther than
+    the radius from the walk's end (the walk does not end inside it: not a ball, or not this one).
+    """
+    edge, t = end_edge(absdiff, pts, n_tangent, reach)
+    if edge is None:
+        return None
+    kind, w_lump = end_lump(absdiff, pts, edge, t)
+    j = len(pts) // 2
+    if kind != "ball" or w_lump < 1.5 * _fwhm_across(absdiff, pts[j], pts[min(j + 2, len(pts) - 1)] - pts[max(j - 2, 0)]):
+        return None   # a lump barely wider than the string (a band of tape at the tip) has no centre of its own
+    r = w_lump / 2
+    c0 = pts[-1] + (float(edge) - r) * t
+    h = int(math.ceil(2 * r)) + 2   # the ball's window: its foreground at half the contrast there
+    r0, c0_ = int(round(c0[0])) - h, int(round(c0[1])) - h
+    if r0 < 0 or c0_ < 0 or r0 + 2 * h + 1 > absdiff.shape[0] or c0_ + 2 * h + 1 > absdiff.shape[1]:
+        return None
+    win = absdiff[r0:r0 + 2 * h + 1, c0_:c0_ + 2 * h + 1]
+    dt = cv2.distanceTransform((win > 0.5 * float(win.max())).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    rr, cc = np.nonzero(dt >= float(dt.max()) - 1.0)   # the deepest point inside the blob: its centre, which
+    wts = dt[rr, cc] - (float(dt.max()) - 1.0) + 1e-6  # the string's stretch into the ball does not move
+    c = np.array([float(wts @ rr) / wts.sum() + r0, float(wts @ cc) / wts.sum() + c0_])
+    return (c, r) if np.hypot(*(c - pts[-1])) <= r else None   # the walk ends inside the ball
 
 
 def mismatch_split(D: float, sigmas) -> np.ndarray:

@@ -18,6 +18,7 @@ from .centreline import (
     branch_vertices,
     clean_end,
     decimate_path,
+    end_ball,
     free_end_extension,
     hidden_arc,
     mismatch_split,
@@ -133,12 +134,15 @@ class FrameTracker:
         if free_end:  # a spur within two widths of a free end is its lump's (a clay ball forks the skeleton)
             fold &= arc_length(pts) < arc_length(pts)[-1] - 2 * self._width
         branch = branch | fold
-        if free_end:
-            if ext > 0.05:
-                t = pts[-1] - pts[-2]
-                pts = np.vstack([pts, pts[-1] + ext * t / max(float(np.hypot(*t)), 1e-9)])
-                bridged = np.r_[bridged, False]
-                branch = np.r_[branch, False]
+        ball = end_ball(absd, pts) if free_end else None
+        if ball is not None:  # a ball's centre, from its contrast (the walk ends on either spur of its fork)
+            k = len(pts) - int(np.argmax(np.hypot(*(pts[::-1] - ball[0]).T) > ball[1]))
+            pts, bridged, branch = np.vstack([pts[:k], ball[0]]), np.r_[bridged[:k], False], np.r_[branch[:k], False]
+        elif free_end and ext > 0.05:
+            t = pts[-1] - pts[-2]
+            pts = np.vstack([pts, pts[-1] + ext * t / max(float(np.hypot(*t)), 1e-9)])
+            bridged = np.r_[bridged, False]
+            branch = np.r_[branch, False]
         cum_px = arc_length(pts)
         gap = np.nonzero(bridged & (np.r_[0.0, np.diff(cum_px)] > 2.5))[0]
         ev_px = np.sort(np.concatenate([cum_px[branch], cum_px[gap - 1], cum_px[gap]]))
