@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import os
-import subprocess
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -19,11 +18,12 @@ def cores() -> int:
 
 
 def git_commit() -> str | None:
-    try:
-        return subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True,
-                              check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return None
+    """HEAD, with ``-dirty`` where tracked files differ from it (a run on uncommitted code recorded
+    the bare HEAD before); None outside a checkout (:func:`stringcast.report.provenance.git_commit`)."""
+    from stringcast.report.provenance import git_commit as commit
+
+    c = commit(ROOT)
+    return None if c == "unknown" else c
 
 
 # The libraries a benchmark's figures depend on: the loop's outcome on seeds 0-2 moved from 43
