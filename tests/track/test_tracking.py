@@ -238,7 +238,7 @@ def test_free_end_extension_finds_where_the_string_ends(end):
     a small blurred one whose width is back to the string's 2 px behind the walk's last vertex
     (generalization seed 17's clay tip, ~6 px across a 3 px string, read as a plain end in
     every other frame)."""
-    from stringcast.track.centreline import free_end_extension
+    from stringcast.track.ends import free_end_extension
 
     img = np.zeros((60, 120), np.float32)
     img[29:32, 10:80] = 1.0                     # the string: 3 px wide, rows 29-31, to column 80
@@ -280,7 +280,7 @@ def test_nan_median0_matches_numpy_nanmedian():
 def test_clean_end_refuses_a_tip_curled_back_onto_the_string():
     """A straight walk ends clean; the same walk whose last 40 px hook back to within 5 px of an
     earlier stretch does not (the tip could be either strand), and neither does one that fades."""
-    from stringcast.track.centreline import clean_end
+    from stringcast.track.ends import clean_end
 
     st = dataclasses.replace(TrackingSettings(), branch_min_px=6, end_contrast_min=0.4, end_edge_max=0.25)
     straight = np.column_stack([np.full(120, 60.0), np.arange(20.0, 140.0)])
@@ -412,7 +412,7 @@ def test_string_continues_past_a_faint_stretch_not_past_a_tip():
     against 40 along the path, generalization seed 11) is not at the free end; a string that ends
     there is; a clay ball's far half is not string going on; and a tip curled back beside its own
     walk does not read as going on."""
-    from stringcast.track.centreline import string_continues
+    from stringcast.track.ends import string_continues
 
     def scene(length, hook=False):
         a = np.zeros((120, 200), np.float32)
@@ -443,7 +443,7 @@ def test_end_ball_is_the_same_whichever_spur_the_walk_ends_on():
     """A skeleton forks inside a clay ball and the walk ends on either spur, frame by frame
     (generalization seeds 0 and 7: the still tip jittered by ~1 mm); the ball's centre comes from
     its contrast and is the same for both. A lump barely wider than the string is no ball."""
-    from stringcast.track.centreline import end_ball
+    from stringcast.track.ends import end_ball
 
     img = np.zeros((60, 120), np.float32)
     img[29:32, 10:80] = 1.0

@@ -16,17 +16,14 @@ from stringcast.core import TrackingSettings
 from .centreline import (
     arc_length,
     branch_vertices,
-    clean_end,
     decimate_path,
-    end_ball,
-    free_end_extension,
     hidden_arc,
     mismatch_split,
     odd_smooth,
     refine_centreline,
     resample_by_arc,
-    string_continues,
 )
+from .ends import clean_end, end_ball, free_end_extension, string_continues
 from .junctions import Zones, walk_skeleton
 from .markers import band_points, path_contrast
 

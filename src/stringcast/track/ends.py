@@ -1,0 +1,232 @@
+"""The string's free end: where it lies, whether the walk's end is the string's end, what ends it.
+
+A skeleton stops short of a free end, forks inside a clay ball, and stops wherever the string
+fades under the segmentation's threshold or goes behind something. These tests and measures
+take the walk's end (its centreline, :mod:`stringcast.track.centreline`) and the frame's contrast
+``absdiff``; :meth:`stringcast.track.frame_tracker.FrameTracker.track` uses them to decide
+whether the end is the tip (step 4 of :mod:`stringcast.track.tracking`). Units: pixels of the
+region of interest, (row, col).
+"""
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+from scipy.ndimage import map_coordinates
+
+from stringcast.core import TrackingSettings
+from .centreline import arc_length
+
+
+def _fwhm_across(absdiff: np.ndarray, p: np.ndarray, t: np.ndarray) -> float:
+    """Full width (px) at half contrast of ``absdiff`` across the direction t at point p."""
+    off = np.arange(-6.0, 6.0 + 1e-9, 0.25)
+    t = np.asarray(t, float) / max(float(np.hypot(*t)), 1e-9)
+    q = p + off[:, None] * np.array([-t[1], t[0]])
+    v = map_coordinates(absdiff, [q[:, 0], q[:, 1]], order=1, mode="nearest")
+    return 0.25 * float(np.count_nonzero(v > v.min() + 0.5 * (v.max() - v.min())))
+
+
+def _end_tangent(pts: np.ndarray, cum: np.ndarray, n_tangent: float):
+    """Unit tangent (2,) of a path (M, 2) at its end, over its last ``n_tangent`` px of arc
+    ``cum`` (M,); None where those vertices coincide."""
+    a = int(np.searchsorted(cum, cum[-1] - n_tangent))
+    t = pts[-1] - pts[min(a, len(pts) - 2)]
+    nt = float(np.hypot(*t))
+    return None if nt < 1e-6 else t / nt
+
+
+def string_continues(absdiff: np.ndarray, pts: np.ndarray, width_px: float, share: float,
+                     n_tangent: int = 6, reach: float = 8.0) -> bool:
+    """Whether string-like contrast goes on past a walk's end: the end is then where the string
+    fades below the segmentation's threshold (a faint stretch, the light behind it changing),
+    not its free end.
+
+    Past the end's far half-contrast edge (:func:`end_edge`; ``reach`` px where the contrast
+    does not fall within it) by one string width, and for two widths + 4 px more, ``absdiff`` is sampled along 9 directions within
+    +-40 deg of the end tangent (over its last ``n_tangent`` px), but not within a width of the
+    walk itself; the string goes on when the best direction's mean reaches ``share``
+    (``end_contrast_min``) of the contrast along the path.
+
+    Args:
+        absdiff: (H, W) smoothed contrast. pts: (M, 2) (row, col) centreline, the end last.
+        width_px: the string's width in the foreground. share: of the path's median contrast.
+    """
+    edge, t = end_edge(absdiff, pts, n_tangent, reach)
+    if t is None:
+        return False
+    edge = reach if edge is None else edge   # past a lump (a clay ball), not from inside it
+    phi = np.arctan2(t[1], t[0]) + np.radians(np.linspace(-40.0, 40.0, 9))
+    d = edge + width_px + np.arange(0.0, 2 * width_px + 4 + 1e-9, 0.5)
+    ray = pts[-1] + d[None, :, None] * np.stack([np.cos(phi), np.sin(phi)], axis=-1)[:, None, :]  # (9, K, 2)
+    v = map_coordinates(absdiff, [ray[..., 0].ravel(), ray[..., 1].ravel()], order=1, mode="constant",
+                        cval=0.0).reshape(ray.shape[:2])   # nothing is seen outside the image
+    own = pts[np.hypot(*(pts - pts[-1]).T) <= d[-1] + width_px]   # the walk's vertices a sample can be near
+    near = np.min(np.hypot(ray[..., None, 0] - own[:, 0], ray[..., None, 1] - own[:, 1]), axis=-1)
+    v[near < width_px] = 0.0   # the string's own walked stretch (a tip curled back onto it) goes on nowhere
+    ij = np.round(pts).astype(int)
+    along = float(np.median(absdiff[ij[:, 0], ij[:, 1]]))
+    return bool(along > 0 and float(np.max(v.mean(axis=1))) >= share * along)
+
+
+def end_edge(absdiff: np.ndarray, pts: np.ndarray, n_tangent: int = 6, reach: float = 8.0):
+    """Where the contrast past a walk's end falls to half: the end's far edge.
+
+    Along the path's end tangent (over its last ``n_tangent`` px), the smoothed contrast
+    ``absdiff`` is sampled every 0.25 px from 2 px before the last vertex to ``reach`` px past
+    it; the edge is where it falls to half way between the contrast on the centreline just
+    before the end and the ray's floor (linear interpolation between samples).
+
+    Args:
+        absdiff: (H, W) contrast image. pts: (M, 2) (row, col) centreline, the end last.
+
+    Returns:
+        ``(edge, t)``: the edge's distance past the last vertex, px (>= 0; ``None`` where the contrast
+        does not fall within ``reach`` px or the path is too short or flat), and the unit end
+        tangent (2,) (``None`` with it where there is none).
+    """
+    t = _end_tangent(pts, arc_length(pts), n_tangent) if len(pts) >= 8 else None
+    if t is None:
+        return None, None
+    off = np.arange(-2.0, reach + 1e-9, 0.25)
+    ray = pts[-1] + off[:, None] * t
+    prof = map_coordinates(absdiff, [ray[:, 0], ray[:, 1]], order=1, mode="nearest")
+    peak, floor = float(np.max(prof[off <= 0])), float(np.min(prof))
+    if peak - floor <= 0:
+        return None, t
+    half = floor + 0.5 * (peak - floor)
+    below = np.nonzero((off > 0) & (prof < half))[0]
+    if len(below) == 0:
+        return None, t
+    i = int(below[0])
+    a, b = float(prof[i - 1]), float(prof[i])
+    frac = (a - half) / (a - b) if a > half else 0.0   # already below half at the last vertex: the edge is there
+    return max(0.0, float(off[i - 1] + frac * (off[i] - off[i - 1]))), t
+
+
+def free_end_extension(absdiff: np.ndarray, pts: np.ndarray, n_tangent: int = 6, reach: float = 8.0) -> float:
+    """How far (px) the string's free end lies past the last vertex of its centreline.
+
+    A skeleton stops short of a free end (by about the foreground's half-width, more under
+    blur). The end is the half-contrast edge along the end tangent (:func:`end_edge`). Where
+    the string is wider at its end than along its length, a lump ends it (:func:`end_lump`): a
+    ball (clay: the end is its centre, half its width back) or a sleeve longer than wide (a
+    pipe: the end is its far edge).
+
+    Args:
+        absdiff: (H, W) contrast image. pts: (M, 2) (row, col) centreline, the free end last.
+
+    Returns:
+        Extension in px (>= 0; 0 where the profile gives no edge within ``reach`` px).
+    """
+    edge, t = end_edge(absdiff, pts, n_tangent, reach)
+    if edge is None:
+        return 0.0
+    kind, w_lump = end_lump(absdiff, pts, edge, t)
+    return max(0.0, float(edge) - (w_lump / 2 if kind == "ball" else 0.0))
+
+
+def end_lump(absdiff: np.ndarray, pts: np.ndarray, edge: float, t: np.ndarray):
+    """What ends the string: ``("plain" | "sleeve" | "ball", lump width px)``.
+
+    Widths across the path (full widths at half contrast) every 0.5 px back from its last
+    vertex, 3-sample running median. The lump's width is the widest within 2 string widths +
+    4 px of the end; it is a lump if 0.5 px wider than the string at a third and two thirds
+    of its length. It ends where its width falls half way back to the string's; a ball's length
+    from there to the far edge (``edge`` px past the last vertex along the unit tangent ``t``,
+    :func:`end_edge`) is under 1.5 of its widths (a blurred disc: ~0.95), a sleeve's is more.
+    """
+    cum = arc_length(pts)
+    mids = [int(np.searchsorted(cum, f * cum[-1])) for f in (1 / 3, 2 / 3)]
+    w_mid = min(_fwhm_across(absdiff, pts[j], pts[min(j + 2, len(pts) - 1)] - pts[max(j - 2, 0)]) for j in mids)
+    back = np.arange(0.0, min(float(cum[-1]) - 1.0, 6.0 * w_mid + 8.0), 0.5)
+    if len(back) < 4:
+        return "plain", w_mid
+    at = cum[-1] - back
+    P = np.column_stack([np.interp(at, cum, pts[:, 0]), np.interp(at, cum, pts[:, 1])])
+    T = np.column_stack([np.interp(at + 1, cum, pts[:, 0]) - np.interp(at - 1, cum, pts[:, 0]),
+                         np.interp(at + 1, cum, pts[:, 1]) - np.interp(at - 1, cum, pts[:, 1])])
+    w = np.array([_fwhm_across(absdiff, P[i], T[i]) for i in range(len(back))])
+    w = np.median(np.stack([w, np.r_[w[:1], w[:-1]], np.r_[w[1:], w[-1:]]]), axis=0)
+    w_lump = float(np.max(w[back <= 2.0 * w_mid + 4.0]))
+    if w_lump - w_mid <= 0.5:
+        return "plain", w_mid
+    narrow = np.nonzero(w < w_mid + 0.5 * (w_lump - w_mid))[0]
+    length = float(edge) + (float(back[narrow[0]]) if len(narrow) else float(back[-1]))
+    return ("sleeve" if length > 1.5 * w_lump else "ball"), w_lump
+
+
+def end_ball(absdiff: np.ndarray, pts: np.ndarray, n_tangent: int = 6, reach: float = 8.0):
+    """The centre (2,) (row, col) and radius (px) of a ball that ends the path, or None.
+
+    A skeleton forks inside a ball, and the walk ends on one spur or the other, frame by frame
+    (generalization seeds 0 and 7: the tip jittered by ~1 mm across and along the string). The
+    centre is found from the contrast, not the walk: near half the ball's width back from its
+    far edge (:func:`end_edge`, :func:`end_lump`), the deepest point of the foreground at half
+    the contrast there (the maximum of its distance transform, ``cv2.distanceTransform``; the
+    centroid of the top 1 px of it). None also where that centre is farther than
+    the radius from the walk's end (the walk does not end inside it: not a ball, or not this one).
+    """
+    edge, t = end_edge(absdiff, pts, n_tangent, reach)
+    if edge is None:
+        return None
+    kind, w_lump = end_lump(absdiff, pts, edge, t)
+    j = len(pts) // 2
+    if kind != "ball" or w_lump < 1.5 * _fwhm_across(absdiff, pts[j], pts[min(j + 2, len(pts) - 1)] - pts[max(j - 2, 0)]):
+        return None   # a lump barely wider than the string (a band of tape at the tip) has no centre of its own
+    r = w_lump / 2
+    c0 = pts[-1] + (float(edge) - r) * t
+    h = int(math.ceil(2 * r)) + 2   # the ball's window: its foreground at half the contrast there
+    r0, c0_ = int(round(c0[0])) - h, int(round(c0[1])) - h
+    if r0 < 0 or c0_ < 0 or r0 + 2 * h + 1 > absdiff.shape[0] or c0_ + 2 * h + 1 > absdiff.shape[1]:
+        return None
+    win = absdiff[r0:r0 + 2 * h + 1, c0_:c0_ + 2 * h + 1]
+    dt = cv2.distanceTransform((win > 0.5 * float(win.max())).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    rr, cc = np.nonzero(dt >= float(dt.max()) - 1.0)   # the deepest point inside the blob: its centre, which
+    wts = dt[rr, cc] - (float(dt.max()) - 1.0) + 1e-6  # the string's stretch into the ball does not move
+    c = np.array([float(wts @ rr) / wts.sum() + r0, float(wts @ cc) / wts.sum() + c0_])
+    return (c, r) if np.hypot(*(c - pts[-1])) <= r else None   # the walk ends inside the ball
+
+
+def clean_end(pts: np.ndarray, skel: np.ndarray, skel_at: np.ndarray, absd: np.ndarray, bg: np.ndarray,
+              st: TrackingSettings, touch_px: float) -> bool:
+    """Whether a skeleton walk's last vertex is the string's free end.
+
+    It is not when: the walk more than 3 ``touch_px`` back comes within ``touch_px`` of the
+    end (``end_touch_mm``, a clay lump's size: a tip curled back onto the string, in a hook
+    or a closed loop, can end the walk on either strand); a skeleton pixel off the walk lies
+    within 2 px (a walk stopped by its own visited pixels, in a loop); the contrast fades
+    (``absd`` over the last 3 px below ``end_contrast_min`` of the path's median: a blurred
+    tip); or the background ``bg`` steps across the end (by ``end_edge_max`` x that median:
+    the rim of an occluder or of a region the string left).
+
+    Args:
+        pts: (M, 2) (row, col) walk, the end last (image px). skel: (h, w) bool skeleton whose
+            pixel (0, 0) is ``skel_at`` (row, col) in the image. absd, bg: (H, W) contrast and
+            background. st: tracking settings (:class:`~stringcast.core.TrackingSettings`:
+            ``branch_min_px``, ``end_contrast_min``, ``end_edge_max``).
+    """
+    cum = arc_length(pts)
+    back = pts[cum < cum[-1] - 3 * touch_px]
+    if len(back) and float(np.min(np.hypot(*(back - pts[-1]).T))) < touch_px:
+        return False
+    r, c = pts[-1].astype(int) - skel_at  # in the skeleton's box
+    r0, c0 = max(r - 6, 0), max(c - 6, 0)
+    win = skel[r0:r + 7, c0:c + 7].copy()
+    wr, wc = (pts.astype(int) - skel_at - [r0, c0]).T
+    inside = (wr >= 0) & (wr < win.shape[0]) & (wc >= 0) & (wc < win.shape[1])
+    win[wr[inside], wc[inside]] = False  # off the walk: a loop's other strand, or a spur
+    _, lab, stats, _ = cv2.connectedComponentsWithStats(win.astype(np.uint8), connectivity=8)
+    core = np.unique(lab[max(r - 2 - r0, 0):r + 3 - r0, max(c - 2 - c0, 0):c + 3 - c0])
+    if np.any(stats[core[core > 0], cv2.CC_STAT_AREA] >= st.branch_min_px):
+        return False
+    ij = pts.astype(int)
+    v = absd[ij[:, 0], ij[:, 1]]
+    t = pts[-1] - pts[max(len(pts) - 7, 0)]
+    t = t / max(float(np.hypot(*t)), 1e-9)
+    ray = pts[-1] + np.arange(-4.0, 5.0)[:, None] * t  # behind and past the end
+    b = map_coordinates(bg, ray.T, order=1, mode="nearest")
+    step = abs(float(np.median(b[6:])) - float(np.median(b[:3])))  # the background changes at the end:
+    return (float(v[-3:].mean()) >= st.end_contrast_min * float(np.median(v))  # an occluder's rim
+            and step < st.end_edge_max * float(np.median(v)))
