@@ -238,7 +238,7 @@ def test_free_end_extension_finds_where_the_string_ends(end):
     a small blurred one whose width is back to the string's 2 px behind the walk's last vertex
     (generalization seed 17's clay tip, ~6 px across a 3 px string, read as a plain end in
     every other frame)."""
-    from stringcast.track.ends import free_end_extension
+    from stringcast.track.ends import locate_end
 
     img = np.zeros((60, 120), np.float32)
     img[29:32, 10:80] = 1.0                     # the string: 3 px wide, rows 29-31, to column 80
@@ -256,7 +256,7 @@ def test_free_end_extension_finds_where_the_string_ends(end):
     img = cv2.GaussianBlur(img, (0, 0), 1.5 if end == "small ball" else 1.0)
     last = 79.0 if end.endswith("ball") else 78.0   # a skeleton stops short of the end
     pts = np.column_stack([np.full(70, 30.0), np.linspace(10.0, last, 70)])
-    ext = free_end_extension(img, pts)
+    ext = locate_end(img, pts).extension
     assert last + ext == pytest.approx(want, abs=1.0), (end, last + ext)
 
 
@@ -412,7 +412,10 @@ def test_string_continues_past_a_faint_stretch_not_past_a_tip():
     against 40 along the path, generalization seed 11) is not at the free end; a string that ends
     there is; a clay ball's far half is not string going on; and a tip curled back beside its own
     walk does not read as going on."""
-    from stringcast.track.ends import string_continues
+    from stringcast.track.ends import end_edge, string_continues
+
+    def goes_on(a, walk):
+        return string_continues(a, walk, *end_edge(a, walk), 3.0, 0.4)
 
     def scene(length, hook=False):
         a = np.zeros((120, 200), np.float32)
@@ -425,25 +428,25 @@ def test_string_continues_past_a_faint_stretch_not_past_a_tip():
     walk = np.column_stack([np.full(81, 60.0), np.arange(20.0, 101.0)])     # (row, col), ends at col 100
     faint = scene(160)
     faint[:, 102:] *= 37.0 / 40.0
-    assert string_continues(faint, walk, 3.0, 0.4)
-    assert not string_continues(scene(80), walk, 3.0, 0.4)              # the string ends at col 100
+    assert goes_on(faint, walk)
+    assert not goes_on(scene(80), walk)              # the string ends at col 100
     sharp = np.zeros((120, 200), np.float32)    # the walk overshoots a sharp end: the contrast is 0 from
     cv2.line(sharp, (20, 60), (96, 60), 40.0, 3)  # its last vertex on (the edge is there, not -inf)
-    assert not string_continues(sharp, walk, 3.0, 0.4)
+    assert not goes_on(sharp, walk)
     hook = np.vstack([walk, [[60.0, c] for c in range(101, 121)], [[r, 120.0] for r in range(61, 67)],
                       [[66.0, c] for c in range(119, 99, -1)]])              # the walk goes round, ends at col 100
-    assert not string_continues(scene(100, hook=True), hook, 3.0, 0.4)
+    assert not goes_on(scene(100, hook=True), hook)
     ball = np.zeros((120, 200), np.float32)      # a clay ball ends the string (generalization seed 17):
     cv2.line(ball, (20, 60), (100, 60), 40.0, 3)  # the walk stops at its centre, its far edge 6 px on
     cv2.circle(ball, (100, 60), 6, 50.0, -1)
-    assert not string_continues(cv2.GaussianBlur(ball, (0, 0), 1.0), walk, 3.0, 0.4)
+    assert not goes_on(cv2.GaussianBlur(ball, (0, 0), 1.0), walk)
 
 
 def test_end_ball_is_the_same_whichever_spur_the_walk_ends_on():
     """A skeleton forks inside a clay ball and the walk ends on either spur, frame by frame
     (generalization seeds 0 and 7: the still tip jittered by ~1 mm); the ball's centre comes from
     its contrast and is the same for both. A lump barely wider than the string is no ball."""
-    from stringcast.track.ends import end_ball
+    from stringcast.track.ends import locate_end
 
     img = np.zeros((60, 120), np.float32)
     img[29:32, 10:80] = 1.0
@@ -452,7 +455,7 @@ def test_end_ball_is_the_same_whichever_spur_the_walk_ends_on():
     line = np.column_stack([np.full(66, 30.0), np.arange(10.0, 76.0)])
     straight = np.vstack([line, [[30.0, c] for c in (76.0, 77.0, 78.0, 79.0, 80.0, 81.0, 82.0)]])
     bent = np.vstack([line, [[30.0, 76.0], [30.0, 77.0], [30.0, 78.0], [29.5, 79.0], [29.0, 80.0], [28.5, 81.0]]])
-    centres = [end_ball(img, p) for p in (straight, bent)]
+    centres = [locate_end(img, p).ball for p in (straight, bent)]
     assert all(c is not None for c in centres)
     for c, r in centres:   # (the string's own stretch inside the disc pulls it ~0.4 px its way)
         assert np.hypot(c[0] - 30.0, c[1] - 80.0) < 0.7 and 3.5 < r < 6.0, (c, r)
@@ -460,4 +463,4 @@ def test_end_ball_is_the_same_whichever_spur_the_walk_ends_on():
     band = np.zeros((60, 120), np.float32)
     band[29:32, 10:80] = 1.0
     band[28:33, 76:80] = 1.0                              # 5 px against 3 px: a band of tape, not a ball
-    assert end_ball(cv2.GaussianBlur(band, (0, 0), 1.0), straight[:-3]) is None
+    assert locate_end(cv2.GaussianBlur(band, (0, 0), 1.0), straight[:-3]).ball is None

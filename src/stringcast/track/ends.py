@@ -10,6 +10,7 @@ region of interest, (row, col).
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -37,23 +38,24 @@ def _end_tangent(pts: np.ndarray, cum: np.ndarray, n_tangent: float):
     return None if nt < 1e-6 else t / nt
 
 
-def string_continues(absdiff: np.ndarray, pts: np.ndarray, width_px: float, share: float,
-                     n_tangent: int = 6, reach: float = 8.0) -> bool:
+def string_continues(absdiff: np.ndarray, pts: np.ndarray, edge: float | None, t: np.ndarray | None,
+                     width_px: float, share: float, reach: float = 8.0) -> bool:
     """Whether string-like contrast goes on past a walk's end: the end is then where the string
     fades below the segmentation's threshold (a faint stretch, the light behind it changing),
     not its free end.
 
-    Past the end's far half-contrast edge (:func:`end_edge`; ``reach`` px where the contrast
-    does not fall within it) by one string width, and for two widths + 4 px more, ``absdiff`` is sampled along 9 directions within
-    +-40 deg of the end tangent (over its last ``n_tangent`` px), but not within a width of the
-    walk itself; the string goes on when the best direction's mean reaches ``share``
-    (``end_contrast_min``) of the contrast along the path.
+    Past the end's far half-contrast edge (``edge``, ``t``: :func:`end_edge`, or
+    :func:`locate_end`'s; ``reach`` px where the contrast does not fall within it) by one string
+    width, and for two widths + 4 px more, ``absdiff`` is sampled along 9 directions within
+    +-40 deg of the end tangent ``t``, but not within a width of the walk itself; the string
+    goes on when the best direction's mean reaches ``share`` (``end_contrast_min``) of the
+    contrast along the path.
 
     Args:
         absdiff: (H, W) smoothed contrast. pts: (M, 2) (row, col) centreline, the end last.
+        edge: px past the last vertex, or None. t: (2,) unit end tangent, or None (then False).
         width_px: the string's width in the foreground. share: of the path's median contrast.
     """
-    edge, t = end_edge(absdiff, pts, n_tangent, reach)
     if t is None:
         return False
     edge = reach if edge is None else edge   # past a lump (a clay ball), not from inside it
@@ -105,26 +107,42 @@ def end_edge(absdiff: np.ndarray, pts: np.ndarray, n_tangent: int = 6, reach: fl
     return max(0.0, float(off[i - 1] + frac * (off[i] - off[i - 1]))), t
 
 
-def free_end_extension(absdiff: np.ndarray, pts: np.ndarray, n_tangent: int = 6, reach: float = 8.0) -> float:
-    """How far (px) the string's free end lies past the last vertex of its centreline.
+class FreeEnd(NamedTuple):
+    """Where a free end lies (:func:`locate_end`).
+
+    ``edge``: px from the last vertex to the far half-contrast edge along ``tangent`` (the unit
+    end tangent, (2,)), None where the contrast does not fall within reach (``tangent`` None too
+    where the path is too short); ``extension``: px from the last vertex to the end along the
+    tangent (>= 0); ``ball``: ``(centre (2,) (row, col), radius px)`` of a clay ball that ends
+    the path (its centre is then the end), or None.
+    """
+
+    edge: float | None
+    tangent: np.ndarray | None
+    extension: float
+    ball: tuple[np.ndarray, float] | None
+
+
+def locate_end(absdiff: np.ndarray, pts: np.ndarray, n_tangent: int = 6, reach: float = 8.0) -> FreeEnd:
+    """Where the string's free end lies, past (or, inside a ball, behind) the walk's last vertex.
 
     A skeleton stops short of a free end (by about the foreground's half-width, more under
     blur). The end is the half-contrast edge along the end tangent (:func:`end_edge`). Where
     the string is wider at its end than along its length, a lump ends it (:func:`end_lump`): a
-    ball (clay: the end is its centre, half its width back) or a sleeve longer than wide (a
-    pipe: the end is its far edge).
+    sleeve longer than wide (a pipe) ends at its far edge; a ball (clay) at its centre, half its
+    width back, and where it is at least 1.5 times as wide as the string the centre is found from
+    its contrast (:func:`_ball_centre`), not from the spur of its skeleton the walk ends on.
 
     Args:
         absdiff: (H, W) contrast image. pts: (M, 2) (row, col) centreline, the free end last.
-
-    Returns:
-        Extension in px (>= 0; 0 where the profile gives no edge within ``reach`` px).
     """
     edge, t = end_edge(absdiff, pts, n_tangent, reach)
     if edge is None:
-        return 0.0
+        return FreeEnd(None, t, 0.0, None)
     kind, w_lump = end_lump(absdiff, pts, edge, t)
-    return max(0.0, float(edge) - (w_lump / 2 if kind == "ball" else 0.0))
+    if kind != "ball":
+        return FreeEnd(edge, t, max(0.0, float(edge)), None)
+    return FreeEnd(edge, t, max(0.0, float(edge) - w_lump / 2), _ball_centre(absdiff, pts, edge, t, w_lump))
 
 
 def end_lump(absdiff: np.ndarray, pts: np.ndarray, edge: float, t: np.ndarray):
@@ -157,23 +175,21 @@ def end_lump(absdiff: np.ndarray, pts: np.ndarray, edge: float, t: np.ndarray):
     return ("sleeve" if length > 1.5 * w_lump else "ball"), w_lump
 
 
-def end_ball(absdiff: np.ndarray, pts: np.ndarray, n_tangent: int = 6, reach: float = 8.0):
-    """The centre (2,) (row, col) and radius (px) of a ball that ends the path, or None.
+def _ball_centre(absdiff: np.ndarray, pts: np.ndarray, edge: float, t: np.ndarray, w_lump: float):
+    """The centre (2,) (row, col) and radius (px) of the ball of width ``w_lump`` that ends the
+    path (far ``edge`` px past its last vertex along ``t``), or None.
 
     A skeleton forks inside a ball, and the walk ends on one spur or the other, frame by frame
-    (generalization seeds 0 and 7: the tip jittered by ~1 mm across and along the string). The
-    centre is found from the contrast, not the walk: near half the ball's width back from its
-    far edge (:func:`end_edge`, :func:`end_lump`), the deepest point of the foreground at half
-    the contrast there (the maximum of its distance transform, ``cv2.distanceTransform``; the
-    centroid of the top 1 px of it). None also where that centre is farther than
-    the radius from the walk's end (the walk does not end inside it: not a ball, or not this one).
+    (generalization seeds 0 and 7: the tip jittered by ~1 mm across and along the string). A
+    ball is a lump at least 1.5 times as wide as the string at the path's middle (clay balls in
+    the lab: 2-2.6 times; a light band of tape at the tip: 1.2 times). The centre is found from
+    the contrast, not the walk: near half the ball's width back from its far edge, the deepest
+    point of the foreground at half the contrast there (the maximum of its distance transform,
+    ``cv2.distanceTransform``; the centroid of the top 1 px of it). None also where that centre
+    is farther than the radius from the walk's end (the walk does not end inside it).
     """
-    edge, t = end_edge(absdiff, pts, n_tangent, reach)
-    if edge is None:
-        return None
-    kind, w_lump = end_lump(absdiff, pts, edge, t)
     j = len(pts) // 2
-    if kind != "ball" or w_lump < 1.5 * _fwhm_across(absdiff, pts[j], pts[min(j + 2, len(pts) - 1)] - pts[max(j - 2, 0)]):
+    if w_lump < 1.5 * _fwhm_across(absdiff, pts[j], pts[min(j + 2, len(pts) - 1)] - pts[max(j - 2, 0)]):
         return None   # a lump barely wider than the string (a band of tape at the tip) has no centre of its own
     r = w_lump / 2
     c0 = pts[-1] + (float(edge) - r) * t

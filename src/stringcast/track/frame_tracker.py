@@ -23,7 +23,7 @@ from .centreline import (
     refine_centreline,
     resample_by_arc,
 )
-from .ends import clean_end, end_ball, free_end_extension, string_continues
+from .ends import clean_end, locate_end, string_continues
 from .junctions import Zones, walk_skeleton
 from .markers import band_points, path_contrast
 
@@ -126,18 +126,19 @@ class FrameTracker:
         loop_back = np.hypot(*(end - g)) <= 2 * rho  # the walk came back to the grasp
         pts = odd_smooth(refine_centreline(absd, pts), 1.5, twice=True)
         if free_end:  # the skeleton stops short of a free end: move the end to the string's end
-            ext = free_end_extension(absd, pts)
-            free_end = not string_continues(absd, pts, self._width, st.end_contrast_min)
+            fe = locate_end(absd, pts)
+            free_end = not string_continues(absd, pts, fe.edge, fe.tangent, self._width, st.end_contrast_min)
         if free_end:  # a spur within two widths of a free end is its lump's (a clay ball forks the skeleton)
-            fold &= arc_length(pts) < arc_length(pts)[-1] - 2 * self._width
+            cum_px = arc_length(pts)
+            fold &= cum_px < cum_px[-1] - 2 * self._width
         branch = branch | fold
-        ball = end_ball(absd, pts) if free_end else None
+        ball = fe.ball if free_end else None
         if ball is not None:  # a ball's centre, from its contrast (the walk ends on either spur of its fork)
             k = len(pts) - int(np.argmax(np.hypot(*(pts[::-1] - ball[0]).T) > ball[1]))
             pts, bridged, branch = np.vstack([pts[:k], ball[0]]), np.r_[bridged[:k], False], np.r_[branch[:k], False]
-        elif free_end and ext > 0.05:
+        elif free_end and fe.extension > 0.05:
             t = pts[-1] - pts[-2]
-            pts = np.vstack([pts, pts[-1] + ext * t / max(float(np.hypot(*t)), 1e-9)])
+            pts = np.vstack([pts, pts[-1] + fe.extension * t / max(float(np.hypot(*t)), 1e-9)])
             bridged = np.r_[bridged, False]
             branch = np.r_[branch, False]
         cum_px = arc_length(pts)

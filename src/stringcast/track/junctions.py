@@ -16,9 +16,9 @@ least in total. The path crosses the zone along its skeleton. Zones are never ma
 visited, so the second pass through a crossing finds its way too (the one exit left).
 
 A choice is *ambiguous* (the ordering beyond it is a guess) when the runner-up bends less
-than ``margin`` more, unless every exit left is a spur (the string ends or folds there, which
-ever is taken: the spur not taken marks a fold); every pass through a zone where a choice was ambiguous, or where a real
-branch is never walked (something joins there), is marked ambiguous; one by a spur never
+than ``margin`` more, unless every exit left is a spur (the string ends or folds there,
+whichever is taken: the spur not taken marks a fold); every pass through a zone where a choice
+was ambiguous, or where a real branch is never walked (something joins there), is marked ambiguous; one by a spur never
 walked (1 px or more out of the zone) is marked *folded*: a fold of the string (a hairpin,
 a collapsed loop) leaves only a short spur and may hold length the walk does not measure.
 The tracker treats both like branches joining the walk (points past them are not valid from
