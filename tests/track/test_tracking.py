@@ -305,6 +305,27 @@ def test_clean_end_refuses_a_tip_curled_back_onto_the_string():
     assert not clean_end(straight, scene(straight)[0], np.array([0, 0]), faded, bg, st, touch_px=10.0)
 
 
+def test_clean_end_sees_a_dark_square_past_a_thin_light_rim():
+    """A dark string over a light board vanishes where it crosses onto a dark square, and a
+    7 px wide string's skeleton stops 3-4 px short of that: the walk's end lies on the light
+    rim before the square. A fixed +-4 px window then sees light on both sides, a window
+    scaled to the string's width sees the dark square past the end (not a free end). A true
+    free end on plain light background stays clean with the wide window."""
+    from stringcast.track.ends import clean_end
+
+    st = dataclasses.replace(TrackingSettings(), branch_min_px=6, end_contrast_min=0.4, end_edge_max=0.25)
+    bg = np.full((200, 200), 200.0)
+    bg[:, 100:] = 20.0  # a dark square from column 100
+    walk = np.column_stack([np.full(77, 60.0), np.arange(20.0, 97.0)])  # the skeleton ends at col 96
+    skel = np.zeros((200, 200), bool)
+    skel[walk[:, 0].astype(int), walk[:, 1].astype(int)] = True
+    absd = np.where(cv2.dilate(skel.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0, 120.0, 0.0)
+    assert clean_end(walk, skel, np.array([0, 0]), absd, bg, st, touch_px=10.0, width_px=2.0)
+    assert not clean_end(walk, skel, np.array([0, 0]), absd, bg, st, touch_px=10.0, width_px=7.0)
+    plain = np.full((200, 200), 200.0)
+    assert clean_end(walk, skel, np.array([0, 0]), absd, plain, st, touch_px=10.0, width_px=7.0)
+
+
 def test_smoothing_and_chords_keep_the_length_of_a_tight_loop():
     """On a loop of 5 px radius (a string looping at the lab's scale), plain Gaussian smoothing
     pulls the path inward and 4 px chords cut the bend: together 6 % short; twicing and the

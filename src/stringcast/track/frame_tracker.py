@@ -121,7 +121,7 @@ class FrameTracker:
         end = pts[-1].astype(int)
         free_end = bool(not end_cut(end, arm, (y0, x0), (H, W), self._width) and np.hypot(*(end - g)) > 2 * rho
                         and clean_end(pts, self._skel, self._skel_at, absd, self._bg, st,
-                                      st.end_touch_mm / 1000 / scale))
+                                      st.end_touch_mm / 1000 / scale, self._width))
         hidden_start = np.hypot(*(pts[0] - g)) > rho + 3 or self._fallback
         loop_back = np.hypot(*(end - g)) <= 2 * rho  # the walk came back to the grasp
         pts = odd_smooth(refine_centreline(absd, pts), 1.5, twice=True)
