@@ -216,10 +216,10 @@ def clean_end(pts: np.ndarray, skel: np.ndarray, skel_at: np.ndarray, absd: np.n
     (``absd`` over the last 3 px below ``end_contrast_min`` of the path's median: a blurred
     tip); or the background ``bg`` steps across the end (by ``end_edge_max`` x that median:
     the rim of an occluder or of a region the string left, such as a dark string crossing
-    onto a calibration board's black square). The step compares ``bg`` 2 px and more before
-    and past the end, out to ``width_px + 2`` px (at least 4): a wide string's skeleton
-    stops half a width short of its end, and a fixed +-4 px window there can lie wholly
-    on a marker's thin light rim.
+    onto a calibration board's black square). The step compares the medians of ``bg`` 2-4 px
+    before and past the string's own end, which lies half ``width_px`` past the skeleton's:
+    a window about the skeleton's end can lie wholly on a marker's thin light rim, and a
+    wider one reads a blotchy wall's gradient as a step.
 
     Args:
         pts: (M, 2) (row, col) walk, the end last (image px). skel: (h, w) bool skeleton whose
@@ -246,9 +246,8 @@ def clean_end(pts: np.ndarray, skel: np.ndarray, skel_at: np.ndarray, absd: np.n
     v = absd[ij[:, 0], ij[:, 1]]
     t = pts[-1] - pts[max(len(pts) - 7, 0)]
     t = t / max(float(np.hypot(*t)), 1e-9)
-    reach = max(4.0, width_px + 2.0)  # a string width and more each side: the skeleton stops short of the end
-    off = np.arange(-reach, reach + 1e-9)
-    b = map_coordinates(bg, (pts[-1] + off[:, None] * t).T, order=1, mode="nearest")
-    step = abs(float(np.median(b[off >= 2])) - float(np.median(b[off <= -2])))  # the background changes at the end:
+    ray = pts[-1] + (0.5 * width_px + np.arange(-4.0, 5.0))[:, None] * t  # about the string's own end, half a
+    b = map_coordinates(bg, ray.T, order=1, mode="nearest")  # width past the skeleton's
+    step = abs(float(np.median(b[6:])) - float(np.median(b[:3])))  # the background changes at the end:
     return (float(v[-3:].mean()) >= st.end_contrast_min * float(np.median(v))  # an occluder's rim
             and step < st.end_edge_max * float(np.median(v)))
