@@ -220,9 +220,13 @@ class FrameTracker:
         Seeds: the skeleton pixel nearest the grasp in each skeleton component within r0 px
         (at most 6), and up to 4 of the component's pixels just outside rho (a string that leaves
         the fingers in a short hook: the nearest pixel's walk takes the hook); the longest walk
-        wins, a walk from outside rho only if it is longer by 2 rho than the nearest pixel's. A walk is cut where it comes closest to the grasp
-        (dropping detours along slivers of the gripper's rim), then its vertices within rho
-        px of the grasp are dropped (there the string mixes with the fingertips).
+        wins, a walk from outside rho only if it is longer by 2 rho than the nearest pixel's.
+        When the nearest pixel's walk ends within r0 of the grasp (a stub: the string hooks off
+        the fingers and back along itself, one skeleton path), the walk from the stub's tip
+        back past the grasp competes as the nearest pixel's. A walk is cut where it comes
+        closest to the grasp (dropping detours along slivers of the gripper's rim), then its
+        vertices within rho px of the grasp are dropped (there the string mixes with the
+        fingertips).
         """
         x, y, w, h = cv2.boundingRect(fg.astype(np.uint8))
         if w == 0:
@@ -258,22 +262,26 @@ class FrameTracker:
         best, zones = None, Zones(skel, self._width, int(self.st.branch_min_px))
         for pair in sorted(seeds, key=lambda p: dist[p[0]])[:6]:
             penalty = 0.0   # once the nearest pixel's walk leaves the clear zone, a ring pixel's must beat it
-            for fallback, c in enumerate(pair):   # by 2 rho (a hook at the fingertips caught the first walk)
-                d0 = np.array([sy[c], sx[c]], float) - g
-                pts, bridged, amb, fold, passed = walk_skeleton(
-                    skel, (sy[c], sx[c]), self.st.max_gap_px, d0 if np.hypot(*d0) >= 1 else None, zones=zones)
-                cum = arc_length(pts)
-                head = np.nonzero(cum <= 2 * r0)[0]
-                j0 = int(head[np.argmin(np.hypot(*(pts[head] - g).T))])
-                far = np.nonzero(np.hypot(*(pts[j0:] - g).T) >= rho)[0]
-                if len(far) == 0:
-                    continue
-                j1 = j0 + int(far[0])
-                score = cum[-1] - cum[j1] - (penalty if fallback else 0.0)
-                if best is None or score > best[2]:
-                    b = bridged[j1:].copy()
-                    b[0] = False
-                    best = (pts[j1:], b, score, pts, fallback, amb, passed, fold)
+            starts = [(sy[c], sx[c]) for c in pair]   # by 2 rho (a hook at the fingertips caught the first walk)
+            for fallback, c in enumerate(starts):
+                d0 = np.array(c, float) - g
+                walks = [walk_skeleton(skel, c, self.st.max_gap_px, d0 if np.hypot(*d0) >= 1 else None, zones=zones)]
+                end = walks[0][0][-1]
+                if fallback == 0 and len(walks[0][0]) > 2 and np.hypot(*(end - g)) <= r0:  # a stub by the grasp: the
+                    walks.append(walk_skeleton(skel, tuple(end.astype(int)), self.st.max_gap_px, None, zones=zones))
+                for pts, bridged, amb, fold, passed in walks:  # string's start may hook off and back along itself
+                    cum = arc_length(pts)
+                    head = np.nonzero(cum <= 2 * r0)[0]
+                    j0 = int(head[np.argmin(np.hypot(*(pts[head] - g).T))])
+                    far = np.nonzero(np.hypot(*(pts[j0:] - g).T) >= rho)[0]
+                    if len(far) == 0:
+                        continue
+                    j1 = j0 + int(far[0])
+                    score = cum[-1] - cum[j1] - (penalty if fallback else 0.0)
+                    if best is None or score > best[2]:
+                        b = bridged[j1:].copy()
+                        b[0] = False
+                        best = (pts[j1:], b, score, pts, fallback, amb, passed, fold)
                 if not fallback:
                     penalty = 2 * rho
         if best is None:
