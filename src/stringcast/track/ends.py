@@ -206,7 +206,7 @@ def _ball_centre(absdiff: np.ndarray, pts: np.ndarray, edge: float, t: np.ndarra
 
 
 def clean_end(pts: np.ndarray, skel: np.ndarray, skel_at: np.ndarray, absd: np.ndarray, bg: np.ndarray,
-              st: TrackingSettings, touch_px: float, width_px: float = 3.0) -> bool:
+              st: TrackingSettings, touch_px: float) -> bool:
     """Whether a skeleton walk's last vertex is the string's free end.
 
     It is not when: the walk more than 3 ``touch_px`` back comes within ``touch_px`` of the
@@ -215,18 +215,13 @@ def clean_end(pts: np.ndarray, skel: np.ndarray, skel_at: np.ndarray, absd: np.n
     within 2 px (a walk stopped by its own visited pixels, in a loop); the contrast fades
     (``absd`` over the last 3 px below ``end_contrast_min`` of the path's median: a blurred
     tip); or the background ``bg`` steps across the end (by ``end_edge_max`` x that median:
-    the rim of an occluder or of a region the string left, such as a dark string crossing
-    onto a calibration board's black square). The step compares the medians of ``bg`` 2-4 px
-    before and past the string's own end, which lies half ``width_px`` past the skeleton's:
-    a window about the skeleton's end can lie wholly on a marker's thin light rim, and a
-    wider one reads a blotchy wall's gradient as a step.
+    the rim of an occluder or of a region the string left).
 
     Args:
         pts: (M, 2) (row, col) walk, the end last (image px). skel: (h, w) bool skeleton whose
             pixel (0, 0) is ``skel_at`` (row, col) in the image. absd, bg: (H, W) contrast and
             background. st: tracking settings (:class:`~stringcast.core.TrackingSettings`:
-            ``branch_min_px``, ``end_contrast_min``, ``end_edge_max``). touch_px: a clay
-            lump's size (px). width_px: the string's width in the image (px).
+            ``branch_min_px``, ``end_contrast_min``, ``end_edge_max``).
     """
     cum = arc_length(pts)
     back = pts[cum < cum[-1] - 3 * touch_px]
@@ -246,8 +241,8 @@ def clean_end(pts: np.ndarray, skel: np.ndarray, skel_at: np.ndarray, absd: np.n
     v = absd[ij[:, 0], ij[:, 1]]
     t = pts[-1] - pts[max(len(pts) - 7, 0)]
     t = t / max(float(np.hypot(*t)), 1e-9)
-    ray = pts[-1] + (0.5 * width_px + np.arange(-4.0, 5.0))[:, None] * t  # about the string's own end, half a
-    b = map_coordinates(bg, ray.T, order=1, mode="nearest")  # width past the skeleton's
+    ray = pts[-1] + np.arange(-4.0, 5.0)[:, None] * t  # behind and past the end
+    b = map_coordinates(bg, ray.T, order=1, mode="nearest")
     step = abs(float(np.median(b[6:])) - float(np.median(b[:3])))  # the background changes at the end:
     return (float(v[-3:].mean()) >= st.end_contrast_min * float(np.median(v))  # an occluder's rim
             and step < st.end_edge_max * float(np.median(v)))
