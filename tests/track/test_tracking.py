@@ -183,7 +183,8 @@ def test_centreline_walks_back_through_a_hook_the_string_starts_with(campaign, s
     comes back along itself, so its skeleton is one path from the hook's tip past the grasp
     and down. The walk from the pixel nearest the grasp turned into the hook (11 px) and no
     ring pixel lay 3 px from it: every rest frame was lost. The walk from the stub's tip
-    must be taken, as the string seen joining the grasp (no fallback)."""
+    must be taken, as a fallback: the hook may as well be a sliver of the fingers, so the
+    string's start is not taken as seen joining the grasp."""
     from stringcast.track.frame_tracker import FrameTracker
 
     tracker = FrameTracker(np.full((SIZE, SIZE), 100, np.float32), (1.0, 0.0), _calibration(), campaign,
@@ -192,7 +193,7 @@ def test_centreline_walks_back_through_a_hook_the_string_starts_with(campaign, s
     cv2.polylines(fg, [np.array([[40, 26], [50, 27], [53, 30], [53, 170]], np.int32)], False, 1, 3)  # (x, y)
     for g in ([19.0, 57.0], [20.0, 56.0], [19.0, 55.0]):
         pts = tracker._centreline(fg.astype(bool), np.array(g), 23.4, 5.86)[0]
-        assert pts[-1].tolist() == [169, 53] and len(pts) > 130 and not tracker._fallback
+        assert pts[-1].tolist() == [169, 53] and len(pts) > 130 and tracker._fallback
 
 
 def test_resample_by_arc_marks_gaps_and_ends():
@@ -320,31 +321,6 @@ def test_clean_end_refuses_a_tip_curled_back_onto_the_string():
     faded = absd.copy()
     faded[60, 137:140] = 2.0
     assert not clean_end(straight, scene(straight)[0], np.array([0, 0]), faded, bg, st, touch_px=10.0)
-
-
-def test_clean_end_sees_a_dark_square_past_a_thin_light_rim():
-    """A dark string over a light board vanishes where it crosses onto a dark square, and a
-    7 px wide string's skeleton stops 3-4 px short of that: the walk's end lies on the light
-    rim before the square. A window about the skeleton's end sees light on both sides; one
-    about the string's own end (half a width on) sees the dark square past it: not a free
-    end. A free end on plain background stays clean, and so does one on a wall with a smooth
-    gradient of 1 grey level per px at a string contrast of 30 (generalization seed 21's
-    blotchy wall), where medians over 2-9 px each side differ by 11 > 0.25 x 30."""
-    from stringcast.track.ends import clean_end
-
-    st = dataclasses.replace(TrackingSettings(), branch_min_px=6, end_contrast_min=0.4, end_edge_max=0.25)
-    bg = np.full((200, 200), 200.0)
-    bg[:, 100:] = 20.0  # a dark square from column 100
-    walk = np.column_stack([np.full(77, 60.0), np.arange(20.0, 97.0)])  # the skeleton ends at col 96
-    skel = np.zeros((200, 200), bool)
-    skel[walk[:, 0].astype(int), walk[:, 1].astype(int)] = True
-    absd = np.where(cv2.dilate(skel.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0, 120.0, 0.0)
-    assert clean_end(walk, skel, np.array([0, 0]), absd, bg, st, touch_px=10.0, width_px=0.0)
-    assert not clean_end(walk, skel, np.array([0, 0]), absd, bg, st, touch_px=10.0, width_px=7.0)
-    plain = np.full((200, 200), 200.0)
-    assert clean_end(walk, skel, np.array([0, 0]), absd, plain, st, touch_px=10.0, width_px=7.0)
-    gradient = np.tile(np.arange(200.0), (200, 1))
-    assert clean_end(walk, skel, np.array([0, 0]), absd / 4, gradient, st, touch_px=10.0, width_px=7.0)
 
 
 def test_smoothing_and_chords_keep_the_length_of_a_tight_loop():

@@ -121,7 +121,7 @@ class FrameTracker:
         end = pts[-1].astype(int)
         free_end = bool(not end_cut(end, arm, (y0, x0), (H, W), self._width) and np.hypot(*(end - g)) > 2 * rho
                         and clean_end(pts, self._skel, self._skel_at, absd, self._bg, st,
-                                      st.end_touch_mm / 1000 / scale, self._width))
+                                      st.end_touch_mm / 1000 / scale))
         hidden_start = np.hypot(*(pts[0] - g)) > rho + 3 or self._fallback
         loop_back = np.hypot(*(end - g)) <= 2 * rho  # the walk came back to the grasp
         pts = odd_smooth(refine_centreline(absd, pts), 1.5, twice=True)
@@ -222,8 +222,10 @@ class FrameTracker:
         the fingers in a short hook: the nearest pixel's walk takes the hook); the longest walk
         wins, a walk from outside rho only if it is longer by 2 rho than the nearest pixel's.
         When the nearest pixel's walk ends within r0 of the grasp (a stub: the string hooks off
-        the fingers and back along itself, one skeleton path), the walk from the stub's tip
-        back past the grasp competes as the nearest pixel's. A walk is cut where it comes
+        the fingers and back along itself in one skeleton path, or a sliver of the fingers), the
+        walk from the stub's tip back past the grasp competes as a ring pixel's: the string's
+        start is then not seen joining the grasp (taken as the string, generalization seed 11's
+        sliver put every point 20-30 mm along the string). A walk is cut where it comes
         closest to the grasp (dropping detours along slivers of the gripper's rim), then its
         vertices within rho px of the grasp are dropped (there the string mixes with the
         fingertips).
@@ -265,11 +267,13 @@ class FrameTracker:
             starts = [(sy[c], sx[c]) for c in pair]   # by 2 rho (a hook at the fingertips caught the first walk)
             for fallback, c in enumerate(starts):
                 d0 = np.array(c, float) - g
-                walks = [walk_skeleton(skel, c, self.st.max_gap_px, d0 if np.hypot(*d0) >= 1 else None, zones=zones)]
-                end = walks[0][0][-1]
-                if fallback == 0 and len(walks[0][0]) > 2 and np.hypot(*(end - g)) <= r0:  # a stub by the grasp: the
-                    walks.append(walk_skeleton(skel, tuple(end.astype(int)), self.st.max_gap_px, None, zones=zones))
-                for pts, bridged, amb, fold, passed in walks:  # string's start may hook off and back along itself
+                walks = [(walk_skeleton(skel, c, self.st.max_gap_px, d0 if np.hypot(*d0) >= 1 else None,
+                                        zones=zones), fallback)]
+                end = walks[0][0][0][-1]
+                if fallback == 0 and len(walks[0][0][0]) > 2 and np.hypot(*(end - g)) <= r0:  # a stub by the grasp:
+                    walks.append((walk_skeleton(  # the string may hook off and back along itself, or the stub
+                        skel, tuple(end.astype(int)), self.st.max_gap_px, None, zones=zones), 1))  # is a sliver
+                for (pts, bridged, amb, fold, passed), fb in walks:
                     cum = arc_length(pts)
                     head = np.nonzero(cum <= 2 * r0)[0]
                     j0 = int(head[np.argmin(np.hypot(*(pts[head] - g).T))])
@@ -277,13 +281,13 @@ class FrameTracker:
                     if len(far) == 0:
                         continue
                     j1 = j0 + int(far[0])
-                    score = cum[-1] - cum[j1] - (penalty if fallback else 0.0)
+                    score = cum[-1] - cum[j1] - (penalty if fb else 0.0)
                     if best is None or score > best[2]:
                         b = bridged[j1:].copy()
                         b[0] = False
-                        best = (pts[j1:], b, score, pts, fallback, amb, passed, fold)
-                if not fallback:
-                    penalty = 2 * rho
+                        best = (pts[j1:], b, score, pts, fb, amb, passed, fold)
+                    if not fb:
+                        penalty = 2 * rho
         if best is None:
             return None
         walk = best[3].astype(int)
