@@ -264,15 +264,14 @@ class FrameTracker:
         best, zones = None, Zones(skel, self._width, int(self.st.branch_min_px))
         for pair in sorted(seeds, key=lambda p: dist[p[0]])[:6]:
             penalty = 0.0   # once the nearest pixel's walk leaves the clear zone, a ring pixel's must beat it
-            starts = [(sy[c], sx[c]) for c in pair]   # by 2 rho (a hook at the fingertips caught the first walk)
-            for fallback, c in enumerate(starts):
-                d0 = np.array(c, float) - g
-                walks = [(walk_skeleton(skel, c, self.st.max_gap_px, d0 if np.hypot(*d0) >= 1 else None,
-                                        zones=zones), fallback)]
-                end = walks[0][0][0][-1]
-                if fallback == 0 and len(walks[0][0][0]) > 2 and np.hypot(*(end - g)) <= r0:  # a stub by the grasp:
-                    walks.append((walk_skeleton(  # the string may hook off and back along itself, or the stub
-                        skel, tuple(end.astype(int)), self.st.max_gap_px, None, zones=zones), 1))  # is a sliver
+            for fallback, c in enumerate(pair):   # by 2 rho (a hook at the fingertips caught the first walk)
+                d0 = np.array([sy[c], sx[c]], float) - g
+                walk = walk_skeleton(skel, (sy[c], sx[c]), self.st.max_gap_px, d0 if np.hypot(*d0) >= 1 else None,
+                                     zones=zones)
+                walks, end = [(walk, fallback)], walk[0][-1]
+                if fallback == 0 and len(walk[0]) > 2 and np.hypot(*(end - g)) <= r0:  # a stub by the grasp: the
+                    walks.append((walk_skeleton(  # string may hook off and back along itself, or the stub is a
+                        skel, tuple(end.astype(int)), self.st.max_gap_px, None, zones=zones), 1))  # sliver
                 for (pts, bridged, amb, fold, passed), fb in walks:
                     cum = arc_length(pts)
                     head = np.nonzero(cum <= 2 * r0)[0]
