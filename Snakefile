@@ -20,6 +20,7 @@ report: "workflow/report/workflow.rst"
 
 include: "workflow/rules/common.smk"
 include: "workflow/rules/plan.smk"
+include: "workflow/rules/video.smk"
 include: "workflow/rules/calibrate.smk"
 include: "workflow/rules/sync.smk"
 include: "workflow/rules/track.smk"

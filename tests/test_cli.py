@@ -1,6 +1,7 @@
 """The command line: every option says what it is and shows its default; --method picks the config."""
 import argparse
 import os
+import re
 from pathlib import Path
 
 import pytest
@@ -113,3 +114,25 @@ def test_each_config_gives_its_own_settings_in_one_process(tmp_path):
     other = _settings(run_first_plan, parser.parse_args(["--config", str(DEFAULT_CONFIG), "--config", str(mine),
                                                          "settings"]))
     assert paper["motion"].flight_window_s == 0.5 and other["motion"].flight_window_s == 0.7
+
+
+def test_stage_progress_prints_each_stage_start_and_end_from_snakemake_lines():
+    """``stringcast campaign``'s live lines: a stage's start, then its end with its own seconds and
+    the step count; stages side by side timed apart; ``all`` and other lines not printed."""
+    import io
+
+    from stringcast.campaign import StageProgress
+
+    out = io.StringIO()
+    p = StageProgress("campaign c, trial 1", out)
+    lines = ["Building DAG of jobs...", "rule decode:", "    input: data/c/trial_1/video.mkv", "    jobid: 3",
+             "rule calibrate:", "    jobid: 5", "Finished jobid: 5 (Rule: calibrate)", "1 of 3 steps (33%) done",
+             "Finished jobid: 3 (Rule: decode)", "2 of 3 steps (67%) done", "localrule all:", "    jobid: 0",
+             "Finished jobid: 0 (Rule: all)", "3 of 3 steps (100%) done"]
+    for line in lines:
+        p.feed(line + "\n")
+    shown = out.getvalue().splitlines()
+    assert shown[:2] == ["[campaign c, trial 1] decode ...", "[campaign c, trial 1] calibrate ..."]
+    assert re.fullmatch(r"\[campaign c, trial 1\] calibrate done, \d+\.\d s \(1/3\)", shown[2])
+    assert re.fullmatch(r"\[campaign c, trial 1\] decode done, \d+\.\d s \(2/3\)", shown[3])
+    assert len(shown) == 4 and p.tail[-1] == "3 of 3 steps (100%) done"

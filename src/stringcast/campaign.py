@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -33,18 +34,62 @@ from stringcast.execute import execute
 from stringcast.lab import write_calibration_clip
 
 
-def _snakemake(root: Path, targets: list[str], cores: int, config_files: list[Path]) -> float:
-    """Run the workflow for ``targets``; returns wall seconds. Raises RuntimeError on failure."""
+_RULE = re.compile(r"^(?:local)?rule (\w+):")
+_JOBID = re.compile(r"^\s+jobid: (\d+)")
+_FINISHED = re.compile(r"Finished jobid: (\d+)")
+_STEPS = re.compile(r"(\d+) of (\d+) steps")
+
+
+class StageProgress:
+    """A line when each workflow stage starts and one when it is done, with its seconds, from
+    Snakemake's own log lines as they come.
+
+    Snakemake announces a job with ``rule sync:`` and ``jobid: 6``, and ends it with ``Finished
+    jobid: 6 (...)`` and ``3 of 7 steps (43%) done``; this prints ``[label] sync ...`` and then
+    ``[label] sync done, 7.0 s (3/7)``. Stages side by side are timed each on its own. The
+    last 40 lines are kept for an error message."""
+
+    def __init__(self, label: str, out=None):
+        self.label, self.out = label, out or sys.stdout
+        self.rule: str | None = None
+        self.started: dict[str, tuple[str, float]] = {}
+        self.done: str | None = None
+        self.tail: list[str] = []
+
+    def feed(self, line: str) -> None:
+        self.tail = (self.tail + [line.rstrip()])[-40:]
+        if m := _RULE.match(line):
+            self.rule = m.group(1)
+        elif (m := _JOBID.match(line)) and self.rule:
+            if self.rule != "all":
+                self.started[m.group(1)] = (self.rule, time.perf_counter())
+                print(f"[{self.label}] {self.rule} ...", file=self.out, flush=True)
+            self.rule = None
+        elif m := _FINISHED.search(line):
+            self.done = m.group(1)
+        elif (m := _STEPS.search(line)) and self.done in self.started:
+            rule, t0 = self.started.pop(self.done)
+            print(f"[{self.label}] {rule} done, {time.perf_counter() - t0:.1f} s ({m.group(1)}/{m.group(2)})",
+                  file=self.out, flush=True)
+            self.done = None
+
+
+def _snakemake(root: Path, targets: list[str], cores: int, config_files: list[Path], label: str = "workflow") -> float:
+    """Run the workflow for ``targets``, printing a line per finished stage (:class:`StageProgress`);
+    returns wall seconds. Raises RuntimeError on failure, with Snakemake's last lines."""
     cmd = [sys.executable, "-m", "snakemake", *targets, "--cores", str(cores), "--snakefile",
-           str(root / "Snakefile"), "--directory", str(root), "--rerun-incomplete",
-           "--quiet", "rules"]
+           str(root / "Snakefile"), "--directory", str(root), "--rerun-incomplete"]
     if config_files:
         cmd += ["--configfile", *map(str, config_files)]
     t0 = time.perf_counter()
-    proc = subprocess.run(cmd, check=False, cwd=root)  # the return code is checked below, with the log named
+    progress = StageProgress(label)
+    with subprocess.Popen(cmd, cwd=root, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) as proc:
+        for line in proc.stdout:
+            progress.feed(line)
     if proc.returncode != 0:
+        tail = "\n".join(progress.tail[-15:])
         raise RuntimeError(f"snakemake failed for {' '.join(targets)} (exit {proc.returncode}); "
-                           f"see the logs under {root / 'results'}/<campaign>/logs/")
+                           f"see the logs under {root / 'results'}/<campaign>/logs/\n{tail}")
     return time.perf_counter() - t0
 
 
@@ -107,7 +152,8 @@ def run_campaign(name: str, string: str, target: str, config_path: str | Path | 
         os.replace(tmp, data / "calib")
         timings["lab_calibration_clip_s"] = time.perf_counter() - t0
 
-    timings["plan_first_s"] = _snakemake(root, [f"results/{name}/first_motion/motion.csv"], cores, given)
+    timings["plan_first_s"] = _snakemake(root, [f"results/{name}/first_motion/motion.csv"], cores, given,
+                                         f"campaign {name}")
     motion = root / "results" / name / "first_motion" / "motion.csv"
     rows = []
     for k in range(1, max_executions + 1):
@@ -128,7 +174,7 @@ def run_campaign(name: str, string: str, target: str, config_path: str | Path | 
             break
         timings[f"process_{k}_s"] = _snakemake(
             root, [f"results/{name}/trial_{k}/motion.csv"] + [f"results/{name}/trial_{k}/report.html"] * reports,
-            cores, given)
+            cores, given, f"campaign {name}, trial {k}")
         err = tracking_error_mm(root / "results" / name / f"trial_{k}" / "tracks.parquet",
                                 trial / "ground_truth.parquet")
         rows[-1].update(tracking_error_median_mm=err[0], tracking_error_p95_mm=err[1])
@@ -138,7 +184,8 @@ def run_campaign(name: str, string: str, target: str, config_path: str | Path | 
             break
         motion = root / "results" / name / f"trial_{k}" / "motion.csv"
     if reports:
-        timings["campaign_report_s"] = _snakemake(root, [f"results/{name}/report.html"], cores, given)
+        timings["campaign_report_s"] = _snakemake(root, [f"results/{name}/report.html"], cores, given,
+                                                  f"campaign {name}")
     report = root / "results" / name / "report.html"
     summary = {"campaign": name, "string": campaign.string_id, "target": campaign.target.name,
                "executions": len(rows), "hit": any(r["hit"] for r in rows), "trials": rows,

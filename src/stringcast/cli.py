@@ -63,6 +63,7 @@ def _settings(func, args) -> dict:
 
 
 STAGES = {
+    "decode": "stringcast.video:write_frame_cache",
     "calibrate": "stringcast.calibrate:run_calibration",
     "sync": "stringcast.sync:run_sync",
     "sweep": "stringcast.sync:run_sweep",
@@ -108,8 +109,20 @@ def cmd_calibrate(args):
         print(f"  {cal.verdict.status}: {reason}")
 
 
+def _frames(args) -> Path | None:
+    return Path(args.frames) if args.frames else None
+
+
+def cmd_decode(args):
+    from stringcast.core import find_video
+
+    out = _run("decode", args, find_video(Path(args.trial_dir)), Path(args.out))
+    print(f"decoded {find_video(Path(args.trial_dir))} once -> {out}")
+
+
 def cmd_sync(args):
-    doc = _run("sync", args, Path(args.trial_dir), Path(args.calibration), _campaign(args), Path(args.out))
+    doc = _run("sync", args, Path(args.trial_dir), Path(args.calibration), _campaign(args), Path(args.out),
+               _frames(args))
     extra = "" if doc.get("time_residual_ms") is None else \
         f", time residual {doc['time_residual_ms']:.2f} ms, arm match residual {doc['residual_mm'] or float('nan'):.1f} mm"
     print(f"sync: offset {doc['offset_s']:.6f} s ({doc['method']}{extra}), verdict {doc['verdict']['status']} "
@@ -118,7 +131,7 @@ def cmd_sync(args):
 
 def cmd_sweep(args):
     geo, clock = _run("sweep", args, Path(args.trial_dir), Path(args.calibration), Path(args.sync), _campaign(args),
-                      Path(args.out_geometry), Path(args.out_clock))
+                      Path(args.out_geometry), Path(args.out_clock), _frames(args))
     sw = geo.get("sweep", {})
     if sw.get("applied"):
         print(f"sweep: {sw['rows_used']} link rows in {sw['frames']} frames; mapping moved up to {sw['moved_p95_mm']:.2f} mm "
@@ -131,7 +144,7 @@ def cmd_sweep(args):
 
 def cmd_track(args):
     df = _run("track", args, Path(args.trial_dir), Path(args.calibration), Path(args.sync), _campaign(args),
-              Path(args.out), Path(args.overlay) if args.overlay else None)
+              Path(args.out), Path(args.overlay) if args.overlay else None, _frames(args))
     print(f"tracking: {df['frame'].nunique()} frames, valid share {df['valid'].mean():.3f} -> {args.out}")
 
 
@@ -275,6 +288,12 @@ SEED_HELP = "random seed of {}"
 def _add_analysis_commands(add) -> None:
     """calibrate, sync, sweep, track, estimate: one trial's analysis, stage by stage (the rules call them)."""
     campaign_help, trial_help = CAMPAIGN_HELP, TRIAL_HELP
+    frames_help = "the trial's frames.npy (`stringcast decode`), read instead of decoding the video"
+    sp = add("decode", cmd_decode, "decode the trial's video once -> frames.npy (+ frames.json), read by sync, "
+                                   "sweep and track")
+    sp.add_argument("--trial-dir", required=True, help=trial_help)
+    sp.add_argument("--out", required=True, help="frames.npy to write: (F, H, W) grey frames")
+
     sp = add("calibrate", cmd_calibrate, "ChArUco calibration of one trial -> calibration.json")
     sp.add_argument("--trial-dir", required=True, help=trial_help)
     sp.add_argument("--calib-dir", help="data/<campaign>/calib/: ChArUco clip or views for the camera intrinsics; "
@@ -287,6 +306,7 @@ def _add_analysis_commands(add) -> None:
     sp.add_argument("--calibration", required=True, help="the trial's calibration.json")
     sp.add_argument("--campaign", required=True, help=campaign_help)
     sp.add_argument("--out", required=True, help="sync.json to write (offset in s: controller time of frame 0)")
+    sp.add_argument("--frames", help=frames_help)
 
     sp = add("sweep", cmd_sweep, "the mapping and the clock refined by the arm's sweep -> geometry.json, clock.json")
     sp.add_argument("--trial-dir", required=True, help=trial_help)
@@ -295,6 +315,7 @@ def _add_analysis_commands(add) -> None:
     sp.add_argument("--campaign", required=True, help=campaign_help)
     sp.add_argument("--out-geometry", required=True, help="geometry.json to write (calibration.json's schema, refined)")
     sp.add_argument("--out-clock", required=True, help="clock.json to write (sync.json's schema, the offset corrected)")
+    sp.add_argument("--frames", help=frames_help)
 
     sp = add("track", cmd_track, "markerless tracking -> tracks.parquet")
     sp.add_argument("--trial-dir", required=True, help=trial_help)
@@ -305,6 +326,7 @@ def _add_analysis_commands(add) -> None:
                                                  "(m, robot frame; point 0 the grasp)")
     sp.add_argument("--overlay", help="tracking_overlay.png to write (tracked points on frames); "
                                       "if not given, none")
+    sp.add_argument("--frames", help=frames_help)
 
     sp = add("estimate", cmd_estimate, "fit the model's parameters -> params.json, fit.parquet")
     sp.add_argument("--tracks", required=True, help="the trial's tracks.parquet")

@@ -5,6 +5,8 @@
 rule sync:
     input:
         video=trial_video,
+        frames="results/{campaign}/trial_{trial}/frames.npy",
+        frames_meta="results/{campaign}/trial_{trial}/frames.json",
         meta="data/{campaign}/trial_{trial}/video.yaml",
         joints="data/{campaign}/trial_{trial}/joints.csv",
         calibration="results/{campaign}/trial_{trial}/calibration.json",
@@ -24,7 +26,7 @@ rule sync:
     shell:
         '{params.cli} sync --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '--calibration "{input.calibration}" --campaign "{input.campaign}" '
-        '--out "{output}" > "{log}" 2>&1'
+        '--out "{output}" --frames "{input.frames}" > "{log}" 2>&1'
 
 
 # The arm's sweep: the swing plane's mapping and the clock refined together by the arm's
@@ -34,6 +36,8 @@ rule sync:
 rule sweep:
     input:
         video=trial_video,
+        frames="results/{campaign}/trial_{trial}/frames.npy",
+        frames_meta="results/{campaign}/trial_{trial}/frames.json",
         joints="data/{campaign}/trial_{trial}/joints.csv",
         calibration="results/{campaign}/trial_{trial}/calibration.json",
         sync="results/{campaign}/trial_{trial}/sync.json",
@@ -54,4 +58,4 @@ rule sweep:
     shell:
         '{params.cli} sweep --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '--calibration "{input.calibration}" --sync "{input.sync}" --campaign "{input.campaign}" '
-        '--out-geometry "{output.geometry}" --out-clock "{output.clock}" > "{log}" 2>&1'
+        '--out-geometry "{output.geometry}" --out-clock "{output.clock}" --frames "{input.frames}" > "{log}" 2>&1'

@@ -5,6 +5,8 @@
 rule track:
     input:
         video=trial_video,
+        frames="results/{campaign}/trial_{trial}/frames.npy",
+        frames_meta="results/{campaign}/trial_{trial}/frames.json",
         joints="data/{campaign}/trial_{trial}/joints.csv",
         calibration="results/{campaign}/trial_{trial}/geometry.json",
         sync="results/{campaign}/trial_{trial}/clock.json",
@@ -31,4 +33,4 @@ rule track:
         '{params.cli} track --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '--calibration "{input.calibration}" --sync "{input.sync}" '
         '--campaign "{input.campaign}" --out "{output.tracks}" --overlay "{output.overlay}" '
-        '> "{log}" 2>&1'
+        '--frames "{input.frames}" > "{log}" 2>&1'

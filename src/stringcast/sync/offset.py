@@ -68,7 +68,7 @@ from stringcast.core import (
     read_video_meta,
     write_json,
 )
-from stringcast.video import check_frame_count, dropped_frames, open_video
+from stringcast.video import check_frame_count, dropped_frames, open_trial_video
 
 METHOD_TRIGGER = "video.yaml trigger_time_s"
 METHOD_VIDEO = "video: arm vs forward kinematics of joints.csv"
@@ -96,15 +96,17 @@ def _check_log_starts_still(t_j: np.ndarray, q_j: np.ndarray, arm, joints_csv: P
 
 
 def _video_doc(trial_dir: Path, calibration_json, campaign, meta: dict, video_yaml: Path, t_j: np.ndarray,
-               q_j: np.ndarray, sync: SyncSettings, board_check: BoardCheckSettings) -> tuple[dict, list[str]]:
-    """``sync.json``'s fields from the video (and the trigger time, if any), and the warnings besides the choice's."""
+               q_j: np.ndarray, sync: SyncSettings, board_check: BoardCheckSettings,
+               frames_npy: Path | None = None) -> tuple[dict, list[str]]:
+    """``sync.json``'s fields from the video (``frames_npy``: its decoded frames, if given) and the trigger time,
+    if any, and the warnings besides the choice's."""
     if calibration_json is None:
         raise DataError(f"{trial_dir}: sync.method 'video' needs the trial's calibration.json")
     _check_log_starts_still(t_j, q_j, campaign.arm, trial_dir / "joints.csv", sync)
     trigger = meta.get("trigger_time_s")
     cal = Calibration.from_json(calibration_json)
     est, failure = None, None
-    with open_video(find_video(trial_dir), fps=float(meta["fps"])) as video:
+    with open_trial_video(find_video(trial_dir), frames_npy, fps=float(meta["fps"])) as video:
         warns = check_frame_count(video, meta, video_yaml)
         try:
             est = estimate_offset(video, cal, campaign.arm, t_j, q_j, sync, board_check, trigger)
@@ -112,8 +114,9 @@ def _video_doc(trial_dir: Path, calibration_json, campaign, meta: dict, video_ya
             if trigger is None:
                 raise
             failure = str(exc)
-        # the file's own frame times, where a full pass (the coarse search) has read them already
-        stamps = video.timestamps_s if est is not None and est["coarse_offset_s"] is not None else None
+        # the file's own frame times, where a full pass (the decode, or the coarse search) has read them already
+        stamps = video.timestamps_s if frames_npy is not None or (est is not None and est["coarse_offset_s"]
+                                                                   is not None) else None
     choice = choose_offset(est, failure, trigger, sync)
     doc = {k: v for k, v in (est or {}).items() if k != "evidence"}
     doc.update(offset_s=choice["offset_s"], chosen=choice["chosen"], candidates=choice["candidates"],
@@ -138,7 +141,7 @@ def _video_doc(trial_dir: Path, calibration_json, campaign, meta: dict, video_ya
 
 
 def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaign, out_json: str | Path | None = None,
-             *, sync: SyncSettings, board_check: BoardCheckSettings) -> dict:
+             frames_npy: str | Path | None = None, *, sync: SyncSettings, board_check: BoardCheckSettings) -> dict:
     """Write ``sync.json`` for one trial (see the module docstring for its keys).
 
     Args:
@@ -146,6 +149,8 @@ def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaig
         calibration_json: the trial's ``calibration.json`` (needed by ``method: video``).
         campaign: :class:`~stringcast.core.specs.Campaign` (the arm, with its outline and speed limits).
         out_json: where to write ``sync.json`` (None: not written).
+        frames_npy: the video's frames decoded once (:func:`~stringcast.video.write_frame_cache`), read
+            instead of decoding the video; None: decode it.
         sync: sync settings (:class:`~stringcast.core.SyncSettings`).
         board_check: board-check settings (:class:`~stringcast.core.BoardCheckSettings`), for the
             check on the rest frames when ``calibration.json`` has none.
@@ -167,7 +172,7 @@ def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaig
         warns = []
     else:
         est_doc, warns = _video_doc(trial_dir, calibration_json, campaign, meta, video_yaml, t_j, q_j, sync,
-                                    board_check)
+                                    board_check, None if frames_npy is None else Path(frames_npy))
         doc.update(est_doc)
     if not math.isfinite(doc["offset_s"]):
         raise DataError(f"{trial_dir}: sync produced a non-finite offset")

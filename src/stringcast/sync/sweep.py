@@ -40,14 +40,15 @@ from stringcast.calibrate import (Calibration, board_corner_points, mapping_stan
                                   sweep_rows)
 from stringcast.core import (BoardCheckSettings, DataError, SweepSettings, Verdict, find_video, forward_kinematics,
                              read_joint_table, read_json, write_json)
-from stringcast.video import open_video
+from stringcast.video import open_trial_video
 
 
-def read_frames(path: Path, keep: np.ndarray) -> list[tuple[int, np.ndarray]]:
-    """(index, (H, W) grey image) of the frames ``keep`` (increasing), read in one forward pass
-    (:meth:`stringcast.video.base.VideoReader.read`: grabs without decoding over short gaps, seeks
-    over long ones where the codec allows)."""
-    with open_video(path) as video:
+def read_frames(path: Path, keep: np.ndarray, frames_npy: Path | None = None) -> list[tuple[int, np.ndarray]]:
+    """(index, (H, W) grey image) of the frames ``keep`` (increasing), from ``frames_npy`` (the video decoded
+    once, :func:`~stringcast.video.write_frame_cache`) if given, else read in one forward pass
+    (:meth:`stringcast.video.base.VideoReader.read`: grabs over short gaps, seeks over long ones where
+    the codec allows)."""
+    with open_trial_video(path, frames_npy) as video:
         return [(int(k), video.read(int(k))) for k in keep]
 
 
@@ -103,8 +104,8 @@ def _passed_through(calibration, sync_doc, reason):
 
 
 def run_sweep(trial_dir: str | Path, calibration_json: str | Path, sync_json: str | Path, campaign,
-              out_geometry: str | Path | None = None, out_clock: str | Path | None = None, *,
-              sweep: SweepSettings, board_check: BoardCheckSettings) -> tuple[dict, dict]:
+              out_geometry: str | Path | None = None, out_clock: str | Path | None = None,
+              frames_npy: str | Path | None = None, *, sweep: SweepSettings, board_check: BoardCheckSettings) -> tuple[dict, dict]:
     """Refine one trial's mapping and clock by the arm's sweep; write ``geometry.json`` and ``clock.json``.
 
     Args:
@@ -112,6 +113,8 @@ def run_sweep(trial_dir: str | Path, calibration_json: str | Path, sync_json: st
         calibration_json, sync_json: the trial's ``calibration.json`` and ``sync.json``.
         campaign: :class:`~stringcast.core.specs.Campaign` (the arm's outline, the board, the string).
         out_geometry, out_clock: where to write them (None: not written).
+        frames_npy: the video's frames decoded once (:func:`~stringcast.video.write_frame_cache`); None:
+            decode the video.
         sweep, board_check: settings (:class:`~stringcast.core.SweepSettings`; the link profiles').
 
     Returns:
@@ -135,7 +138,7 @@ def run_sweep(trial_dir: str | Path, calibration_json: str | Path, sync_json: st
             raise DataError(f"{calibration_json}: no swing-plane point the string can reach (from {trial_dir}/joints.csv)"
                             " maps into the image")
         keep = np.unique(np.linspace(0, len(t_frames) - 1, sweep.frames).astype(int))
-        frames = read_frames(find_video(trial_dir), keep)
+        frames = read_frames(find_video(trial_dir), keep, None if frames_npy is None else Path(frames_npy))
         corners = board_corner_points(calibration, campaign.setup.board.make())
         fit, rows = _fit(calibration, frames, campaign, t_frames, t_j, q_j, corners, sweep, board_check)
         if fit is None:

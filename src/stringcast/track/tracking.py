@@ -64,7 +64,7 @@ from .overlay import write_overlay
 from .quality import frames_judged, tracking_quality
 from stringcast.video import prefetch
 from stringcast.sync import frame_times
-from stringcast.video import open_video
+from stringcast.video import open_trial_video
 
 
 def _joint_px(cal: Calibration, arm, q: np.ndarray) -> np.ndarray:
@@ -72,7 +72,7 @@ def _joint_px(cal: Calibration, arm, q: np.ndarray) -> np.ndarray:
     return cal.robot_to_pixel(pts.reshape(-1, 2)).reshape(pts.shape)
 
 
-def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, overlay_png=None, *,
+def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, overlay_png=None, frames_npy=None, *,
                  tracking: TrackingSettings) -> pd.DataFrame:
     """Track the string in one trial; write ``tracks.parquet``, ``tracking.json`` beside it (the
     tracking's self-measures and verdict, :mod:`stringcast.track.quality`) and the overlay PNG.
@@ -83,6 +83,8 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
         campaign: the resolved campaign (arm, string length L and n).
         out_parquet: where to write ``tracks.parquet``.
         overlay_png: if given, a strip of ``overlay_frames`` frames with the tracked points.
+        frames_npy: the video's frames decoded once (:func:`~stringcast.video.write_frame_cache`), read
+            instead of decoding the video; None: decode it (the background's frames a second time).
         tracking: tracking settings (:class:`~stringcast.core.TrackingSettings`).
 
     Returns:
@@ -102,7 +104,7 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
     t_j, q_j, _ = read_joint_table(trial_dir / "joints.csv", n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
     arm, n = campaign.arm, campaign.string.n_points
     vpath = find_video(trial_dir)
-    video = open_video(vpath)
+    video = open_trial_video(vpath, frames_npy)
     if (video.width, video.height) != tuple(cal.image_size):
         raise DataError(f"{video.path}: frames are {video.width}x{video.height}, {calibration_json} is for "
                         f"{cal.image_size[0]}x{cal.image_size[1]}")
@@ -129,7 +131,7 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
     moving, rest = frames_judged(t, in_log, t_start, t_end)   # the frames tracking.json judges
     pre = np.nonzero(rest)[0][-int(st.rest_frames):]
     frames = prefetch(video, int(st.prefetch_frames))  # the main pass decodes while the background is built
-    second = open_video(vpath)
+    second = open_trial_video(vpath, frames_npy)
     try:
         bg, noise = build_background(second, samples.astype(int), pre, lambda k: draw_arm_mask(
             (video.height, video.width), jpx[k], campaign.arm, st, scale, grow_px=2.0))

@@ -1,0 +1,134 @@
+"""A trial's video decoded once: the frames as one NumPy array on disk, read back by memory map.
+
+Sync, the arm's sweep and tracking all read the trial's video. Decoding it costs the same for
+each of them: even the sweep's 40 frames spread over the clip decode every frame between them
+(an FFV1 seek in Matroska costs about 30 decodes), so the trial's three stages decoded the clip
+three times, and tracking's background a fourth time in part. The workflow's ``decode`` rule
+now decodes it once into ``frames.npy`` and the stages read frames from it at the cost of a
+memory copy. The file is F x H x W pixels (823 MB for 823 frames of 1024 x 1024, 8-bit): the
+price of not decoding again when a later stage reruns.
+
+* ``frames.npy``: (F, H, W) ``uint8`` or ``uint16``, the grey frames exactly as
+  :func:`~stringcast.video.container.open_video` gives them, in NumPy's ``.npy`` format (any
+  NumPy opens it: ``np.load(path, mmap_mode="r")``);
+* ``frames.json`` beside it: the source video's path, size and modification time (a cache of
+  another or a changed video is refused), fps, bit depth and per-frame timestamps.
+"""
+from __future__ import annotations
+
+import json
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from stringcast.core import DataError
+
+from .base import VideoReader
+from .container import open_video
+
+
+def _sidecar(frames_npy: Path) -> Path:
+    return Path(frames_npy).with_suffix(".json")
+
+
+def _source_stamp(video_path: Path) -> dict:
+    """What identifies the source video: its path, byte size and modification time (ns)."""
+    st = Path(video_path).stat()
+    return {"path": str(video_path), "bytes": int(st.st_size), "mtime_ns": int(st.st_mtime_ns)}
+
+
+def write_frame_cache(video_path: str | Path, frames_npy: str | Path, fps: float | None = None,
+                      progress: bool | None = None) -> Path:
+    """Decode ``video_path`` once into ``frames_npy`` (+ ``frames.json``); returns ``frames_npy``.
+
+    Args:
+        video_path: any :func:`~stringcast.video.container.open_video` source.
+        frames_npy: the ``.npy`` file to write; written under a temporary name and renamed, so
+            an interrupted decode leaves no half cache.
+        fps: the frame rate for a source that has none (frame folders), as ``open_video``.
+        progress: show a tqdm bar (default: when stderr is a terminal).
+
+    Raises:
+        DataError: the video is missing, unreadable or truncated (named by the reader).
+    """
+    from tqdm import tqdm
+
+    video_path, frames_npy = Path(video_path), Path(frames_npy)
+    frames_npy.parent.mkdir(parents=True, exist_ok=True)
+    tmp = frames_npy.with_name(f".{frames_npy.name}.partial")
+    with open_video(video_path, fps=fps) as video:
+        out = np.lib.format.open_memmap(tmp, mode="w+", dtype=video.dtype,
+                                        shape=(video.n_frames, video.height, video.width))
+        try:
+            show = sys.stderr.isatty() if progress is None else progress
+            for k, frame in tqdm(video, total=video.n_frames, desc="decode", unit="frame", disable=not show):
+                out[k] = frame
+            out.flush()
+            stamps = video.timestamps_s               # recorded by the pass above: no second decode
+            meta = {"source": _source_stamp(video_path), "fps": video.fps, "bit_depth": int(video.bit_depth),
+                    "frames": int(video.n_frames), "width": int(video.width), "height": int(video.height),
+                    "timestamps_s": None if stamps is None else [float(t) for t in stamps]}
+        finally:
+            del out
+    side_tmp = _sidecar(tmp)
+    side_tmp.write_text(json.dumps(meta))
+    os.replace(side_tmp, _sidecar(frames_npy))
+    os.replace(tmp, frames_npy)
+    return frames_npy
+
+
+class CachedVideo(VideoReader):
+    """The frames of :func:`write_frame_cache`, with the :class:`VideoReader` interface.
+
+    :meth:`read` is a copy out of the memory map (any frame, any order, no decode); the
+    attributes are the source reader's, as recorded.
+
+    Raises:
+        DataError: the cache or its ``frames.json`` is missing or malformed, or it was made
+            from another video than ``video_path`` or from an earlier version of it.
+    """
+
+    def __init__(self, frames_npy: str | Path, video_path: str | Path):
+        self.path = Path(video_path)
+        frames_npy = Path(frames_npy)
+        try:
+            meta = json.loads(_sidecar(frames_npy).read_text())
+            self._frames = np.load(frames_npy, mmap_mode="r")
+        except (OSError, ValueError) as exc:
+            raise DataError(f"{frames_npy}: not a readable frame cache ({exc}); delete it to decode the video "
+                            "again") from exc
+        if meta.get("source") != _source_stamp(self.path):
+            raise DataError(f"{frames_npy}: made from {meta.get('source', {}).get('path')} as it was then, not from "
+                            f"{self.path} as it is now; delete it to decode the video again")
+        if self._frames.ndim != 3 or self._frames.shape[0] != meta["frames"]:
+            raise DataError(f"{frames_npy}: holds {self._frames.shape}, {_sidecar(frames_npy)} says "
+                            f"{meta['frames']} frames")
+        self.n_frames, self.height, self.width = (int(x) for x in self._frames.shape)
+        self.dtype = self._frames.dtype
+        self.fps = meta["fps"]
+        self.bit_depth = int(meta["bit_depth"])
+        self._stamps = None if meta["timestamps_s"] is None else np.asarray(meta["timestamps_s"], float)
+
+    @property
+    def timestamps_s(self) -> np.ndarray | None:
+        return self._stamps
+
+    def read(self, index: int) -> np.ndarray:
+        return np.array(self._frames[self._check_index(index)])
+
+    def close(self) -> None:
+        self._frames = None
+
+
+def open_trial_video(video_path: str | Path, frames_npy: str | Path | None = None,
+                     fps: float | None = None) -> VideoReader:
+    """``frames_npy``'s :class:`CachedVideo` of ``video_path`` when given, else
+    :func:`~stringcast.video.container.open_video` (``fps`` as there; a cache has its own)."""
+    if frames_npy is None:
+        return open_video(video_path, fps=fps)
+    video = CachedVideo(frames_npy, video_path)
+    if video.fps is None:
+        video.fps = fps
+    return video
