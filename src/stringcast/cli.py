@@ -144,7 +144,7 @@ def cmd_sweep(args):
 
 def cmd_track(args):
     df = _run("track", args, Path(args.trial_dir), Path(args.calibration), Path(args.sync), _campaign(args),
-              Path(args.out), Path(args.overlay) if args.overlay else None, _frames(args))
+              Path(args.out), Path(args.overlay) if args.overlay else None, _frames(args), int(args.workers))
     print(f"tracking: {df['frame'].nunique()} frames, valid share {df['valid'].mean():.3f} -> {args.out}")
 
 
@@ -327,6 +327,7 @@ def _add_analysis_commands(add) -> None:
     sp.add_argument("--overlay", help="tracking_overlay.png to write (tracked points on frames); "
                                       "if not given, none")
     sp.add_argument("--frames", help=frames_help)
+    sp.add_argument("--workers", default=1, help="processes tracking frames side by side (with --frames)")
 
     sp = add("estimate", cmd_estimate, "fit the model's parameters -> params.json, fit.parquet")
     sp.add_argument("--tracks", required=True, help="the trial's tracks.parquet")

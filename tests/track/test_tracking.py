@@ -228,7 +228,7 @@ def test_prefetch_keeps_order_and_raises_reader_errors():
 
 
 # ---------------------------------------------------------------------------- virtual lab
-def test_tracking_on_a_tiny_lab_render(tmp_path, config, settings):
+def test_tracking_on_a_tiny_lab_render(tmp_path, config, settings, monkeypatch):
     """The whole metrology chain (calibration, sync, tracking) on a short lab clip."""
     trial, res, campaign, cfg = tiny_lab_trial(tmp_path, config)
     cal = Calibration.from_json(res / "calibration.json")
@@ -248,6 +248,18 @@ def test_tracking_on_a_tiny_lab_render(tmp_path, config, settings):
     # measured 0.88 / 1.91 mm at 1.3 mm per px; the margin absorbs changes to the lab's renderer
     assert np.median(e) < 1.5 and np.percentile(e, 95) < 4.0, (np.median(e), np.percentile(e, 95))
     assert read_json(res / "tracking.json")["verdict"]["status"] == "ok"   # within the goals: no false alarm
+
+    # the video decoded once and tracked by two worker processes: the same table and overlay
+    from stringcast.track import parallel
+    from stringcast.video import write_frame_cache
+
+    monkeypatch.setattr(parallel, "CHUNK", 4)      # several chunks even on this short clip
+    assert df.frame.nunique() > 2 * parallel.CHUNK
+    frames = write_frame_cache(trial / "video.mkv", res / "frames.npy")
+    par = run_tracking(trial, res / "calibration.json", res / "sync.json", campaign, res / "tracks_2.parquet",
+                       res / "overlay_2.png", frames, 2, tracking=settings.tracking)
+    pd.testing.assert_frame_equal(par, df)
+    assert (res / "overlay_2.png").read_bytes() == (res / "overlay.png").read_bytes()
 
 
 @pytest.mark.parametrize("end", ["plain", "ball", "small ball", "sleeve"])

@@ -25,6 +25,7 @@ rule track:
         "results/{campaign}/benchmarks/track_{trial}.tsv"
     conda:
         "../envs/stringcast.yaml"
+    threads: 4  # worker processes over the decoded frames; capped at --cores when run locally
     params:
         cli=CLI,
         settings=stage_settings("track"),
@@ -33,4 +34,4 @@ rule track:
         '{params.cli} track --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '--calibration "{input.calibration}" --sync "{input.sync}" '
         '--campaign "{input.campaign}" --out "{output.tracks}" --overlay "{output.overlay}" '
-        '--frames "{input.frames}" > "{log}" 2>&1'
+        '--frames "{input.frames}" --workers {threads} > "{log}" 2>&1'

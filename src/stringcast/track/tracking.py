@@ -60,11 +60,12 @@ from stringcast.calibrate import Calibration
 from stringcast.core import (DataError, find_video, joint_log_span, read_joint_table, read_json, write_json,
                              write_parquet)
 from .frame_tracker import FrameTracker
+from .parallel import track_frames
 from .overlay import write_overlay
 from .quality import frames_judged, tracking_quality
 from stringcast.video import prefetch
 from stringcast.sync import frame_times
-from stringcast.video import open_trial_video
+from stringcast.video import CachedVideo, open_trial_video
 
 
 def _joint_px(cal: Calibration, arm, q: np.ndarray) -> np.ndarray:
@@ -72,8 +73,8 @@ def _joint_px(cal: Calibration, arm, q: np.ndarray) -> np.ndarray:
     return cal.robot_to_pixel(pts.reshape(-1, 2)).reshape(pts.shape)
 
 
-def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, overlay_png=None, frames_npy=None, *,
-                 tracking: TrackingSettings) -> pd.DataFrame:
+def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, overlay_png=None, frames_npy=None,
+                 workers: int = 1, *, tracking: TrackingSettings) -> pd.DataFrame:
     """Track the string in one trial; write ``tracks.parquet``, ``tracking.json`` beside it (the
     tracking's self-measures and verdict, :mod:`stringcast.track.quality`) and the overlay PNG.
 
@@ -85,6 +86,8 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
         overlay_png: if given, a strip of ``overlay_frames`` frames with the tracked points.
         frames_npy: the video's frames decoded once (:func:`~stringcast.video.write_frame_cache`), read
             instead of decoding the video; None: decode it (the background's frames a second time).
+        workers: processes that track frames side by side, from ``frames_npy`` only (a video being
+            decoded is tracked in this process, as it is decoded); the same result for any number.
         tracking: tracking settings (:class:`~stringcast.core.TrackingSettings`).
 
     Returns:
@@ -95,8 +98,6 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
         DataError: missing or malformed inputs (named), or a frame count or image size that
             disagrees with ``sync.json`` / ``calibration.json``.
     """
-    from tqdm import tqdm
-
     trial_dir = Path(trial_dir)
     st = tracking
     cal = Calibration.from_json(calibration_json)
@@ -130,13 +131,14 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
     samples = background_samples(bwin, int(st.background_samples), int(st.background_bursts))
     moving, rest = frames_judged(t, in_log, t_start, t_end)   # the frames tracking.json judges
     pre = np.nonzero(rest)[0][-int(st.rest_frames):]
-    frames = prefetch(video, int(st.prefetch_frames))  # the main pass decodes while the background is built
-    second = open_trial_video(vpath, frames_npy)
+    frames = None if isinstance(video, CachedVideo) else prefetch(video, int(st.prefetch_frames))
+    second = video if frames is None else open_trial_video(vpath, frames_npy)  # decoding: the main pass runs ahead
     try:
         bg, noise = build_background(second, samples.astype(int), pre, lambda k: draw_arm_mask(
             (video.height, video.width), jpx[k], campaign.arm, st, scale, grow_px=2.0))
     finally:
-        second.close()
+        if second is not video:
+            second.close()
     tracker = FrameTracker(bg, noise, cal, campaign, st)
 
     xy = np.full((F, n + 1, 2), np.nan)
@@ -147,12 +149,9 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
     xy[~in_log, 0] = np.nan
     shows = set(np.round(np.linspace(win[0], win[-1], int(st.overlay_frames))).astype(int)) if overlay_png else set()
     shown = []
-    for k, frame in tqdm(frames, total=F, desc="tracking", unit="frame", disable=not sys.stderr.isatty()):
-        if not in_log[k]:
-            continue
-        ft = tracker.track(frame, jpx[k])
+    for k, ft, frame in track_frames(tracker, video, frames, jpx, np.flatnonzero(in_log), shows, workers):
         xy[k, 1:], valid[k, 1:], mismatch[k] = ft.positions, ft.valid, ft.length_mismatch_m
-        if k in shows:
+        if frame is not None:
             shown.append((k, frame, ft.path_px, cal.robot_to_pixel(np.nan_to_num(xy[k])), valid[k].copy()))
     video.close()
     df = pd.DataFrame({
