@@ -122,7 +122,7 @@ def cmd_decode(args):
 
 def cmd_sync(args):
     doc = _run("sync", args, Path(args.trial_dir), Path(args.calibration), _campaign(args), Path(args.out),
-               _frames(args))
+               _frames(args), int(args.workers))
     extra = "" if doc.get("time_residual_ms") is None else \
         f", time residual {doc['time_residual_ms']:.2f} ms, arm match residual {doc['residual_mm'] or float('nan'):.1f} mm"
     print(f"sync: offset {doc['offset_s']:.6f} s ({doc['method']}{extra}), verdict {doc['verdict']['status']} "
@@ -307,6 +307,7 @@ def _add_analysis_commands(add) -> None:
     sp.add_argument("--campaign", required=True, help=campaign_help)
     sp.add_argument("--out", required=True, help="sync.json to write (offset in s: controller time of frame 0)")
     sp.add_argument("--frames", help=frames_help)
+    sp.add_argument("--workers", default=1, help="processes matching frames side by side (with --frames)")
 
     sp = add("sweep", cmd_sweep, "the mapping and the clock refined by the arm's sweep -> geometry.json, clock.json")
     sp.add_argument("--trial-dir", required=True, help=trial_help)

@@ -105,6 +105,19 @@ def test_offset_from_the_video_within_half_a_millisecond(lab_trial, settings, tr
     if trigger == "wrong by 25 ms":
         assert doc["trigger_disagrees"]
     assert read_json(root / f"sync_{d.name}.json")["offset_s"] == doc["offset_s"]
+    if trigger == "wrong by 25 ms":   # the video decoded once, matched by two worker processes: the same document
+        from stringcast.sync import video_offset
+        from stringcast.video import write_frame_cache
+
+        frames = write_frame_cache(trial / "video.mkv", root / "frames_sync.npy")
+        with pytest.MonkeyPatch.context() as mp, warnings.catch_warnings(record=True):
+            mp.setattr(video_offset, "FRAMES_PER_TASK", 4)    # several tasks on this short clip
+            warnings.simplefilter("always")
+            again = run_sync(d, root / "calibration.json", campaign, None, frames, 2, **_kw(settings))
+        assert doc["frames_used"] > 2 * 4
+        assert {k: v for k, v in again.items() if k != "dropped_frames"} == \
+            {k: v for k, v in doc.items() if k != "dropped_frames"}
+        assert again["dropped_frames"] == []      # the decoded frames' timestamps are always checked
 
 
 def test_a_misplaced_board_neither_biases_the_offset_nor_goes_unnoticed(lab_trial, settings):

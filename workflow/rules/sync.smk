@@ -19,6 +19,7 @@ rule sync:
         "results/{campaign}/benchmarks/sync_{trial}.tsv"
     conda:
         "../envs/stringcast.yaml"
+    threads: 4  # worker processes over the decoded frames; capped at --cores when run locally
     params:
         cli=CLI,
         settings=stage_settings("sync"),
@@ -26,7 +27,7 @@ rule sync:
     shell:
         '{params.cli} sync --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '--calibration "{input.calibration}" --campaign "{input.campaign}" '
-        '--out "{output}" --frames "{input.frames}" > "{log}" 2>&1'
+        '--out "{output}" --frames "{input.frames}" --workers {threads} > "{log}" 2>&1'
 
 
 # The arm's sweep: the swing plane's mapping and the clock refined together by the arm's

@@ -97,7 +97,7 @@ def _check_log_starts_still(t_j: np.ndarray, q_j: np.ndarray, arm, joints_csv: P
 
 def _video_doc(trial_dir: Path, calibration_json, campaign, meta: dict, video_yaml: Path, t_j: np.ndarray,
                q_j: np.ndarray, sync: SyncSettings, board_check: BoardCheckSettings,
-               frames_npy: Path | None = None) -> tuple[dict, list[str]]:
+               frames_npy: Path | None = None, workers: int = 1) -> tuple[dict, list[str]]:
     """``sync.json``'s fields from the video (``frames_npy``: its decoded frames, if given) and the trigger time,
     if any, and the warnings besides the choice's."""
     if calibration_json is None:
@@ -109,7 +109,7 @@ def _video_doc(trial_dir: Path, calibration_json, campaign, meta: dict, video_ya
     with open_trial_video(find_video(trial_dir), frames_npy, fps=float(meta["fps"])) as video:
         warns = check_frame_count(video, meta, video_yaml)
         try:
-            est = estimate_offset(video, cal, campaign.arm, t_j, q_j, sync, board_check, trigger)
+            est = estimate_offset(video, cal, campaign.arm, t_j, q_j, sync, board_check, trigger, workers)
         except DataError as exc:
             if trigger is None:
                 raise
@@ -141,7 +141,8 @@ def _video_doc(trial_dir: Path, calibration_json, campaign, meta: dict, video_ya
 
 
 def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaign, out_json: str | Path | None = None,
-             frames_npy: str | Path | None = None, *, sync: SyncSettings, board_check: BoardCheckSettings) -> dict:
+             frames_npy: str | Path | None = None, workers: int = 1, *, sync: SyncSettings,
+             board_check: BoardCheckSettings) -> dict:
     """Write ``sync.json`` for one trial (see the module docstring for its keys).
 
     Args:
@@ -151,6 +152,7 @@ def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaig
         out_json: where to write ``sync.json`` (None: not written).
         frames_npy: the video's frames decoded once (:func:`~stringcast.video.write_frame_cache`), read
             instead of decoding the video; None: decode it.
+        workers: processes matching the decoded frames side by side (with ``frames_npy``; the same result).
         sync: sync settings (:class:`~stringcast.core.SyncSettings`).
         board_check: board-check settings (:class:`~stringcast.core.BoardCheckSettings`), for the
             check on the rest frames when ``calibration.json`` has none.
@@ -172,7 +174,7 @@ def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaig
         warns = []
     else:
         est_doc, warns = _video_doc(trial_dir, calibration_json, campaign, meta, video_yaml, t_j, q_j, sync,
-                                    board_check, None if frames_npy is None else Path(frames_npy))
+                                    board_check, None if frames_npy is None else Path(frames_npy), workers)
         doc.update(est_doc)
     if not math.isfinite(doc["offset_s"]):
         raise DataError(f"{trial_dir}: sync produced a non-finite offset")

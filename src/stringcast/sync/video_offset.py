@@ -15,6 +15,11 @@ import numpy as np
 from . import arm_match as sync_arm
 from stringcast.calibrate import check_board_to_robot
 from stringcast.core import BoardCheckSettings, DataError, SyncSettings, joints_at, motion_window
+from stringcast.core.forked import chunked, forked_map
+from stringcast.video import CachedVideo
+
+FRAMES_PER_TASK = 16
+"""Frames one worker matches per task in the fine search (a few ms each)."""
 
 
 @dataclass(frozen=True)
@@ -45,7 +50,8 @@ class VideoEvidence:
 
 
 def estimate_offset(video, calibration, arm, t_j: np.ndarray, q_j: np.ndarray,
-                    sync: SyncSettings, board_check: BoardCheckSettings, trigger_s: float | None = None) -> dict:
+                    sync: SyncSettings, board_check: BoardCheckSettings, trigger_s: float | None = None,
+                    workers: int = 1) -> dict:
     """Offset of frame 0 on the controller clock, from the arm seen in the video.
 
     Args:
@@ -57,6 +63,8 @@ def estimate_offset(video, calibration, arm, t_j: np.ndarray, q_j: np.ndarray,
             the check on the rest frames when the calibration has none.
         trigger_s: the recording's trigger time, a starting guess only (whether it or the estimate is used is
             :func:`stringcast.sync.confidence.choose_offset`'s choice).
+        workers: processes matching frames side by side, where ``video`` is a decoded
+            :class:`~stringcast.video.CachedVideo` (the same result for any number).
 
     Steps: the board check on the median of the rest frames gives the translation d
     between where the still arm is seen and its FK position; the strips are moved by d
@@ -102,7 +110,7 @@ def estimate_offset(video, calibration, arm, t_j: np.ndarray, q_j: np.ndarray,
     coarse = partial(_coarse_search, video, calibration, sig, rest_pts, rest_s, template, strips, n_rest, t_j, q_j,
                      fps, st)
     fine = partial(_fine_search, video, calibration, sig, template, strips, t_j, q_j, fps, (t_on, t_off), search,
-                   step, len(segments), st)
+                   step, len(segments), st, workers if isinstance(video, CachedVideo) else 1)
     coarse_s, (taus, total, best, frames, tau_ks, per_frame) = _recentred_search(coarse, fine, trigger_s, step, st)
     if not best:
         raise DataError(f"{video.path}: the arm's motion is not visible in the frames (no frame's match with the "
@@ -175,8 +183,12 @@ def _coarse_search(video, calibration, sig: float, rest_pts: np.ndarray, rest_s:
 
 def _fine_search(video, calibration, sig: float, template: np.ndarray, strips, t_j: np.ndarray, q_j: np.ndarray,
                  fps: float, window: tuple[float, float], search: float, step: float, n_seg: int, st: SyncSettings,
-                 tau0: float) -> tuple[np.ndarray, np.ndarray, list, np.ndarray, np.ndarray, np.ndarray]:
+                 workers: int, tau0: float) -> tuple[np.ndarray, np.ndarray, list, np.ndarray, np.ndarray, np.ndarray]:
     """Each motion frame's match over the candidate offsets taus = tau0 +- search (step), s.
+
+    The frames are matched by ``workers`` forked processes (:func:`~stringcast.core.forked.forked_map`)
+    where the video is a :class:`~stringcast.video.CachedVideo` (any frame, no decoding); the result
+    is the same for any number.
 
     Returns taus (T,) s, total (T,) (the summed mean NCC of the frames with contrast), best (the
     peak offset of each such frame, s), frames (F,) (the frames used), tau_ks (F, S) s (each
@@ -201,10 +213,14 @@ def _fine_search(video, calibration, sig: float, template: np.ndarray, strips, t
     total, best = np.zeros(len(taus)), []
     tau_ks = np.full((len(frames), n_seg), np.nan)
     per_frame = []
-    for i, k in enumerate(frames):
-        f = sync_arm.smooth(video.read(int(k)), sig)
-        q = joints_at(taus + k / fps, t_j, q_j)
-        per_seg = sync_arm.ncc_segments(sync_arm.sample(f, calibration, strips(q)), template)  # (T, S)
+
+    def match(ks):  # each frame's per-segment NCC over the offsets, (T, S): independent of the others
+        return [sync_arm.ncc_segments(sync_arm.sample(sync_arm.smooth(video.read(int(k)), sig), calibration,
+                                                      strips(joints_at(taus + k / fps, t_j, q_j))), template)
+                for k in ks]
+
+    matches = (m for part in forked_map(match, chunked(frames, FRAMES_PER_TASK), workers) for m in part)
+    for i, per_seg in enumerate(matches):
         score = per_seg.mean(axis=1)
         if np.ptp(score) >= st.min_frame_contrast:
             total += score

@@ -1,0 +1,47 @@
+"""Independent pieces of work side by side in forked worker processes (sync's and tracking's frames).
+
+The frames of a decoded video (:class:`~stringcast.video.CachedVideo`) are independent and can be
+read in any order, so a stage splits them into chunks and :func:`forked_map` hands the chunks to
+worker processes. The workers are forked after the stage has set everything up: they inherit
+its state (the tracker, the template, the memory-mapped frames) at no copying cost, and only the
+chunk's index goes out and its small result comes back. The results come back in the chunks'
+order, so a stage's output does not depend on the number of workers.
+"""
+from __future__ import annotations
+
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor
+from typing import Callable, Iterator, Sequence
+
+_TASK: dict = {}   # the function and its chunks, set in the parent just before the workers are forked
+
+
+def _run_chunk(i: int):
+    return _TASK["func"](_TASK["chunks"][i])
+
+
+def forked_map(func: Callable, chunks: Sequence, workers: int) -> Iterator:
+    """``func(chunk)`` for each of ``chunks``, yielded in order.
+
+    ``func`` may be any callable, a closure included: the workers inherit it by ``fork``. With
+    ``workers`` <= 1, one chunk, or no ``fork`` start method (Windows), the chunks run here, one
+    after the other. Not re-entrant: ``func`` must not call :func:`forked_map` itself.
+    """
+    if workers <= 1 or len(chunks) < 2 or "fork" not in multiprocessing.get_all_start_methods():
+        for chunk in chunks:
+            yield func(chunk)
+        return
+    if _TASK:
+        raise RuntimeError("forked_map: already running (func may not call forked_map)")
+    _TASK.update(func=func, chunks=chunks)
+    try:
+        with ProcessPoolExecutor(max_workers=min(workers, len(chunks)),
+                                 mp_context=multiprocessing.get_context("fork")) as pool:
+            yield from pool.map(_run_chunk, range(len(chunks)))
+    finally:
+        _TASK.clear()
+
+
+def chunked(items: Sequence, size: int) -> list:
+    """``items`` in consecutive chunks of ``size`` (the last one shorter)."""
+    return [items[i:i + size] for i in range(0, len(items), max(1, int(size)))]
