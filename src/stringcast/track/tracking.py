@@ -47,7 +47,6 @@ Settings: tracking settings (:class:`~stringcast.core.TrackingSettings`).
 """
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
