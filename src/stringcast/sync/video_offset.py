@@ -110,7 +110,7 @@ def estimate_offset(video, calibration, arm, t_j: np.ndarray, q_j: np.ndarray,
     coarse = partial(_coarse_search, video, calibration, sig, rest_pts, rest_s, template, strips, n_rest, t_j, q_j,
                      fps, st)
     fine = partial(_fine_search, video, calibration, sig, template, strips, t_j, q_j, fps, (t_on, t_off), search,
-                   step, len(segments), st, workers if isinstance(video, CachedVideo) else 1)
+                   step, len(segments), st, workers if isinstance(video, CachedVideo) else 1, {})
     coarse_s, (taus, total, best, frames, tau_ks, per_frame) = _recentred_search(coarse, fine, trigger_s, step, st)
     if not best:
         raise DataError(f"{video.path}: the arm's motion is not visible in the frames (no frame's match with the "
@@ -183,12 +183,13 @@ def _coarse_search(video, calibration, sig: float, rest_pts: np.ndarray, rest_s:
 
 def _fine_search(video, calibration, sig: float, template: np.ndarray, strips, t_j: np.ndarray, q_j: np.ndarray,
                  fps: float, window: tuple[float, float], search: float, step: float, n_seg: int, st: SyncSettings,
-                 workers: int, tau0: float) -> tuple[np.ndarray, np.ndarray, list, np.ndarray, np.ndarray, np.ndarray]:
+                 workers: int, memo: dict, tau0: float) -> tuple[np.ndarray, np.ndarray, list, np.ndarray, np.ndarray, np.ndarray]:
     """Each motion frame's match over the candidate offsets taus = tau0 +- search (step), s.
 
     The frames are matched by ``workers`` forked processes (:func:`~stringcast.core.forked.forked_map`)
     where the video is a :class:`~stringcast.video.CachedVideo` (any frame, no decoding); the result
-    is the same for any number.
+    is the same for any number. ``memo`` {frame: {grid index: (S,) NCC}} keeps every match made, so a
+    re-centred window only matches its new offsets (the candidate offsets lie on a fixed grid).
 
     Returns taus (T,) s, total (T,) (the summed mean NCC of the frames with contrast), best (the
     peak offset of each such frame, s), frames (F,) (the frames used), tau_ks (F, S) s (each
@@ -214,13 +215,22 @@ def _fine_search(video, calibration, sig: float, template: np.ndarray, strips, t
     tau_ks = np.full((len(frames), n_seg), np.nan)
     per_frame = []
 
-    def match(ks):  # each frame's per-segment NCC over the offsets, (T, S): independent of the others
-        return [sync_arm.ncc_segments(sync_arm.sample(sync_arm.smooth(video.read(int(k)), sig), calibration,
-                                                      strips(joints_at(taus + k / fps, t_j, q_j))), template)
-                for k in ks]
+    grid = np.rint(taus / step).astype(np.int64)   # the offsets' places on the fixed grid: memo's keys
+
+    def match(ks):  # each frame's per-segment NCC at the offsets not matched before, (T', S)
+        out = []
+        for k in ks:
+            need = np.flatnonzero([g not in memo.get(int(k), ()) for g in grid])
+            out.append((need, sync_arm.ncc_segments(sync_arm.sample(
+                sync_arm.smooth(video.read(int(k)), sig), calibration,
+                strips(joints_at(taus[need] + k / fps, t_j, q_j))), template) if len(need) else None))
+        return out
 
     matches = (m for part in forked_map(match, chunked(frames, FRAMES_PER_TASK), workers) for m in part)
-    for i, per_seg in enumerate(matches):
+    for i, (k, (need, rows)) in enumerate(zip(frames, matches)):
+        known = memo.setdefault(int(k), {})
+        known.update(zip(grid[need].tolist(), rows if rows is not None else ()))
+        per_seg = np.stack([known[g] for g in grid.tolist()])   # (T, S)
         score = per_seg.mean(axis=1)
         if np.ptp(score) >= st.min_frame_contrast:
             total += score
