@@ -253,163 +253,18 @@ def cmd_settings(args):
     print(yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=110), end="")
 
 
-class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
-    """Shows each option's default after its help, except where it has none (required, or None)."""
-
-    def _get_help_string(self, action):
-        if action.required or action.default is None:
-            return action.help
-        return super()._get_help_string(action)
+HANDLERS = {"decode": cmd_decode, "calibrate": cmd_calibrate, "sync": cmd_sync, "sweep": cmd_sweep, "track": cmd_track,
+            "estimate": cmd_estimate, "plan-first": cmd_plan_first, "plan": cmd_plan,
+            "report-trial": cmd_report_trial, "report-campaign": cmd_report_campaign, "execute": cmd_execute,
+            "calib-clip": cmd_calib_clip, "campaign": cmd_campaign, "settings": cmd_settings}
+"""Each subcommand's function."""
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="stringcast", description=__doc__.split("\n\n")[0],
-                                formatter_class=_HelpFormatter)
-    p.add_argument("--config", action="append", default=None,
-                   help="config YAML (default: config/config.yaml); given again, each file is merged over the ones "
-                        "before it, as Snakemake merges --configfile over the Snakefile's configfile")
-    sub = p.add_subparsers(dest="command", required=True, help="the stage or tool to run")
+    """The command line (:func:`stringcast.cli_parser.build_parser` with :data:`HANDLERS`)."""
+    from stringcast.cli_parser import build_parser as build
 
-    def add(name, func, help_):
-        sp = sub.add_parser(name, help=help_, description=help_, formatter_class=_HelpFormatter)
-        sp.set_defaults(func=func)
-        return sp
-
-    _add_analysis_commands(add)
-    _add_planning_and_tools(add)
-    return p
-
-
-CAMPAIGN_HELP = "data/<campaign>/campaign.yaml: the campaign's string, target, arm and set-up"
-TRIAL_HELP = "data/<campaign>/trial_<k>: the trial's raw files (video, video.yaml, joints.csv, motion.json)"
-SEED_HELP = "random seed of {}"
-
-
-def _add_analysis_commands(add) -> None:
-    """calibrate, sync, sweep, track, estimate: one trial's analysis, stage by stage (the rules call them)."""
-    campaign_help, trial_help = CAMPAIGN_HELP, TRIAL_HELP
-    frames_help = "the trial's frames.npy (`stringcast decode`), read instead of decoding the video"
-    sp = add("decode", cmd_decode, "decode the trial's video once -> frames.npy (+ frames.json), read by sync, "
-                                   "sweep and track")
-    sp.add_argument("--trial-dir", required=True, help=trial_help)
-    sp.add_argument("--out", required=True, help="frames.npy to write: (F, H, W) grey frames")
-
-    sp = add("calibrate", cmd_calibrate, "ChArUco calibration of one trial -> calibration.json")
-    sp.add_argument("--trial-dir", required=True, help=trial_help)
-    sp.add_argument("--calib-dir", help="data/<campaign>/calib/: ChArUco clip or views for the camera intrinsics; "
-                                        "if not given or not a folder, the board's homography only")
-    sp.add_argument("--campaign", required=True, help=campaign_help)
-    sp.add_argument("--out", required=True, help="calibration.json to write (intrinsics, board pose, px errors)")
-
-    sp = add("sync", cmd_sync, "video-to-controller clock offset -> sync.json")
-    sp.add_argument("--trial-dir", required=True, help=trial_help)
-    sp.add_argument("--calibration", required=True, help="the trial's calibration.json")
-    sp.add_argument("--campaign", required=True, help=campaign_help)
-    sp.add_argument("--out", required=True, help="sync.json to write (offset in s: controller time of frame 0)")
-    sp.add_argument("--frames", help=frames_help)
-    sp.add_argument("--workers", default=1, help="processes matching frames side by side (with --frames)")
-
-    sp = add("sweep", cmd_sweep, "the mapping and the clock refined by the arm's sweep -> geometry.json, clock.json")
-    sp.add_argument("--trial-dir", required=True, help=trial_help)
-    sp.add_argument("--calibration", required=True, help="the trial's calibration.json")
-    sp.add_argument("--sync", required=True, help="the trial's sync.json")
-    sp.add_argument("--campaign", required=True, help=campaign_help)
-    sp.add_argument("--out-geometry", required=True, help="geometry.json to write (calibration.json's schema, refined)")
-    sp.add_argument("--out-clock", required=True, help="clock.json to write (sync.json's schema, the offset corrected)")
-    sp.add_argument("--frames", help=frames_help)
-
-    sp = add("track", cmd_track, "markerless tracking -> tracks.parquet")
-    sp.add_argument("--trial-dir", required=True, help=trial_help)
-    sp.add_argument("--calibration", required=True, help="the trial's geometry.json (or calibration.json)")
-    sp.add_argument("--sync", required=True, help="the trial's clock.json (or sync.json)")
-    sp.add_argument("--campaign", required=True, help=campaign_help)
-    sp.add_argument("--out", required=True, help="tracks.parquet to write: frame, t_s, point, x_m, y_m, valid "
-                                                 "(m, robot frame; point 0 the grasp)")
-    sp.add_argument("--overlay", help="tracking_overlay.png to write (tracked points on frames); "
-                                      "if not given, none")
-    sp.add_argument("--frames", help=frames_help)
-    sp.add_argument("--workers", default=1, help="processes tracking frames side by side (with --frames)")
-
-    sp = add("estimate", cmd_estimate, "fit the model's parameters -> params.json, fit.parquet")
-    sp.add_argument("--tracks", required=True, help="the trial's tracks.parquet")
-    sp.add_argument("--joints", required=True, help="the trial's joints.csv (t_s, q1_rad .. qJ_rad)")
-    sp.add_argument("--campaign", required=True, help=campaign_help)
-    sp.add_argument("--prev", help="previous trial's params.json (chi_best of eq. 3)")
-    sp.add_argument("--trial", required=True, help="trial index k = executions so far (M of eq. 3)")
-    sp.add_argument("--out-params", required=True, help="params.json to write: coefficients, masses, E in mm")
-    sp.add_argument("--out-fit", required=True, help="fit.parquet to write: tracked and simulated points per "
-                                                     "frame (m)")
-    sp.add_argument("--earlier-tracks", nargs="*", help="earlier trials' tracks.parquet, fitted together")
-    sp.add_argument("--earlier-joints", nargs="*", help="their joints.csv, in the same order")
-
-
-def _add_planning_and_tools(add) -> None:
-    """plan-first, plan, the reports, and the tools around the workflow (execute, calib-clip,
-    campaign, settings)."""
-    campaign_help, seed_help = CAMPAIGN_HELP, SEED_HELP
-    plan_seed_help = seed_help.format("the planner's search (beside the config's motion.seed)")
-
-    sp = add("plan-first", cmd_plan_first, "first motion with Table 2's minimum parameters")
-    sp.add_argument("--campaign", required=True, help=campaign_help)
-    sp.add_argument("--out-dir", required=True, help="folder for motion.csv (t_s, q1_rad ..) and motion.json")
-    sp.add_argument("--seed", default=0, help=plan_seed_help)
-
-    sp = add("plan", cmd_plan, "next motion from estimated parameters")
-    sp.add_argument("--params", required=True, help="the trial's params.json (the estimate)")
-    sp.add_argument("--played-motion", required=True, help="motion.json of the motion just played")
-    sp.add_argument("--tracks", help="tracks.parquet of the played trial (motion.residual_correction)")
-    sp.add_argument("--joints", help="joints.csv of the played trial (motion.residual_correction)")
-    sp.add_argument("--campaign", required=True, help=campaign_help)
-    sp.add_argument("--out-dir", required=True, help="folder for the next motion's motion.csv and motion.json")
-    sp.add_argument("--seed", default=0, help=plan_seed_help)
-
-    sp = add("report-trial", cmd_report_trial, "self-contained HTML page for one trial")
-    sp.add_argument("--data-dir", required=True, help="data/<campaign>/trial_<k>")
-    sp.add_argument("--results-dir", required=True, help="results/<campaign>/trial_<k>")
-    sp.add_argument("--campaign", required=True, help=campaign_help)
-    sp.add_argument("--out", required=True, help="report.html to write")
-
-    sp = add("report-campaign", cmd_report_campaign, "campaign page: one row per execution")
-    sp.add_argument("--data-dir", required=True, help="data/<campaign>")
-    sp.add_argument("--results-dir", required=True, help="results/<campaign>")
-    sp.add_argument("--campaign", required=True, help=campaign_help)
-    sp.add_argument("--out", required=True, help="report.html to write")
-
-    sp = add("execute", cmd_execute, "play a motion file on an arm and record the next trial's raw files")
-    sp.add_argument("motion", help="motion.csv (its motion.json beside it is copied along)")
-    sp.add_argument("--backend", choices=["virtual", "ur-rtde"], default="virtual",
-                    help="virtual: the simulated lab's arm and camera; ur-rtde: a UR arm over RTDE")
-    sp.add_argument("--out", required=True, help="data/<campaign>/trial_<k> to create")
-    sp.add_argument("--campaign", required=True, help="data/<campaign>/campaign.yaml")
-    sp.add_argument("--seed", default=0,
-                    help=seed_help.format("the virtual lab's trial: joint and camera noise, trigger delay"))
-    sp.add_argument("--dry-run", action="store_true", help="check and print the plan, move nothing")
-    sp.add_argument("--robot-ip", help="ur-rtde: the UR controller's address")
-    sp.add_argument("--move-to-start", action="store_true",
-                    help="ur-rtde: moveJ slowly to the start posture if the arm is not there (else refuse)")
-
-    sp = add("calib-clip", cmd_calib_clip, "virtual lab: film the ChArUco board for intrinsics -> calib/")
-    sp.add_argument("--campaign", required=True, help=campaign_help)
-    sp.add_argument("--out", required=True, help="folder to write the board's frames to (data/<campaign>/calib)")
-    sp.add_argument("--seed", default=0, help=seed_help.format("the board's poses and the camera's noise"))
-
-    sp = add("campaign", cmd_campaign, "the whole loop on the virtual lab until the tip hits")
-    sp.add_argument("name", help="campaign name: data/<name>/ and results/<name>/")
-    sp.add_argument("--string", default="1", help="string type id from the config")
-    sp.add_argument("--target", default="1", help="target id from the config")
-    sp.add_argument("--max-executions", default=5, help="stop after this many executions without a hit")
-    sp.add_argument("--cores", default=2, help="CPU cores Snakemake runs the jobs on")
-    sp.add_argument("--seed", default=0, help="seed of the campaign (campaign.yaml) and of the virtual lab's "
-                                              "noise in each execution")
-    sp.add_argument("--root", default=".", help="project folder holding Snakefile, data/ and results/")
-    sp.add_argument("--method", choices=list(METHOD_CONFIGS), default="paper",
-                    help="paper: the config as given (config/config.yaml: the paper's method); ours: "
-                         "config/ours.yaml merged over it, after any --config")
-
-    sp = add("settings", cmd_settings, "print the settings the stages would run with (the merged config over "
-                                       "the defaults), as YAML")
-    sp.add_argument("--markdown", action="store_true",
-                    help="print every setting's default and meaning as Markdown tables instead (config/README.md)")
+    return build(HANDLERS, __doc__.split("\n\n")[0])
 
 
 def main(argv: list[str] | None = None) -> int:

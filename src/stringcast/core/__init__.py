@@ -16,6 +16,7 @@ from .settings import (MODES, POLARITIES, SECTION_CLASSES, BoardCheckSettings, C
                        EstimationSettings, EvaluationSettings, ExecutorSettings, ModelSettings, MotionSettings,
                        Settings, SweepSettings, SyncSettings, TrackingSettings, settings_from_config)
 from .verdict import STATUSES, Verdict, worst
+from .forked import chunked, forked_map
 
 __all__ = [
     "JointLimitError", "assert_within_limits", "check_limits", "forward_kinematics", "hand_pose", "joints_at",
@@ -32,5 +33,6 @@ __all__ = [
     "SyncSettings",
     "TrackingSettings",
     "STATUSES", "Verdict", "worst",
+    "chunked", "forked_map",
     "markdown_table", "sections_read", "settings_digest", "settings_from_config", "stage_kwargs",
 ]

@@ -15,7 +15,7 @@ import numpy as np
 from . import arm_match as sync_arm
 from stringcast.calibrate import check_board_to_robot
 from stringcast.core import BoardCheckSettings, DataError, SyncSettings, joints_at, motion_window
-from stringcast.core.forked import chunked, forked_map
+from stringcast.core import chunked, forked_map
 from stringcast.video import CachedVideo
 
 FRAMES_PER_TASK = 16

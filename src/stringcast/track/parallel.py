@@ -13,7 +13,7 @@ from typing import Iterator
 
 import numpy as np
 
-from stringcast.core.forked import chunked, forked_map
+from stringcast.core import chunked, forked_map
 
 CHUNK = 16
 """Frames per task: a few ms each, so the workers' bookkeeping stays below 1 % and the load balances."""
