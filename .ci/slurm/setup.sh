@@ -99,7 +99,7 @@ done
 if [ ${#missing[@]} -gt 0 ]; then
     command -v apt-get >/dev/null || die "missing ${missing[*]} and no apt-get: install ${PACKAGES[*]} yourself"
     say "installing ${PACKAGES[*]} (missing: ${missing[*]})"
-    # --no-install-recommends: 27 packages instead of 77 (no docs, mail, X11 or PAM helpers)
+    # --no-install-recommends: 27 packages instead of 77 with the recommended ones, which none of this needs
     apt_install() { DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${PACKAGES[@]}" >/tmp/slurm-apt.log 2>&1; }
     if ! apt_install; then
         say "apt-get install failed with the current package lists; updating them and trying again"
