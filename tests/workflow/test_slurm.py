@@ -48,6 +48,7 @@ RULES = {"plan_first", "calibrate", "sync", "sweep", "track", "estimate", "plan"
 #   campaign_summary.json: the lab driver's summary (with its timings), written only by the
 #   local run (run_campaign), not by the workflow.
 # No stage writes a host, a path of the run or a time of day into its JSON or YAML.
+# The pages' provenance (git commit, library versions) compares whole: both runs run the same code.
 RUN_DEPENDENT_FIELDS = {"params.json": {"seconds"}}   # top-level keys, by file name
 HTML_RUN_DEPENDENT = [
     re.compile(r"(written )\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d(\.\d+)?"),
