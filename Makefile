@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-fast bench bench-quick lint clean venv browser lock
+.PHONY: demo test test-fast bench bench-quick lint clean venv browser slurm lock
 
 venv: $(STAMP)
 
@@ -40,6 +40,12 @@ browser:
 	  { if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null; then \
 	      apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium-headless-shell >/dev/null; \
 	    else echo "make browser: install Debian's chromium-headless-shell (or chromium) as root"; exit 1; fi; }
+
+# A real one-node Slurm cluster with accounting, for the Slurm test (tests/workflow/test_slurm.py):
+# Debian's slurmctld, slurmd, slurmdbd, MariaDB and munge, installed and started by .ci/slurm/setup.sh
+# (needs root and apt-get; quick and harmless on a running cluster). docs/slurm.md explains it.
+slurm:
+	.ci/slurm/setup.sh
 
 # Re-pin constraints.txt to what .venv holds now (after a deliberate upgrade; then re-run the benchmarks).
 lock: $(STAMP)

@@ -25,21 +25,11 @@ import pytest
 import yaml
 
 import browser
+from lab_project import make_project
 from stringcast.campaign import run_campaign, tracking_error_mm, tracking_errors
 from stringcast.core.files import DataError
 
 ROOT = Path(__file__).resolve().parents[2]
-
-
-def small_config(config: dict) -> dict:
-    cfg = copy.deepcopy({k: v for k, v in config.items() if k != "_path"})
-    cfg["cameras"]["small"] = {"width_px": 512, "height_px": 512, "fps": 250.0, "bit_depth": 8, "mono": True}
-    cfg["setups"]["default"].update(camera="small", board_origin_mm=[700.0, -250.0], board={
-        "squares_x": 6, "squares_y": 4, "square_mm": 100.0, "marker_mm": 75.0, "dictionary": "DICT_4X4_50"})
-    cfg["lab"]["camera"]["focal_px"] = 695.0
-    cfg.setdefault("estimation", {}).update(iterations=256, batch=64)
-    cfg.setdefault("motion", {}).update(max_candidates=4096, extra_after_hit=64)
-    return cfg
 
 
 def snakemake(root: Path, *args: str) -> str:
@@ -82,11 +72,7 @@ def test_tracking_error_against_truth(tmp_path):
 @pytest.fixture(scope="module")
 def finished(tmp_path_factory, config):
     """A campaign run to its end (at most 2 executions) in a tmp project: (root, summary)."""
-    root = tmp_path_factory.mktemp("e2e") / "project"
-    (root / "config").mkdir(parents=True)
-    (root / "Snakefile").symlink_to(ROOT / "Snakefile")
-    (root / "workflow").symlink_to(ROOT / "workflow")
-    (root / "config" / "config.yaml").write_text(yaml.safe_dump(small_config(config)))
+    root = make_project(tmp_path_factory.mktemp("e2e") / "project", config)
     summary = run_campaign("e2e", "1", "1", config_path=str(root / "config" / "config.yaml"),
                            max_executions=2, cores=2, seed=3, root=root)
     return root, summary
