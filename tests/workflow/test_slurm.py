@@ -37,19 +37,21 @@ PARTITION = os.environ.get("STRINGCAST_SLURM_PARTITION")   # None: the cluster's
 CORES = 2               # the local run's --cores (run_campaign's default)
 TIMEOUT_S = 900         # the Slurm run, at most (a job that can never start would hang it)
 # every rule of the workflow: the campaign's first motion, one trial's stages, the campaign report
-RULES = {"plan_first", "calibrate", "sync", "sweep", "track", "estimate", "plan", "report_trial",
+RULES = {"plan_first", "decode", "calibrate", "sync", "sweep", "track", "estimate", "plan", "report_trial",
          "report_campaign"}
 # What legitimately differs between two runs of the same data, by file; nothing else may.
 #   params.json "seconds": the estimation's wall time.
+#   frames.json "source": the decoded video's real path and modification time (each run has its
+#   own copy of data/); frames.npy, the frames themselves, compares whole.
 #   report.html (the trial's): its "estimation time" row (that same wall time).
 #   report.html (the campaign's): its "Time per stage" table (from the benchmark files).
 #   report.html (both): the "written <date and time>" note at the page's foot.
 #   benchmarks/*.tsv: Snakemake's timings and memory of each job (only their columns compare).
 #   campaign_summary.json: the lab driver's summary (with its timings), written only by the
 #   local run (run_campaign), not by the workflow.
-# No stage writes a host, a path of the run or a time of day into its JSON or YAML.
+# No other stage writes a host, a path of the run or a time of day into its JSON or YAML.
 # The pages' provenance (git commit, library versions) compares whole: both runs run the same code.
-RUN_DEPENDENT_FIELDS = {"params.json": {"seconds"}}   # top-level keys, by file name
+RUN_DEPENDENT_FIELDS = {"params.json": {"seconds"}, "frames.json": {"source"}}   # top-level keys, by file name
 HTML_RUN_DEPENDENT = [
     re.compile(r"(written )\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d(\.\d+)?"),
     re.compile(r"(<td[^>]*>estimation time</td>\s*<td>)[^<]*"),
@@ -191,6 +193,8 @@ def compare_results(a: Path, b: Path) -> list[str]:
             elif f.suffix == ".html":
                 ta, tb = (_masked_html(p.read_text()) for p in (pa, pb))
                 assert ta == tb, _text_difference(ta, tb)
+            elif f.suffix == ".npy":
+                assert np.array_equal(np.load(pa, mmap_mode="r"), np.load(pb, mmap_mode="r")), "arrays differ"
             elif f.suffix == ".png":
                 ia, ib = (cv2.imread(str(p), cv2.IMREAD_UNCHANGED) for p in (pa, pb))
                 assert ia is not None and ib is not None and np.array_equal(ia, ib), "pixels differ"
