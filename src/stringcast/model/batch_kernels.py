@@ -71,9 +71,32 @@ def _samples_block(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, sam
 def simulate_batch_kernel(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, sample_t, g, lmax):
     """B candidates from sample_t[0] (at rest at p_init[hand_idx[b]]), sampled at sample_t.
 
-    coeffs (B, 10) Table 2 units, mu (B, n), hand_t (K,) s, hand (H, K, 3) (x m, y m, phi rad),
-    hand_idx (B,) int64, p_init (H, n, 2) m, l0 m, psi0 rad, dt s, sample_t (F,) s, g m/s^2,
-    lmax m. Returns pos (B, F, n, 2) m (NaN from a blow-up on) and ok (B,) bool.
+    Parameters
+    ----------
+    coeffs : ndarray, (B, 10)
+        Coefficients, ``config.PARAM_NAMES`` order, Table 2 units.
+    mu : ndarray, (B, n)
+        Relative masses.
+    hand_t : ndarray, (K,)
+        Hand sample times, s.
+    hand : ndarray, (H, K, 3)
+        Hand paths (x m, y m, phi rad).
+    hand_idx : ndarray, (B,) int64
+        Each candidate's hand path and initial state.
+    p_init : ndarray, (H, n, 2)
+        Initial positions at rest, m.
+    l0, psi0, dt : float
+        Rest segment length m, rest direction in the hand frame rad, step s.
+    sample_t : ndarray, (F,)
+        Sample times, s, non-decreasing; the run starts at sample_t[0].
+    g, lmax : float
+        Gravity m/s^2 along -y, blow-up segment length m.
+
+    Returns
+    -------
+    pos : ndarray, (B, F, n, 2)
+        Positions, m; NaN from the step a candidate blew up on.
+    ok : ndarray, (B,) bool
     """
     B = coeffs.shape[0]
     out = np.empty((B, sample_t.shape[0], p_init.shape[1], 2))
@@ -185,12 +208,27 @@ def _closest_block(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, t_s
 @njit(parallel=True, **_KERNEL)
 def closest_batch_kernel(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt,
                          t_start, t_end, targets, target_idx, target_dt, g, lmax):
-    """Closest approach of B candidates' tip paths to their targets over [t_start, t_end] s.
+    """Closest approach of B candidates' tip paths to their targets (docs/string_model.md, "Closest approach").
 
-    Arguments as :func:`simulate_batch_kernel`'s, and targets (P, S, 2) m sampled every target_dt
-    s from t_start (S = 1: fixed), candidate b against targets[target_idx[b]]. Returns d_min m,
-    t_min s, min_y m (lowest y of any point over the run), ok, each (B,); a blown-up candidate
-    has (inf, NaN, -inf, False).
+    Parameters
+    ----------
+    coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, g, lmax
+        As :func:`simulate_batch_kernel`'s.
+    t_start, t_end : float
+        The run, s; it starts at rest at p_init.
+    targets : ndarray, (P, S, 2)
+        Target paths, m, sampled every target_dt s from t_start (S = 1: fixed).
+    target_idx : ndarray, (B,) int64
+        Each candidate's target path.
+    target_dt : float
+        s.
+
+    Returns
+    -------
+    d_min, t_min, min_y : ndarray, (B,)
+        Closest distance m and its time s, lowest y of any point over the run m; a blown-up
+        candidate has (inf, NaN, -inf).
+    ok : ndarray, (B,) bool
     """
     B = coeffs.shape[0]
     d_min = np.empty(B)

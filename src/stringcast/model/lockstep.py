@@ -116,10 +116,20 @@ def _segment(S, P, o, w, lmax, l0):
 def step_block(S, P, n, l0, psi0, dt, g, lmax):
     """One semi-implicit Euler step of a block (docs/string_model.md, Table 1, "Integration").
 
-    S ((n + 1) * ROW,), P (NP * W,): the block (module docstring); node 0 of S and P's PHI,
-    DPHI must hold each lane's hand at time t. l0, lmax m, psi0 rad, dt s, g m/s^2. Forces
-    use the state at t; then v += a dt, p += v dt in place (nodes 1..n). A lane whose
-    segments had blown up before the step gets OK = 0.
+    Forces use the state at t; then v += a dt, p += v dt in place (nodes 1..n).
+
+    Parameters
+    ----------
+    S : ndarray, ((n + 1) * ROW,) float64
+        The block's state (module docstring); node 0 must hold each lane's hand at t.
+    P : ndarray, (NP * W,) float64
+        Coefficients; PHI, DPHI must hold the hand's angle (rad) and rate (rad/s) at t.
+        A lane whose segments had blown up before the step gets OK = 0.
+    n : int
+        Mass points.
+    l0, psi0, dt, g, lmax : float
+        Rest segment length m, rest direction in the hand frame rad, step s, gravity
+        m/s^2 along -y, blow-up length m.
     """
     sdt = DAMPING_SAFETY * dt
     o = ROW
@@ -176,8 +186,26 @@ def step_block(S, P, n, l0, psi0, dt, g, lmax):
 def new_block(coeffs, mu, p_init, hand_idx, b0):
     """A block for candidates b0 .. b0 + W - 1 (lanes past the batch repeat its last candidate).
 
-    coeffs (B, 10), mu (B, n), p_init (H, n, 2) m, hand_idx (B,). Returns S, P (module docstring)
-    at rest at p_init[hand_idx[b]], OK = 1, and lanes (W,) int64: each lane's candidate b.
+    Parameters
+    ----------
+    coeffs : ndarray, (B, 10)
+        Coefficients, ``config.PARAM_NAMES`` order, Table 2 units.
+    mu : ndarray, (B, n)
+        Relative masses.
+    p_init : ndarray, (H, n, 2)
+        Initial positions, m, one per hand path.
+    hand_idx : ndarray, (B,) int64
+        The hand path (and p_init) of each candidate.
+    b0 : int
+        The block's first candidate.
+
+    Returns
+    -------
+    S, P : ndarray
+        The block (module docstring), at rest at p_init[hand_idx[b]], every OK = 1; node 0
+        (the hand) is left at 0 for :func:`set_hand`.
+    lanes : ndarray, (W,) int64
+        Each lane's candidate b.
     """
     B = coeffs.shape[0]
     n = p_init.shape[1]
@@ -200,11 +228,30 @@ def new_block(coeffs, mu, p_init, hand_idx, b0):
 
 @njit(inline="always", **_KERNEL)
 def set_hand(S, P, hand_t, hand, lane_hand, t, k):
-    """Each lane's hand at time t s into node 0 of S and P's PHI, DPHI, as :func:`kernels.hand_state`.
+    """Each lane's hand at time t into node 0 of S and P's PHI, DPHI (docs/string_model.md, "Frame").
 
-    hand_t (K,) s, hand (H, K, 3) = (x m, y m, phi rad), lane_hand (W,) int64: the hand row of
-    each lane. The sample interval k (the previous call's, time only moves forward) is shared,
-    as all lanes share hand_t. Returns the interval index for the next call.
+    Linear interpolation of the samples; the velocity is the slope of the sample interval
+    holding t; before the first and from the last sample the end pose is held, at rest.
+
+    Parameters
+    ----------
+    S, P : ndarray
+        The block (module docstring), written in place.
+    hand_t : ndarray, (K,)
+        Sample times, s, strictly increasing; shared by all lanes, so is the interval.
+    hand : ndarray, (H, K, 3)
+        Hand paths (x m, y m, phi rad).
+    lane_hand : ndarray, (W,) int64
+        Each lane's hand path.
+    t : float
+        Time, s.
+    k : int
+        The sample interval of the previous call (time only moves forward); 0 at first.
+
+    Returns
+    -------
+    int
+        The interval index for the next call.
     """
     K = hand_t.shape[0]
     if t < hand_t[0] or K == 1 or t >= hand_t[K - 1]:
