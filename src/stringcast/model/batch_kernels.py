@@ -8,6 +8,7 @@ blows up keeps stepping (masked) until the block ends; its outputs are NaN / inf
 docs/string_model.md's "Blow-up" says. A block stops early once every lane blew up.
 
 Everything here assumes inputs already checked by ``stringcast.model.string_model``.
+The compiled code is cached keyed on this file alone: touch it after editing ``lockstep``.
 """
 from __future__ import annotations
 

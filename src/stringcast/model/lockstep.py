@@ -24,6 +24,11 @@ dependence analysis and left the lane loops scalar. Division by zero gives inf/N
 (``error_model="numpy"``) instead of an exception, which would branch out of the loop.
 A lane that blows up is marked and keeps stepping on its own inf/NaN values, which never
 reach the other lanes.
+
+Numba's cache (``cache=True``) keys a function on its own file only: the batch runs in
+``batch_kernels`` inline this module's functions, so after editing this file touch
+``batch_kernels.py`` too (or delete the ``*.nbi``/``*.nbc`` files in ``__pycache__``),
+or they keep running the old step.
 """
 from __future__ import annotations
 
