@@ -2,7 +2,11 @@
 
 Figures, measured in this run:
 * point_steps_per_s_per_core: mass-point steps per second of ``model.simulate_batch``
-  on one thread (``numba.set_num_threads(1)``), n = 15 points, dt = 1e-4 s.
+  on one thread (``numba.set_num_threads(1)``), n = 15 points, dt = 1e-4 s, a batch of
+  ``batch_single_thread`` (64) candidates: the size estimation and planning call it with
+  (``estimation.batch``, ``motion.batch``); the kernel steps ``lanes`` (16) candidates at
+  once. ``..._batch_8`` is the same for a batch of 8, the size this figure used before the
+  lock-step kernel (half of a 16-lane block idles there).
 * candidates_per_s: candidates per second of a batch on all cores (1 s of motion,
   frames sampled at 500 fps), and the same for ``closest_approach_batch``.
 * reference: MuJoCo stepping a planar chain of hinge-jointed capsules with the same
@@ -52,6 +56,7 @@ def _best_of(fn, repeats: int) -> float:
 def model_rates(duration: float, batch: int, repeats: int) -> dict:
     import numba
 
+    from stringcast.model.lockstep import LANES
     from stringcast.model.string_model import closest_approach_batch, simulate_batch
 
     coeffs, mu, hand_t, hand, p0 = _case(duration)
@@ -74,16 +79,18 @@ def model_rates(duration: float, batch: int, repeats: int) -> dict:
     closest(1)()                                         # compile (or load the cache)
     numba.set_num_threads(1)
     try:
-        b1 = 8
-        t_single = _best_of(sim(b1), repeats)
-        t_single_closest = _best_of(closest(b1), repeats)
+        t_single = _best_of(sim(batch), repeats)
+        t_single_closest = _best_of(closest(batch), repeats)
+        t_single_8 = _best_of(sim(8), repeats)
     finally:
         numba.set_num_threads(all_threads)
     t_batch = _best_of(sim(batch), repeats)
     t_batch_closest = _best_of(closest(batch), repeats)
     return {
-        "point_steps_per_s_per_core": b1 * N_POINTS * steps / t_single,
-        "point_steps_per_s_per_core_closest_approach": b1 * N_POINTS * steps / t_single_closest,
+        "point_steps_per_s_per_core": batch * N_POINTS * steps / t_single,
+        "point_steps_per_s_per_core_closest_approach": batch * N_POINTS * steps / t_single_closest,
+        "point_steps_per_s_per_core_batch_8": 8 * N_POINTS * steps / t_single_8,
+        "batch_single_thread": batch, "lanes": LANES,
         "candidates_per_s": batch / t_batch,
         "candidates_per_s_closest_approach": batch / t_batch_closest,
         "threads": all_threads, "batch": batch, "simulated_s": duration,
@@ -122,8 +129,8 @@ def mujoco_chain_rate(duration: float, repeats: int) -> dict:
 def run(quick: bool = False) -> dict:
     """Measure, write results/bench/model_speed.json and return its content."""
     duration = 0.25 if quick else 1.0
-    repeats = 2 if quick else 3
-    rates = model_rates(duration, batch=16 if quick else 64, repeats=repeats)
+    repeats = 3 if quick else 7                   # best of: the machine may be shared
+    rates = model_rates(duration, batch=64, repeats=repeats)
     ref = mujoco_chain_rate(0.1 if quick else 0.5, repeats)
     doc = {
         **header("model_speed", quick), "n_points": N_POINTS, "dt_s": DT, **rates,

@@ -1,10 +1,11 @@
-"""Numba kernels of the string model (docs/string_model.md); the public drivers are in ``model``.
+"""One-candidate numba kernels of the string model (docs/string_model.md); drivers in ``string_model``.
 
 Layout: one candidate's state is held in six 1-D arrays (structure of arrays)
 ``px, py, vx, vy`` (n,) and the force scratch ``fx, fy`` (n,), index j = point j+1.
-:func:`step` advances one candidate by one semi-implicit Euler step; the ``*_batch``
-kernels run candidates in parallel (``prange``) and allocate only per candidate,
-never inside the time loop.
+:func:`step` advances one candidate by one semi-implicit Euler step; :func:`settle` runs it
+for the hanging equilibrium. Batches run in lock-step blocks instead
+(:mod:`stringcast.model.lockstep`, :mod:`stringcast.model.batch_kernels`), whose lanes do
+:func:`step`'s arithmetic in the same order: the tests hold them to it bit for bit.
 
 Everything here assumes inputs already checked by ``stringcast.model.string_model``.
 """
@@ -13,7 +14,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 DAMPING_SAFETY = 2.0
 """Safety factor s of the locally implicit bending damper, c_eff = c / (1 + s dt c lambda).
@@ -62,32 +63,6 @@ def atan2(y, x):
         a = math.pi - a
     return math.copysign(a, y)
 
-
-
-@njit(cache=True, fastmath=False)
-def hand_state(hand_t, hand, t, k):
-    """Hand pose and velocity at time t from samples (linear interpolation).
-
-    hand_t (K,) s increasing, hand (K, 3) = (x, y, phi); k is the interval index of
-    the previous call (time only moves forward). Outside [hand_t[0], hand_t[-1]) the
-    first/last sample is held with zero velocity; inside, the velocity is the slope
-    of the current sample interval [hand_t[k], hand_t[k+1]).
-    Returns (x, y, phi, vx, vy, dphi, k).
-    """
-    K = hand_t.shape[0]
-    if t < hand_t[0] or K == 1:
-        return hand[0, 0], hand[0, 1], hand[0, 2], 0.0, 0.0, 0.0, 0
-    if t >= hand_t[K - 1]:
-        return hand[K - 1, 0], hand[K - 1, 1], hand[K - 1, 2], 0.0, 0.0, 0.0, K - 2
-    while hand_t[k + 1] <= t:
-        k += 1
-    h = hand_t[k + 1] - hand_t[k]
-    w = (t - hand_t[k]) / h
-    dx = hand[k + 1, 0] - hand[k, 0]
-    dy = hand[k + 1, 1] - hand[k, 1]
-    dp = hand[k + 1, 2] - hand[k, 2]
-    return (hand[k, 0] + w * dx, hand[k, 1] + w * dy, hand[k, 2] + w * dp,
-            dx / h, dy / h, dp / h, k)
 
 
 @njit(cache=True, fastmath=False)
@@ -204,147 +179,6 @@ def _state(p_init):
         px[j] = p_init[j, 0]
         py[j] = p_init[j, 1]
     return px, py, np.zeros(n), np.zeros(n), np.empty(n), np.empty(n)
-
-
-@njit(cache=True, fastmath=False)
-def run_samples(c, mu, hand_t, hand, p_init, l0, psi0, dt, sample_t, g, lmax, out):
-    """Simulate one candidate from sample_t[0] (at rest at p_init) and write out (F, n, 2).
-
-    Each sample is the linear interpolation between the substeps around it; with
-    semi-implicit Euler p(t) = p_new - (t_new - t) v_new exactly on that line.
-    On blow-up the remaining samples are NaN and False is returned.
-    """
-    n = p_init.shape[0]
-    F = sample_t.shape[0]
-    px, py, vx, vy, fx, fy = _state(p_init)
-    inv_mu = 1.0 / mu
-    t0 = sample_t[0]
-    f = 0
-    while f < F and sample_t[f] <= t0:
-        out[f, :, :] = p_init
-        f += 1
-    m = 0
-    k = 0
-    while f < F:
-        t = t0 + m * dt
-        hx, hy, ph, hvx, hvy, dph, k = hand_state(hand_t, hand, t, k)
-        ok = step(px, py, vx, vy, fx, fy, hx, hy, hvx, hvy, ph, dph, c, inv_mu,
-                  l0, psi0, dt, g, lmax, 0.0)
-        if not ok:
-            out[f:, :, :] = np.nan
-            return False
-        m += 1
-        t1 = t0 + m * dt
-        while f < F and sample_t[f] <= t1:
-            back = t1 - sample_t[f]
-            for j in range(n):
-                out[f, j, 0] = px[j] - back * vx[j]
-                out[f, j, 1] = py[j] - back * vy[j]
-            f += 1
-    return True
-
-
-@njit(cache=True, fastmath=False, parallel=True)
-def simulate_batch_kernel(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt,
-                          sample_t, g, lmax):
-    """Batched :func:`run_samples`: returns pos (B, F, n, 2) and ok (B,)."""
-    B = coeffs.shape[0]
-    n = p_init.shape[1]
-    out = np.empty((B, sample_t.shape[0], n, 2))
-    ok = np.zeros(B, dtype=np.bool_)
-    for b in prange(B):
-        h = hand_idx[b]
-        ok[b] = run_samples(coeffs[b], mu[b], hand_t, hand[h], p_init[h], l0, psi0, dt,
-                            sample_t, g, lmax, out[b])
-    return out, ok
-
-
-@njit(cache=True, fastmath=False)
-def target_at(target, target_dt, s):
-    """The target (x, y) at time s after t_start: target (S, 2) sampled every target_dt,
-    linearly interpolated, held beyond its ends (S = 1: a fixed target)."""
-    S = target.shape[0]
-    if S == 1:
-        return target[0, 0], target[0, 1]
-    f = s / target_dt
-    if f <= 0.0:
-        return target[0, 0], target[0, 1]
-    i = int(f)
-    if i >= S - 1:
-        return target[S - 1, 0], target[S - 1, 1]
-    w = f - i
-    return (target[i, 0] + w * (target[i + 1, 0] - target[i, 0]),
-            target[i, 1] + w * (target[i + 1, 1] - target[i, 1]))
-
-
-@njit(cache=True, fastmath=False)
-def run_closest(c, mu, hand_t, hand, p_init, l0, psi0, dt, t_start, t_end, target, target_dt, g, lmax):
-    """One candidate: closest approach of the tip path to a target over [t_start, t_end].
-
-    target (S, 2) m: the target's position every target_dt s from t_start (S = 1: fixed;
-    :func:`target_at`). The tip path is the polyline through the substep tip positions;
-    the distance is to each of its segments, from the target at the segment's end time.
-    Returns (d_min m, t_min s, min_y m over all points, ok); on blow-up (inf, nan, -inf, False).
-    """
-    n = p_init.shape[0]
-    px, py, vx, vy, fx, fy = _state(p_init)
-    inv_mu = 1.0 / mu
-    ax = px[n - 1]
-    ay = py[n - 1]
-    tx, ty = target_at(target, target_dt, 0.0)
-    d_min = math.sqrt((ax - tx) ** 2 + (ay - ty) ** 2)
-    t_min = t_start
-    min_y = py[0]
-    for j in range(n):
-        min_y = min(min_y, py[j])
-    nsteps = int(math.ceil((t_end - t_start) / dt - 1e-9))
-    k = 0
-    for m in range(nsteps):
-        t = t_start + m * dt
-        hx, hy, ph, hvx, hvy, dph, k = hand_state(hand_t, hand, t, k)
-        ok = step(px, py, vx, vy, fx, fy, hx, hy, hvx, hvy, ph, dph, c, inv_mu,
-                  l0, psi0, dt, g, lmax, 0.0)
-        if not ok:
-            return math.inf, math.nan, -math.inf, False
-        bx = px[n - 1]
-        by = py[n - 1]
-        tx, ty = target_at(target, target_dt, (m + 1) * dt)
-        sx = bx - ax
-        sy = by - ay
-        s2 = sx * sx + sy * sy
-        w = 0.0
-        if s2 > 0.0:
-            w = min(1.0, max(0.0, ((tx - ax) * sx + (ty - ay) * sy) / s2))
-        d = math.sqrt((ax + w * sx - tx) ** 2 + (ay + w * sy - ty) ** 2)
-        if d < d_min:
-            d_min = d
-            t_min = t + w * dt
-        for j in range(n):
-            if py[j] < min_y:
-                min_y = py[j]
-        ax = bx
-        ay = by
-    if not (math.isfinite(d_min) and math.isfinite(min_y)):
-        return math.inf, math.nan, -math.inf, False
-    return d_min, t_min, min_y, True
-
-
-@njit(cache=True, fastmath=False, parallel=True)
-def closest_batch_kernel(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt,
-                         t_start, t_end, targets, target_idx, target_dt, g, lmax):
-    """Batched :func:`run_closest` (candidate b against targets[target_idx[b]], each (S, 2)):
-    returns d_min, t_min, min_y (B,) and ok (B,)."""
-    B = coeffs.shape[0]
-    d_min = np.empty(B)
-    t_min = np.empty(B)
-    min_y = np.empty(B)
-    ok = np.zeros(B, dtype=np.bool_)
-    for b in prange(B):
-        h = hand_idx[b]
-        d_min[b], t_min[b], min_y[b], ok[b] = run_closest(
-            coeffs[b], mu[b], hand_t, hand[h], p_init[h], l0, psi0, dt, t_start, t_end,
-            targets[target_idx[b]], target_dt, g, lmax)
-    return d_min, t_min, min_y, ok
 
 
 @njit(cache=True, fastmath=False)

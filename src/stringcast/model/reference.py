@@ -1,6 +1,6 @@
 """Plain NumPy reference of the string model: one candidate, slow, readable.
 
-The same equations as the numba kernels in ``model_kernels`` (docs/string_model.md,
+The same equations as the numba kernels in ``kernels`` and ``lockstep`` (docs/string_model.md,
 including the locally implicit bending damper documented in ``model``), written
 with whole-array NumPy operations so they can be read against Table 1. Tests check
 that the fast kernels agree with it (to ~1e-9 m on short runs).

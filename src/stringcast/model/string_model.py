@@ -18,7 +18,7 @@ pushes its three points along one direction a (forces +-(c / l) n), so it relaxe
 at the rate c * lambda with lambda = sum_j |a_j|^2 / mu_j (~6 / (l0^2 mu)): up to
 ~1e6 1/s at Table 2's corner (c_h = 10, mu = 0.1, l0 = 30 mm), which no explicit
 step of 1e-4 s survives (the plain scheme blows up there within a few ms). Each damper
-uses c_eff = c / (1 + s dt c lambda), s = ``model_kernels.DAMPING_SAFETY`` = 2: backward
+uses c_eff = c / (1 + s dt c lambda), s = ``kernels.DAMPING_SAFETY`` = 2: backward
 Euler for an isolated damper (s = 1), made safe for the three dampers a point
 shares. c_eff -> c as dt -> 0, so the scheme converges to the same equations. The
 relative change, s dt c lambda with mu = 1, l0 = 30 mm, is 1e-4 at c = 1e-4, 1 % at
@@ -34,6 +34,7 @@ import math
 
 import numpy as np
 
+from . import batch_kernels as _bk
 from . import kernels as _k
 
 G = 9.81
@@ -134,8 +135,8 @@ def simulate_batch(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, sam
     st = _f64(sample_t, "sample_t", 1)
     if len(st) < 1 or np.any(np.diff(st) < 0) or not np.all(np.isfinite(st)):
         raise ValueError("sample_t: need >= 1 finite, non-decreasing times")
-    return _k.simulate_batch_kernel(c, m, ht, h, idx, p, l0, float(psi0), dt, st,
-                                    float(g), lmax)
+    return _bk.simulate_batch_kernel(c, m, ht, h, idx, p, l0, float(psi0), dt, st,
+                                     float(g), lmax)
 
 
 def simulate(coeffs, mu, hand_t, hand, p_init, l0, psi0, dt, sample_t, *, g: float = G,
@@ -191,8 +192,8 @@ def closest_approach_batch(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0,
     targets, tidx, tdt = _targets(target_xy, target_dt, target_idx, B)
     if not (math.isfinite(t_start) and math.isfinite(t_end) and t_end > t_start):
         raise ValueError(f"need finite t_start < t_end (got {t_start}, {t_end})")
-    return _k.closest_batch_kernel(c, m, ht, h, idx, p, l0, float(psi0), dt, float(t_start),
-                                   float(t_end), targets, tidx, tdt, float(g), lmax)
+    return _bk.closest_batch_kernel(c, m, ht, h, idx, p, l0, float(psi0), dt, float(t_start),
+                                    float(t_end), targets, tidx, tdt, float(g), lmax)
 
 
 def _targets(target_xy, target_dt, target_idx, B: int):
