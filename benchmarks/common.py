@@ -6,7 +6,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-BENCH_DIR = ROOT / "results" / "bench"
+BENCH_DIR = Path(os.environ.get("STRINGCAST_BENCH_DIR") or ROOT / "results" / "bench")
+"""Where the benchmark JSON files go: results/bench/, or $STRINGCAST_BENCH_DIR (the tests' own folder)."""
 
 
 def cores() -> int:

@@ -36,7 +36,17 @@ Figure: results/bench/loop.png (executions per type: Table 3, the paper's method
 one dot per seed); table: results/bench/loop.md.
 
 Run: ``python -m benchmarks.loop [--quick] [--types 1 5] [--seeds 0 1 2] [--methods paper ours]
-[--work DIR]``. A full run (7 types x 3 seeds x 2 methods, full-size lab) takes hours on
+[--work DIR]``, one campaign after another in this process.
+
+The campaigns are independent, so they may also run as separate jobs, side by side or on a
+cluster, through ``benchmarks/loop.smk`` (Snakemake): one job per campaign
+(``python -m benchmarks.loop --only TYPE SEED METHOD --work DIR``: its ``run.json`` only), then
+one that gathers them into loop.json (``--finished-only``)::
+
+    snakemake -s benchmarks/loop.smk --cores 8 --config work=/data/loop seeds="0 1 2"
+    snakemake -s benchmarks/loop.smk --profile config/profiles/slurm --config work=/shared/loop
+
+ A full run (7 types x 3 seeds x 2 methods, full-size lab) takes hours on
 2 cores; ``--quick`` is types 1 and 5, seed 0, both methods. ``--work`` keeps every
 campaign (data/ and results/) and its ``run.json``; a later run with the same DIR reuses
 finished runs and resumes unfinished campaigns; ``--finished-only`` runs nothing and
@@ -318,5 +328,19 @@ if __name__ == "__main__":
     ap.add_argument("--cores", type=int, default=2, help="Snakemake --cores per campaign")
     ap.add_argument("--finished-only", action="store_true",
                     help="run nothing: summarize the finished campaigns in --work")
+    ap.add_argument("--only", nargs=3, metavar=("TYPE", "SEED", "METHOD"),
+                    help="run this one campaign into --work (its run.json; loop.json is left as it is)")
     a = ap.parse_args()
-    run(a.quick, a.types, a.seeds, a.methods, a.work, a.cores, a.finished_only)
+    if a.only:
+        if not a.work:
+            ap.error("--only needs --work (where the campaign's run.json goes)")
+        k, s, m = int(a.only[0]), int(a.only[1]), a.only[2]
+        if k not in PAPER_TARGET or m not in METHODS:
+            ap.error(f"--only {k} {s} {m}: a type 1-7 and a method of {', '.join(METHODS)}")
+        from stringcast.core import load_config
+
+        r = run_one(k, s, m, load_config(), Path(a.work).resolve(), a.cores)
+        print(f"string {k} seed {s} {m}: " + (f"FAILED {r['error']}" if r["error"] else
+                                               f"{'hit' if r['hit'] else 'no hit'} after {r['executions']}"))
+    else:
+        run(a.quick, a.types, a.seeds, a.methods, a.work, a.cores, a.finished_only)
