@@ -136,7 +136,7 @@ def run_one(string_type: int, seed: int, method: str, config: dict, work: Path, 
     try:
         summary = run_campaign(name, str(string_type), str(PAPER_TARGET[string_type]),
                                config_path=str(cfg_path), max_executions=CAP, cores=cores,
-                               seed=seed, root=root, reports=False)
+                               seed=seed, root=root, reports=False, keep_frames=False)
     except (RuntimeError, DataError) as exc:  # a failed workflow step or trial is a result, not the end
         rec.update(executions=None, hit=False, closest_approach_mm=[], E_mm=[], timings_s={},
                    wall_s=time.perf_counter() - t0, s_per_execution=None,

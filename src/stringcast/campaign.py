@@ -106,7 +106,7 @@ def campaign_config(root: Path, config_path: str | Path | list | None = None) ->
 
 def run_campaign(name: str, string: str, target: str, config_path: str | Path | list | None = None,
                  max_executions: int = 5, cores: int = 2, seed: int = 0,
-                 root: Path = Path("."), reports: bool = True) -> dict:
+                 root: Path = Path("."), reports: bool = True, keep_frames: bool = True) -> dict:
     """Run (or resume) a campaign on the virtual lab.
 
     Args:
@@ -117,6 +117,9 @@ def run_campaign(name: str, string: str, target: str, config_path: str | Path | 
         max_executions: stop after this many executions without a hit.
         reports: False: only what the loop needs (no HTML reports, and the hitting trial is
             not processed); the loop benchmark's setting, about a third faster.
+        keep_frames: False: delete each trial's decoded video (``frames.npy``, F x H x W bytes)
+            once the trial is processed; the loop benchmark's setting, where hundreds of trials
+            would fill the disk. The results stay up to date; a stage rerun later decodes again.
 
     Returns:
         dict with per-trial rows (lab hit, closest approach mm; for processed trials the tracking
@@ -175,6 +178,9 @@ def run_campaign(name: str, string: str, target: str, config_path: str | Path | 
         timings[f"process_{k}_s"] = _snakemake(
             root, [f"results/{name}/trial_{k}/motion.csv"] + [f"results/{name}/trial_{k}/report.html"] * reports,
             cores, given, f"campaign {name}, trial {k}")
+        if not keep_frames:
+            for cache in ("frames.npy", "frames.json"):
+                (root / "results" / name / f"trial_{k}" / cache).unlink(missing_ok=True)
         err = tracking_error_mm(root / "results" / name / f"trial_{k}" / "tracks.parquet",
                                 trial / "ground_truth.parquet")
         rows[-1].update(tracking_error_median_mm=err[0], tracking_error_p95_mm=err[1])

@@ -28,6 +28,7 @@ import browser
 from lab_project import make_project
 from stringcast.campaign import run_campaign, tracking_error_mm, tracking_errors
 from stringcast.core.files import DataError
+from stringcast.video import open_video
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -87,6 +88,11 @@ def test_campaign_end_to_end(tmp_path, finished):
     for name in ("calibration.json", "sync.json", "geometry.json", "clock.json", "tracks.parquet", "params.json",
                  "fit.parquet", "motion.csv", "motion.json", "report.html"):
         assert (res / "trial_1" / name).stat().st_size > 0, name
+    # the video decoded once, kept (keep_frames): exactly the video's frames
+    frames = np.load(res / "trial_1" / "frames.npy", mmap_mode="r")
+    with open_video(root / "data" / "e2e" / "trial_1" / "video.mkv") as video:
+        assert frames.shape == (video.n_frames, video.height, video.width)
+        assert np.array_equal(frames[video.n_frames // 2], video.read(video.n_frames // 2))
     tracks = pd.read_parquet(res / "trial_1" / "tracks.parquet")
     assert list(tracks.columns) == ["frame", "t_s", "point", "x_m", "y_m", "valid"]
     assert tracks["valid"].mean() > 0.5
