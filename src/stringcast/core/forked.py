@@ -10,6 +10,7 @@ order, so a stage's output does not depend on the number of workers.
 from __future__ import annotations
 
 import multiprocessing
+import sys
 from concurrent.futures import ProcessPoolExecutor
 from typing import Callable, Iterator, Sequence
 
@@ -24,10 +25,12 @@ def forked_map(func: Callable, chunks: Sequence, workers: int) -> Iterator:
     """``func(chunk)`` for each of ``chunks``, yielded in order.
 
     ``func`` may be any callable, a closure included: the workers inherit it by ``fork``. With
-    ``workers`` <= 1, one chunk, or no ``fork`` start method (Windows), the chunks run here, one
-    after the other. Not re-entrant: ``func`` must not call :func:`forked_map` itself.
+    ``workers`` <= 1, one chunk, or off Linux, the chunks run here, one after the other (Windows
+    has no ``fork``; on macOS a forked child of a process that used the system's frameworks may
+    crash, which is why Python spawns there). Not re-entrant: ``func`` must not call
+    :func:`forked_map` itself.
     """
-    if workers <= 1 or len(chunks) < 2 or "fork" not in multiprocessing.get_all_start_methods():
+    if workers <= 1 or len(chunks) < 2 or not sys.platform.startswith("linux"):
         for chunk in chunks:
             yield func(chunk)
         return
