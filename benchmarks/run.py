@@ -13,7 +13,7 @@ import importlib
 import json
 import time
 
-BENCHMARKS = ("model_speed", "tracking", "sync", "estimation")
+BENCHMARKS = ("model_speed", "tracking", "sync", "estimation", "turnaround")
 SLOW = ("loop", "generalization")   # run only when named (the loop also with --with-loop)
 
 
