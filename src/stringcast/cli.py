@@ -87,10 +87,11 @@ def stage_entry(command: str):
 
 def stage_sections(command: str) -> tuple[str, ...]:
     """The config sections a workflow subcommand reads: those of its stage entry's settings
-    parameters (:func:`stringcast.core.sections_read`). The rules' params are these sections."""
-    from stringcast.core import sections_read
+    parameters, read from the source without importing the stage
+    (:func:`stringcast.core.sections_read_from_source`). The rules' params are these sections."""
+    from stringcast.core import sections_read_from_source
 
-    return sections_read(stage_entry(command))
+    return sections_read_from_source(STAGES[command])
 
 
 def _run(command: str, args, *positional):

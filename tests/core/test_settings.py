@@ -62,6 +62,18 @@ def test_every_workflow_stage_names_what_it_reads():
     assert read["report-trial"] == read["report-campaign"] == tuple(c.SECTION for c in SECTION_CLASSES)
     for cmd in STAGES:   # nothing else in the signature looks like a config
         assert "config" not in stage_entry(cmd).__code__.co_varnames[:stage_entry(cmd).__code__.co_argcount]
+    # read from the source (the Snakefile does not import the stages): the same as the imported signature's
+    assert read == {cmd: sections_read(stage_entry(cmd)) for cmd in STAGES}
+    assert read["decode"] == ()
+
+
+def test_sections_from_source_follow_a_re_export_and_refuse_a_missing_function():
+    from stringcast.core import sections_read_from_source
+
+    assert sections_read_from_source("stringcast.sync:run_sweep") == ("board_check", "sweep")   # via sync/__init__
+    assert sections_read_from_source("stringcast.sync.sweep:run_sweep") == ("board_check", "sweep")
+    with pytest.raises(ValueError, match="no function nothing_here"):
+        sections_read_from_source("stringcast.sync:nothing_here")
 
 
 def test_digest_is_of_the_settings_not_the_files(config):

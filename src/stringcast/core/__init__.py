@@ -11,7 +11,7 @@ from .specs import (ArmSpec, BoardSpec, Campaign, SetupSpec, StringSpec, TargetS
 from .files import (TRACK_COLUMNS, DataError, atomic_path, check_joint_coverage, check_joint_header, end_speed_shares,
                     find_video, joint_log_span, read_joint_table, read_json, read_parquet, read_video_meta,
                     tracks_arrays, trial_result, write_joint_table, write_json, write_parquet, write_text, write_yaml)
-from .sections import markdown_table, sections_read, settings_digest, stage_kwargs
+from .sections import markdown_table, sections_read, sections_read_from_source, settings_digest, stage_kwargs
 from .settings import (MODES, POLARITIES, SECTION_CLASSES, BoardCheckSettings, CalibrationSettings,
                        EstimationSettings, EvaluationSettings, ExecutorSettings, ModelSettings, MotionSettings,
                        Settings, SweepSettings, SyncSettings, TrackingSettings, settings_from_config)
@@ -34,5 +34,6 @@ __all__ = [
     "TrackingSettings",
     "STATUSES", "Verdict", "worst",
     "chunked", "forked_map",
-    "markdown_table", "sections_read", "settings_digest", "settings_from_config", "stage_kwargs",
+    "markdown_table", "sections_read", "sections_read_from_source", "settings_digest", "settings_from_config",
+    "stage_kwargs",
 ]

@@ -34,6 +34,45 @@ def sections_read(func) -> tuple[str, ...]:
     return tuple(c.SECTION for c in SECTION_CLASSES if c in types or Settings in types)
 
 
+def sections_read_from_source(entry: str) -> tuple[str, ...]:
+    """:func:`sections_read` of the stage entry point ``"stringcast.<module>:<function>"``, read
+    from its source with :mod:`ast`, without importing the stage.
+
+    The Snakefile asks every stage's sections when it is parsed, for every Snakemake call;
+    importing the stages for it (numba, matplotlib, scipy, ...) took 1.3 s of each call's 2 s.
+    The function is found in its module or, through ``from .x import name``, in the sibling
+    module a package re-exports it from; its parameters annotated with a settings class name
+    (``tracking: TrackingSettings``) or ``Settings`` give the sections. ``tests/core`` holds this
+    to :func:`sections_read` of the imported function for every stage.
+
+    Raises:
+        ValueError: the function is not defined where ``entry`` says (nor re-exported there).
+    """
+    import ast
+    from pathlib import Path
+
+    module, _, name = entry.partition(":")
+    parts = module.split(".")[1:]                      # below stringcast/
+    base = Path(__file__).resolve().parents[1].joinpath(*parts)
+    path = base / "__init__.py" if base.is_dir() else base.with_suffix(".py")
+    known = {c.__name__: c for c in (*SECTION_CLASSES, Settings)}
+    for _ in range(4):                                 # a re-export chain is short
+        tree = ast.parse(path.read_text())
+        for node in tree.body:
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and node.name == name:
+                a = node.args
+                types = {known[arg.annotation.id] for arg in (*a.posonlyargs, *a.args, *a.kwonlyargs)
+                         if isinstance(arg.annotation, ast.Name) and arg.annotation.id in known}
+                return tuple(c.SECTION for c in SECTION_CLASSES if c in types or Settings in types)
+        found = [n for n in tree.body if isinstance(n, ast.ImportFrom) and n.level == 1
+                 and any((al.asname or al.name) == name for al in n.names)]
+        if not found:
+            break
+        name = next(al.name for al in found[0].names if (al.asname or al.name) == name)
+        path = path.parent.joinpath(*found[0].module.split(".")).with_suffix(".py")
+    raise ValueError(f"{entry}: no function {name} in {path}")
+
+
 def stage_kwargs(func, settings: Settings) -> dict:
     """The keyword arguments ``{parameter: settings}`` that ``func`` takes from ``settings``:
     each section's object by its class, and ``settings`` itself for a :class:`Settings` one."""
