@@ -132,7 +132,7 @@ def cmd_sync(args):
 
 def cmd_sweep(args):
     geo, clock = _run("sweep", args, Path(args.trial_dir), Path(args.calibration), Path(args.sync), _campaign(args),
-                      Path(args.out_geometry), Path(args.out_clock), _frames(args))
+                      Path(args.out_geometry), Path(args.out_clock), _frames(args), int(args.workers))
     sw = geo.get("sweep", {})
     if sw.get("applied"):
         print(f"sweep: {sw['rows_used']} link rows in {sw['frames']} frames; mapping moved up to {sw['moved_p95_mm']:.2f} mm "

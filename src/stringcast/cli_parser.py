@@ -74,6 +74,7 @@ def _add_analysis_commands(add) -> None:
     sp.add_argument("--out-geometry", required=True, help="geometry.json to write (calibration.json's schema, refined)")
     sp.add_argument("--out-clock", required=True, help="clock.json to write (sync.json's schema, the offset corrected)")
     sp.add_argument("--frames", help=frames_help)
+    sp.add_argument("--workers", default=1, help="processes reading the frames' link rows side by side")
 
     sp = add("track", "markerless tracking -> tracks.parquet")
     sp.add_argument("--trial-dir", required=True, help=trial_help)

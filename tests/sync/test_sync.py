@@ -373,6 +373,13 @@ def test_the_sweep_refines_a_bent_mapping_and_a_late_clock(lab_trial, settings):
     assert abs(err_ms) < 0.3 and clock["offset_before_sweep_s"] == late["offset_s"]
     assert read_json(root / "clock.json")["offset_s"] == clock["offset_s"] and frame_times(clock)[0] == clock["offset_s"]
     assert geo["verdict"]["status"] in ("ok", "warn") and geo["verdict"]["reasons"]
+    # from the decoded frames, the link rows read by two worker processes: the same documents
+    from stringcast.video import write_frame_cache
+
+    frames = write_frame_cache(trial / "video.mkv", root / "frames_sweep.npy")
+    again = run_sweep(trial, root / "calibration_bent.json", root / "sync_late.json", campaign, None, None, frames, 2,
+                      sweep=settings.sweep, board_check=settings.board_check)
+    assert again == (geo, clock)
 
 
 def test_the_sweep_switched_off_passes_the_inputs_through_with_a_warning(lab_trial, settings):

@@ -52,6 +52,7 @@ rule sweep:
         "results/{campaign}/benchmarks/sweep_{trial}.tsv"
     conda:
         "../envs/stringcast.yaml"
+    threads: 2  # worker processes over its 40 frames; capped at --cores when run locally
     params:
         cli=CLI,
         settings=stage_settings("sweep"),
@@ -59,4 +60,4 @@ rule sweep:
     shell:
         '{params.cli} sweep --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '--calibration "{input.calibration}" --sync "{input.sync}" --campaign "{input.campaign}" '
-        '--out-geometry "{output.geometry}" --out-clock "{output.clock}" --frames "{input.frames}" > "{log}" 2>&1'
+        '--out-geometry "{output.geometry}" --out-clock "{output.clock}" --frames "{input.frames}" --workers {threads} > "{log}" 2>&1'

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from stringcast.core import BoardCheckSettings, forward_kinematics, joints_at
+from stringcast.core import BoardCheckSettings, chunked, forked_map, forward_kinematics, joints_at
 
 from .link_profiles import link_consensus, link_profiles
 
@@ -44,7 +44,7 @@ def _link_rows(image, calibration, arm, q, st: BoardCheckSettings) -> list[tuple
 
 
 def sweep_rows(frames, calibration, arm, t_frames: np.ndarray, t_j: np.ndarray, q_j: np.ndarray,
-               st: BoardCheckSettings, dt_s: float = 5e-3) -> np.ndarray:
+               st: BoardCheckSettings, dt_s: float = 5e-3, workers: int = 1) -> np.ndarray:
     """The arm's link rows in the given frames.
 
     Args:
@@ -56,6 +56,8 @@ def sweep_rows(frames, calibration, arm, t_frames: np.ndarray, t_j: np.ndarray, 
         st: the board check's profile settings (:class:`~stringcast.core.BoardCheckSettings`).
         dt_s: the half-step of the rows' speed (central difference of the FK), s: a few of the
             log's samples, so that its encoder noise does not read as speed.
+        workers: forked processes reading the frames' rows side by side
+            (:func:`~stringcast.core.forked_map`; the same rows for any number).
 
     Returns:
         (K, 7) array, columns :data:`ROW_FIELDS`: frame, the row's point on the FK axis (m,
@@ -63,15 +65,22 @@ def sweep_rows(frames, calibration, arm, t_frames: np.ndarray, t_j: np.ndarray, 
         point's velocity along the normal (m/s, signed: a clock error of dt s adds velocity * dt
         to the offset).
     """
-    out = []
-    for k, image in frames:
-        t = float(t_frames[k])
-        q_minus, q_mid, q_plus = joints_at(np.array([t - dt_s, t, t + dt_s]), t_j, q_j)
-        mid, ends = forward_kinematics(arm, q_mid), (forward_kinematics(arm, q_minus), forward_kinematics(arm, q_plus))
-        for pts, nrm, off in _link_rows(np.asarray(image, np.float32), calibration, arm, q_mid, st):
-            # the same material points a little earlier and later: their motion along the normal
-            speed = [float(_point_motion(mid, ends, p) @ nrm) / (2 * dt_s) for p in pts]
-            out += [[k, p[0], p[1], nrm[0], nrm[1], o, v] for p, o, v in zip(pts, off, speed)]
+    def rows(part):
+        out = []
+        for k, image in part:
+            t = float(t_frames[k])
+            q_minus, q_mid, q_plus = joints_at(np.array([t - dt_s, t, t + dt_s]), t_j, q_j)
+            mid = forward_kinematics(arm, q_mid)
+            ends = (forward_kinematics(arm, q_minus), forward_kinematics(arm, q_plus))
+            for pts, nrm, off in _link_rows(np.asarray(image, np.float32), calibration, arm, q_mid, st):
+                # the same material points a little earlier and later: their motion along the normal
+                speed = [float(_point_motion(mid, ends, p) @ nrm) / (2 * dt_s) for p in pts]
+                out += [[k, p[0], p[1], nrm[0], nrm[1], o, v] for p, o, v in zip(pts, off, speed)]
+        return out
+
+    frames = list(frames)
+    out = [r for part in forked_map(rows, chunked(frames, -(-len(frames) // max(1, workers))), workers)
+           for r in part]
     return np.asarray(out, float).reshape(-1, len(ROW_FIELDS))
 
 

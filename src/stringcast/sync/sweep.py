@@ -66,12 +66,13 @@ def reach_points(campaign, q_j: np.ndarray, calibration: Calibration, step_m: fl
     return g[near][inside]
 
 
-def _fit(calibration, frames, campaign, t_frames, t_j, q_j, corners, sweep, board_check):
+def _fit(calibration, frames, campaign, t_frames, t_j, q_j, corners, sweep, board_check, workers=1):
     """Passes of rows and fit, each at the clock of the last: (fit, with ``dt_s`` the total clock
     correction, s; rows of the last pass), or (None, rows) when a pass has too few rows."""
     total = 0.0
     for _ in range(sweep.passes):
-        rows = sweep_rows(frames, calibration, campaign.arm, t_frames + total, t_j, q_j, board_check)
+        rows = sweep_rows(frames, calibration, campaign.arm, t_frames + total, t_j, q_j, board_check,
+                          workers=workers)
         if len(rows) < sweep.min_rows:
             return None, rows
         fit = refine_mapping(calibration, rows, corners, huber=sweep.huber)
@@ -105,7 +106,7 @@ def _passed_through(calibration, sync_doc, reason):
 
 def run_sweep(trial_dir: str | Path, calibration_json: str | Path, sync_json: str | Path, campaign,
               out_geometry: str | Path | None = None, out_clock: str | Path | None = None,
-              frames_npy: str | Path | None = None, *, sweep: SweepSettings, board_check: BoardCheckSettings) -> tuple[dict, dict]:
+              frames_npy: str | Path | None = None, workers: int = 1, *, sweep: SweepSettings, board_check: BoardCheckSettings) -> tuple[dict, dict]:
     """Refine one trial's mapping and clock by the arm's sweep; write ``geometry.json`` and ``clock.json``.
 
     Args:
@@ -115,6 +116,7 @@ def run_sweep(trial_dir: str | Path, calibration_json: str | Path, sync_json: st
         out_geometry, out_clock: where to write them (None: not written).
         frames_npy: the video's frames decoded once (:func:`~stringcast.video.write_frame_cache`); None:
             decode the video.
+        workers: processes reading the frames' link rows side by side (the same result).
         sweep, board_check: settings (:class:`~stringcast.core.SweepSettings`; the link profiles').
 
     Returns:
@@ -140,7 +142,7 @@ def run_sweep(trial_dir: str | Path, calibration_json: str | Path, sync_json: st
         keep = np.unique(np.linspace(0, len(t_frames) - 1, sweep.frames).astype(int))
         frames = read_frames(find_video(trial_dir), keep, None if frames_npy is None else Path(frames_npy))
         corners = board_corner_points(calibration, campaign.setup.board.make())
-        fit, rows = _fit(calibration, frames, campaign, t_frames, t_j, q_j, corners, sweep, board_check)
+        fit, rows = _fit(calibration, frames, campaign, t_frames, t_j, q_j, corners, sweep, board_check, workers)
         if fit is None:
             geo, clock = _passed_through(calibration, sync_doc, f"{len(rows)} agreeing link rows in {len(frames)} "
                                          f"frames, fewer than sweep.min_rows = {sweep.min_rows}")
