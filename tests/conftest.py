@@ -3,6 +3,7 @@ import dataclasses
 import os
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
@@ -83,3 +84,20 @@ def tiny_lab_trial(tmp_path, config, bands=None):
 def settings(config):
     """Every stage's settings (:class:`stringcast.core.Settings`) from the project's config."""
     return settings_from_config(config)
+
+
+def random_frames(n, h=40, w=56, dtype=np.uint8, seed=0):
+    """n random (h, w) frames of ``dtype`` (the video tests' footage)."""
+    rng = np.random.default_rng(seed)
+    hi = 255 if dtype == np.uint8 else 65535
+    return [rng.integers(0, hi, (h, w)).astype(dtype) for _ in range(n)]
+
+
+def write_ffv1(path, frames, fps=500.0):
+    """``frames`` (grey, 8- or 16-bit) as a lossless FFV1 video at ``path``."""
+    h, w = frames[0].shape
+    vw = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"FFV1"), fps, (w, h), isColor=False)
+    assert vw.isOpened()
+    for f in frames:
+        vw.write(f)
+    vw.release()

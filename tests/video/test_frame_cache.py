@@ -3,7 +3,6 @@ in any order; a cache of another or a changed video is refused; the real H.264 c
 import json
 import os
 
-import cv2
 import numpy as np
 import pytest
 
@@ -11,21 +10,18 @@ from stringcast.cli import main
 from stringcast.core.files import DataError
 from stringcast.video import CachedVideo, open_trial_video, open_video, write_frame_cache
 
-from conftest import SHARED_REAL
+from conftest import SHARED_REAL, random_frames, write_ffv1
 
 
-def _write_ffv1(path, n=9, h=24, w=32, fps=500.0, seed=0):
-    rng = np.random.default_rng(seed)
-    frames = [rng.integers(0, 255, (h, w)).astype(np.uint8) for _ in range(n)]
-    vw = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"FFV1"), fps, (w, h), isColor=False)
-    for f in frames:
-        vw.write(f)
-    vw.release()
+def _video(path, n=9, seed=0):
+    """A small random FFV1 video at ``path``; returns its frames."""
+    frames = random_frames(n, 24, 32, seed=seed)
+    write_ffv1(path, frames)
     return frames
 
 
 def test_cache_holds_the_videos_frames_times_and_attributes(tmp_path):
-    frames = _write_ffv1(tmp_path / "video.mkv")
+    frames = _video(tmp_path / "video.mkv")
     out = write_frame_cache(tmp_path / "video.mkv", tmp_path / "res" / "frames.npy")
     assert out.exists() and not list((tmp_path / "res").glob(".*partial*"))
     assert np.load(out).shape == (9, 24, 32)           # a plain .npy any NumPy opens
@@ -44,8 +40,8 @@ def test_cache_holds_the_videos_frames_times_and_attributes(tmp_path):
 
 
 def test_cache_of_a_changed_or_other_video_is_refused(tmp_path):
-    _write_ffv1(tmp_path / "video.mkv")
-    _write_ffv1(tmp_path / "other.mkv", seed=1)
+    _video(tmp_path / "video.mkv")
+    _video(tmp_path / "other.mkv", seed=1)
     out = write_frame_cache(tmp_path / "video.mkv", tmp_path / "frames.npy")
     with pytest.raises(DataError, match="not from .*other.mkv"):
         CachedVideo(out, tmp_path / "other.mkv")
@@ -61,7 +57,7 @@ def test_cache_of_a_changed_or_other_video_is_refused(tmp_path):
 def test_decode_command_writes_the_cache_beside_its_sidecar(tmp_path, capsys):
     trial = tmp_path / "trial_1"
     trial.mkdir()
-    frames = _write_ffv1(trial / "video.mkv", n=5)
+    frames = _video(trial / "video.mkv", n=5)
     assert main(["decode", "--trial-dir", str(trial), "--out", str(tmp_path / "r" / "frames.npy")]) == 0
     meta = json.loads((tmp_path / "r" / "frames.json").read_text())
     assert meta["frames"] == 5 and meta["source"]["path"].endswith("video.mkv")

@@ -9,27 +9,12 @@ from stringcast.core.files import DataError
 from stringcast.video.container import ContainerReader, open_video
 from stringcast.video.images import FrameFolderReader
 
-from conftest import SHARED_REAL
-
-
-def _frames(n, h=40, w=56, dtype=np.uint8, seed=0):
-    rng = np.random.default_rng(seed)
-    hi = 255 if dtype == np.uint8 else 65535
-    return [rng.integers(0, hi, (h, w)).astype(dtype) for _ in range(n)]
-
-
-def _write_ffv1(path, frames, fps=500.0):
-    h, w = frames[0].shape
-    vw = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"FFV1"), fps, (w, h), isColor=False)
-    assert vw.isOpened()
-    for f in frames:
-        vw.write(f)
-    vw.release()
+from conftest import SHARED_REAL, random_frames, write_ffv1
 
 
 def test_ffv1_mkv_lossless_stream_and_random_access(tmp_path):
-    frames = _frames(12)
-    _write_ffv1(tmp_path / "v.mkv", frames)
+    frames = random_frames(12)
+    write_ffv1(tmp_path / "v.mkv", frames)
     with open_video(tmp_path / "v.mkv") as v:
         assert isinstance(v, ContainerReader)
         assert (v.n_frames, v.width, v.height, v.dtype, v.fps) == (12, 56, 40, np.uint8, 500.0)
@@ -42,7 +27,7 @@ def test_ffv1_mkv_lossless_stream_and_random_access(tmp_path):
 
 
 def test_16bit_ffv1_keeps_depth(tmp_path):
-    frames = _frames(4, dtype=np.uint16)
+    frames = random_frames(4, dtype=np.uint16)
     h, w = frames[0].shape
     vw = cv2.VideoWriter(str(tmp_path / "v16.mkv"), cv2.CAP_FFMPEG, cv2.VideoWriter_fourcc(*"FFV1"), 100.0,
                          (w, h), [cv2.VIDEOWRITER_PROP_DEPTH, cv2.CV_16U, cv2.VIDEOWRITER_PROP_IS_COLOR, 0])
@@ -55,7 +40,7 @@ def test_16bit_ffv1_keeps_depth(tmp_path):
 
 
 def test_png_folder_natural_order_and_colour_to_grey(tmp_path):
-    frames = _frames(11)
+    frames = random_frames(11)
     for i, f in enumerate(frames):  # f2 must come before f10
         cv2.imwrite(str(tmp_path / f"f{i}.png"), cv2.cvtColor(f, cv2.COLOR_GRAY2BGR) if i % 2 else f)
     (tmp_path / "notes.txt").write_text("not a frame")
@@ -67,7 +52,7 @@ def test_png_folder_natural_order_and_colour_to_grey(tmp_path):
 
 
 def test_tiff_folder_16bit(tmp_path):
-    frames = _frames(3, dtype=np.uint16)
+    frames = random_frames(3, dtype=np.uint16)
     for i, f in enumerate(frames):
         assert cv2.imwrite(str(tmp_path / f"frame_{i:04d}.tiff"), f)
     v = open_video(tmp_path)
@@ -85,7 +70,7 @@ def test_folder_with_changing_frame_size(tmp_path):
 
 
 def test_truncated_video_raises_naming_file(tmp_path):
-    _write_ffv1(tmp_path / "full.mkv", _frames(30, 64, 64))
+    write_ffv1(tmp_path / "full.mkv", random_frames(30, 64, 64))
     data = (tmp_path / "full.mkv").read_bytes()
     (tmp_path / "cut.mkv").write_bytes(data[: len(data) // 2])
     v = open_video(tmp_path / "cut.mkv")
@@ -124,7 +109,7 @@ def test_real_h264_clip_to_grey():
 def test_tiff_folder_12bit_packed_and_rgb(tmp_path):
     tifffile = pytest.importorskip("tifffile")
     pytest.importorskip("imagecodecs")  # tifffile packs/unpacks 12-bit integers through imagecodecs
-    mono = [f >> 4 for f in _frames(3, dtype=np.uint16, seed=1)]  # 12-bit values
+    mono = [f >> 4 for f in random_frames(3, dtype=np.uint16, seed=1)]  # 12-bit values
     for i, f in enumerate(mono):
         tifffile.imwrite(tmp_path / f"m{i}.tif", f, bitspersample=12, photometric="minisblack")
     v = open_video(tmp_path)
@@ -143,7 +128,7 @@ def test_tiff_folder_12bit_packed_and_rgb(tmp_path):
 
 def test_multipage_tiff_stack(tmp_path):
     tifffile = pytest.importorskip("tifffile")
-    frames = _frames(5, dtype=np.uint16, seed=3)
+    frames = random_frames(5, dtype=np.uint16, seed=3)
     tifffile.imwrite(tmp_path / "stack.tif", np.stack(frames), photometric="minisblack")
     with open_video(tmp_path / "stack.tif", fps=1000.0) as v:
         assert (v.n_frames, v.fps, v.bit_depth, v.timestamps_s) == (5, 1000.0, 16, None)
@@ -157,7 +142,7 @@ def test_multipage_tiff_stack(tmp_path):
 def test_photron_cihx_mraw_round_trip(tmp_path, bits):
     from stringcast.video.photron import PhotronReader, write_photron
 
-    frames = [f >> (16 - bits) for f in _frames(7, dtype=np.uint16, seed=bits)]
+    frames = [f >> (16 - bits) for f in random_frames(7, dtype=np.uint16, seed=bits)]
     cihx = write_photron(tmp_path / "shot.cihx", iter(frames), fps=2000.0, color_bit=bits)
     assert (tmp_path / "shot.mraw").stat().st_size == 7 * 40 * 56 * bits // 8
     for p in (cihx, tmp_path / "shot.mraw"):  # open by header or by frame file
@@ -174,12 +159,12 @@ def test_photron_agrees_with_pymraw(tmp_path):
     pyMRAW = pytest.importorskip("pyMRAW")
     from stringcast.video.photron import write_photron
 
-    frames = np.stack([f >> 4 for f in _frames(3, dtype=np.uint16, seed=9)])
+    frames = np.stack([f >> 4 for f in random_frames(3, dtype=np.uint16, seed=9)])
     cihx = write_photron(tmp_path / "a.cihx", frames, fps=500.0, color_bit=12)
     images, cih = pyMRAW.load_video(str(cihx))  # unpacks the whole 12-bit file at once
     assert cih["Record Rate(fps)"] == 500.0 and np.array_equal(np.asarray(images), frames)
 
-    frames16 = _frames(4, dtype=np.uint16, seed=10)
+    frames16 = random_frames(4, dtype=np.uint16, seed=10)
     pyMRAW.save_mraw(np.stack(frames16), str(tmp_path / "b.cih"), bit_depth=16,
                      info_dict={"Record Rate(fps)": 750, "EffectiveBit Depth": 16})
     v = open_video(tmp_path / "b.cih")
@@ -190,7 +175,7 @@ def test_photron_agrees_with_pymraw(tmp_path):
 def test_photron_truncated_or_missing_mraw(tmp_path):
     from stringcast.video.photron import write_photron
 
-    cihx = write_photron(tmp_path / "c.cihx", _frames(6, dtype=np.uint16), fps=1000.0)
+    cihx = write_photron(tmp_path / "c.cihx", random_frames(6, dtype=np.uint16), fps=1000.0)
     mraw = tmp_path / "c.mraw"
     mraw.write_bytes(mraw.read_bytes()[: 40 * 56 * 2 * 4 + 100])
     with pytest.raises(DataError, match=r"c.mraw: truncated: .* 4 of the 6 frames"):
@@ -206,8 +191,8 @@ def test_photron_truncated_or_missing_mraw(tmp_path):
 
 def test_matroska_above_1000fps_counts_frames_exactly(tmp_path):
     """Matroska keeps ms times: at 2000 fps its announced count is off; the reader counts."""
-    frames = _frames(37, 24, 32, seed=4)
-    _write_ffv1(tmp_path / "fast.mkv", frames, fps=2000.0)
+    frames = random_frames(37, 24, 32, seed=4)
+    write_ffv1(tmp_path / "fast.mkv", frames, fps=2000.0)
     announced = cv2.VideoCapture(str(tmp_path / "fast.mkv")).get(cv2.CAP_PROP_FRAME_COUNT)
     v = open_video(tmp_path / "fast.mkv")
     assert v.n_frames == 37 and announced != 37
@@ -220,7 +205,7 @@ def test_matroska_above_1000fps_counts_frames_exactly(tmp_path):
 def test_container_timestamps_and_dropped_frames(tmp_path):
     from stringcast.video.container import dropped_frames
 
-    _write_ffv1(tmp_path / "v.mkv", _frames(20, 24, 32), fps=500.0)
+    write_ffv1(tmp_path / "v.mkv", random_frames(20, 24, 32), fps=500.0)
     v = open_video(tmp_path / "v.mkv")
     t = v.timestamps_s  # asked before any pass: one decoding pass
     assert t == pytest.approx(np.arange(20) / 500.0, abs=1e-9)
