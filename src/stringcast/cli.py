@@ -117,8 +117,8 @@ def _frames(args) -> Path | None:
 def cmd_decode(args):
     from stringcast.core import find_video
 
-    out = _run("decode", args, find_video(Path(args.trial_dir)), Path(args.out))
-    print(f"decoded {find_video(Path(args.trial_dir))} once -> {out}")
+    video = find_video(Path(args.trial_dir))
+    print(f"decoded {video} once -> {_run('decode', args, video, Path(args.out))}")
 
 
 def cmd_sync(args):

@@ -52,6 +52,18 @@ def test_cache_of_a_changed_or_other_video_is_refused(tmp_path):
     (tmp_path / "frames.json").write_text("{not json")
     with pytest.raises(DataError, match="frames.npy: not a readable frame cache"):
         CachedVideo(out, tmp_path / "video.mkv")
+    (tmp_path / "frames.json").write_text(json.dumps({"frames": 9}))
+    with pytest.raises(DataError, match="frames.json lacks bit_depth, fps, source, timestamps_s"):
+        CachedVideo(out, tmp_path / "video.mkv")
+
+
+def test_a_truncated_video_leaves_no_cache_nor_partial_file(tmp_path):
+    write_ffv1(tmp_path / "full.mkv", random_frames(30, 64, 64))
+    data = (tmp_path / "full.mkv").read_bytes()
+    (tmp_path / "cut.mkv").write_bytes(data[: len(data) // 2])
+    with pytest.raises(DataError, match="cut.mkv.*truncated"):
+        write_frame_cache(tmp_path / "cut.mkv", tmp_path / "res" / "frames.npy")
+    assert list((tmp_path / "res").iterdir()) == []
 
 
 def test_decode_command_writes_the_cache_beside_its_sidecar(tmp_path, capsys):

@@ -30,7 +30,12 @@ def sections_read(func) -> tuple[str, ...]:
     ``stringcast.cli`` hands each stage exactly these, and the workflow makes them the rule's
     params, so Snakemake reruns the rule when one of them changes and only then.
     """
-    types = set(_settings_parameters(func).values())
+    return _sections_of(set(_settings_parameters(func).values()))
+
+
+def _sections_of(types: set) -> tuple[str, ...]:
+    """The sections of the settings classes ``types``, in :data:`SECTION_CLASSES` order (all of them
+    where :class:`Settings` is among ``types``)."""
     return tuple(c.SECTION for c in SECTION_CLASSES if c in types or Settings in types)
 
 
@@ -61,9 +66,8 @@ def sections_read_from_source(entry: str) -> tuple[str, ...]:
         for node in tree.body:
             if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and node.name == name:
                 a = node.args
-                types = {known[arg.annotation.id] for arg in (*a.posonlyargs, *a.args, *a.kwonlyargs)
-                         if isinstance(arg.annotation, ast.Name) and arg.annotation.id in known}
-                return tuple(c.SECTION for c in SECTION_CLASSES if c in types or Settings in types)
+                return _sections_of({known[arg.annotation.id] for arg in (*a.posonlyargs, *a.args, *a.kwonlyargs)
+                                     if isinstance(arg.annotation, ast.Name) and arg.annotation.id in known})
         found = [n for n in tree.body if isinstance(n, ast.ImportFrom) and n.level == 1
                  and any((al.asname or al.name) == name for al in n.names)]
         if not found:

@@ -106,7 +106,8 @@ def _passed_through(calibration, sync_doc, reason):
 
 def run_sweep(trial_dir: str | Path, calibration_json: str | Path, sync_json: str | Path, campaign,
               out_geometry: str | Path | None = None, out_clock: str | Path | None = None,
-              frames_npy: str | Path | None = None, workers: int = 1, *, sweep: SweepSettings, board_check: BoardCheckSettings) -> tuple[dict, dict]:
+              frames_npy: str | Path | None = None, workers: int = 1, *, sweep: SweepSettings,
+              board_check: BoardCheckSettings) -> tuple[dict, dict]:
     """Refine one trial's mapping and clock by the arm's sweep; write ``geometry.json`` and ``clock.json``.
 
     Args:

@@ -59,19 +59,23 @@ def write_frame_cache(video_path: str | Path, frames_npy: str | Path, fps: float
     video_path, frames_npy = Path(video_path), Path(frames_npy)
     frames_npy.parent.mkdir(parents=True, exist_ok=True)
     tmp = frames_npy.with_name(f".{frames_npy.name}.partial")
-    with open_video(video_path, fps=fps) as video, open(tmp, "wb") as fh:
-        # the .npy header, then each frame's bytes as decoded: a plain sequential write (a memory map
-        # took a page fault per 4 KiB written, a third of the decode's time)
-        np.lib.format.write_array_header_2_0(fh, {"descr": np.lib.format.dtype_to_descr(np.dtype(video.dtype)),
-                                                  "fortran_order": False,
-                                                  "shape": (video.n_frames, video.height, video.width)})
-        show = sys.stderr.isatty() if progress is None else progress
-        for _, frame in tqdm(video, total=video.n_frames, desc="decode", unit="frame", disable=not show):
-            fh.write(np.ascontiguousarray(frame).data)
-        stamps = video.timestamps_s                   # recorded by the pass above: no second decode
-        meta = {"source": _source_stamp(video_path), "fps": video.fps, "bit_depth": int(video.bit_depth),
-                "frames": int(video.n_frames), "width": int(video.width), "height": int(video.height),
-                "timestamps_s": None if stamps is None else [float(t) for t in stamps]}
+    try:
+        with open_video(video_path, fps=fps) as video, open(tmp, "wb") as fh:
+            # the .npy header, then each frame's bytes as decoded: a plain sequential write (a memory
+            # map took a page fault per 4 KiB written, a third of the decode's time)
+            np.lib.format.write_array_header_2_0(fh, {"descr": np.lib.format.dtype_to_descr(np.dtype(video.dtype)),
+                                                      "fortran_order": False,
+                                                      "shape": (video.n_frames, video.height, video.width)})
+            show = sys.stderr.isatty() if progress is None else progress
+            for _, frame in tqdm(video, total=video.n_frames, desc="decode", unit="frame", disable=not show):
+                fh.write(np.ascontiguousarray(frame).data)
+            stamps = video.timestamps_s                   # recorded by the pass above: no second decode
+            meta = {"source": _source_stamp(video_path), "fps": video.fps, "bit_depth": int(video.bit_depth),
+                    "frames": int(video.n_frames), "width": int(video.width), "height": int(video.height),
+                    "timestamps_s": None if stamps is None else [float(t) for t in stamps]}
+    except BaseException:
+        tmp.unlink(missing_ok=True)   # a truncated video or an interrupt leaves no gigabyte of partial frames
+        raise
     side_tmp = _sidecar(tmp)
     side_tmp.write_text(json.dumps(meta))
     os.replace(side_tmp, _sidecar(frames_npy))
@@ -96,7 +100,10 @@ class CachedVideo(VideoReader):
         try:
             meta = json.loads(_sidecar(frames_npy).read_text())
             self._frames = np.load(frames_npy, mmap_mode="r")
-        except (OSError, ValueError) as exc:
+            missing = {"source", "frames", "fps", "bit_depth", "timestamps_s"} - set(meta)
+            if missing:
+                raise ValueError(f"{_sidecar(frames_npy).name} lacks {', '.join(sorted(missing))}")
+        except (OSError, ValueError, TypeError) as exc:
             raise DataError(f"{frames_npy}: not a readable frame cache ({exc}); delete it to decode the video "
                             "again") from exc
         if meta.get("source") != _source_stamp(self.path):
