@@ -86,7 +86,8 @@ def track_string(string_type: int, config: dict, settings, calib_dir: Path, work
     alone_s = time.perf_counter() - t0
     if not tracks.equals(alone):
         raise RuntimeError(f"string {string_type}: tracking from the decoded frames differs from tracking the video")
-    frames_npy.unlink()
+    for f in (frames_npy, frames_npy.with_suffix(".json")):   # the cache and its frames.json
+        f.unlink()
     frames = int(tracks["frame"].nunique())
     e, valid = tracking_errors(tracks, pd.read_parquet(trial / "ground_truth.parquet"))
     return {"errors_mm": e, "valid_share": valid, "frames": frames, "track_s": seconds,
