@@ -2,6 +2,7 @@ import numpy as np
 import pytest
 
 from stringcast.estimate.evaluation import evaluation_value, per_point_errors
+from stringcast.estimate import evaluation as ev
 
 
 def _tracks(F=30, n=6, seed=0):
@@ -101,3 +102,21 @@ def test_bad_inputs_raise():
         evaluation_value(tracked, np.zeros_like(valid), tracked, 0.1)
     with pytest.raises(ValueError, match="w must"):
         evaluation_value(tracked, valid, tracked, -1.0)
+
+
+@pytest.mark.parametrize("n", [1, 2, 7, 10])
+def test_kernel_equals_numpy_reference_bit_for_bit(n):
+    """The numba E_i kernel is the NumPy reference's result exactly (same sums in the same order),
+    with invalid frames, a point with no frame, and a candidate blown up (NaN) at a valid frame."""
+    rng = np.random.default_rng(n)
+    F, B = 333, 37
+    tr = rng.normal(size=(F, n, 2))
+    va = rng.random((F, n)) > 0.3
+    va[:, n - 1] = False if n > 2 else va[:, n - 1]          # one point with no valid frame
+    sim = tr[None] + rng.normal(scale=0.01, size=(B, F, n, 2))
+    f_bad = int(np.flatnonzero(va[:, 0])[0])
+    sim[5, f_bad, 0, 1] = np.nan
+    batch = ev._per_point(tr, va, sim)
+    assert np.array_equal(batch, ev._per_point_reference(tr, va, sim), equal_nan=True)
+    assert np.isinf(batch[5, 0]) and np.isfinite(batch[4, 0])
+    assert np.array_equal(ev._per_point(tr, va, sim[3]), ev._per_point_reference(tr, va, sim[3]), equal_nan=True)
