@@ -394,3 +394,33 @@ def test_the_sweep_switched_off_passes_the_inputs_through_with_a_warning(lab_tri
     assert clock["offset_s"] == truth["trigger_time_s"] + 0.001
     assert geo["verdict"]["status"] == clock["verdict"]["status"] == "warn"
     assert "not refined by the arm's sweep" in geo["verdict"]["reasons"][-1]
+
+
+@pytest.mark.parametrize("lens", ["distorted", "homography only"])
+def test_strip_sampling_kernel_is_the_reference_bit_for_bit(lens):
+    """sample_strips (one compiled pass) gives the values of sample(image, calibration, strip_points + shift)
+    exactly, strips partly outside the image (edge held) included, with and without intrinsics."""
+    from stringcast.calibrate.calibration import Calibration
+    from stringcast.core import load_config, resolve_campaign
+    from stringcast.sync.arm_match import sample, sample_strips, segment_half_widths, strip_points
+
+    arm = resolve_campaign({"string": 1, "target": 1}, load_config(None), "k").arm
+    rng = np.random.default_rng(4)
+    image = (rng.random((240, 320)) * 255).astype(np.float32)
+    K = np.array([[300.0, 0, 161.3], [0, 302.0, 118.9], [0, 0, 1]])
+    R, t = np.eye(3), np.array([-0.45, -0.05, 2.5])          # the arm's reach maps into the image and past it
+    H = np.linalg.inv(K @ np.column_stack([R[:, 0], R[:, 1], t]))
+    cal = Calibration(H, (320, 240), K, np.array([-0.2, 0.05, 1e-3, -5e-4, 0.01])) if lens == "distorted" \
+        else Calibration(H, (320, 240))
+    hw = segment_half_widths(arm, 0.01)
+    segments = np.arange(len(hw))
+    q = rng.uniform(-2.0, 1.0, (17, arm.n_joints))
+    shift = np.array([0.0021, -0.0013])
+    fast = sample_strips(image, cal, arm, q, hw, 8, 11, segments, shift)
+    ref = sample(image, cal, strip_points(arm, q, hw, 8, 11, segments) + shift)
+    assert fast.shape == ref.shape == (17, len(segments), 8, 11) and fast.dtype == np.float32
+    assert np.array_equal(fast, ref)
+    uv = cal.robot_to_pixel((strip_points(arm, q, hw, 8, 11, segments) + shift).reshape(-1, 2))
+    assert ((uv < 0) | (uv > [319, 239])).any(axis=1).sum() > 20      # the edge case is exercised
+    with pytest.raises(ValueError, match="image must be"):
+        sample_strips(image[0], cal, arm, q, hw, 8, 11, segments, shift)

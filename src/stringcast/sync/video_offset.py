@@ -99,9 +99,12 @@ def estimate_offset(video, calibration, arm, t_j: np.ndarray, q_j: np.ndarray,
     def strips(q):
         return sync_arm.strip_points(arm, q, hw, n_u, n_v, segments) + shift
 
+    def strip_samples(image, q):  # sample(image, calibration, strips(q)), bit for bit, in one pass
+        return sync_arm.sample_strips(image, calibration, arm, q, hw, n_u, n_v, segments, shift)
+
     rest_pts = strips(q_j[0])
     rest_s = sync_arm.smooth(rest, sig)
-    template = sync_arm.sample(rest_s, calibration, rest_pts)
+    template = strip_samples(rest_s, q_j[0][None])[0]  # sample(rest_s, calibration, rest_pts); loads the kernel before any fork
     try:
         t_on, t_off = motion_window(t_j, q_j)
     except ValueError as exc:
@@ -109,7 +112,7 @@ def estimate_offset(video, calibration, arm, t_j: np.ndarray, q_j: np.ndarray,
     search, step = st.search_ms / 1000, st.step_ms / 1000
     coarse = partial(_coarse_search, video, calibration, sig, rest_pts, rest_s, template, strips, n_rest, t_j, q_j,
                      fps, st)
-    fine = partial(_fine_search, video, calibration, sig, template, strips, t_j, q_j, fps, (t_on, t_off), search,
+    fine = partial(_fine_search, video, sig, template, strip_samples, t_j, q_j, fps, (t_on, t_off), search,
                    step, len(segments), st, workers if isinstance(video, CachedVideo) else 1, {})
     coarse_s, (taus, total, best, frames, tau_ks, per_frame) = _recentred_search(coarse, fine, trigger_s, step, st)
     if not best:
@@ -181,10 +184,12 @@ def _coarse_search(video, calibration, sig: float, rest_pts: np.ndarray, rest_s:
     return sync_arm.coarse_offset(rest_ncc, fps, tp, pred, st.coarse_step_ms / 1000)
 
 
-def _fine_search(video, calibration, sig: float, template: np.ndarray, strips, t_j: np.ndarray, q_j: np.ndarray,
+def _fine_search(video, sig: float, template: np.ndarray, strip_samples, t_j: np.ndarray, q_j: np.ndarray,
                  fps: float, window: tuple[float, float], search: float, step: float, n_seg: int, st: SyncSettings,
                  workers: int, memo: dict, tau0: float) -> tuple[np.ndarray, np.ndarray, list, np.ndarray, np.ndarray, np.ndarray]:
     """Each motion frame's match over the candidate offsets taus = tau0 +- search (step), s.
+
+    ``strip_samples(image, q)``: the smoothed frame sampled at the (shifted) strips of postures q (T, J).
 
     The frames are matched by ``workers`` forked processes (:func:`~stringcast.core.forked.forked_map`)
     where the video is a :class:`~stringcast.video.CachedVideo` (any frame, no decoding); the result
@@ -221,9 +226,9 @@ def _fine_search(video, calibration, sig: float, template: np.ndarray, strips, t
         out = []
         for k in ks:
             need = np.flatnonzero([g not in memo.get(int(k), ()) for g in grid])
-            out.append((need, sync_arm.ncc_segments(sync_arm.sample(
-                sync_arm.smooth(video.read(int(k)), sig), calibration,
-                strips(joints_at(taus[need] + k / fps, t_j, q_j))), template) if len(need) else None))
+            out.append((need, sync_arm.ncc_segments(strip_samples(
+                sync_arm.smooth(video.read(int(k)), sig), joints_at(taus[need] + k / fps, t_j, q_j)), template)
+                if len(need) else None))
         return out
 
     matches = (m for part in forked_map(match, chunked(frames, FRAMES_PER_TASK), workers) for m in part)
