@@ -140,3 +140,18 @@ def test_a_stage_imports_only_lower_layers(sub):
                   for t in ts if t.count(".") and t.split(".")[1] != sub
                   and t.split(".")[1] in SUBPACKAGES and t.split(".")[1] not in allowed})
     assert bad == []
+
+
+def test_a_stage_loads_only_what_it_runs():
+    """Lazy package faces: a fresh interpreter running the decode stage's entry has not loaded pandas,
+    sync's has not loaded SciPy's optimizers (the sweep's), and an unknown name is an AttributeError."""
+    import subprocess
+    import sys
+
+    code = ("import sys\nfrom stringcast.cli import stage_entry\nstage_entry('decode')\n"
+            "print('pandas' in sys.modules)\nstage_entry('sync')\nprint('scipy.optimize' in sys.modules)\n"
+            "stage_entry('sweep')\nprint('scipy.optimize' in sys.modules)\n"
+            "import stringcast.sync as s\ntry:\n    s.no_such_name\nexcept AttributeError as e:\n    print(e)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split("\n")
+    assert out[:3] == ["False", "False", "True"]
+    assert "no attribute 'no_such_name'" in out[3]

@@ -3,10 +3,25 @@
 (the paper's Fig. 2, 'camera calibration'), and the mapping refined by the arm's sweep of a
 trial (its link rows, :mod:`.arm_sweep`; the fit, :mod:`.refine`).
 """
-from .arm_sweep import sweep_rows
-from .board_check import check_board_to_robot
-from .calibration import Calibration, run_calibration
-from .refine import board_corner_points, mapping_standard_error, refine_mapping
+from typing import TYPE_CHECKING
+
+from stringcast.core import lazy_exports
+
+if TYPE_CHECKING:
+    from .arm_sweep import sweep_rows
+    from .board_check import check_board_to_robot
+    from .calibration import Calibration, run_calibration
+    from .refine import board_corner_points, mapping_standard_error, refine_mapping
+
+__getattr__, __dir__ = lazy_exports(__name__, {
+    "sweep_rows": ".arm_sweep",
+    "check_board_to_robot": ".board_check",
+    "Calibration": ".calibration",
+    "run_calibration": ".calibration",
+    "board_corner_points": ".refine",
+    "mapping_standard_error": ".refine",
+    "refine_mapping": ".refine",
+})
 
 __all__ = ["Calibration", "board_corner_points", "check_board_to_robot", "mapping_standard_error", "refine_mapping",
            "run_calibration", "sweep_rows"]

@@ -17,6 +17,7 @@ from .settings import (MODES, POLARITIES, SECTION_CLASSES, BoardCheckSettings, C
                        Settings, SweepSettings, SyncSettings, TrackingSettings, settings_from_config)
 from .verdict import STATUSES, Verdict, worst
 from .forked import chunked, forked_map
+from .lazy import lazy_exports
 
 __all__ = [
     "JointLimitError", "assert_within_limits", "check_limits", "forward_kinematics", "hand_pose", "joints_at",
@@ -33,7 +34,7 @@ __all__ = [
     "SyncSettings",
     "TrackingSettings",
     "STATUSES", "Verdict", "worst",
-    "chunked", "forked_map",
+    "chunked", "forked_map", "lazy_exports",
     "markdown_table", "sections_read", "sections_read_from_source", "settings_digest", "settings_from_config",
     "stage_kwargs",
 ]

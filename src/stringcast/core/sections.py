@@ -45,8 +45,8 @@ def sections_read_from_source(entry: str) -> tuple[str, ...]:
 
     The Snakefile asks every stage's sections when it is parsed, for every Snakemake call;
     importing the stages for it (numba, matplotlib, scipy, ...) took 1.3 s of each call's 2 s.
-    The function is found in its module or, through ``from .x import name``, in the sibling
-    module a package re-exports it from; its parameters annotated with a settings class name
+    The function is found in its module or, through ``from .x import name`` (at the top, or under
+    a lazy face's ``if TYPE_CHECKING:``), in the sibling module a package re-exports it from; its parameters annotated with a settings class name
     (``tracking: TrackingSettings``) or ``Settings`` give the sections. ``tests/core`` holds this
     to :func:`sections_read` of the imported function for every stage.
 
@@ -68,7 +68,8 @@ def sections_read_from_source(entry: str) -> tuple[str, ...]:
                 a = node.args
                 return _sections_of({known[arg.annotation.id] for arg in (*a.posonlyargs, *a.args, *a.kwonlyargs)
                                      if isinstance(arg.annotation, ast.Name) and arg.annotation.id in known})
-        found = [n for n in tree.body if isinstance(n, ast.ImportFrom) and n.level == 1
+        top = [*tree.body, *(n for i in tree.body if isinstance(i, ast.If) for n in i.body)]  # lazy faces: under TYPE_CHECKING
+        found = [n for n in top if isinstance(n, ast.ImportFrom) and n.level == 1
                  and any((al.asname or al.name) == name for al in n.names)]
         if not found:
             break
