@@ -8,6 +8,8 @@ import math
 
 import numpy as np
 
+from stringcast.core import forked_map
+
 
 def nan_median0(a: np.ndarray) -> np.ndarray:
     """Median over axis 0 ignoring NaN, as ``np.nanmedian(a, axis=0)`` (NaN where all are NaN), 4x faster.
@@ -48,13 +50,16 @@ def background_samples(window: np.ndarray, n_samples: int, n_bursts: int) -> np.
     return np.unique(window[np.clip(idx, 0, len(window) - 1)])
 
 
-def build_background(video, sample_idx, pre_idx, arm_masks) -> tuple[np.ndarray, tuple[float, float]]:
+def build_background(video, sample_idx, pre_idx, arm_masks, workers: int = 1) -> tuple[np.ndarray, tuple[float, float]]:
     """Arm-masked temporal median background and the sensor's noise model.
 
     Args:
         video: :class:`~stringcast.video.container.VideoReader`.
         sample_idx: frames spread over the motion; pre_idx: pre-motion frames (fill-in).
         arm_masks: callable frame index -> (H, W) bool arm mask.
+        workers: processes computing bands of rows side by side (:func:`~stringcast.core.forked_map`),
+            for a video read in any order (a decoded :class:`~stringcast.video.CachedVideo`); the
+            same result for any number (each pixel's median is its own).
 
     Returns:
         background (H, W) float32 (grey levels), and (a, b) of sigma^2 = a + b B, fitted by
@@ -62,22 +67,31 @@ def build_background(video, sample_idx, pre_idx, arm_masks) -> tuple[np.ndarray,
         in 16 brightness bins.
     """
     h, w = video.height, video.width
-    stack = np.empty((len(sample_idx), h, w), np.float32)
-    for j, k in enumerate(sample_idx):
-        f = video.read(int(k)).astype(np.float32)
-        f[arm_masks(int(k))] = np.nan
-        stack[j] = f
-    bg = np.empty((h, w), np.float32)
-    for r in range(0, h, 64):  # row chunks keep the sort's temporaries small
-        bg[r:r + 64] = nan_median0(stack[:, r:r + 64])
+    rows = -(-h // max(1, workers) // 64) * 64                  # bands of whole 64-row chunks
+    bands = [(r, min(h, r + rows)) for r in range(0, h, rows)]
+
+    def band(rng):  # (the band's background, its samples at every 4th row and column)
+        r0, r1 = rng
+        stack = np.empty((len(sample_idx), r1 - r0, w), np.float32)
+        for j, k in enumerate(sample_idx):
+            f = video.read(int(k))[r0:r1].astype(np.float32)
+            f[arm_masks(int(k))[r0:r1]] = np.nan
+            stack[j] = f
+        bg = np.empty((r1 - r0, w), np.float32)
+        for r in range(0, r1 - r0, 64):  # row chunks keep the sort's temporaries small
+            bg[r:r + 64] = nan_median0(stack[:, r:r + 64])
+        return bg, stack[:, ::4, ::4].copy()   # every 16th pixel: ~10^5 per bin at 1024^2
+
+    parts = list(forked_map(band, bands, workers))
+    bg = np.concatenate([p[0] for p in parts])
+    sub = np.concatenate([p[1] for p in parts], axis=1)
     hole = ~np.isfinite(bg)
     if hole.any():
         src = pre_idx if len(pre_idx) else sample_idx
         pre = np.median(np.stack([video.read(int(k)) for k in src[:15]]), axis=0).astype(np.float32)
         bg[hole] = pre[hole]
-    sub = (slice(None), slice(None, None, 4), slice(None, None, 4))  # every 16th pixel: ~10^5 per bin at 1024^2
-    d = (stack[sub] - bg[None, ::4, ::4]).ravel()
-    B = np.broadcast_to(bg[None, ::4, ::4], stack[sub].shape).ravel()
+    d = (sub - bg[None, ::4, ::4]).ravel()
+    B = np.broadcast_to(bg[None, ::4, ::4], sub.shape).ravel()
     ok = np.isfinite(d)
     d, B = d[ok], B[ok]
     which = np.clip(np.searchsorted(np.quantile(B, np.linspace(0, 1, 17)), B, side="right") - 1, 0, 15)

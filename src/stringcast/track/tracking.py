@@ -134,7 +134,8 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
     second = video if frames is None else open_trial_video(vpath, frames_npy)  # decoding: the main pass runs ahead
     try:
         bg, noise = build_background(second, samples.astype(int), pre, lambda k: draw_arm_mask(
-            (video.height, video.width), jpx[k], campaign.arm, st, scale, grow_px=2.0))
+            (video.height, video.width), jpx[k], campaign.arm, st, scale, grow_px=2.0),
+            workers if isinstance(video, CachedVideo) else 1)
     finally:
         if second is not video:
             second.close()
