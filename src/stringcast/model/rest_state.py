@@ -21,7 +21,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.optimize import brentq
 
 
 def fill_rest_pose(grasp: np.ndarray, direction0: float, known: np.ndarray, l0: float) -> tuple[np.ndarray, tuple]:
@@ -74,6 +73,8 @@ def _polygon(a: np.ndarray, b: np.ndarray, m: int, l0: float, above_dir: float) 
         return a + s * chord
     # m chords of l0 turning by alpha each span sin(m alpha / 2) / sin(alpha / 2) l0: equal to c on (0, 2 pi / m)
     ratio = c / l0
+    from scipy.optimize import brentq   # here: importing SciPy's optimizers costs estimate and plan 0.2 s each
+
     alpha = brentq(lambda x: math.sin(m * x / 2) / math.sin(x / 2) - ratio, 1e-12, 2 * math.pi / m - 1e-12)
     beta = math.atan2(chord[1], chord[0])
     # segment j leans sign ((m - 1) / 2 - j) alpha from the chord; the side whose first segment is nearer above_dir
