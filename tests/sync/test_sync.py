@@ -10,7 +10,7 @@ import yaml
 
 from stringcast.core import SyncSettings
 from stringcast.core.files import DataError, read_json
-from stringcast.sync.offset import frame_times, run_sync
+from stringcast.sync import frame_times, run_sync
 
 FPS = 500.0
 

@@ -7,11 +7,12 @@ from typing import TYPE_CHECKING
 from stringcast.core import lazy_exports
 
 if TYPE_CHECKING:
-    from .offset import frame_times, run_sync
+    from .clock import frame_times
+    from .offset import run_sync
     from .sweep import run_sweep
 
 __getattr__, __dir__ = lazy_exports(__name__, {
-    "frame_times": ".offset",
+    "frame_times": ".clock",
     "run_sync": ".offset",
     "run_sweep": ".sweep",
 })

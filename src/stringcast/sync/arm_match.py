@@ -45,6 +45,7 @@ import numpy as np
 from scipy.ndimage import map_coordinates
 
 from stringcast.core import forward_kinematics
+from .strip_kernel import strips_kernel
 
 
 def segment_half_widths(arm, margin_m: float) -> np.ndarray:
@@ -115,8 +116,6 @@ def sample_strips(image: np.ndarray, calibration, arm, q: np.ndarray, half_width
     fk = np.ascontiguousarray(forward_kinematics(arm, np.atleast_2d(q)))
     u = np.linspace(0.15, 0.85, n_u)
     v = np.ascontiguousarray(np.linspace(-1.0, 1.0, n_v)[None, :] * np.asarray(half_widths, float)[:, None])
-    from .strip_kernel import strips_kernel   # here: the sweep, which imports this module, needs no numba
-
     out = np.empty((len(fk), len(segments), n_u, n_v), img.dtype)
     strips_kernel(img, fk, np.asarray(segments, np.int64), u, v, np.asarray(shift, float),
                    np.asarray(calibration._H_inv, float), _camera(calibration), out)

@@ -192,23 +192,3 @@ def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaig
     if out_json is not None:
         write_json(out_json, doc)
     return doc
-
-
-def frame_times(sync: dict, n: int | None = None) -> np.ndarray:
-    """Controller-clock times of frames 0..n-1: ``offset_s + k / fps`` -> (n,) s.
-
-    Args:
-        sync: the ``sync.json`` mapping (offset_s, fps, frames).
-        n: frame count (default ``sync["frames"]``).
-
-    Raises:
-        DataError: missing or non-positive fps, or missing offset.
-    """
-    try:
-        offset, fps = float(sync["offset_s"]), float(sync["fps"])
-        n = int(sync["frames"]) if n is None else int(n)
-    except (KeyError, TypeError, ValueError) as exc:
-        raise DataError(f"sync: needs offset_s, fps and frames, got {sync!r}") from exc
-    if not (np.isfinite(fps) and fps > 0) or not np.isfinite(offset):
-        raise DataError(f"sync: fps must be > 0 and offset finite, got fps={fps}, offset_s={offset}")
-    return offset + np.arange(n) / fps

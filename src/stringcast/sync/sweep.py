@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .offset import frame_times
+from .clock import frame_times
 from stringcast.calibrate import (Calibration, board_corner_points, mapping_standard_error, refine_mapping,
                                   sweep_rows)
 from stringcast.core import (BoardCheckSettings, DataError, SweepSettings, Verdict, find_video, forward_kinematics,
