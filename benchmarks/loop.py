@@ -37,10 +37,9 @@ Modes (``--mode``; issue 27):
   type, ``--video-methods``, default ours): loop.json's ``video_check``.
 
 Per run (``run.json``): executions, hit, the lab's closest approach per execution (mm), E per
-trial (params.json, mm), the next-motion prediction error of every loop step (trial k's
-estimate predicting trial k + 1, :mod:`stringcast.estimate.prediction`, the workflow's
-``prediction.json``: the hitting trial is tracked for it, state mode: synthesized), wall
-seconds of the campaign and of the predictions, and the lab's physics and the mode.
+trial (mm), the next-motion prediction error of every loop step (trial k's estimate predicting
+trial k + 1: the workflow's ``prediction.json``, :mod:`stringcast.estimate.prediction`; the
+hitting trial is tracked, or synthesized, for it), seconds, the physics and the mode.
 
 loop.json (docs/results.md, "Benchmark records"): one entry per physics, ``"mujoco": {...}``,
 ``"elastica": {...}`` (:func:`benchmarks.loop_summary.summarize`: ``campaigns_per_method``,
@@ -65,11 +64,10 @@ only), then one that gathers them into loop.json (``--finished-only``)::
     snakemake -s benchmarks/loop.smk --cores 8 --config work=/data/loop seeds="0 1 2 3 4"
     snakemake -s benchmarks/loop.smk --profile config/profiles/slurm --config work=/shared/loop
 
-``--work`` keeps every campaign (data/ and results/, in ``loop_<physics>_<mode>_s<type>_seed
-<seed>_<method>/``) and its ``run.json``; a later run with the same DIR reuses finished runs and
-resumes unfinished campaigns; ``--finished-only`` runs nothing and summarizes the finished ones.
-loop.json, loop.png and loop.md are rewritten after every run (``"complete": false`` until the
-last), so a stopped run leaves a consistent partial result.
+``--work`` keeps every campaign (``loop_<physics>_<mode>_s<type>_seed<seed>_<method>/``) and its
+``run.json``; the same DIR later reuses finished runs and resumes the others; ``--finished-only``
+summarizes the finished ones. loop.json, loop.png and loop.md are rewritten after every run
+(``"complete": false`` until the last), so a stopped run leaves a consistent partial result.
 """
 from __future__ import annotations
 
@@ -302,9 +300,11 @@ def run_one(string_type: int, seed: int, method: str, config: dict, work: Path, 
     return rec
 
 
-def run(spec: Spec, quick: bool = False, work: Path | None = None, cores: int = 2,
+def run(quick: bool = False, spec: Spec | None = None, work: Path | None = None, cores: int = 2,
         finished_only: bool = False) -> dict:
     """Run ``spec``'s campaigns and write results/bench/loop.json (after every run), loop.png and loop.md.
+
+    ``spec`` None: the default (``quick``: types 1 and 5, seed 0), as ``benchmarks.run`` calls it.
 
     ``finished_only``: run nothing; summarize the campaigns ``work`` holds a run.json for
     (``"complete"`` only if that is all of them).
@@ -317,6 +317,7 @@ def run(spec: Spec, quick: bool = False, work: Path | None = None, cores: int = 
     from stringcast.core.files import write_text
 
     config = load_config()
+    spec = spec or (Spec(types=(1, 5), seeds=(0,)) if quick else Spec())
     todo = spec.campaigns()
     n_all = len(todo)
     if finished_only:
@@ -381,7 +382,7 @@ def main(argv: list[str] | None = None) -> None:
     except ValueError as exc:
         ap.error(str(exc))
     if not a.only:
-        run(spec, a.quick, a.work, a.cores, a.finished_only)
+        run(a.quick, spec, a.work, a.cores, a.finished_only)
         return
     if not a.work:
         ap.error("--only needs --work (where the campaign's run.json goes)")

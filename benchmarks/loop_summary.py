@@ -44,7 +44,8 @@ def bootstrap_ci(by_type: dict, resamples: int = RESAMPLES, seed: int = SEED) ->
         by_type: {type: values (S_t,)}, one value per campaign; types without values are left out.
 
     Returns:
-        [lo, hi], or None without any value.
+        [lo, hi], or None without any value. A type with one campaign adds no spread: with one
+        seed per type the interval is the mean itself.
     """
     groups = [np.asarray(v, float) for v in by_type.values() if len(v)]
     if not groups:
@@ -108,6 +109,7 @@ def summarize(runs: list[dict], types: list[int], methods: list[str]) -> dict:
         out[f"prediction_error_mm_{lab}"] = _median(steps)
         out[f"prediction_steps_{lab}"] = len(steps)
     out["paper_table3_mean"] = float(np.mean([PAPER_TABLE3[k] for k in types]))
+    out["paired_diff_ci95"] = None
     if len(methods) > 1:  # the campaigns (type, seed) every method finished: a like-for-like comparison
         done = {m: {(r["string"], r["seed"]): executions(r) for r in runs if r["method"] == m} for m in methods}
         both = sorted(set.intersection(*(set(d) for d in done.values())))
@@ -117,6 +119,10 @@ def summarize(runs: list[dict], types: list[int], methods: list[str]) -> dict:
         if {"ours", "paper"} <= set(methods):
             diff = {k: [done["ours"][c] - done["paper"][c] for c in both if c[0] == k] for k in types}
             out["paired_diff_ci95"] = bootstrap_ci(diff)
+    for lab in LABELS.values():   # issue 27's keys are there for a method not run, as null
+        for key in ("mean_{}", "mean_{}_ci95", "max_{}", "all_hit_{}", "first_shot_hit_rate_{}",
+                    "prediction_error_mm_{}"):
+            out.setdefault(key.format(lab), None)
     return out
 
 
@@ -283,6 +289,6 @@ def markdown(doc: dict, spec) -> str:
                           if vc[p].get(f"relative_difference_{lab}") is not None) or "-"
         out.append(f"## {p}, video-mode check\n\n" + table(vc[p], list(spec.video_methods))
                    + f"\nRelative difference of the video mode's mean to the state mode's: {diffs}.\n")
-    commits = "; ".join(f"{m} at " + ", ".join(c[:7] if len(c) == 40 else c for c in cs)
+    commits = "; ".join(f"{m} at " + ", ".join(c[:7] + c[40:] if len(c) >= 40 else c for c in cs)
                         for m, cs in doc["git_commits"].items() if cs)
     return "\n".join(out) + (f"\nCode that ran the campaigns: {commits}.\n" if commits else "")
