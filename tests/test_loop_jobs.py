@@ -111,3 +111,18 @@ def test_spec_and_run_config(config):
     assert cfg["lab"]["physics"] == "elastica" and cfg["lab"]["render"] is False and cfg["estimation"]["seed"] == 3
     assert "render" not in method_config(config, "paper", 0, "mujoco", "video")["lab"]
     assert run_dir(Path("/w"), 5, 1, "ours", "elastica", "state").name == "loop_elastica_state_s5_seed1_ours"
+
+
+def test_a_lab_that_ran_other_physics_is_refused(tmp_path):
+    """A trial whose ground_truth.json does not say it ran the physics asked for (a lab without it
+    records none: the MuJoCo chain) stops the campaign, naming the file."""
+    from benchmarks.loop import check_physics
+    from stringcast.core import DataError
+
+    truth = tmp_path / "ground_truth.json"
+    truth.write_text(json.dumps({"hit": False}))
+    check_physics(truth, "mujoco")
+    with pytest.raises(DataError, match=r"ground_truth\.json: the lab ran 'mujoco' physics, not lab.physics 'elastica'"):
+        check_physics(truth, "elastica")
+    truth.write_text(json.dumps({"physics": "elastica"}))
+    check_physics(truth, "elastica")
