@@ -37,9 +37,20 @@ cause: E is nearly as rugged with it removed, measured once by hand on type 7).
 Figure: best E against evaluations per type, the three optimizers
 (results/bench/estimation.png).
 
-Run: ``python -m benchmarks.estimation [--quick] [--work DIR]`` -> results/bench/estimation.json.
-``--work`` keeps the filmed and tracked trials in DIR and reuses them in a later run
-(the estimations are always run anew).
+``--prediction`` (issue 27: an estimate is judged by how it predicts the next motion): the
+workflow's next motion is planned from the default run's estimate (``plan.run_plan``, the
+config's planner), played on the lab and calibrated, synced and tracked like the first; then
+each optimizer's estimate (the CMA-ES seeds' each) predicts it
+(:func:`stringcast.estimate.prediction.run_prediction`: driven by its measured joints, the
+model's tip against the tracked tip from the motion's start to the tip's closest approach).
+Per type and optimizer ``prediction``: ``median_mm``, ``p95_mm``, ``valid_frames``, ...; overall
+``prediction_error_mm`` per optimizer (the median over the types; CMA-ES: of each type's median
+over its seeds). It films and tracks a second trial per type (about as long as the first), so it
+is an option; without it these keys are absent.
+
+Run: ``python -m benchmarks.estimation [--quick] [--prediction] [--work DIR]`` ->
+results/bench/estimation.json. ``--work`` keeps the filmed and tracked trials in DIR and reuses
+them in a later run (the estimations are always run anew).
 """
 from __future__ import annotations
 
@@ -72,21 +83,85 @@ def prepare(string_type: int, config: dict, settings, calib_dir: Path, work: Pat
 
     ``settings``: the stages' settings (:class:`stringcast.core.Settings`) of ``config``.
     Returns (campaign, d): ``d`` holds tracks.parquet and trial_1/joints.csv."""
-    from stringcast.core import stage_kwargs
     from stringcast.core import resolve_campaign
-    from stringcast.sync import run_sweep, run_sync
-    from stringcast.track.tracking import run_tracking
 
     d = work / f"string_{string_type}"
     if (d / "tracks.parquet").exists() and (d / "trial_1" / "joints.csv").exists():
         return resolve_campaign({"string": string_type, "target": 1}, config, f"bench_{string_type}"), d
     campaign, d, trial = film_first_motion(string_type, config, work, seed, calib_dir)
+    _sync_and_track(trial, d, campaign, settings)
+    return campaign, d
+
+
+def _sync_and_track(trial: Path, d: Path, campaign, settings) -> None:
+    """Sync, sweep and track a calibrated trial (``d/calibration.json``) into ``d``, as the workflow does."""
+    from stringcast.core import stage_kwargs
+    from stringcast.sync import run_sweep, run_sync
+    from stringcast.track.tracking import run_tracking
+
     run_sync(trial, d / "calibration.json", campaign, d / "sync.json", **stage_kwargs(run_sync, settings))
     run_sweep(trial, d / "calibration.json", d / "sync.json", campaign, d / "geometry.json", d / "clock.json",
               **stage_kwargs(run_sweep, settings))
     run_tracking(trial, d / "geometry.json", d / "clock.json", campaign, d / "tracks.parquet",
                  **stage_kwargs(run_tracking, settings))
-    return campaign, d
+
+
+def prepare_next(campaign, d: Path, config: dict, settings, calib_dir: Path, seed: int) -> Path:
+    """The next motion, planned from ``d``'s default estimate (``params_<default optimizer>.json``),
+    played on the lab, calibrated, synced and tracked into ``d/next`` (reused if there). Returns
+    ``d/next``: tracks.parquet and trial_2/joints.csv."""
+    from stringcast.calibrate.calibration import run_calibration
+    from stringcast.core import stage_kwargs
+    from stringcast.execute.executor import execute
+    from stringcast.plan.planning import run_plan
+
+    nxt = d / "next"
+    if (nxt / "tracks.parquet").exists() and (nxt / "trial_2" / "joints.csv").exists():
+        return nxt
+    default = str(settings.estimation.optimizer)
+    run_plan(d / f"params_{default}.json", d / "trial_1" / "motion.json", campaign, nxt / "motion.csv",
+             nxt / "motion.json", seed, d / "tracks.parquet", d / "trial_1" / "joints.csv",
+             **stage_kwargs(run_plan, settings))
+    trial = nxt / "trial_2"
+    execute(nxt / "motion.csv", "virtual", trial, campaign, settings.executor, config, seed=seed + 1000)
+    run_calibration(trial, calib_dir, campaign, nxt / "calibration.json", **stage_kwargs(run_calibration, settings))
+    _sync_and_track(trial, nxt, campaign, settings)
+    return nxt
+
+
+def predict_next(campaign, d: Path, nxt: Path, settings, tags: list[str]) -> dict:
+    """Each estimate ``d/params_<tag>.json`` predicting the next trial in ``nxt`` (module doc): per tag
+    :func:`stringcast.estimate.prediction.run_prediction`'s figures, or ``error`` when it cannot."""
+    from stringcast.core import DataError, stage_kwargs
+    from stringcast.estimate.prediction import run_prediction
+
+    out = {}
+    for tag in tags:
+        try:
+            doc = run_prediction(d / f"params_{tag}.json", nxt / "tracks.parquet", nxt / "trial_2" / "joints.csv",
+                                 campaign, nxt / f"prediction_{tag}.json", **stage_kwargs(run_prediction, settings))
+            out[tag] = {k: v for k, v in doc.items() if k not in ("params", "tracks", "joints")}
+        except DataError as exc:
+            out[tag] = {"error": str(exc)}
+    return out
+
+
+def prediction_summary(per: dict) -> dict:
+    """Per optimizer, the median over the types of its next-motion prediction error, mm (CMA-ES: each
+    type's median over its seeds; a blow-up counts as inf; None without a figure)."""
+    def figure(doc):
+        return np.inf if doc.get("blew_up") else doc.get("median_mm")
+    out = {}
+    for name in OPTIMIZERS:
+        vals = []
+        for r in per.values():
+            pred = r.get("prediction") or {}
+            tags = [t for t in pred if t == name or t.startswith(f"{name}_")]
+            errs = [e for e in (figure(pred[t]) for t in tags) if e is not None]
+            if errs:
+                vals.append(float(np.median(errs)))
+        out[name] = float(np.median(vals)) if vals else None
+    return out
 
 
 def _estimate(campaign, d: Path, settings, optimizer: str | None, tag: str, seed_offset: int = 0):
@@ -227,7 +302,7 @@ def _figure(per: dict, path: Path) -> None:
     plt.close(fig)
 
 
-def run(quick: bool = False, work: Path | None = None, cmaes_seeds: int = 3) -> dict:
+def run(quick: bool = False, work: Path | None = None, cmaes_seeds: int = 3, prediction: bool = False) -> dict:
     from stringcast.core import settings_from_config
     from stringcast.core import load_config
 
@@ -245,6 +320,10 @@ def run(quick: bool = False, work: Path | None = None, cmaes_seeds: int = 3) -> 
             campaign, d = prepare(k, config, settings, calib, work, seed=k)
             t_film = time.perf_counter() - t0
             per[str(k)] = r = one_string(campaign, d, settings, cmaes_seeds)
+            if prediction:
+                tags = list(r["optimizers"]) + [f"cmaes_{s}" for s in range(1, cmaes_seeds)]
+                r["prediction"] = predict_next(campaign, d, prepare_next(campaign, d, config, settings, calib, k),
+                                               settings, tags)
             print(f"  string {k}: paper E {r['paper_E_mm']:.2f} mm in {r['paper_evals']} evals; CMA-ES reaches it "
                   f"after {r['cmaes_evals_to_paper_E']}, DE after {r['de_evals_to_paper_E']}; E rises 10 % within "
                   f"{r['ruggedness']['basin_radius_chi']} (chi) of its set, "
@@ -268,7 +347,7 @@ def run(quick: bool = False, work: Path | None = None, cmaes_seeds: int = 3) -> 
         "reference": {"name": "paper_random_search", "optimizer": "random_search",
                       "evaluations": int(est.iterations), "chi0": est.chi0, "beta": est.beta},
         "settings": est.as_dict(), "figure": figure.name,
-    }
+    } | ({"prediction_error_mm": prediction_summary(per)} if prediction else {})
     write("estimation", doc)
     return doc
 
@@ -278,5 +357,7 @@ if __name__ == "__main__":
     ap.add_argument("--quick", action="store_true", help="string types 1 and 5 only")
     ap.add_argument("--work", type=Path, help="keep (and reuse) the filmed, tracked trials here")
     ap.add_argument("--cmaes-seeds", type=int, default=3, help="CMA-ES runs per string type (median)")
+    ap.add_argument("--prediction", action="store_true",
+                    help="film a second (planned) motion per type and report each optimizer's prediction of it")
     a = ap.parse_args()
-    run(a.quick, a.work, a.cmaes_seeds)
+    run(a.quick, a.work, a.cmaes_seeds, a.prediction)

@@ -1,64 +1,79 @@
-"""Benchmark ``loop``: executions until the lab's tip hits, per string type, next to the paper's Table 3.
+"""Benchmark ``loop``: executions until the lab's tip hits, per physics and string type, ours and the paper's method.
 
-For every string type (1-7) with its paper target (docs/results.md, "String types": types 1,
-2 -> target 1; 3 -> 2; 4, 5, 6 -> 3; 7 -> 4), every seed and every method, the whole loop runs
-as a person would run it: :func:`stringcast.campaign.run_campaign` in a project root of its own
-(the repo's Snakefile and workflow/ linked, its own config/config.yaml carrying the
-method), at most ``CAP`` = 8 executions. Whether the tip hit is the *lab's* verdict
-(``ground_truth.json`` of the last trial, as the campaign loop reads it to stop); the
-workflow's stages never read it. The campaigns run with ``reports=False``: no HTML
-reports, and the hitting trial is not processed (its E is then null), about a third
-less time per run.
+For every lab physics (``lab.physics``: ``mujoco``, the MuJoCo chain, and ``elastica``, the
+Cosserat rod of issue 27), every string type (1-7) with its paper target (docs/results.md,
+"String types": types 1, 2 -> target 1; 3 -> 2; 4, 5, 6 -> 3; 7 -> 4), every seed and every
+method, the whole loop runs as a person would run it: :func:`stringcast.campaign.run_campaign`
+in a project root of its own (the repo's Snakefile and workflow/ linked, its own
+config/config.yaml carrying the method, ``lab.physics`` and the mode), at most ``CAP`` = 8
+executions. Whether the tip hit is the *lab's* verdict (``ground_truth.json`` of the last
+trial, as the campaign loop reads it to stop); the workflow's stages never read it. The
+campaigns run with ``reports=False``: no HTML reports, and the hitting trial is processed only
+as far as the prediction error needs (below).
 
 Methods are config overlays:
 
 * ``paper``: ``estimation.optimizer: random_search`` (eqs. 2-3) and ``motion.planner: paper``
   (Section V), the paper's method as the config describes it.
 * ``ours``: ``config/ours.yaml``, read at import (the file ``snakemake --configfile`` and
-  ``stringcast campaign --method ours`` use): CMA-ES (two runs), the robust planner with the
-  residual correction and the replan rules, tip weighting w = 1, the first plan with Table 2's
-  largest k_s, and the hand spring's range up to 1. Each line's reason is in the file; the
-  evidence, and what was tried and left out (``motion.first_ensemble``, ``robust_min_share``,
-  ``estimation.joint_trials``, ...), is in docs/method.md.
+  ``stringcast campaign --method ours`` use), one file for both physics. Each line's reason is
+  in the file; the evidence, and what was tried and left out, is in docs/method.md.
 
 A seed ``s`` sets the lab's noise (the campaign's seed: camera noise, joint noise, trigger
-error) and the pipeline's own searches (``estimation.seed`` and ``motion.seed`` = ``s``), so
-the seeds differ in both the lab and the method.
+error), the pipeline's own searches (``estimation.seed`` and ``motion.seed`` = ``s``) and, in
+the state mode, the drawn tracking error, so the seeds differ in both the lab and the method.
 
-Per run: executions, hit, the lab's closest approach per execution (mm), E per trial
-(params.json, mm), wall seconds and seconds per execution. Per type: the executions per
-seed for each method and the paper's Table 3 figure; overall: ``mean_ours``,
-``mean_paper_method``, ``max_ours``, ``all_hit_ours`` (every seed of every type hit within
-the cap). A run without a hit counts as ``cap`` executions in the means (a lower bound).
-Goal (issue 4): every type hits within 8 for every seed, and ``mean_ours`` <= 2.0 (paper 2.14).
+Modes (``--mode``; issue 27):
 
-Figure: results/bench/loop.png (executions per type: Table 3, the paper's method, ours,
-one dot per seed); table: results/bench/loop.md.
+* ``state`` (default): the lab plays each motion without filming it (``lab.render: false``),
+  and the benchmark, not the workflow, writes each trial's ``tracks.parquet`` and the
+  calibration, sync and tracking verdicts from the lab's true points with the tracking's own
+  measured error, dropout and sync error (``tracking.json`` and ``generalization.json`` in
+  ``--state-source``, default results/bench/; :mod:`benchmarks.loop_state` says exactly what is
+  drawn, and what that leaves out). The workflow then runs only its estimate, plan and predict
+  rules, unchanged. Each run's ``state_mode`` and loop.json's say so.
+* ``video``: everything filmed, calibrated, synced and tracked, as a campaign on a real camera.
+  With ``--mode state``, a video-mode check also runs (``--video-seeds``, default seed 0, every
+  type, ``--video-methods``, default ours): loop.json's ``video_check``.
 
-Run: ``python -m benchmarks.loop [--quick] [--types 1 5] [--seeds 0 1 2] [--methods paper ours]
-[--work DIR]``, one campaign after another in this process.
+Per run (``run.json``): executions, hit, the lab's closest approach per execution (mm), E per
+trial (mm), the next-motion prediction error of every loop step (trial k's estimate predicting
+trial k + 1: the workflow's ``prediction.json``, :mod:`stringcast.estimate.prediction`; the
+hitting trial is tracked, or synthesized, for it), seconds, the physics and the mode.
+
+loop.json (docs/results.md, "Benchmark records"): one entry per physics, ``"mujoco": {...}``,
+``"elastica": {...}`` (:func:`benchmarks.loop_summary.summarize`: ``campaigns_per_method``,
+``mean_ours`` with ``mean_ours_ci95``, ``mean_paper_method``, ``paired_diff_ci95`` (ours minus
+the paper's method), ``all_hit_ours``, ``max_ours``, ``first_shot_hit_rate_*``,
+``prediction_error_mm_*``, ``mode``, ``per_string``), ``video_check`` (the video-mode runs'
+entries per physics and their relative difference to the state mode's mean), ``state_mode``
+(the error model per type, or null), ``runs``, the goals of issue 27, library versions and
+commits. A run without a hit counts as ``cap`` executions in the means (a lower bound).
+Figure: results/bench/loop.png (one panel per physics); table: results/bench/loop.md.
+
+Run: ``python -m benchmarks.loop [--quick] [--physics mujoco elastica] [--mode state|video]
+[--types 1 5] [--seeds 0 1 2 3 4] [--methods paper ours] [--video-seeds 0] [--work DIR]``, one
+campaign after another in this process. Default per physics: 7 types x 5 seeds x both methods
+(state mode) and 7 types x seed 0 x ours (video check); ``--quick``: types 1 and 5, seed 0.
 
 The campaigns are independent, so they may also run as separate jobs, side by side or on a
-cluster, through ``benchmarks/loop.smk`` (Snakemake): one job per campaign
-(``python -m benchmarks.loop --only TYPE SEED METHOD --work DIR``: its ``run.json`` only), then
-one that gathers them into loop.json (``--finished-only``)::
+cluster, through ``benchmarks/loop.smk`` (Snakemake): one job per campaign (``python -m
+benchmarks.loop --only TYPE SEED METHOD --physics P --mode M --work DIR``: its ``run.json``
+only), then one that gathers them into loop.json (``--finished-only``)::
 
-    snakemake -s benchmarks/loop.smk --cores 8 --config work=/data/loop seeds="0 1 2"
+    snakemake -s benchmarks/loop.smk --cores 8 --config work=/data/loop seeds="0 1 2 3 4"
     snakemake -s benchmarks/loop.smk --profile config/profiles/slurm --config work=/shared/loop
 
- A full run (7 types x 3 seeds x 2 methods, full-size lab) takes hours on
-2 cores; ``--quick`` is types 1 and 5, seed 0, both methods. ``--work`` keeps every
-campaign (data/ and results/) and its ``run.json``; a later run with the same DIR reuses
-finished runs and resumes unfinished campaigns; ``--finished-only`` runs nothing and
-summarizes the finished ones (``paired_mean_*``: the means over the campaigns both
-methods finished). loop.json, loop.png and loop.md are
-rewritten after every run (``"complete": false`` until the last), so a stopped run leaves
-a consistent partial result.
+``--work`` keeps every campaign (``loop_<physics>_<mode>_s<type>_seed<seed>_<method>/``) and its
+``run.json``; the same DIR later reuses finished runs and resumes the others; ``--finished-only``
+summarizes the finished ones. loop.json, loop.png and loop.md are rewritten after every run
+(``"complete": false`` until the last), so a stopped run leaves a consistent partial result.
 """
 from __future__ import annotations
 
 import argparse
 import copy
+import dataclasses
 import tempfile
 import time
 from pathlib import Path
@@ -66,21 +81,59 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from benchmarks.common import BENCH_DIR, ROOT, git_commit, header, library_versions, write
+from benchmarks.common import BENCH_DIR, ROOT, git_commit, library_versions, write
+from benchmarks.loop_summary import CAP, PAPER_TABLE3, PAPER_TARGET, document, figure, markdown, prediction_steps
 
-CAP = 8
-PAPER_TABLE3 = {1: 2, 2: 2, 3: 2, 4: 2, 5: 3, 6: 2, 7: 2}          # executions, paper Table 3
-PAPER_TARGET = {1: 1, 2: 1, 3: 2, 4: 3, 5: 3, 6: 3, 7: 4}          # docs/results.md, string types
 OURS_CONFIG = ROOT / "config" / "ours.yaml"
 METHODS = {
     "paper": {"estimation": {"optimizer": "random_search"}, "motion": {"planner": "paper"}},
     "ours": yaml.safe_load(OURS_CONFIG.read_text()),   # one place for ours' settings
 }
-LABELS = {"paper": "paper_method", "ours": "ours"}
+PHYSICS = ("mujoco", "elastica")
+MODES = ("state", "video")
+STATE_SOURCE = ROOT / "results" / "bench"
+"""Where the state mode's error figures are read (tracking.json, generalization.json) by default."""
 
 
-def method_config(config: dict, method: str, seed: int) -> dict:
-    """The config a run uses: ``config`` (as loaded) with the method's overlay and the seed.
+@dataclasses.dataclass(frozen=True)
+class Spec:
+    """What a benchmark run covers: the main runs (physics x types x seeds x methods in ``mode``) and,
+    in the state mode, the video check (physics x video_types x video_seeds x video_methods)."""
+
+    types: tuple[int, ...] = tuple(sorted(PAPER_TABLE3))
+    seeds: tuple[int, ...] = (0, 1, 2, 3, 4)
+    methods: tuple[str, ...] = tuple(METHODS)
+    physics: tuple[str, ...] = PHYSICS
+    mode: str = "state"
+    video_types: tuple[int, ...] | None = None       # None: the main runs' types
+    video_seeds: tuple[int, ...] = (0,)
+    video_methods: tuple[str, ...] = ("ours",)
+    state_source: Path = STATE_SOURCE
+
+    def __post_init__(self):
+        bad = ([f"type {k}" for k in (*self.types, *(self.video_types or ())) if k not in PAPER_TARGET]
+               + [f"method {m}" for m in (*self.methods, *self.video_methods) if m not in METHODS]
+               + [f"physics {p}" for p in self.physics if p not in PHYSICS]
+               + ([f"mode {self.mode}"] if self.mode not in MODES else []))
+        if bad:
+            raise ValueError(f"loop benchmark: unknown {', '.join(bad)} (types 1-7, methods {list(METHODS)}, "
+                             f"physics {list(PHYSICS)}, modes {list(MODES)})")
+
+    def campaigns(self) -> list[tuple[str, str, int, int, str]]:
+        """(physics, mode, type, seed, method) of every run, seed by seed within each physics (a
+        partial run covers every type), each physics' video check after its main runs."""
+        out = []
+        for p in self.physics:
+            out += [(p, self.mode, k, s, m) for s in self.seeds for k in self.types for m in self.methods]
+            if self.mode == "state":
+                out += [(p, "video", k, s, m) for s in self.video_seeds for k in (self.video_types or self.types)
+                        for m in self.video_methods]
+        return out
+
+
+def method_config(config: dict, method: str, seed: int, physics: str = "mujoco", mode: str = "video") -> dict:
+    """The config a run uses: ``config`` (as loaded) with the method's overlay, the seed,
+    ``lab.physics`` and, in the state mode, ``lab.render: false``.
 
     Raises:
         KeyError: unknown method (not in ``METHODS``).
@@ -90,6 +143,9 @@ def method_config(config: dict, method: str, seed: int) -> dict:
     cfg = merge_config(copy.deepcopy({k: v for k, v in config.items() if k != "_path"}), METHODS[method])
     cfg.setdefault("estimation", {})["seed"] = int(seed)   # the config file may leave a section to its defaults
     cfg.setdefault("motion", {})["seed"] = int(seed)
+    cfg["lab"] = dict(cfg.get("lab") or {}, physics=physics)
+    if mode == "state":
+        cfg["lab"]["render"] = False
     return cfg
 
 
@@ -108,51 +164,135 @@ def project_root(path: Path, cfg: dict) -> Path:
     return cfg_path
 
 
-def run_dir(work: Path, string_type: int, seed: int, method: str) -> Path:
+def run_dir(work: Path, string_type: int, seed: int, method: str, physics: str = "mujoco",
+            mode: str = "state") -> Path:
     """The campaign's project folder (and campaign name) under ``work``."""
-    return work / f"loop_s{string_type}_seed{seed}_{method}"
+    return work / f"loop_{physics}_{mode}_s{string_type}_seed{seed}_{method}"
 
 
-def run_one(string_type: int, seed: int, method: str, config: dict, work: Path, cores: int = 2) -> dict:
-    """One campaign: string ``string_type`` at its paper target, ``method``, ``seed``, at most ``CAP``
-    executions. Reuses ``work/<name>/run.json`` when a previous run finished.
+def check_physics(truth_json: Path, physics: str) -> None:
+    """Refuse a trial the lab played with another physics than ``physics`` (``ground_truth.json``'s
+    ``physics``; a lab that does not record it ran the MuJoCo chain).
 
-    Returns a dict: executions, hit, closest_approach_mm (per execution, lab truth), E_mm (per
-    trial, params.json), wall_s, s_per_execution, timings_s, git_commit and libraries (the code
-    and library versions that ran it: a table may gather campaigns run at different commits,
-    ``--finished-only``), error (None, or the failure)."""
+    Raises:
+        DataError: naming the file and both physics.
+    """
+    from stringcast.core.files import DataError, read_json
+
+    ran = read_json(truth_json).get("physics", "mujoco")
+    ran = ran.get("name", ran) if isinstance(ran, dict) else ran
+    if ran != physics:
+        raise DataError(f"{truth_json}: the lab ran {ran!r} physics, not lab.physics {physics!r}: does this "
+                        f"checkout's lab implement {physics!r} (and record it in ground_truth.json's \"physics\")?")
+
+
+def _trial_hook(physics: str, mode: str, cfg: dict, model, seed: int, records: list):
+    """run_campaign's ``before_processing``: check the lab's physics; in the state mode write the
+    trial's tracked files (:func:`benchmarks.loop_state.synthesize_trial`), its record into ``records``."""
+    from benchmarks.loop_state import synthesize_trial
+    from stringcast.core import load_campaign, settings_from_config
+
+    tracking = settings_from_config(cfg).tracking
+
+    def hook(k: int, trial_dir: Path, results_dir: Path) -> None:
+        check_physics(Path(trial_dir) / "ground_truth.json", physics)
+        if mode == "state":
+            campaign = load_campaign(Path(trial_dir).parent / "campaign.yaml", cfg)
+            records.append(synthesize_trial(k, trial_dir, results_dir, campaign, model, seed, tracking))
+    return hook
+
+
+def predictions(root: Path, name: str, n: int, cores: int, workflow_args, hook) -> tuple[list[dict], float]:
+    """Every loop step's next-motion prediction error of a finished campaign of ``n`` executions: the
+    workflow's ``prediction.json`` of trials 2..n (the hitting trial tracked first, or in the state
+    mode synthesized by ``hook``). Returns (one dict per step, seconds); a step whose job failed
+    has ``error``."""
+    from stringcast.campaign import run_workflow
+    from stringcast.core.files import read_json
+
+    if n < 2:
+        return [], 0.0
+    t0 = time.perf_counter()
+    res = root / "results" / name
+    if not (res / f"trial_{n}" / "tracks.parquet").exists():
+        hook(n, root / "data" / name / f"trial_{n}", res / f"trial_{n}")
+    failure = None
+    try:
+        run_workflow(root, [f"results/{name}/trial_{k}/prediction.json" for k in range(2, n + 1)], cores, [],
+                     f"campaign {name}, predictions", [*workflow_args, "--keep-going"])
+    except RuntimeError as exc:   # the steps that did finish still count
+        failure = str(exc).splitlines()[0]
+    for cache in ("frames.npy", "frames.json"):
+        (res / f"trial_{n}" / cache).unlink(missing_ok=True)
+    keys = ("median_mm", "p95_mm", "max_mm", "frames", "valid_frames", "valid_share", "blew_up",
+            "tracked_closest_approach_mm")
+    steps = []
+    for k in range(2, n + 1):
+        p = res / f"trial_{k}" / "prediction.json"
+        doc = read_json(p) if p.exists() else None
+        steps.append({"trial": k, "params_trial": k - 1} | (
+            {key: doc.get(key) for key in keys} | {"verdict": doc["verdict"]["status"]} if doc
+            else {"error": failure or f"{p}: not made"}))
+    return steps, time.perf_counter() - t0
+
+
+def run_one(string_type: int, seed: int, method: str, config: dict, work: Path, cores: int = 2,
+            physics: str = "mujoco", mode: str = "state", state_source: Path = STATE_SOURCE) -> dict:
+    """One campaign: string ``string_type`` at its paper target, ``method``, ``seed``, ``physics`` and
+    ``mode``, at most ``CAP`` executions. Reuses ``run_dir(...)/run.json`` when a previous run finished.
+
+    Returns a dict: the run's identity; executions, hit, closest_approach_mm (per execution, lab
+    truth), E_mm (per trial, params.json), prediction (per loop step) and prediction_error_mm
+    (their median), wall_s (the campaign), prediction_s, s_per_execution, timings_s, state_mode
+    (the error model and each trial's draw; None in the video mode), git_commit and libraries,
+    error (None, or the failure).
+
+    Raises:
+        DataError: (state mode) the error model's files are missing (before anything runs).
+    """
+    from benchmarks.loop_state import WORKFLOW_ARGS, error_model
     from stringcast.campaign import run_campaign
     from stringcast.core.files import DataError, read_json, write_json
 
-    root = run_dir(work, string_type, seed, method)
-    name = root.name
-    done = root / "run.json"
+    root = run_dir(work, string_type, seed, method, physics, mode)
+    name, done = root.name, root / "run.json"
     if done.exists():
         return read_json(done)
-    cfg_path = project_root(root, method_config(config, method, seed))
+    model = error_model(string_type, state_source) if mode == "state" else None
+    cfg = method_config(config, method, seed, physics, mode)
+    cfg_path = project_root(root, cfg)
+    records: list[dict] = []
+    hook = _trial_hook(physics, mode, cfg, model, seed, records)
+    args = WORKFLOW_ARGS if mode == "state" else ()
     rec = {"string": string_type, "target": PAPER_TARGET[string_type], "seed": seed, "method": method,
-           "campaign": name, "git_commit": git_commit(), "libraries": library_versions(), "error": None}
+           "physics": physics, "mode": mode, "campaign": name, "git_commit": git_commit(),
+           "libraries": library_versions(), "error": None,
+           "state_mode": None if model is None else {"error_model": model.as_dict(), "trials": records}}
     t0 = time.perf_counter()
     try:
-        summary = run_campaign(name, str(string_type), str(PAPER_TARGET[string_type]),
-                               config_path=str(cfg_path), max_executions=CAP, cores=cores,
-                               seed=seed, root=root, reports=False, keep_frames=False)
+        summary = run_campaign(name, str(string_type), str(PAPER_TARGET[string_type]), config_path=str(cfg_path),
+                               max_executions=CAP, cores=cores, seed=seed, root=root, reports=False,
+                               keep_frames=False, before_processing=hook, workflow_args=args)
+        rec["wall_s"] = time.perf_counter() - t0
+        for t in summary["trials"]:
+            check_physics(root / "data" / name / f"trial_{t['trial']}" / "ground_truth.json", physics)
+        rec["prediction"], rec["prediction_s"] = predictions(root, name, len(summary["trials"]), cores, args, hook)
     except (RuntimeError, DataError) as exc:  # a failed workflow step or trial is a result, not the end
-        rec.update(executions=None, hit=False, closest_approach_mm=[], E_mm=[], timings_s={},
-                   wall_s=time.perf_counter() - t0, s_per_execution=None,
+        rec.update(executions=None, hit=False, closest_approach_mm=[], E_mm=[], timings_s={}, prediction=[],
+                   prediction_error_mm=None, wall_s=time.perf_counter() - t0, s_per_execution=None,
                    error=f"{type(exc).__name__}: {exc}")
         write_json(done, rec)
         return rec
-    rec["wall_s"] = time.perf_counter() - t0
     trials = summary["trials"]
-    rec["executions"] = len(trials)
-    rec["hit"] = bool(trials[-1]["hit"])                 # the lab's verdict on the last execution
+    rec["executions"], rec["hit"] = len(trials), bool(trials[-1]["hit"])   # the lab's verdict on the last
     rec["closest_approach_mm"] = [float(t["closest_approach_mm"]) for t in trials]
     rec["E_mm"] = []
     for t in trials:
         p = root / "results" / name / f"trial_{t['trial']}" / "params.json"
         e = read_json(p).get("E_mm") if p.exists() else None
         rec["E_mm"].append(None if e is None else float(e))
+    steps = prediction_steps(rec)
+    rec["prediction_error_mm"] = float(np.median(steps)) if steps else None
     rec["timings_s"] = summary["timings_s"]
     per_exec = [v for k, v in summary["timings_s"].items() if k.startswith(("execute_", "process_"))]
     rec["s_per_execution"] = float(sum(per_exec) / len(trials)) if per_exec else None
@@ -160,187 +300,102 @@ def run_one(string_type: int, seed: int, method: str, config: dict, work: Path, 
     return rec
 
 
-def _executions(rec: dict) -> int:
-    """Executions to a hit; a run with no hit (or a failure) counts as ``CAP``."""
-    return int(rec["executions"]) if rec["hit"] else CAP
-
-
-def summarize(runs: list[dict], types: list[int], methods: list[str]) -> dict:
-    """loop.json's summary keys (docs/results.md, "Benchmark records") from the runs: per_string
-    (executions per seed per method, Table 3), means over every run (type means averaged over the
-    types run), max and all-hit flags."""
-    per, out = {}, {}
-    for k in types:
-        row = {"paper_table3": PAPER_TABLE3[k], "target": PAPER_TARGET[k]}
-        for m in methods:
-            rs = sorted((r for r in runs if r["string"] == k and r["method"] == m), key=lambda r: r["seed"])
-            row[LABELS[m]] = [_executions(r) for r in rs]
-            row[f"{LABELS[m]}_hit"] = [bool(r["hit"]) for r in rs]
-            row[f"{LABELS[m]}_mean"] = float(np.mean(row[LABELS[m]])) if rs else None
-        per[str(k)] = row
-    out["per_string"] = per
-    for m in methods:
-        lab = LABELS[m]
-        means = [per[str(k)][f"{lab}_mean"] for k in types if per[str(k)][f"{lab}_mean"] is not None]
-        allx = [x for k in types for x in per[str(k)][lab]]
-        out[f"mean_{lab}"] = float(np.mean(means)) if means else None
-        out[f"max_{lab}"] = int(max(allx)) if allx else None
-        out[f"all_hit_{lab}"] = bool(allx) and all(h for k in types for h in per[str(k)][f"{lab}_hit"])
-    out["paper_table3_mean"] = float(np.mean([PAPER_TABLE3[k] for k in types]))
-    if len(methods) > 1:  # the campaigns (type, seed) every method finished: a like-for-like comparison
-        done = {m: {(r["string"], r["seed"]): _executions(r) for r in runs if r["method"] == m} for m in methods}
-        both = sorted(set.intersection(*(set(d) for d in done.values())))
-        out["paired_campaigns"] = len(both)
-        for m in methods:
-            out[f"paired_mean_{LABELS[m]}"] = float(np.mean([done[m][c] for c in both])) if both else None
-    return out
-
-
-def _figure(per: dict, methods: list[str], path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    keys = sorted(per, key=int)
-    x = np.arange(len(keys))
-    series = [("paper_table3", "paper, Table 3", "0.6")] + [(LABELS[m], {"paper": "paper's method (measured)",
-                                                                        "ours": "ours"}[m], c)
-                                                           for m, c in zip(methods, ("C1", "C0"))]
-    w = 0.8 / len(series)
-    fig, ax = plt.subplots(figsize=(1.2 * len(keys) + 3, 3.6))   # the legend under the axes hides no dot
-    for i, (key, label, colour) in enumerate(series):
-        xs = x - 0.4 + w * (i + 0.5)
-        if key == "paper_table3":
-            ax.bar(xs, [per[k][key] for k in keys], w, color=colour, label=label)
-            continue
-        ax.bar(xs, [per[k][f"{key}_mean"] or 0 for k in keys], w, color=colour, alpha=0.6, label=label)
-        for xi, k in zip(xs, keys):
-            vals, hits = per[k][key], per[k][f"{key}_hit"]
-            ax.scatter([xi] * len(vals), vals, s=14, c=["k" if h else "r" for h in hits], zorder=3)
-    ax.axhline(CAP, color="r", lw=0.8, ls=":")
-    ax.set_xticks(x, [f"type {k}" for k in keys])
-    ax.set_ylabel("executions to a hit")
-    ax.set_ylim(0, CAP + 0.5)
-    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=len(series), frameon=False)
-    ax.set_title("dots: one seed each (red: no hit within the cap)", fontsize=8)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-
-
-def _table(doc: dict, methods: list[str]) -> str:
-    cols = ["string type", "target", "paper Table 3"] + [{"paper": "paper's method (seeds)", "ours": "ours (seeds)"}[m]
-                                                         for m in methods]
-    lines = ["| " + " | ".join(cols) + " |", "|" + " --- |" * len(cols)]
-
-    def cell(vals, hits):
-        return ", ".join(str(v) if h else f"{v}*" for v, h in zip(vals, hits)) or "-"
-    for k in sorted(doc["per_string"], key=int):
-        r = doc["per_string"][k]
-        lines.append(f"| {k} | {r['target']} | {r['paper_table3']} | "
-                     + " | ".join(cell(r[LABELS[m]], r[f"{LABELS[m]}_hit"]) for m in methods) + " |")
-    means = [f"{doc[f'mean_{LABELS[m]}']:.2f}" if doc.get(f"mean_{LABELS[m]}") is not None else "-" for m in methods]
-    lines.append(f"| mean | | {doc['paper_table3_mean']:.2f} | " + " | ".join(means) + " |")
-    if doc.get("paired_campaigns"):
-        paired = [f"{doc[f'paired_mean_{LABELS[m]}']:.2f}" for m in methods]
-        lines.append(f"| mean over the {doc['paired_campaigns']} campaigns both methods finished | | | "
-                     + " | ".join(paired) + " |")
-    names, by_method = {"paper": "the paper's method", "ours": "ours"}, doc.get("git_commits", {})
-    commits = "; ".join(f"{names[m]} at " + ", ".join(c[:7] if len(c) == 40 else c for c in by_method[m])
-                        for m in methods if by_method.get(m))
-    if commits:
-        lines.append(f"\nCode that ran the campaigns: {commits}.")
-    total = len(doc["types"]) * len(doc["seeds"]) * len(methods)
-    partial = "" if doc["complete"] else f" Partial run: {len(doc['runs'])} of {total} campaigns so far."
-    return (f"Executions until the lab's tip hits (cap {CAP}; * = no hit, counted as {CAP}).{partial}\n\n"
-            + "\n".join(lines) + "\n")
-
-
-def run(quick: bool = False, types: list[int] | None = None, seeds: list[int] | None = None,
-        methods: list[str] | None = None, work: Path | None = None, cores: int = 2,
+def run(quick: bool = False, spec: Spec | None = None, work: Path | None = None, cores: int = 2,
         finished_only: bool = False) -> dict:
-    """Run the campaigns and write results/bench/loop.json (after every run), loop.png and loop.md.
+    """Run ``spec``'s campaigns and write results/bench/loop.json (after every run), loop.png and loop.md.
+
+    ``spec`` None: the default (``quick``: types 1 and 5, seed 0), as ``benchmarks.run`` calls it.
 
     ``finished_only``: run nothing; summarize the campaigns ``work`` holds a run.json for
     (``"complete"`` only if that is all of them).
 
     Raises:
-        ValueError: a type outside 1-7, or ``finished_only`` without ``work``."""
+        ValueError: ``finished_only`` without ``work``.
+        DataError: (state mode) the error model's files are missing.
+    """
     from stringcast.core import load_config
     from stringcast.core.files import write_text
 
     config = load_config()
-    types = types or ([1, 5] if quick else sorted(PAPER_TABLE3))
-    seeds = seeds if seeds is not None else ([0] if quick else [0, 1, 2])
-    methods = methods or list(METHODS)
-    for k in types:
-        if k not in PAPER_TARGET:
-            raise ValueError(f"string type {k}: the paper's Table 3 covers types 1-7")
-    runs: list[dict] = []
-    settings = {m: METHODS[m] for m in methods}
-    todo = [(k, s, m) for s in seeds for k in types for m in methods]  # seed by seed: a partial run covers every type
+    spec = spec or (Spec(types=(1, 5), seeds=(0,)) if quick else Spec())
+    todo = spec.campaigns()
     n_all = len(todo)
     if finished_only:
         if not work:
             raise ValueError("finished_only: name the campaigns' folder (--work)")
-        todo = [(k, s, m) for k, s, m in todo if (run_dir(Path(work), k, s, m) / "run.json").exists()]
+        todo = [c for c in todo if (run_dir(Path(work), c[2], c[3], c[4], c[0], c[1]) / "run.json").exists()]
+    runs: list[dict] = []
+    doc = document(runs, spec, False, quick, METHODS)
     with tempfile.TemporaryDirectory(prefix="bench_loop_") as tmp:
         work = Path(work).resolve() if work else Path(tmp)
-        for i, (k, s, m) in enumerate(todo, 1):
-            r = run_one(k, s, m, config, work, cores)
+        for i, (p, mode, k, s, m) in enumerate(todo, 1):
+            r = run_one(k, s, m, config, work, cores, p, mode, spec.state_source)
             runs.append(r)
-            print(f"  [{i}/{len(todo)}] string {k} seed {s} {m}: "
+            print(f"  [{i}/{len(todo)}] {p} {mode} string {k} seed {s} {m}: "
                   + (f"FAILED {r['error']}" if r["error"] else
                      f"{'hit' if r['hit'] else 'no hit'} after {r['executions']} execution(s), closest "
                      + ", ".join(f"{c:.1f}" for c in r["closest_approach_mm"]) + f" mm; {r['wall_s']:.0f} s"),
                   flush=True)
-            doc = header("loop", quick) | summarize(runs, types, methods) | {
-                "cap": CAP, "complete": i == n_all, "types": types, "seeds": seeds, "methods": settings,
-                "paper_table3": {str(k): v for k, v in PAPER_TABLE3.items()}, "paper_table3_mean_all": 2.14,
-                "reference": {"name": "paper_table3", "mean": float(np.mean(list(PAPER_TABLE3.values())))},
-                "goals": {"all_hit_ours": True, "max_ours": CAP, "mean_ours": 2.0},
-                "lab": "full-size (config/config.yaml as is, plus the method overlay)",
-                "runs": runs, "seconds_per_execution_mean": _mean_s(runs),
-                "git_commits": {m: sorted({r.get("git_commit") or "unrecorded" for r in runs if r["method"] == m})
-                                for m in methods},
-                "figure": "loop.png", "table": "loop.md",
-            }
+            doc = document(runs, spec, i == n_all, quick, METHODS)
             write("loop", doc)
-            _figure(doc["per_string"], methods, BENCH_DIR / "loop.png")  # all three agree at every point
-            write_text(BENCH_DIR / "loop.md", _table(doc, methods))
+            figure({q: doc[q] for q in spec.physics}, list(spec.methods), BENCH_DIR / "loop.png")
+            write_text(BENCH_DIR / "loop.md", markdown(doc, spec))   # all three agree at every point
     return doc
 
 
-def _mean_s(runs: list[dict]) -> float | None:
-    v = [r["s_per_execution"] for r in runs if r.get("s_per_execution")]
-    return float(np.mean(v)) if v else None
-
-
-if __name__ == "__main__":
+def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="string types 1 and 5, seed 0, both methods")
+    ap.add_argument("--quick", action="store_true", help="string types 1 and 5, seed 0")
     ap.add_argument("--types", type=int, nargs="+", help="string types (default 1-7)")
-    ap.add_argument("--seeds", type=int, nargs="+", help="seeds (default 0 1 2)")
+    ap.add_argument("--seeds", type=int, nargs="+", help="seeds (default 0 1 2 3 4)")
     ap.add_argument("--methods", nargs="+", choices=list(METHODS), help="methods (default both)")
+    ap.add_argument("--physics", nargs="+", choices=PHYSICS, default=list(PHYSICS), help="lab physics")
+    ap.add_argument("--mode", choices=MODES, default="state", help="state: no video, the tracking's measured "
+                    "error drawn on the lab's truth; video: filmed and tracked")
+    ap.add_argument("--video-seeds", type=int, nargs="*", default=[0],
+                    help="state mode: the video check's seeds (none: no check)")
+    ap.add_argument("--video-types", type=int, nargs="+", help="the video check's types (default: --types)")
+    ap.add_argument("--video-methods", nargs="+", choices=list(METHODS), default=["ours"],
+                    help="the video check's methods")
+    ap.add_argument("--state-source", type=Path, default=STATE_SOURCE,
+                    help="folder holding tracking.json and generalization.json (the state mode's error)")
     ap.add_argument("--work", type=Path, help="keep (and reuse/resume) the campaigns here")
     ap.add_argument("--cores", type=int, default=2, help="Snakemake --cores per campaign")
     ap.add_argument("--finished-only", action="store_true",
                     help="run nothing: summarize the finished campaigns in --work")
     ap.add_argument("--only", nargs=3, metavar=("TYPE", "SEED", "METHOD"),
-                    help="run this one campaign into --work (its run.json; loop.json is left as it is)")
-    a = ap.parse_args()
-    if a.only:
-        if not a.work:
-            ap.error("--only needs --work (where the campaign's run.json goes)")
-        k, s, m = int(a.only[0]), int(a.only[1]), a.only[2]
-        if k not in PAPER_TARGET or m not in METHODS:
-            ap.error(f"--only {k} {s} {m}: a type 1-7 and a method of {', '.join(METHODS)}")
-        from stringcast.core import load_config
+                    help="run this one campaign (of each --physics, in --mode) into --work (its run.json; "
+                         "loop.json is left as it is)")
+    return ap
 
-        r = run_one(k, s, m, load_config(), Path(a.work).resolve(), a.cores)
-        print(f"string {k} seed {s} {m}: " + (f"FAILED {r['error']}" if r["error"] else
-                                               f"{'hit' if r['hit'] else 'no hit'} after {r['executions']}"))
-    else:
-        run(a.quick, a.types, a.seeds, a.methods, a.work, a.cores, a.finished_only)
+
+def main(argv: list[str] | None = None) -> None:
+    ap = _parser()
+    a = ap.parse_args(argv)
+    quick_types, quick_seeds = ([1, 5], [0]) if a.quick else (None, None)
+    try:
+        spec = Spec(types=tuple(a.types or quick_types or sorted(PAPER_TABLE3)),
+                    seeds=tuple(a.seeds if a.seeds is not None else quick_seeds or (0, 1, 2, 3, 4)),
+                    methods=tuple(a.methods or METHODS), physics=tuple(a.physics), mode=a.mode,
+                    video_types=tuple(a.video_types) if a.video_types else None, video_seeds=tuple(a.video_seeds),
+                    video_methods=tuple(a.video_methods), state_source=a.state_source.resolve())
+    except ValueError as exc:
+        ap.error(str(exc))
+    if not a.only:
+        run(a.quick, spec, a.work, a.cores, a.finished_only)
+        return
+    if not a.work:
+        ap.error("--only needs --work (where the campaign's run.json goes)")
+    k, s, m = int(a.only[0]), int(a.only[1]), a.only[2]
+    if k not in PAPER_TARGET or m not in METHODS:
+        ap.error(f"--only {k} {s} {m}: a type 1-7 and a method of {', '.join(METHODS)}")
+    from stringcast.core import load_config
+
+    for p in spec.physics:
+        r = run_one(k, s, m, load_config(), Path(a.work).resolve(), a.cores, p, a.mode, spec.state_source)
+        print(f"{p} {a.mode} string {k} seed {s} {m}: " + (f"FAILED {r['error']}" if r["error"] else
+                                                            f"{'hit' if r['hit'] else 'no hit'} after {r['executions']}"))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,13 +1,16 @@
 # The loop benchmark's campaigns as separate jobs (benchmarks/loop.py): one job per
-# campaign (string type x seed x method), side by side or on a cluster, then one job that
-# gathers their run.json files into results/bench/loop.json.
+# campaign (physics x mode x string type x seed x method), side by side or on a cluster,
+# then one job that gathers their run.json files into results/bench/loop.json.
 #   snakemake -s benchmarks/loop.smk --cores 8 --config work=/data/loop
 #   snakemake -s benchmarks/loop.smk --profile config/profiles/slurm --config work=/shared/loop
 # work (required): where the campaigns live (reused: a finished campaign is not run again);
-# types, seeds, methods: space-separated lists (default: 1-7, 0 1 2, paper ours);
-# campaign_cores: each campaign's Snakemake --cores (default 2). The jobs run in the
-# repository (benchmarks/ is not an installed package); loop.json goes to results/bench/ there,
-# or to $STRINGCAST_BENCH_DIR.
+# types, seeds, methods, physics: space-separated lists (default: 1-7, 0 1 2 3 4, paper ours,
+# mujoco elastica); mode: state (default) or video; in the state mode the video check's
+# video_types (default: types), video_seeds (default 0; "" for none) and video_methods
+# (default ours); state_source: the folder with tracking.json and generalization.json
+# (default results/bench/ in the repository); campaign_cores: each campaign's Snakemake
+# --cores (default 2). The jobs run in the repository (benchmarks/ is not an installed
+# package); loop.json goes to results/bench/ there, or to $STRINGCAST_BENCH_DIR.
 
 
 import os
@@ -19,17 +22,28 @@ if "work" not in config:
     )
 WORK = Path(str(config["work"])).resolve()
 TYPES = str(config.get("types", "1 2 3 4 5 6 7")).split()
-SEEDS = str(config.get("seeds", "0 1 2")).split()
+SEEDS = str(config.get("seeds", "0 1 2 3 4")).split()
 METHODS = str(config.get("methods", "paper ours")).split()
+PHYSICS = str(config.get("physics", "mujoco elastica")).split()
+MODE = str(config.get("mode", "state"))
+VIDEO_TYPES = str(config.get("video_types", " ".join(TYPES))).split()
+VIDEO_SEEDS = str(config.get("video_seeds", "0")).split() if MODE == "state" else []
+VIDEO_METHODS = str(config.get("video_methods", "ours")).split()
 CORES = int(config.get("campaign_cores", 2))
 PY = sys.executable
 REPO = Path(workflow.basedir).parent
 BENCH = Path(
     os.environ.get("STRINGCAST_BENCH_DIR") or REPO / "results" / "bench"
 ).resolve()
+STATE_SOURCE = Path(
+    str(config.get("state_source", REPO / "results" / "bench"))
+).resolve()
+RUN = f"{WORK}/loop_{{physics}}_{{mode}}_s{{type}}_seed{{seed}}_{{method}}/run.json"
 
 
 wildcard_constraints:
+    physics=r"[a-z]+",
+    mode=r"state|video",
     type=r"\d+",
     seed=r"\d+",
     method=r"[a-z]+",
@@ -42,9 +56,9 @@ rule all:
 
 rule campaign:
     output:
-        f"{WORK}/loop_s{{type}}_seed{{seed}}_{{method}}/run.json",
+        RUN,
     log:
-        f"{WORK}/logs/loop_s{{type}}_seed{{seed}}_{{method}}.log",
+        f"{WORK}/logs/loop_{{physics}}_{{mode}}_s{{type}}_seed{{seed}}_{{method}}.log",
     threads: CORES
     resources:
         runtime=600,
@@ -52,19 +66,31 @@ rule campaign:
         cpus_per_task=CORES,
     shell:
         'cd "{REPO}" && "{PY}" -m benchmarks.loop --only {wildcards.type} {wildcards.seed} {wildcards.method} '
+        '--physics {wildcards.physics} --mode {wildcards.mode} --state-source "{STATE_SOURCE}" '
         '--work "{WORK}" --cores {threads} > "{log}" 2>&1'
 
 
 rule gather:
     input:
         expand(
-            f"{WORK}/loop_s{{type}}_seed{{seed}}_{{method}}/run.json",
-            type=TYPES,
-            seed=SEEDS,
-            method=METHODS,
+            RUN, physics=PHYSICS, mode=[MODE], type=TYPES, seed=SEEDS, method=METHODS
+        ),
+        expand(
+            RUN,
+            physics=PHYSICS,
+            mode=["video"],
+            type=VIDEO_TYPES,
+            seed=VIDEO_SEEDS,
+            method=VIDEO_METHODS,
         ),
     output:
         f"{BENCH}/loop.json",
+    params:
+        video=(
+            f"--video-types {' '.join(VIDEO_TYPES)} --video-methods {' '.join(VIDEO_METHODS)} "
+            f"--video-seeds {' '.join(VIDEO_SEEDS)}"
+        ),
     shell:
         'cd "{REPO}" && "{PY}" -m benchmarks.loop --finished-only --work "{WORK}" --types {TYPES} '
-        "--seeds {SEEDS} --methods {METHODS}"
+        "--seeds {SEEDS} --methods {METHODS} --physics {PHYSICS} --mode {MODE} {params.video} "
+        '--state-source "{STATE_SOURCE}"'

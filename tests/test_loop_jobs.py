@@ -1,24 +1,31 @@
 """The loop benchmark's campaigns as separate Snakemake jobs (benchmarks/loop.smk): one job per
-campaign, then a gather into loop.json with the same summary as the in-process run."""
+campaign, then a gather into loop.json with the same summary as the in-process run; and loop.json's
+figures (benchmarks/loop_summary.py): per physics, intervals, the paired difference, the video check."""
 import json
 import os
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
-from benchmarks.loop import run_dir, summarize
+from benchmarks.loop import Spec, method_config, run_dir
+from benchmarks.loop_summary import bootstrap_ci, summarize
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _record(k: int, seed: int, method: str, executions: int, hit: bool) -> dict:
+def _record(k: int, seed: int, method: str, executions: int, hit: bool, physics: str = "mujoco",
+            mode: str = "state", prediction_mm=(12.0,)) -> dict:
     """A finished campaign's run.json, as benchmarks.loop.run_one writes it."""
-    return {"string": k, "target": 1, "seed": seed, "method": method, "campaign": f"c{k}{seed}{method}",
-            "git_commit": "test", "libraries": {}, "error": None, "executions": executions, "hit": hit,
-            "closest_approach_mm": [50.0] * (executions - 1) + [5.0], "E_mm": [20.0] * executions,
-            "wall_s": 1.0, "s_per_execution": 1.0, "timings_s": {}}
+    steps = [{"trial": j + 2, "params_trial": j + 1, "median_mm": e, "blew_up": False}
+             for j, e in enumerate(prediction_mm[:executions - 1])]
+    return {"string": k, "target": 1, "seed": seed, "method": method, "physics": physics, "mode": mode,
+            "campaign": f"c{k}{seed}{method}", "git_commit": "test", "libraries": {}, "error": None,
+            "executions": executions, "hit": hit, "closest_approach_mm": [50.0] * (executions - 1) + [5.0],
+            "E_mm": [20.0] * executions, "wall_s": 1.0, "s_per_execution": 1.0, "timings_s": {},
+            "prediction": steps, "prediction_s": 0.1, "state_mode": None}
 
 
 def _snakemake(tmp_path, *args):
@@ -29,29 +36,93 @@ def _snakemake(tmp_path, *args):
 
 
 def test_one_job_per_campaign_then_one_gather(tmp_path):
+    """Per physics: types x seeds x methods in the state mode, and the video check's types x seed 0 x ours."""
     proc = _snakemake(tmp_path, "-n", "--config", f"work={tmp_path / 'w'}", "types=1 5", "seeds=0 1")
     out = proc.stdout + proc.stderr
     assert proc.returncode == 0, out
-    jobs = [line for line in out.splitlines() if line.strip().startswith("wildcards:")]
-    assert len(jobs) == 2 * 2 * 2, out                     # types x seeds x methods
-    assert out.count("rule gather:") == 1 and out.count("rule campaign:") == 8
+    n = 2 * (2 * 2 * 2 + 2 * 1 * 1)                      # physics x (main + video check)
+    assert out.count("rule campaign:") == n and out.count("rule gather:") == 1, out
+    assert "loop_elastica_state_s5_seed1_paper/run.json" in out and "loop_mujoco_video_s1_seed0_ours/run.json" in out
+    assert "loop_mujoco_video_s1_seed0_paper" not in out                              # the check: ours only
+    proc = _snakemake(tmp_path, "-n", "--config", f"work={tmp_path / 'w'}", "types=1", "seeds=0", "physics=mujoco",
+                      "mode=video")
+    assert proc.returncode == 0 and (proc.stdout + proc.stderr).count("rule campaign:") == 2   # no video check
 
 
 def test_gather_summarises_the_campaign_jobs_run_json(tmp_path):
     """Campaigns already finished (their run.json) are not run again; the gather writes loop.json
-    with the summary benchmarks.loop.summarize gives for the same runs."""
+    with the summary benchmarks.loop_summary.summarize gives for the same runs, per physics."""
     work = tmp_path / "w"
     runs = [_record(1, 0, "paper", 3, True), _record(1, 0, "ours", 2, True),
             _record(5, 0, "paper", 8, False), _record(5, 0, "ours", 1, True)]
-    for r in runs:
-        d = run_dir(work, r["string"], r["seed"], r["method"])
+    video = [_record(1, 0, "ours", 3, True, mode="video"), _record(5, 0, "ours", 1, True, mode="video")]
+    for r in runs + video:
+        d = run_dir(work, r["string"], r["seed"], r["method"], r["physics"], r["mode"])
         d.mkdir(parents=True)
         (d / "run.json").write_text(json.dumps(r))
-    proc = _snakemake(tmp_path, "--config", f"work={work}", "types=1 5", "seeds=0")
+    proc = _snakemake(tmp_path, "--config", f"work={work}", "types=1 5", "seeds=0", "physics=mujoco")
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "rule campaign" not in proc.stdout + proc.stderr    # nothing re-run
     doc = json.loads((tmp_path / "bench" / "loop.json").read_text())
     expect = summarize(runs, [1, 5], ["paper", "ours"])
-    for key in ("mean_ours", "mean_paper_method", "max_ours", "all_hit_ours", "per_string"):
-        assert doc[key] == expect[key], key
-    assert doc["mean_ours"] == pytest.approx(1.5) and doc["all_hit_ours"] and doc["complete"]
+    for key in ("mean_ours", "mean_paper_method", "max_ours", "all_hit_ours", "per_string", "mean_ours_ci95",
+                "paired_diff_ci95", "prediction_error_mm_ours", "first_shot_hit_rate_ours", "campaigns_per_method"):
+        assert doc["mujoco"][key] == expect[key], key
+    m = doc["mujoco"]
+    assert m["mean_ours"] == pytest.approx(1.5) and m["all_hit_ours"] and doc["complete"] and m["mode"] == "state"
+    assert doc["video_check"]["mujoco"]["mean_ours"] == pytest.approx(2.0)
+    assert doc["video_check"]["mujoco"]["relative_difference_ours"] == pytest.approx(2.0 / 1.5 - 1)
+    assert "elastica" not in doc and doc["physics"] == ["mujoco"] and doc["state_mode"] is not None
+    assert "## mujoco (state mode)" in (tmp_path / "bench" / "loop.md").read_text()
+    assert (tmp_path / "bench" / "loop.png").stat().st_size > 0
+
+
+def test_summary_intervals_first_shots_and_predictions():
+    """The mean's interval holds the mean; the paired difference's interval is below 0 where ours
+    always needs fewer executions; a blown-up prediction sorts last in the median."""
+    runs = []
+    for k in (1, 2, 3):
+        for s in range(5):
+            runs += [_record(k, s, "ours", 1 + (s == 0), True, prediction_mm=(5.0,)),
+                     _record(k, s, "paper", 3 + s % 2, True, prediction_mm=(20.0, 30.0, 40.0))]
+    runs[1]["prediction"][0] = {"trial": 2, "params_trial": 1, "median_mm": None, "blew_up": True}
+    out = summarize(runs, [1, 2, 3], ["paper", "ours"])
+    assert out["mean_ours"] == pytest.approx(1.2) and out["campaigns_per_method"] == {"paper_method": 15, "ours": 15}
+    lo, hi = out["mean_ours_ci95"]
+    assert 1.0 <= lo <= 1.2 <= hi <= 1.4 + 1e-9
+    assert out["paired_campaigns"] == 15 and out["paired_diff_ci95"][1] < 0
+    assert out["first_shot_hit_rate_ours"] == pytest.approx(12 / 15) and out["first_shot_hit_rate_paper_method"] == 0
+    assert out["prediction_error_mm_ours"] == 5.0 and out["prediction_steps_ours"] == 3   # 3 campaigns took 2
+    paper_steps = [20.0, 30.0] * 9 + [20.0, 30.0, 40.0] * 6
+    paper_steps[0] = np.inf
+    assert out["prediction_error_mm_paper_method"] == pytest.approx(np.median(paper_steps))
+    assert bootstrap_ci({1: [2, 2, 2]}) == [2.0, 2.0] and bootstrap_ci({1: []}) is None
+    assert bootstrap_ci({1: [1, 3]}, seed=4) == bootstrap_ci({1: [1, 3]}, seed=4)     # seeded
+
+
+def test_spec_and_run_config(config):
+    spec = Spec(types=(1, 5), seeds=(0, 1), physics=("mujoco",))
+    runs = spec.campaigns()
+    assert len(runs) == 2 * 2 * 2 + 2 and runs[-1] == ("mujoco", "video", 5, 0, "ours")
+    assert len(Spec(mode="video", physics=("mujoco",)).campaigns()) == 7 * 5 * 2
+    with pytest.raises(ValueError, match="physics bullet"):
+        Spec(physics=("bullet",))
+    cfg = method_config(config, "ours", 3, "elastica", "state")
+    assert cfg["lab"]["physics"] == "elastica" and cfg["lab"]["render"] is False and cfg["estimation"]["seed"] == 3
+    assert "render" not in method_config(config, "paper", 0, "mujoco", "video")["lab"]
+    assert run_dir(Path("/w"), 5, 1, "ours", "elastica", "state").name == "loop_elastica_state_s5_seed1_ours"
+
+
+def test_a_lab_that_ran_other_physics_is_refused(tmp_path):
+    """A trial whose ground_truth.json does not say it ran the physics asked for (a lab without it
+    records none: the MuJoCo chain) stops the campaign, naming the file."""
+    from benchmarks.loop import check_physics
+    from stringcast.core import DataError
+
+    truth = tmp_path / "ground_truth.json"
+    truth.write_text(json.dumps({"hit": False}))
+    check_physics(truth, "mujoco")
+    with pytest.raises(DataError, match=r"ground_truth\.json: the lab ran 'mujoco' physics, not lab.physics 'elastica'"):
+        check_physics(truth, "elastica")
+    truth.write_text(json.dumps({"physics": "elastica"}))
+    check_physics(truth, "elastica")

@@ -4,7 +4,8 @@
 ``data/<name>/`` (campaign.yaml and a ChArUco clip for intrinsics), asks the
 Snakemake workflow for the first motion, plays it with the executor on the
 virtual lab, asks the workflow to process the trial (calibrate, sync, track,
-estimate, plan, report), plays the next motion, and so on until the lab says the
+estimate, plan, report; from trial 2 on also the previous estimate's prediction of it,
+``prediction.json``), plays the next motion, and so on until the lab says the
 tip hit the target or ``max_executions`` is reached.
 
 Only this loop, standing where the experimenter stands, reads the lab's ground
@@ -24,6 +25,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Callable, Sequence
 
 import numpy as np
 import pandas as pd
@@ -74,11 +76,13 @@ class StageProgress:
             self.done = None
 
 
-def _snakemake(root: Path, targets: list[str], cores: int, config_files: list[Path], label: str = "workflow") -> float:
+def run_workflow(root: Path, targets: list[str], cores: int, config_files: list[Path], label: str = "workflow",
+                 extra_args: Sequence[str] = ()) -> float:
     """Run the workflow for ``targets``, printing a line per finished stage (:class:`StageProgress`);
-    returns wall seconds. Raises RuntimeError on failure, with Snakemake's last lines."""
+    returns wall seconds. ``extra_args``: more Snakemake arguments (e.g. ``--allowed-rules ...``).
+    Raises RuntimeError on failure, with Snakemake's last lines."""
     cmd = [sys.executable, "-m", "snakemake", *targets, "--cores", str(cores), "--snakefile",
-           str(root / "Snakefile"), "--directory", str(root), "--rerun-incomplete"]
+           str(root / "Snakefile"), "--directory", str(root), "--rerun-incomplete", *extra_args]
     if config_files:
         cmd += ["--configfile", *map(str, config_files)]
     t0 = time.perf_counter()
@@ -106,7 +110,9 @@ def campaign_config(root: Path, config_path: str | Path | list | None = None) ->
 
 def run_campaign(name: str, string: str, target: str, config_path: str | Path | list | None = None,
                  max_executions: int = 5, cores: int = 2, seed: int = 0,
-                 root: Path = Path("."), reports: bool = True, keep_frames: bool = True) -> dict:
+                 root: Path = Path("."), reports: bool = True, keep_frames: bool = True,
+                 before_processing: Callable[[int, Path, Path], None] | None = None,
+                 workflow_args: Sequence[str] = ()) -> dict:
     """Run (or resume) a campaign on the virtual lab.
 
     Args:
@@ -120,6 +126,12 @@ def run_campaign(name: str, string: str, target: str, config_path: str | Path | 
         keep_frames: False: delete each trial's decoded video (``frames.npy``, F x H x W bytes)
             once the trial is processed; the loop benchmark's setting, where hundreds of trials
             would fill the disk. The results stay up to date; a stage rerun later decodes again.
+        before_processing: called as ``(k, data/<name>/trial_<k>, results/<name>/trial_<k>)`` after
+            execution k is recorded and before the workflow processes it (not for a hitting trial
+            left unprocessed). The loop benchmark's state mode writes the trial's tracked points
+            there (``benchmarks/loop_state.py``); None: nothing.
+        workflow_args: more Snakemake arguments for every workflow call (the state mode's
+            ``--allowed-rules``).
 
     Returns:
         dict with per-trial rows (lab hit, closest approach mm; for processed trials the tracking
@@ -155,8 +167,8 @@ def run_campaign(name: str, string: str, target: str, config_path: str | Path | 
         os.replace(tmp, data / "calib")
         timings["lab_calibration_clip_s"] = time.perf_counter() - t0
 
-    timings["plan_first_s"] = _snakemake(root, [f"results/{name}/first_motion/motion.csv"], cores, given,
-                                         f"campaign {name}")
+    timings["plan_first_s"] = run_workflow(root, [f"results/{name}/first_motion/motion.csv"], cores, given,
+                                           f"campaign {name}", workflow_args)
     motion = root / "results" / name / "first_motion" / "motion.csv"
     rows = []
     for k in range(1, max_executions + 1):
@@ -175,9 +187,12 @@ def run_campaign(name: str, string: str, target: str, config_path: str | Path | 
               f"{truth['closest_approach_mm']:.1f} mm -> {'HIT' if truth['hit'] else 'miss'}", flush=True)
         if truth["hit"] and not reports:
             break
-        timings[f"process_{k}_s"] = _snakemake(
-            root, [f"results/{name}/trial_{k}/motion.csv"] + [f"results/{name}/trial_{k}/report.html"] * reports,
-            cores, given, f"campaign {name}, trial {k}")
+        if before_processing is not None:
+            before_processing(k, trial, root / "results" / name / f"trial_{k}")
+        extra = [f"results/{name}/trial_{k}/report.html"] + [f"results/{name}/trial_{k}/prediction.json"] * (k > 1)
+        timings[f"process_{k}_s"] = run_workflow(
+            root, [f"results/{name}/trial_{k}/motion.csv"] + extra * reports, cores, given,
+            f"campaign {name}, trial {k}", workflow_args)
         if not keep_frames:
             for cache in ("frames.npy", "frames.json"):
                 (root / "results" / name / f"trial_{k}" / cache).unlink(missing_ok=True)
@@ -190,8 +205,8 @@ def run_campaign(name: str, string: str, target: str, config_path: str | Path | 
             break
         motion = root / "results" / name / f"trial_{k}" / "motion.csv"
     if reports:
-        timings["campaign_report_s"] = _snakemake(root, [f"results/{name}/report.html"], cores, given,
-                                                  f"campaign {name}")
+        timings["campaign_report_s"] = run_workflow(root, [f"results/{name}/report.html"], cores, given,
+                                                   f"campaign {name}", workflow_args)
     report = root / "results" / name / "report.html"
     summary = {"campaign": name, "string": campaign.string_id, "target": campaign.target.name,
                "executions": len(rows), "hit": any(r["hit"] for r in rows), "trials": rows,

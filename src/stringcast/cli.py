@@ -69,6 +69,7 @@ STAGES = {
     "sweep": "stringcast.sync:run_sweep",
     "track": "stringcast.track:run_tracking",
     "estimate": "stringcast.estimate:run_estimation",
+    "predict": "stringcast.estimate:run_prediction",
     "plan-first": "stringcast.plan:run_first_plan",
     "plan": "stringcast.plan:run_plan",
     "report-trial": "stringcast.report:write_trial_report",
@@ -169,6 +170,15 @@ def cmd_estimate(args):
         print(f"  - {reason}")
 
 
+def cmd_predict(args):
+    doc = _run("predict", args, Path(args.params), Path(args.tracks), Path(args.joints), _campaign(args), Path(args.out))
+    figure = "no figure" if doc["median_mm"] is None else f"median {doc['median_mm']:.1f} mm, p95 {doc['p95_mm']:.1f} mm"
+    print(f"next-motion prediction: {figure} over {doc['valid_frames']} of {doc['frames']} frames, "
+          f"{doc['verdict']['status']} -> {args.out}")
+    for reason in doc["verdict"]["reasons"]:
+        print(f"  - {reason}")
+
+
 def cmd_plan_first(args):
     out = Path(args.out_dir)
     _run("plan-first", args, _campaign(args), out / "motion.csv", out / "motion.json", int(args.seed))
@@ -255,7 +265,7 @@ def cmd_settings(args):
 
 
 HANDLERS = {"decode": cmd_decode, "calibrate": cmd_calibrate, "sync": cmd_sync, "sweep": cmd_sweep, "track": cmd_track,
-            "estimate": cmd_estimate, "plan-first": cmd_plan_first, "plan": cmd_plan,
+            "estimate": cmd_estimate, "predict": cmd_predict, "plan-first": cmd_plan_first, "plan": cmd_plan,
             "report-trial": cmd_report_trial, "report-campaign": cmd_report_campaign, "execute": cmd_execute,
             "calib-clip": cmd_calib_clip, "campaign": cmd_campaign, "settings": cmd_settings}
 """Each subcommand's function."""

@@ -43,7 +43,7 @@ SEED_HELP = "random seed of {}"
 
 
 def _add_analysis_commands(add) -> None:
-    """calibrate, sync, sweep, track, estimate: one trial's analysis, stage by stage (the rules call them)."""
+    """calibrate, sync, sweep, track, estimate, predict: one trial's analysis, stage by stage (the rules call them)."""
     campaign_help, trial_help = CAMPAIGN_HELP, TRIAL_HELP
     frames_help = "the trial's frames.npy (`stringcast decode`), read instead of decoding the video"
     sp = add("decode", "decode the trial's video once -> frames.npy (+ frames.json), read by sync, "
@@ -99,6 +99,14 @@ def _add_analysis_commands(add) -> None:
                                                      "frame (m)")
     sp.add_argument("--earlier-tracks", nargs="*", help="earlier trials' tracks.parquet, fitted together")
     sp.add_argument("--earlier-joints", nargs="*", help="their joints.csv, in the same order")
+
+    sp = add("predict", "the previous trial's estimate predicting this trial's tip -> prediction.json")
+    sp.add_argument("--params", required=True, help="the previous trial's params.json (the estimate that predicts)")
+    sp.add_argument("--tracks", required=True, help="this trial's tracks.parquet (the tip compared)")
+    sp.add_argument("--joints", required=True, help="this trial's joints.csv (the measured joints that drive the model)")
+    sp.add_argument("--campaign", required=True, help=campaign_help)
+    sp.add_argument("--out", required=True, help="prediction.json to write: the tip's error, mm (median, p95), "
+                                                 "frames compared, verdict")
 
 
 def _add_planning_and_tools(add) -> None:

@@ -304,6 +304,28 @@ def test_trial_files_match_contract(trial, tiny):
     assert not list(out.glob(".*"))                     # no temporary files left
 
 
+def test_a_trial_not_filmed_keeps_the_cameras_clock_and_truth(trial, tiny, tmp_path):
+    """lab.render: false (the loop benchmark's state mode) writes no video, but the same joints,
+    video.yaml (without file) and ground truth as the filmed trial of the same seed."""
+    out, truth, t_cmd, q_cmd = trial
+    campaign, cfg = tiny
+    cfg = dict(cfg, lab=dict(cfg["lab"], render=False))
+    bare = run_trial(t_cmd, q_cmd, campaign, cfg, tmp_path, seed=5, motion_start_s=0.1)
+    assert not [p.name for p in tmp_path.iterdir() if p.name.startswith("video.") and p.suffix != ".yaml"]
+    assert bare["video"]["rendered"] is False and bare["video"]["file"] is None and bare["video_mb"] == 0
+    filmed = read_video_meta(out / "video.yaml")
+    meta = read_video_meta(tmp_path / "video.yaml")
+    assert "file" not in meta and meta == {k: v for k, v in filmed.items() if k != "file"}
+    cols = ["frame", "t_s", "point", "x_m", "y_m"]
+    pd.testing.assert_frame_equal(read_parquet(tmp_path / "ground_truth.parquet", cols),
+                                  read_parquet(out / "ground_truth.parquet", cols))
+    assert (tmp_path / "joints.csv").read_text() == (out / "joints.csv").read_text()
+    assert bare["closest_approach_mm"] == truth["closest_approach_mm"]
+    with pytest.raises(ConfigError, match="lab.render"):
+        run_trial(t_cmd, q_cmd, campaign, dict(cfg, lab=dict(cfg["lab"], render="no")), tmp_path / "x", seed=5,
+                  motion_start_s=0.1)
+
+
 def test_ground_truth_lands_on_dark_string_pixels(trial, tiny):
     out, truth, _, _ = trial
     campaign, cfg = tiny

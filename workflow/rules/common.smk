@@ -150,6 +150,18 @@ def previous_params(wildcards):
     return [f"results/{wildcards.campaign}/trial_{k - 1}/params.json"]
 
 
+def predicting_params(wildcards):
+    """The estimate that predicts trial k (the predict rule): trial k - 1's params.json; trial 1
+    has none."""
+    k = int(wildcards.trial)
+    if k <= 1:
+        raise WorkflowError(
+            f"stringcast: results/{wildcards.campaign}/trial_{k}/prediction.json: trial 1 has "
+            "no earlier estimate to predict it"
+        )
+    return f"results/{wildcards.campaign}/trial_{k - 1}/params.json"
+
+
 def earlier_trials(wildcards):
     """The earlier trials fitted together with this one (estimation.joint_trials; 1: none)."""
     k = int(wildcards.trial)
@@ -204,6 +216,7 @@ def all_targets():
         out.append(f"results/{c}/first_motion/motion.csv")
         ks = trials(c)
         out += [f"results/{c}/trial_{k}/{name}" for k in ks for name in stages]
+        out += [f"results/{c}/trial_{k}/prediction.json" for k in ks if k > 1]
         if ks:
             out.append(f"results/{c}/report.html")
     return out

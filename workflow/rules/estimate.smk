@@ -35,3 +35,30 @@ rule estimate:
         '--joints "{input.joints}" --campaign "{input.campaign}" {params.prev} {params.earlier} '
         '--trial {wildcards.trial} --out-params "{output.params}" --out-fit "{output.fit}" '
         '> "{log}" 2>&1'
+
+
+# The next-motion prediction error (issue 27): trial k - 1's estimate driven by this trial's
+# measured joints, its tip against this trial's tracked tip (out-of-sample validation).
+
+
+rule predict:
+    input:
+        params=predicting_params,
+        tracks="results/{campaign}/trial_{trial}/tracks.parquet",
+        joints="data/{campaign}/trial_{trial}/joints.csv",
+        campaign="data/{campaign}/campaign.yaml",
+    output:
+        "results/{campaign}/trial_{trial}/prediction.json",
+    log:
+        "results/{campaign}/logs/predict_{trial}.log",
+    benchmark:
+        "results/{campaign}/benchmarks/predict_{trial}.tsv"
+    conda:
+        "../envs/stringcast.yaml"
+    params:
+        cli=CLI,
+        settings=stage_settings("predict"),
+        lab=campaign_lab_entries,
+    shell:
+        '{params.cli} predict --params "{input.params}" --tracks "{input.tracks}" --joints "{input.joints}" '
+        '--campaign "{input.campaign}" --out "{output}" > "{log}" 2>&1'

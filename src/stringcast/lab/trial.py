@@ -14,6 +14,12 @@ U(+-lab.trigger_error_s) + lab.trigger_offset_s, as a real trigger line is (or n
 with ``lab.trigger_written: false``). Recording stops at the end of the log (the last
 whole exposure). ``lab.joint_log: at_motion_start`` writes only the log's rows from the
 motion's start on (a logger started with the motion; the arm still rests, filmed, before it).
+
+``lab.render: false`` (the loop benchmark's state mode, ``benchmarks/loop_state.py``) films
+nothing: no video is rendered or encoded, but the camera's clock is drawn exactly as when
+filming (the same trigger for the same seed), so ``video.yaml`` (without ``file``) and
+``ground_truth.parquet`` hold the frames the camera would have taken, and
+``ground_truth.json`` says ``video.rendered: false``.
 """
 from __future__ import annotations
 
@@ -113,7 +119,8 @@ def run_trial(t_cmd: np.ndarray, q_cmd: np.ndarray, campaign: Campaign, config: 
     ``lab.video.codec`` mjpeg / h264), ``video.yaml``, ``joints.csv`` (``t_s, q1_rad..
     measured, q1_cmd_rad.. commanded``; from the motion's start on with ``lab.joint_log:
     at_motion_start``), ``ground_truth.parquet`` (``frame, t_s, point, x_m, y_m``: the n + 1
-    points at arc i L / n at each exposure centre, true times) and ``ground_truth.json``.
+    points at arc i L / n at each exposure centre, true times) and ``ground_truth.json``; with
+    ``lab.render: false`` no video (module doc).
 
     Returns:
         The ground_truth.json dict (hit, closest_approach_mm, ..., video: the codec written).
@@ -128,6 +135,7 @@ def run_trial(t_cmd: np.ndarray, q_cmd: np.ndarray, campaign: Campaign, config: 
     arm = campaign.arm
     t_cmd, q_cmd = _checked_command(t_cmd, q_cmd, arm.n_joints)
     lab = _lab(config)
+    render = _render(lab)
     video = video_settings(config)
     ss = np.random.SeedSequence(int(seed))
     rng_trig, rng_joint, rng_noise = (np.random.default_rng(s) for s in ss.spawn(3))
@@ -144,17 +152,21 @@ def run_trial(t_cmd: np.ndarray, q_cmd: np.ndarray, campaign: Campaign, config: 
 
     # -- camera ------------------------------------------------------------------
     wall1 = time.perf_counter()
-    renderer = build_renderer(campaign, config, phys)
-    cam = renderer.cam
+    renderer = build_renderer(campaign, config, phys) if render else None
+    cam = renderer.cam if render else CameraModel.from_config(campaign.setup.camera, config)
     fps = _fps(campaign)
     exposure, t_trigger, t_trigger_written, n_frames = _frame_clock(camera_settings(config), fps, float(rec.t[-1]),
                                                                     lab, rng_trig)
     n = campaign.string.n_points
-    name = "video" + CODECS[video["codec"]]
-    gt_rows, size_mb, written = _film(out_dir / name, video, renderer, rec, t_trigger, n_frames, exposure, fps, n, lpp)
+    name = "video" + CODECS[video["codec"]] if render else None
+    if render:
+        gt_rows, size_mb, written = _film(out_dir / name, video, renderer, rec, t_trigger, n_frames, exposure, fps,
+                                          n, lpp)
+    else:
+        gt_rows, size_mb, written = _truth_rows(rec, t_trigger + np.arange(n_frames) / fps, n, lpp), 0.0, None
     wall_render = time.perf_counter() - wall1
 
-    meta = {"file": name, "fps": fps, "frames": n_frames}
+    meta = ({"file": name} if render else {}) | {"fps": fps, "frames": n_frames}
     if t_trigger_written is not None:
         meta["trigger_time_s"] = round(t_trigger_written, 9)
     write_yaml(out_dir / "video.yaml", {**meta, "width_px": cam.width, "height_px": cam.height, "bit_depth": 8})
@@ -176,10 +188,30 @@ def run_trial(t_cmd: np.ndarray, q_cmd: np.ndarray, campaign: Campaign, config: 
         "wall_s": {"physics": wall_physics, "render": wall_render, "total": time.perf_counter() - wall0},
         "seed": int(seed),
     }
-    truth["video"] = {**video, "file": name, "codec_written": written}
+    truth["video"] = {**video, "file": name, "codec_written": written, "rendered": render}
     truth["joint_log_start_s"] = log_start
     write_json(out_dir / "ground_truth.json", truth)
     return truth
+
+
+def _render(lab: Mapping) -> bool:
+    """``lab.render`` (default true): whether the trial is filmed (module doc).
+
+    Raises:
+        ConfigError: a value that is not a boolean.
+    """
+    render = lab.get("render", True)
+    if not isinstance(render, bool):
+        raise ConfigError(f"lab.render = {render!r}: expected true or false")
+    return render
+
+
+def _truth_rows(rec, t_frames: np.ndarray, n: int, lpp: int) -> list:
+    """Ground-truth rows (as :func:`_film` returns them) at the exposure centres ``t_frames`` (F,) s,
+    without filming: per frame (frame, t_s, point, x_m, y_m), each (n + 1,)."""
+    pts = rec.at(np.asarray(t_frames, float))[:, ::lpp][:, : n + 1]
+    return [(np.full(n + 1, k), np.full(n + 1, tc), np.arange(n + 1), p[:, 0], p[:, 1])
+            for k, (tc, p) in enumerate(zip(t_frames, pts))]
 
 
 def _write_joint_log(path: Path, rec, t_cmd: np.ndarray, q_cmd: np.ndarray, lab: Mapping,
