@@ -64,6 +64,7 @@ def _settings(func, args) -> dict:
 
 STAGES = {
     "decode": "stringcast.video:write_frame_cache",
+    "calib-views": "stringcast.calibrate:write_calib_views",
     "calibrate": "stringcast.calibrate:run_calibration",
     "sync": "stringcast.sync:run_sync",
     "sweep": "stringcast.sync:run_sweep",
@@ -101,9 +102,15 @@ def _run(command: str, args, *positional):
     return func(*positional, **_settings(func, args))
 
 
+def cmd_calib_views(args):
+    views = _run("calib-views", args, Path(args.calib_dir), _campaign(args), Path(args.out))
+    print(f"calibration views: {len(views)} of the board's {views.found} in {args.calib_dir} -> {args.out}")
+
+
 def cmd_calibrate(args):
     calib_dir = Path(args.calib_dir) if args.calib_dir and Path(args.calib_dir).is_dir() else None
-    cal = _run("calibrate", args, Path(args.trial_dir), calib_dir, _campaign(args), Path(args.out))
+    calib = Path(args.calib_views) if args.calib_views else calib_dir
+    cal = _run("calibrate", args, Path(args.trial_dir), calib, _campaign(args), Path(args.out))
     bc = (cal.board_check or {}).get("residual_mm")
     extra = "" if bc is None else f", board-to-robot check {bc:.1f} mm"
     print(f"calibration: reprojection error {cal.reprojection_error_px:.3f} px{extra}, {cal.verdict.status} -> {args.out}")
@@ -264,7 +271,7 @@ def cmd_settings(args):
     print(yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=110), end="")
 
 
-HANDLERS = {"decode": cmd_decode, "calibrate": cmd_calibrate, "sync": cmd_sync, "sweep": cmd_sweep, "track": cmd_track,
+HANDLERS = {"decode": cmd_decode, "calib-views": cmd_calib_views, "calibrate": cmd_calibrate, "sync": cmd_sync, "sweep": cmd_sweep, "track": cmd_track,
             "estimate": cmd_estimate, "predict": cmd_predict, "plan-first": cmd_plan_first, "plan": cmd_plan,
             "report-trial": cmd_report_trial, "report-campaign": cmd_report_campaign, "execute": cmd_execute,
             "calib-clip": cmd_calib_clip, "campaign": cmd_campaign, "settings": cmd_settings}

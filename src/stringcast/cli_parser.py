@@ -43,7 +43,7 @@ SEED_HELP = "random seed of {}"
 
 
 def _add_analysis_commands(add) -> None:
-    """calibrate, sync, sweep, track, estimate, predict: one trial's analysis, stage by stage (the rules call them)."""
+    """calib-views, calibrate, sync, sweep, track, estimate, predict: one trial's analysis, stage by stage (the rules call them)."""
     campaign_help, trial_help = CAMPAIGN_HELP, TRIAL_HELP
     frames_help = "the trial's frames.npy (`stringcast decode`), read instead of decoding the video"
     sp = add("decode", "decode the trial's video once -> frames.npy (+ frames.json), read by sync, "
@@ -51,10 +51,17 @@ def _add_analysis_commands(add) -> None:
     sp.add_argument("--trial-dir", required=True, help=trial_help)
     sp.add_argument("--out", required=True, help="frames.npy to write: (F, H, W) grey frames")
 
+    sp = add("calib-views", "find the ChArUco board's views in a campaign's calib/ once -> calib_views.npz")
+    sp.add_argument("--calib-dir", required=True, help="data/<campaign>/calib/: ChArUco clip or images")
+    sp.add_argument("--campaign", required=True, help=campaign_help)
+    sp.add_argument("--out", required=True, help="calib_views.npz to write (the views' corners, for calibrate)")
+
     sp = add("calibrate", "ChArUco calibration of one trial -> calibration.json")
     sp.add_argument("--trial-dir", required=True, help=trial_help)
     sp.add_argument("--calib-dir", help="data/<campaign>/calib/: ChArUco clip or views for the camera intrinsics; "
                                         "if not given or not a folder, the board's homography only")
+    sp.add_argument("--calib-views", help="the campaign's calib_views.npz (its board views, found once); read instead "
+                                          "of searching the calib folder")
     sp.add_argument("--campaign", required=True, help=campaign_help)
     sp.add_argument("--out", required=True, help="calibration.json to write (intrinsics, board pose, px errors)")
 

@@ -108,6 +108,30 @@ def test_calibration_stage_records_the_check_and_warns(still_arm, tmp_path, sett
     assert any("board-to-robot check" in w and "board_origin_mm" in w for w in doc["warnings"])
 
 
+def test_the_campaigns_views_found_once_give_the_trials_calibration_exactly(still_arm, tmp_path, settings):
+    """calib_views.npz (the calib_views rule, once per campaign) read back by a trial's calibration gives
+    the calibration the calib/ folder gives, byte for byte; a broken views file is named."""
+    from stringcast.calibrate import write_calib_views
+    from stringcast.calibrate.calib_views import read_calib_views
+    from stringcast.calibrate.calibration import run_calibration
+    from stringcast.core import DataError
+    from stringcast.lab import write_calibration_clip
+
+    _, _, campaign, cfg, _, trial = still_arm
+    calib = write_calibration_clip(campaign, cfg, tmp_path / "calib", seed=5, n_frames=14)
+    st = {"board_check": settings.board_check, "calibration": settings.calibration}
+    views = write_calib_views(calib, campaign, tmp_path / "calib_views.npz", calibration=settings.calibration)
+    back, source = read_calib_views(tmp_path / "calib_views.npz")
+    assert len(back) == len(views) >= 3 and back.names == views.names and source.endswith("calib")
+    assert all(np.array_equal(a, b) and a.dtype == np.float32 for a, b in zip(back.image_points, views.image_points))
+    run_calibration(trial, calib, campaign, tmp_path / "from_folder.json", **st)
+    run_calibration(trial, tmp_path / "calib_views.npz", campaign, tmp_path / "from_views.json", **st)
+    assert (tmp_path / "from_views.json").read_bytes() == (tmp_path / "from_folder.json").read_bytes()
+    (tmp_path / "broken.npz").write_bytes(b"not a zip")
+    with pytest.raises(DataError, match="broken.npz: not a calibration views file"):
+        run_calibration(trial, tmp_path / "broken.npz", campaign, tmp_path / "x.json", **st)
+
+
 # ------------------------------------------------------------ an arm without joint discs
 
 def _plain_arm_image(calibration, arm, q, rng, blotchy: bool):

@@ -1,5 +1,27 @@
-# Calibration: intrinsics from data/<campaign>/calib/ (if present) and the
-# pixel-to-plane homography from the ChArUco board in the trial's video.
+# Calibration: intrinsics from data/<campaign>/calib/ (if present; its board views found
+# once per campaign) and the pixel-to-plane homography from the ChArUco board in the
+# trial's video.
+
+
+rule calib_views:
+    input:
+        calib="data/{campaign}/calib",
+        campaign="data/{campaign}/campaign.yaml",
+    output:
+        "results/{campaign}/calib_views.npz",
+    log:
+        "results/{campaign}/logs/calib_views.log",
+    benchmark:
+        "results/{campaign}/benchmarks/calib_views.tsv"
+    conda:
+        "../envs/stringcast.yaml"
+    params:
+        cli=CLI,
+        settings=stage_settings("calib-views"),
+        lab=campaign_lab_entries,
+    shell:
+        '{params.cli} calib-views --calib-dir "{input.calib}" --campaign "{input.campaign}" '
+        '--out "{output}" > "{log}" 2>&1'
 
 
 rule calibrate:

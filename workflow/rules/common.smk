@@ -133,13 +133,14 @@ def trial_video(wildcards):
 
 
 def calib_input(wildcards):
-    """data/<campaign>/calib/ if the campaign has a board clip for intrinsics."""
+    """The campaign's calibration views (rule calib_views) if it has a board clip for intrinsics
+    in data/<campaign>/calib/; found once, read by every trial's calibrate."""
     d = Path("data", wildcards.campaign, "calib")
-    return [str(d)] if d.is_dir() else []
+    return [f"results/{wildcards.campaign}/calib_views.npz"] if d.is_dir() else []
 
 
 def calib_arg(wildcards, input):
-    return f'--calib-dir "{input.calib[0]}"' if input.calib else ""
+    return f'--calib-views "{input.calib[0]}"' if input.calib else ""
 
 
 def previous_params(wildcards):

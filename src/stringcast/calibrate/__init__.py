@@ -1,6 +1,7 @@
 """Camera calibration: intrinsics from a ChArUco clip, the board's pose in the trial's video
 (pixel <-> swing-plane homography), and the still-arm check of the board-to-robot transform
-(the paper's Fig. 2, 'camera calibration'), and the mapping refined by the arm's sweep of a
+(the paper's Fig. 2, 'camera calibration'; the clip's views found once per campaign,
+:mod:`.calib_views`), and the mapping refined by the arm's sweep of a
 trial (its link rows, :mod:`.arm_sweep`; the fit, :mod:`.refine`).
 """
 from typing import TYPE_CHECKING
@@ -10,12 +11,14 @@ from stringcast.core import lazy_exports
 if TYPE_CHECKING:
     from .arm_sweep import sweep_rows
     from .board_check import check_board_to_robot
+    from .calib_views import write_calib_views
     from .calibration import Calibration, run_calibration
     from .refine import board_corner_points, mapping_standard_error, refine_mapping
 
 __getattr__, __dir__ = lazy_exports(__name__, {
     "sweep_rows": ".arm_sweep",
     "check_board_to_robot": ".board_check",
+    "write_calib_views": ".calib_views",
     "Calibration": ".calibration",
     "run_calibration": ".calibration",
     "board_corner_points": ".refine",
@@ -24,4 +27,4 @@ __getattr__, __dir__ = lazy_exports(__name__, {
 })
 
 __all__ = ["Calibration", "board_corner_points", "check_board_to_robot", "mapping_standard_error", "refine_mapping",
-           "run_calibration", "sweep_rows"]
+           "run_calibration", "sweep_rows", "write_calib_views"]

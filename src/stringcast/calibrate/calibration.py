@@ -36,8 +36,6 @@ too few views, image size mismatch).
 """
 from __future__ import annotations
 
-import math
-from contextlib import contextmanager
 from pathlib import Path
 
 import cv2
@@ -45,10 +43,11 @@ import numpy as np
 
 from stringcast.core import (BoardCheckSettings, CalibrationSettings, DataError, Verdict, find_video,
                              read_joint_table)
-from stringcast.video import FRAME_SUFFIXES, open_video
+from stringcast.video import open_video
 
 from .board_check import check_board_to_robot
-from .charuco import Intrinsics, calibrate_intrinsics, detect_charuco, select_calibration_views
+from .calib_views import find_calib_views, read_calib_views, single_threaded_opencv
+from .charuco import Intrinsics, calibrate_intrinsics, detect_charuco
 from .intrinsics import board_view_check, judged_intrinsics
 from .mapping import Calibration, apply_homography
 
@@ -144,45 +143,19 @@ def _pose_homography(board_xy: np.ndarray, corners: np.ndarray, K: np.ndarray, d
     return K @ np.c_[R[:, :2], tvec.reshape(3)]
 
 
-def _calib_reader(calib_dir: Path):
-    """The calibration views: the folder's images, or the one video inside it."""
-    if any(p.suffix.lower() in FRAME_SUFFIXES for p in calib_dir.iterdir()):
-        return open_video(calib_dir)
-    vids = sorted(p for p in calib_dir.iterdir() if p.is_file() and p.suffix.lower() in (".mkv", ".avi", ".mp4", ".mov"))
-    if not vids:
-        raise DataError(f"{calib_dir}: no PNG/TIFF images or video of the calibration board")
-    return open_video(vids[0])
-
-
 def median_frame(video, n: int = 5) -> np.ndarray:
     """Pixel-wise median of the first ``n`` frames of a :class:`~stringcast.video.container.VideoReader`."""
     frames = [f for _, (_, f) in zip(range(min(n, video.n_frames)), video)]
     return np.median(np.stack(frames), axis=0).astype(video.dtype)
 
 
-@contextmanager
-def single_threaded_opencv():
-    """Run OpenCV on one thread inside the block (``cv2.setNumThreads``), then restore.
-
-    With its worker threads, calibration on the same views gave intrinsics that differed run
-    to run in the 9th significant digit (the threads' partial sums add up in varying order);
-    the estimation's search amplifies such a difference into another estimate, so a
-    reprocessed trial would not reproduce its results. One thread costs this stage ~1 s.
-    """
-    n = cv2.getNumThreads()
-    cv2.setNumThreads(1)
-    try:
-        yield
-    finally:
-        cv2.setNumThreads(n)
-
-
 def run_calibration(trial_dir: str | Path, calib_dir: str | Path | None, campaign, out_json: str | Path,
                     n_median: int = 5, *, board_check: BoardCheckSettings,
                     calibration: CalibrationSettings = CalibrationSettings()) -> Calibration:
-    """Calibrate one trial and write ``calibration.json`` (reproducibly: :func:`single_threaded_opencv`).
+    """Calibrate one trial and write ``calibration.json`` (reproducibly: :func:`~stringcast.calibrate.calib_views.single_threaded_opencv`).
 
-    Intrinsics from ``calib_dir`` (if given), judged (:func:`~stringcast.calibrate.intrinsics.judged_intrinsics`);
+    Intrinsics from ``calib_dir`` (if given: the ``calib/`` folder, or the campaign's views found
+    in it once, ``calib_views.npz`` of :func:`~stringcast.calibrate.calib_views.write_calib_views`), judged (:func:`~stringcast.calibrate.intrinsics.judged_intrinsics`);
     the trial's board (in the median of the first ``n_median`` trial frames, where the arm
     and string hang still before the motion) checks them and joins the views; then the plane
     homography. The configured board-to-robot transform is checked against the still arm
@@ -206,14 +179,12 @@ def run_calibration(trial_dir: str | Path, calib_dir: str | Path | None, campaig
 
 def _intrinsics(calib_dir: Path, board, setup, image: np.ndarray, detection, source: str, st: CalibrationSettings):
     """(Intrinsics, their measures, the board view's check or None, verdict) from calib/ and the trial's board."""
-    reader = _calib_reader(calib_dir)
-    stride = max(1, math.ceil(reader.n_frames / st.max_candidate_frames))
+    calib = Path(calib_dir)
+    views, where = read_calib_views(calib) if calib.is_file() else find_calib_views(calib, board, st)
     flags = cv2.CALIB_FIX_K3 if setup.camera.get("fix_k3") else 0
-    views = select_calibration_views((f for i, f in reader if i % stride == 0), board, str(reader.path),
-                                     max_views=st.max_views)
     size = (image.shape[1], image.shape[0])
     if tuple(views.image_size) != size:
-        raise DataError(f"{source}: image is {size[0]}x{size[1]} but the calibration views in {reader.path} are "
+        raise DataError(f"{source}: image is {size[0]}x{size[1]} but the calibration views in {where} are "
                         f"{views.image_size[0]}x{views.image_size[1]}")
     intr, quality, verdict = judged_intrinsics(views, flags, st)
     if not st.board_view:
