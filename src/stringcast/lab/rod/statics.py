@@ -56,7 +56,8 @@ def rod_equilibrium(rod, mat: RodMaterial, pose, nodes0: np.ndarray) -> float:
     discrete Cosserat operators) plus gravity is zero, and on elements 1..n-1 its in-plane internal
     torque is zero; unknowns the node positions and element angles (node 0 and element 0 are the
     clamp's). So the integrator starts at rest in its own equilibrium, shear and stretch included.
-    Leaves the rod at rest there. Returns the largest residual force, N.
+    Leaves the rod at rest there (at ``nodes0`` if Newton made it worse). Returns the largest
+    residual force, N.
     """
     from scipy.optimize import root
 
@@ -86,7 +87,8 @@ def rod_equilibrium(rod, mat: RodMaterial, pose, nodes0: np.ndarray) -> float:
     d = np.diff(nodes0, axis=0)
     x0 = np.concatenate([np.asarray(nodes0, float)[1:].ravel(), np.arctan2(d[1:, 1], d[1:, 0])])
     res = root(fun, x0, method="hybr", options={"xtol": 1e-13, "maxfev": 200 * (len(x0) + 1)})
-    x = res.x if np.all(np.isfinite(res.x)) else x0
+    start = np.abs(fun(x0)).max()
+    x = res.x if np.all(np.isfinite(res.x)) and np.abs(fun(res.x)).max() < start else x0
     resid = fun(x)
     rod.velocity_collection[:] = 0.0
     rod.omega_collection[:] = 0.0
