@@ -312,3 +312,14 @@ def test_rod_shares_no_code_with_the_chain_or_the_model():
                         assert (mod, a.name) in allowed, f"{f.name} imports {a.name} from {mod}"
                 elif mod.startswith("stringcast."):
                     assert mod == "stringcast.core", f"{f.name} imports {mod}"
+
+
+def test_the_lab_imports_pyelastica_only_for_a_rod():
+    """``import stringcast.lab`` (the MuJoCo lab, the trial, the rod package) leaves PyElastica
+    unimported: it costs 0.5-0.9 s and only a rod needs it."""
+    import subprocess
+    import sys
+
+    code = "import sys, stringcast.lab, stringcast.lab.rod; print('elastica' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"

@@ -31,6 +31,7 @@ from .encode import CODECS, FFV1Writer, open_writer, video_settings
 from .look import scene_look
 from .mjcf import StringPhysics
 from .physics import simulate
+from .rod import simulate_rod
 from .scene import FrameRenderer, StringLook
 from .truth import physics_truth, verdict, write_points
 
@@ -56,7 +57,8 @@ PHYSICS = ("mujoco", "elastica")
 
 def lab_physics(lab: Mapping):
     """The simulate function ``lab.physics`` names: ``mujoco`` (default, :func:`.physics.simulate`,
-    the capsule chain) or ``elastica`` (:func:`.rod.simulate_rod`, the Cosserat rod); both take
+    the capsule chain) or ``elastica`` (:func:`.rod.simulate_rod`, the Cosserat rod; PyElastica is
+    imported when it builds a rod); both take
     (phys, arm, t_cmd, q_cmd, timestep, servo_lag_s, settle_s, progress) and return a Recording.
 
     Raises:
@@ -66,8 +68,6 @@ def lab_physics(lab: Mapping):
     if name == "mujoco":
         return simulate
     if name == "elastica":
-        from .rod import simulate_rod
-
         return simulate_rod
     raise ConfigError(f"lab.physics = {name!r}: expected one of {list(PHYSICS)}")
 

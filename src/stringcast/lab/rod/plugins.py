@@ -9,6 +9,11 @@
   configured ``bending_damping``) and on stretch, applied implicitly after each step.
 
 Planar: the rod lies in z = 0 and every force here is in that plane (z components stay 0).
+
+The three classes subclass PyElastica's, so they are made on first use by :func:`plugin_classes`:
+PyElastica is imported only when a rod is built (it takes 0.5-0.9 s, scipy.interpolate
+included), as the MuJoCo chain imports MuJoCo only when a chain is built, so ``stringcast.lab``
+stays as quick to import as it was. The numba kernels and :class:`HandPath` need neither.
 """
 from __future__ import annotations
 
@@ -16,8 +21,6 @@ import math
 
 import numpy as np
 from numba import njit
-
-from elastica import ConstraintBase, DamperBase, NoForces
 
 from .material import RodMaterial
 
@@ -83,30 +86,6 @@ def _clamp_rates(velocity, omega, vel, t0, h, time):  # pragma: no cover - compi
     omega[0, 0] = vel[i, 2]
     omega[1, 0] = 0.0
     omega[2, 0] = 0.0
-
-
-class HandClamp(ConstraintBase):
-    """Clamp node 0 and element 0 to the hand (a time-varying ``elastica.OneEndFixedBC``).
-
-    ``constrain_values`` sets node 0 to (x, y, 0) and element 0's directors to :func:`directors`
-    (phi_h) at the sample of the owner's :class:`HandPath` nearest the time; ``constrain_rates``
-    sets node 0's velocity to the hand's and element 0's angular velocity to (dphi_h/dt, 0, 0) in
-    its own frame (d1 = +z). Use as ``sim.constrain(rod).using(HandClamp, clamp=owner)``, where
-    ``owner.hand`` is the :class:`HandPath` (swapped between settling and the motion).
-    """
-
-    def __init__(self, *, clamp, **kwargs):
-        super().__init__(**kwargs)
-        self._owner = clamp
-
-    def constrain_values(self, system, time) -> None:
-        hand = self._owner.hand
-        _clamp_values(system.position_collection, system.director_collection, hand.pose, hand.t0, hand.h,
-                      float(time))
-
-    def constrain_rates(self, system, time) -> None:
-        hand = self._owner.hand
-        _clamp_rates(system.velocity_collection, system.omega_collection, hand.vel, hand.t0, hand.h, float(time))
 
 
 # --------------------------------------------------------------------------------------- air
@@ -180,27 +159,6 @@ def drag_kernel(vel, tangents, lengths, diam, clay_node, clay_w, clay_d, rho, nu
         out[1, i] += (1 - w) * f * vy
         out[0, i + 1] += w * f * vx
         out[1, i + 1] += w * f * vy
-
-
-class AirDrag(NoForces):
-    """Air drag on the rod (:func:`drag_kernel`) in still air.
-
-    Args:
-        material: the rod's :class:`~.material.RodMaterial` (diameters, clay). rho: air density,
-            kg/m^3. mu: air viscosity, Pa s.
-    """
-
-    def __init__(self, material: RodMaterial, rho: float, mu: float):
-        super().__init__()
-        self.diam = 2 * np.asarray(material.radius, float)
-        self.clay = (material.clay_node, material.clay_w, material.clay_d)
-        self.rho = float(rho)
-        self.nu = float(mu) / max(float(rho), 1e-12)
-        self.length = float(material.length)
-
-    def apply_forces(self, system, time=0.0) -> None:
-        drag_kernel(system.velocity_collection, system.tangents, system.lengths, self.diam, *self.clay,
-                    self.rho, self.nu, self.length, system.external_forces)
 
 
 # ------------------------------------------------------------------------------- damping
@@ -289,29 +247,104 @@ def _damp_stretch(vel, tangents, mass, c, dt):  # pragma: no cover - compiled
         vel[1, i] = (B[i, 0, 0] * r1 - B[i, 1, 0] * r0) / det
 
 
-class CordDamping(DamperBase):
-    """The cord's internal (Kelvin-Voigt) damping, applied implicitly after each step.
+# ------------------------------------------------------------------------------- classes
+_PLUGINS: dict = {}
 
-    Bending: a dashpot eta / l_v (``bending_damping`` eta, N m^2 s; couple eta d(kappa)/dt) at
-    every junction between elements, on their in-plane angular velocities. Stretch: a dashpot
-    eta_a / l on every element's axial strain rate (eta_a = AXIAL_LOSS EA / omega_1). Each is the
-    exact backward-Euler step of its dashpots alone (a linear solve), so it is stable at any
-    step; element 0 and node 0 are the clamp's and stay as it set them. Neither dashpot acts on
-    a rigid motion of the rod (they see only differences).
 
-    Args:
-        material: the rod's :class:`~.material.RodMaterial`. time_step: the step, s.
-    """
+def plugin_classes() -> tuple[type, type, type]:
+    """(HandClamp, AirDrag, CordDamping): the PyElastica plug-ins, made once on first use
+    (:func:`_hand_clamp`, :func:`_air_drag`, :func:`_cord_damping`; see the module docstring)."""
+    if not _PLUGINS:
+        _PLUGINS.update(clamp=_hand_clamp(), drag=_air_drag(), damping=_cord_damping())
+    return _PLUGINS["clamp"], _PLUGINS["drag"], _PLUGINS["damping"]
 
-    def __init__(self, material: RodMaterial, time_step: float, **kwargs):
-        super().__init__(**kwargs)
-        rod = self._system
-        self.J = np.ascontiguousarray(rod.mass_second_moment_of_inertia[0, 0, :])
-        self.c_bend = np.ascontiguousarray(material.eta_bend, float)
-        self.c_axial = np.ascontiguousarray(material.eta_axial, float)
-        self.dt = float(time_step)
 
-    def dampen_rates(self, system, time) -> None:
-        if self.c_bend.size and self.c_bend.max() > 0:
-            _damp_rotation(system.omega_collection, self.J, self.c_bend, self.dt)
-        _damp_stretch(system.velocity_collection, system.tangents, system.mass, self.c_axial, self.dt)
+def _hand_clamp() -> type:
+    """The clamp class, a ``elastica.ConstraintBase``."""
+    from elastica import ConstraintBase
+
+    class HandClamp(ConstraintBase):
+        """Clamp node 0 and element 0 to the hand (a time-varying ``elastica.OneEndFixedBC``).
+
+        ``constrain_values`` sets node 0 to (x, y, 0) and element 0's directors to :func:`directors`
+        (phi_h) at the sample of the owner's :class:`HandPath` nearest the time; ``constrain_rates``
+        sets node 0's velocity to the hand's and element 0's angular velocity to (dphi_h/dt, 0, 0) in
+        its own frame (d1 = +z). Use as ``sim.constrain(rod).using(HandClamp, clamp=owner)``, where
+        ``owner.hand`` is the :class:`HandPath` (swapped between settling and the motion).
+        """
+
+        def __init__(self, *, clamp, **kwargs):
+            super().__init__(**kwargs)
+            self._owner = clamp
+
+        def constrain_values(self, system, time) -> None:
+            hand = self._owner.hand
+            _clamp_values(system.position_collection, system.director_collection, hand.pose, hand.t0, hand.h,
+                          float(time))
+
+        def constrain_rates(self, system, time) -> None:
+            hand = self._owner.hand
+            _clamp_rates(system.velocity_collection, system.omega_collection, hand.vel, hand.t0, hand.h, float(time))
+
+    return HandClamp
+
+
+def _air_drag() -> type:
+    """The air-drag class, a ``elastica.NoForces``."""
+    from elastica import NoForces
+
+    class AirDrag(NoForces):
+        """Air drag on the rod (:func:`drag_kernel`) in still air.
+
+        Args:
+            material: the rod's :class:`~.material.RodMaterial` (diameters, clay). rho: air density,
+                kg/m^3. mu: air viscosity, Pa s.
+        """
+
+        def __init__(self, material: RodMaterial, rho: float, mu: float):
+            super().__init__()
+            self.diam = 2 * np.asarray(material.radius, float)
+            self.clay = (material.clay_node, material.clay_w, material.clay_d)
+            self.rho = float(rho)
+            self.nu = float(mu) / max(float(rho), 1e-12)
+            self.length = float(material.length)
+
+        def apply_forces(self, system, time=0.0) -> None:
+            drag_kernel(system.velocity_collection, system.tangents, system.lengths, self.diam, *self.clay,
+                        self.rho, self.nu, self.length, system.external_forces)
+
+    return AirDrag
+
+
+def _cord_damping() -> type:
+    """The internal-damping class, a ``elastica.DamperBase``."""
+    from elastica import DamperBase
+
+    class CordDamping(DamperBase):
+        """The cord's internal (Kelvin-Voigt) damping, applied implicitly after each step.
+
+        Bending: a dashpot eta / l_v (``bending_damping`` eta, N m^2 s; couple eta d(kappa)/dt) at
+        every junction between elements, on their in-plane angular velocities. Stretch: a dashpot
+        eta_a / l on every element's axial strain rate (eta_a = AXIAL_LOSS EA / omega_1). Each is the
+        exact backward-Euler step of its dashpots alone (a linear solve), so it is stable at any
+        step; element 0 and node 0 are the clamp's and stay as it set them. Neither dashpot acts on
+        a rigid motion of the rod (they see only differences).
+
+        Args:
+            material: the rod's :class:`~.material.RodMaterial`. time_step: the step, s.
+        """
+
+        def __init__(self, material: RodMaterial, time_step: float, **kwargs):
+            super().__init__(**kwargs)
+            rod = self._system
+            self.J = np.ascontiguousarray(rod.mass_second_moment_of_inertia[0, 0, :])
+            self.c_bend = np.ascontiguousarray(material.eta_bend, float)
+            self.c_axial = np.ascontiguousarray(material.eta_axial, float)
+            self.dt = float(time_step)
+
+        def dampen_rates(self, system, time) -> None:
+            if self.c_bend.size and self.c_bend.max() > 0:
+                _damp_rotation(system.omega_collection, self.J, self.c_bend, self.dt)
+            _damp_stretch(system.velocity_collection, system.tangents, system.mass, self.c_axial, self.dt)
+
+    return CordDamping

@@ -7,25 +7,37 @@ import time
 
 import numpy as np
 
-import elastica as ea
-
 from stringcast.core import ArmSpec
 from ..mjcf import StringPhysics
 from ..recording import Recording
 from ..servo import hand_trajectory, servo_lag
 from .material import CORD_E_AXIAL, G_ACC, RodMaterial, rod_material
-from .plugins import AirDrag, CordDamping, HandClamp, HandPath, directors
+from .plugins import HandPath, directors, plugin_classes
 from .statics import hanging_nodes, rod_equilibrium
 
 
-class _Simulator(ea.BaseSystemCollection, ea.Constraints, ea.Forcing, ea.Damping):
-    """PyElastica's system collection with the modules the lab uses."""
+_SIMULATOR: list = []
 
 
-def build_rod(mat: RodMaterial) -> ea.CosseratRod:
+def _simulator():
+    """A new PyElastica system collection with the modules the lab uses (constraints, forcing,
+    damping); its class is made once, PyElastica imported then (see :mod:`.plugins`)."""
+    if not _SIMULATOR:
+        import elastica as ea
+
+        class Simulator(ea.BaseSystemCollection, ea.Constraints, ea.Forcing, ea.Damping):
+            """PyElastica's system collection with constraints, forcing and damping."""
+
+        _SIMULATOR.append(Simulator)
+    return _SIMULATOR[0]()
+
+
+def build_rod(mat: RodMaterial):
     """A straight ``elastica.CosseratRod`` hanging along -y from the origin with ``mat``'s
     per-element stiffness (shear_matrix diag(GA, GA, EA)), junction stiffness (bend_matrix
     diag(EI, EI, GJ), halves in series), node masses (clay included) and inertias."""
+    import elastica as ea
+
     n = mat.n
     rod = ea.CosseratRod.straight_rod(
         n, np.zeros(3), np.array([0.0, -1.0, 0.0]), np.array([0.0, 0.0, 1.0]), mat.length,
@@ -68,9 +80,12 @@ class RodSim:
         self.dt = float(dt or self.mat.dt_max)
         if self.dt > self.mat.dt_max * (1 + 1e-9):
             raise ValueError(f"RodSim: dt {self.dt:.3g} s is above the stable {self.mat.dt_max:.3g} s")
+        import elastica as ea
+
+        HandClamp, AirDrag, CordDamping = plugin_classes()
         self.hand = HandPath.hold((0.0, 0.0, -math.pi / 2))
         self.rod = build_rod(self.mat)
-        sim = self.sim = _Simulator()
+        sim = self.sim = _simulator()
         sim.append(self.rod)
         sim.constrain(self.rod).using(HandClamp, clamp=self)
         sim.add_forcing_to(self.rod).using(ea.GravityForces, acc_gravity=np.array([0.0, -G_ACC, 0.0]))

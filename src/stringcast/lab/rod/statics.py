@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from .material import G_ACC, RodMaterial
+from .plugins import directors
 
 
 def hanging_angles(mat: RodMaterial, phi_h: float) -> np.ndarray:
@@ -60,8 +61,6 @@ def rod_equilibrium(rod, mat: RodMaterial, pose, nodes0: np.ndarray) -> float:
     residual force, N.
     """
     from scipy.optimize import root
-
-    from .plugins import directors
 
     n = mat.n
     pose = np.asarray(pose, float)
