@@ -16,7 +16,8 @@ from .calib_clip import write_calibration_clip
 from .camera import PRESETS, CameraModel, IdealCanvas, Sensor, apply_preset, camera_settings
 from .encode import h264_backend
 from .mjcf import StringPhysics
-from .physics import ChainSim, Recording, simulate
+from .physics import ChainSim, simulate
+from .recording import Recording
 from .randomize import Setup, apply_setup, draw_setup
 from .servo import servo_lag
 from .trial import build_renderer, motion_end, run_trial

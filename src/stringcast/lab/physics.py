@@ -45,13 +45,12 @@ such chains.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-
 import numpy as np
 
 from stringcast.core import ArmSpec
 from .air import C_FRICTION, drag_kernel
 from .mjcf import DRIVER_ARMATURE, StringPhysics, build_mjcf, link_diameter, weight_link
+from .recording import Recording
 from .servo import hand_trajectory, servo_lag
 
 _DRIVER_BANDWIDTH_HZ = 60.0               # PD bandwidth of the driver
@@ -204,46 +203,6 @@ class ChainSim:
         return float(self.data.energy[0]), float(self.data.energy[1])
 
 
-@dataclass(frozen=True)
-class Recording:
-    """String points on the physics time grid.
-
-    Attributes:
-        t: (N,) s, controller-clock times of the samples (even, step dt).
-        points: (N, S, 2) world (x, y) of the S = n_links + 1 sites, m (site k at arc k * l_link).
-        q_arm: (N, J) the lagged (true) arm joint angles, rad.
-        settle_speed: the largest point speed left after settling, m/s.
-        steps_per_s: MuJoCo steps per wall second while recording.
-    """
-
-    t: np.ndarray
-    points: np.ndarray
-    q_arm: np.ndarray
-    settle_speed: float
-    steps_per_s: float
-
-    def __post_init__(self):
-        n = len(self.t)
-        if self.points.ndim != 3 or self.points.shape[0] != n or self.points.shape[2] != 2:
-            raise ValueError(f"Recording: points must be ({n}, S, 2), got {self.points.shape}")
-        if self.q_arm.shape[0] != n:
-            raise ValueError(f"Recording: q_arm must have {n} rows, got {self.q_arm.shape}")
-
-    def at(self, times: np.ndarray) -> np.ndarray:
-        """(len(times), S, 2) site positions linearly interpolated in time, m."""
-        times = np.asarray(times, float)
-        dt = self.t[1] - self.t[0]
-        f = np.clip((times - self.t[0]) / dt, 0, len(self.t) - 1 - 1e-9)
-        i = np.floor(f).astype(int)
-        w = (f - i)[:, None, None]
-        return self.points[i] * (1 - w) + self.points[i + 1] * w
-
-    def arm_at(self, times: np.ndarray) -> np.ndarray:
-        """(len(times), J) lagged joint angles at ``times``, rad (linear interpolation)."""
-        times = np.asarray(times, float)
-        return np.stack([np.interp(times, self.t, self.q_arm[:, j]) for j in range(self.q_arm.shape[1])], axis=1)
-
-
 def simulate(phys: StringPhysics, arm: ArmSpec, t_cmd: np.ndarray, q_cmd: np.ndarray,
              timestep: float, servo_lag_s: float, settle_s: float = 0.3, progress: bool = False) -> Recording:
     """Settle the string at q_cmd[0], then swing it through the commanded joint motion.
@@ -288,4 +247,4 @@ def simulate(phys: StringPhysics, arm: ArmSpec, t_cmd: np.ndarray, q_cmd: np.nda
     wall = time.perf_counter() - t0
     if not np.isfinite(pts).all():
         raise FloatingPointError("lab physics diverged (non-finite positions)")
-    return Recording(t, pts, q, speed, n / max(wall, 1e-9))
+    return Recording(t, pts, q, speed, n / max(wall, 1e-9), physics="mujoco", detail={"timestep_s": dt})

@@ -1,7 +1,7 @@
 """One execution in the virtual lab, written exactly as docs/data_contract.md.
 
 :func:`run_trial` plays a commanded joint trajectory on the simulated arm and
-string (:mod:`.physics`), films it with the simulated high-speed camera
+string (:mod:`.physics` or :mod:`.rod`, as ``lab.physics`` says), films it with the simulated high-speed camera
 (:mod:`.camera`, :mod:`.scene`) and writes the video (``lab.video``, :mod:`.encode`: by
 default ``video.mkv``, FFV1, 8-bit mono), ``video.yaml``, ``joints.csv`` and the ground truth
 that only tests and benchmarks read (``ground_truth.parquet`` / ``.json``).
@@ -37,6 +37,7 @@ from .encode import CODECS, FFV1Writer, open_writer, video_settings
 from .look import scene_look
 from .mjcf import StringPhysics
 from .physics import simulate
+from .rod import simulate_rod
 from .scene import FrameRenderer, StringLook
 from .truth import physics_truth, verdict, write_points
 
@@ -57,6 +58,24 @@ def _fps(campaign: Campaign) -> float:
 
 
 JOINT_LOGS = ("full", "at_motion_start")
+PHYSICS = ("mujoco", "elastica")
+
+
+def lab_physics(lab: Mapping):
+    """The simulate function ``lab.physics`` names: ``mujoco`` (default, :func:`.physics.simulate`,
+    the capsule chain) or ``elastica`` (:func:`.rod.simulate_rod`, the Cosserat rod; PyElastica is
+    imported when it builds a rod); both take
+    (phys, arm, t_cmd, q_cmd, timestep, servo_lag_s, settle_s, progress) and return a Recording.
+
+    Raises:
+        ConfigError: any other value.
+    """
+    name = lab.get("physics", "mujoco")
+    if name == "mujoco":
+        return simulate
+    if name == "elastica":
+        return simulate_rod
+    raise ConfigError(f"lab.physics = {name!r}: expected one of {list(PHYSICS)}")
 
 
 def string_bands(config: Mapping, n_points: int, phys: StringPhysics) -> dict:
@@ -144,8 +163,8 @@ def run_trial(t_cmd: np.ndarray, q_cmd: np.ndarray, campaign: Campaign, config: 
     # -- physics ---------------------------------------------------------------
     phys = StringPhysics.from_campaign(campaign, config)
     lpp = int(lab.get("links_per_point", 3))
-    rec = simulate(phys, arm, t_cmd, q_cmd, float(lab.get("timestep_s", 5e-5)),
-                   float(lab.get("servo_lag_s", 0.008)), float(lab.get("settle_s", 0.3)), progress=True)
+    rec = lab_physics(lab)(phys, arm, t_cmd, q_cmd, float(lab.get("timestep_s", 5e-5)),
+                           float(lab.get("servo_lag_s", 0.008)), float(lab.get("settle_s", 0.3)), progress=True)
     wall_physics = time.perf_counter() - wall0
     log_start = _write_joint_log(out_dir / "joints.csv", rec, t_cmd, q_cmd, lab, rng_joint, motion_start_s,
                                  arm.controller_rate)

@@ -1,4 +1,4 @@
-"""A lab trial's ground truth, from :func:`.trial.run_trial`'s simulation (a :class:`.physics.Recording`):
+"""A lab trial's ground truth, from :func:`.trial.run_trial`'s simulation (a :class:`.recording.Recording`):
 ``ground_truth.json``'s verdict and physics, and ``ground_truth.parquet``'s string points."""
 from __future__ import annotations
 
@@ -54,8 +54,9 @@ def verdict(rec, campaign: Campaign, config: Mapping, motion_start_s: float, t_m
 
 
 def physics_truth(rec, phys: StringPhysics) -> dict:
-    """ground_truth.json's physics: the string's model, its largest length error (relative) over the
-    simulation, the settling speed m/s and MuJoCo's steps per second."""
+    """ground_truth.json's physics: the string's description, its largest length error (relative) over
+    the simulation, the settling speed m/s, which physics ran (``physics``: mujoco | elastica), its
+    steps per wall second and its own figures (``physics_detail``: time step, material)."""
     length = np.linalg.norm(np.diff(rec.points[:, :, :], axis=1), axis=2).sum(axis=1)
     return {
         "string_physics": {
@@ -65,5 +66,7 @@ def physics_truth(rec, phys: StringPhysics) -> dict:
             "grasp_damping": phys.grasp_damping, "weights": phys.weights, "pipes": phys.pipes},
         "length_error_max": float(np.max(np.abs(length - phys.length)) / phys.length),
         "settle_speed_m_s": rec.settle_speed,
-        "mujoco_steps_per_s": rec.steps_per_s,
+        "physics": rec.physics,
+        "steps_per_s": rec.steps_per_s,
+        "physics_detail": rec.detail,
     }
