@@ -29,7 +29,7 @@ def git_commit() -> str | None:
 
 # The libraries a benchmark's figures depend on: the loop's outcome on seeds 0-2 moved from 43
 # to 47 executions with their versions alone (docs/method.md, "Library versions"), so each JSON records them.
-LIBRARIES = ("numpy", "numba", "scipy", "opencv-contrib-python-headless", "mujoco", "cma", "scikit-image")
+LIBRARIES = ("numpy", "numba", "scipy", "opencv-contrib-python-headless", "mujoco", "pyelastica", "cma", "scikit-image")
 
 
 def library_versions() -> dict[str, str | None]:
