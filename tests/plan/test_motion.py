@@ -100,3 +100,16 @@ def test_valid_curves_keep_the_arm_inside_its_limits(campaign):
     at_the_limit = np.repeat(arm.q_max[None], 2, axis=0)       # any positive swing leaves the box
     up = np.abs(cps[:20])
     assert mo.valid_curves(arm, up, T, rate, at_the_limit, rng) == []
+
+
+@pytest.mark.parametrize("shape, T", [((3, 4), 0.3), ((5, 3, 4), 0.51), ((2, 7, 3, 6), 0.77)])
+def test_joint_paths_integrate_as_scipys_cumulative_trapezoid_bit_for_bit(shape, T):
+    """dq of joint_paths is scipy.integrate.cumulative_trapezoid(qd, t, initial=0) exactly (it is written
+    out in NumPy only to keep SciPy's optimizers out of the plan job's imports)."""
+    from scipy.integrate import cumulative_trapezoid
+
+    cp = np.random.default_rng(len(shape)).normal(size=shape) * 3
+    dq, qd = mo.joint_paths(cp, T, 500.0)
+    t, _ = mo.time_grid(T, 500.0)
+    assert dq.shape == qd.shape and np.all(dq[..., 0, :] == 0)
+    assert np.array_equal(dq, cumulative_trapezoid(qd, t, axis=-2, initial=0.0))
