@@ -37,7 +37,7 @@ PARTITION = os.environ.get("STRINGCAST_SLURM_PARTITION")   # None: the cluster's
 CORES = 2               # the local run's --cores (run_campaign's default)
 TIMEOUT_S = 900         # the Slurm run, at most (a job that can never start would hang it)
 # every rule of the workflow: the campaign's first motion, one trial's stages, the campaign report
-RULES = {"plan_first", "decode", "calibrate", "sync", "sweep", "track", "estimate", "plan", "report_trial",
+RULES = {"plan_first", "decode", "calib_views", "calibrate", "sync", "sweep", "track", "estimate", "plan", "report_trial",
          "report_campaign"}
 # What legitimately differs between two runs of the same data, by file; nothing else may.
 #   params.json "seconds": the estimation's wall time.
@@ -195,6 +195,11 @@ def compare_results(a: Path, b: Path) -> list[str]:
                 assert ta == tb, _text_difference(ta, tb)
             elif f.suffix == ".npy":
                 assert np.array_equal(np.load(pa, mmap_mode="r"), np.load(pb, mmap_mode="r")), "arrays differ"
+            elif f.suffix == ".npz":
+                with np.load(pa) as za, np.load(pb) as zb:
+                    assert sorted(za.files) == sorted(zb.files), f"arrays {sorted(za.files)} / {sorted(zb.files)}"
+                    bad = [k for k in za.files if not np.array_equal(za[k], zb[k])]
+                    assert not bad, f"arrays differ: {bad}"
             elif f.suffix == ".png":
                 ia, ib = (cv2.imread(str(p), cv2.IMREAD_UNCHANGED) for p in (pa, pb))
                 assert ia is not None and ib is not None and np.array_equal(ia, ib), "pixels differ"
@@ -272,6 +277,7 @@ def test_compare_results_finds_what_differs(tmp_path):
         (root / "report.html").write_text(page.format(t=1.5 * d, v="stringcast 0.1", d=d))
         (root / "benchmarks" / "track_1.tsv").write_text(f"s\tmax_rss\n{4.9 * d}\t390\n")
         (root / "trial_1" / "overlay.svg").write_text("<svg/>")
+        np.savez(root / "calib_views.npz", image_points_0=np.ones((4, 2), np.float32))
     (a / "campaign_summary.json").write_text("{}")
     assert compare_results(a, b) == ["trial_1/overlay.svg: no comparison for a .svg file (add one here)"]
 
@@ -280,8 +286,9 @@ def test_compare_results_finds_what_differs(tmp_path):
     (b / "trial_1" / "motion.csv").write_text("t_s,q1\n0,0.6\n")
     (b / "report.html").write_text(page.format(t=3.0, v="stringcast 0.2", d=2))
     (b / "trial_1" / "tracking.json").write_text("{}")
+    np.savez(b / "calib_views.npz", image_points_0=np.full((4, 2), 1.5, np.float32))
     diffs = compare_results(a, b)
-    assert {d.split(":")[0] for d in diffs} == {"trial_1/tracks.parquet", "trial_1/params.json", "trial_1/motion.csv",
+    assert {d.split(":")[0] for d in diffs} == {"calib_views.npz", "trial_1/tracks.parquet", "trial_1/params.json", "trial_1/motion.csv",
                                                 "report.html", "trial_1/tracking.json", "trial_1/overlay.svg"}
     assert "trial_1/params.json: .params.k: 2 != 3" in diffs and "stringcast 0.2" in " ".join(diffs)
 
