@@ -108,6 +108,34 @@ def campaign_config(root: Path, config_path: str | Path | list | None = None) ->
     return load_config(([base] if base.exists() else []) + given), given
 
 
+def _prepare_campaign(root: Path, name: str, string: str, target: str, seed: int,
+                      config: dict) -> tuple[Path, Path, object, dict[str, float]]:
+    """``data/<name>/campaign.yaml`` (written once, validated first; an existing one must be for the
+    same string and target) and the lab's calibration clip. Returns (data folder, campaign.yaml,
+    the resolved campaign, the lab's timings). Raises ConfigError as :func:`run_campaign`."""
+    data = root / "data" / name
+    camp_yaml = data / "campaign.yaml"
+    doc = {"string": _id(string), "target": _id(target), "setup": "default", "seed": int(seed)}
+    if camp_yaml.exists():
+        old = load_yaml(camp_yaml)
+        if str(old.get("string")) != str(doc["string"]) or str(old.get("target")) != str(doc["target"]):
+            raise ConfigError(f"{camp_yaml}: exists for string {old.get('string')} target "
+                              f"{old.get('target')}; choose another campaign name")
+    else:
+        resolve_campaign(doc, config, name, camp_yaml)  # validate before writing anything
+        write_yaml(camp_yaml, doc)
+    campaign = resolve_campaign(load_yaml(camp_yaml), config, name, camp_yaml)
+    timings: dict[str, float] = {}
+    if not (data / "calib").is_dir():
+        t0 = time.perf_counter()
+        tmp = data / ".calib.partial"
+        shutil.rmtree(tmp, ignore_errors=True)
+        write_calibration_clip(campaign, config, tmp, seed)
+        os.replace(tmp, data / "calib")
+        timings["lab_calibration_clip_s"] = time.perf_counter() - t0
+    return data, camp_yaml, campaign, timings
+
+
 def run_campaign(name: str, string: str, target: str, config_path: str | Path | list | None = None,
                  max_executions: int = 5, cores: int = 2, seed: int = 0,
                  root: Path = Path("."), reports: bool = True, keep_frames: bool = True,
@@ -145,27 +173,7 @@ def run_campaign(name: str, string: str, target: str, config_path: str | Path | 
     root = Path(root).resolve()
     config, given = campaign_config(root, config_path)
     settings = settings_from_config(config)
-    data = root / "data" / name
-    camp_yaml = data / "campaign.yaml"
-    doc = {"string": _id(string), "target": _id(target), "setup": "default", "seed": int(seed)}
-    if camp_yaml.exists():
-        old = load_yaml(camp_yaml)
-        if str(old.get("string")) != str(doc["string"]) or str(old.get("target")) != str(doc["target"]):
-            raise ConfigError(f"{camp_yaml}: exists for string {old.get('string')} target "
-                              f"{old.get('target')}; choose another campaign name")
-    else:
-        resolve_campaign(doc, config, name, camp_yaml)  # validate before writing anything
-        write_yaml(camp_yaml, doc)
-    campaign = resolve_campaign(load_yaml(camp_yaml), config, name, camp_yaml)
-    timings: dict[str, float] = {}
-
-    if not (data / "calib").is_dir():
-        t0 = time.perf_counter()
-        tmp = data / ".calib.partial"
-        shutil.rmtree(tmp, ignore_errors=True)
-        write_calibration_clip(campaign, config, tmp, seed)
-        os.replace(tmp, data / "calib")
-        timings["lab_calibration_clip_s"] = time.perf_counter() - t0
+    data, camp_yaml, campaign, timings = _prepare_campaign(root, name, string, target, seed, config)
 
     timings["plan_first_s"] = run_workflow(root, [f"results/{name}/first_motion/motion.csv"], cores, given,
                                            f"campaign {name}", workflow_args)
