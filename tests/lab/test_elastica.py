@@ -290,11 +290,12 @@ def test_trial_on_elastica_writes_the_mujoco_files(config, tmp_path):
 
 def test_rod_shares_no_code_with_the_chain_or_the_model():
     """The rod imports from the lab only the string's description (mjcf.StringPhysics), the arm's
-    servo and the Recording container: nothing of the MuJoCo chain (physics, air, the MJCF
-    builders), nothing of the string model, and not MuJoCo itself."""
+    servo, the Recording container and its set-point check: nothing of the MuJoCo chain
+    (physics, air, the MJCF builders), nothing of the string model, and not MuJoCo itself."""
     import stringcast.lab.rod as rod
 
     allowed = {("stringcast.lab.mjcf", "StringPhysics"), ("stringcast.lab.recording", "Recording"),
+               ("stringcast.lab.recording", "command_arrays"),
                ("stringcast.lab.servo", "hand_trajectory"), ("stringcast.lab.servo", "servo_lag")}
     for f in Path(rod.__file__).parent.glob("*.py"):
         for node in ast.walk(ast.parse(f.read_text())):
@@ -323,3 +324,15 @@ def test_the_lab_imports_pyelastica_only_for_a_rod():
     code = "import sys, stringcast.lab, stringcast.lab.rod; print('elastica' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_both_physics_check_the_set_points_alike():
+    """The chain and the rod take the controller's set-points through one check (lab.recording)."""
+    from stringcast.lab.recording import command_arrays
+
+    t, q = command_arrays([0, 1, 2], [[0, 1], [1, 2], [2, 3]], 2)
+    assert t.dtype == q.dtype == np.float64 and q.shape == (3, 2)
+    with pytest.raises(ValueError, match=r"q_cmd must be \(3, 3\), got \(3, 2\)"):
+        command_arrays(t, q, 3)
+    with pytest.raises(ValueError, match=r"got \(6,\)"):
+        command_arrays(t, q.ravel(), 2)

@@ -50,7 +50,7 @@ import numpy as np
 from stringcast.core import ArmSpec
 from .air import C_FRICTION, drag_kernel
 from .mjcf import DRIVER_ARMATURE, StringPhysics, build_mjcf, link_diameter, weight_link
-from .recording import Recording
+from .recording import Recording, command_arrays
 from .servo import hand_trajectory, servo_lag
 
 _DRIVER_BANDWIDTH_HZ = 60.0               # PD bandwidth of the driver
@@ -220,10 +220,7 @@ def simulate(phys: StringPhysics, arm: ArmSpec, t_cmd: np.ndarray, q_cmd: np.nda
     """
     import time
 
-    t_cmd = np.asarray(t_cmd, float)
-    q_cmd = np.asarray(q_cmd, float)
-    if q_cmd.ndim != 2 or q_cmd.shape != (len(t_cmd), arm.n_joints):
-        raise ValueError(f"q_cmd must be ({len(t_cmd)}, {arm.n_joints}), got {q_cmd.shape}")
+    t_cmd, q_cmd = command_arrays(t_cmd, q_cmd, arm.n_joints)
     sim = ChainSim(phys, timestep)
     dt = sim.dt
     n = int(math.floor((t_cmd[-1] - t_cmd[0]) / dt + 1e-9)) + 1

@@ -57,3 +57,16 @@ class Recording:
         """(len(times), J) lagged joint angles at ``times``, rad (linear interpolation)."""
         times = np.asarray(times, float)
         return np.stack([np.interp(times, self.t, self.q_arm[:, j]) for j in range(self.q_arm.shape[1])], axis=1)
+
+
+def command_arrays(t_cmd, q_cmd, n_joints: int) -> tuple[np.ndarray, np.ndarray]:
+    """The controller's set-points as float arrays, checked: t_cmd (K,) s, q_cmd (K, n_joints) rad.
+
+    Raises:
+        ValueError: q_cmd is not (len(t_cmd), n_joints) (both shapes named).
+    """
+    t_cmd = np.asarray(t_cmd, float)
+    q_cmd = np.asarray(q_cmd, float)
+    if q_cmd.ndim != 2 or q_cmd.shape != (len(t_cmd), n_joints):
+        raise ValueError(f"q_cmd must be ({len(t_cmd)}, {n_joints}), got {q_cmd.shape}")
+    return t_cmd, q_cmd

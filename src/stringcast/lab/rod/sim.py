@@ -9,7 +9,7 @@ import numpy as np
 
 from stringcast.core import ArmSpec
 from ..mjcf import StringPhysics
-from ..recording import Recording
+from ..recording import Recording, command_arrays
 from ..servo import hand_trajectory, servo_lag
 from .material import CORD_E_AXIAL, G_ACC, RodMaterial, rod_material
 from .plugins import HandPath, directors, plugin_classes
@@ -181,10 +181,7 @@ def simulate_rod(phys: StringPhysics, arm: ArmSpec, t_cmd: np.ndarray, q_cmd: np
     Raises:
         ValueError: bad shapes; FloatingPointError: the simulation diverged.
     """
-    t_cmd = np.asarray(t_cmd, float)
-    q_cmd = np.asarray(q_cmd, float)
-    if q_cmd.ndim != 2 or q_cmd.shape != (len(t_cmd), arm.n_joints):
-        raise ValueError(f"q_cmd must be ({len(t_cmd)}, {arm.n_joints}), got {q_cmd.shape}")
+    t_cmd, q_cmd = command_arrays(t_cmd, q_cmd, arm.n_joints)
     mat = rod_material(phys)
     k = max(1, math.ceil(timestep / mat.dt_max - 1e-9))
     sim = RodSim(phys, timestep / k, mat)
