@@ -32,7 +32,7 @@ import numpy as np
 from stringcast.core import (PARAM_NAMES, TRACK_COLUMNS, Campaign, DataError, EstimationSettings,
                              EvaluationSettings, ModelSettings, MotionSettings, TrackingSettings, Verdict,
                              motion_window, read_joint_table, read_json, read_parquet, write_json)
-from stringcast.model import simulate_batch
+from stringcast.model import planned_parameters, simulate_batch
 from .problem import EstimationProblem, build_problem
 
 MIN_VALID_FRAMES = 5
@@ -105,19 +105,6 @@ def prediction_verdict(figures: dict) -> Verdict:
     return v
 
 
-def read_estimate(params_json: Path, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """``params.json``'s best set: coeffs (10,) in ``PARAM_NAMES`` order and mu (n,).
-
-    Raises:
-        DataError: a missing file, or coefficients or masses missing or of the wrong size (named).
-    """
-    doc = read_json(params_json)
-    coeffs, mu = doc.get("coefficients"), doc.get("mu")
-    if not isinstance(coeffs, dict) or any(k not in coeffs for k in PARAM_NAMES) or mu is None or len(mu) != n:
-        raise DataError(f"{params_json}: needs \"coefficients\" ({', '.join(PARAM_NAMES)}) and \"mu\" ({n} values)")
-    return np.array([float(coeffs[k]) for k in PARAM_NAMES]), np.asarray(mu, float)
-
-
 def run_prediction(params_json: Path, tracks_parquet: Path, joints_csv: Path, campaign: Campaign,
                    out_json: Path, *, model: ModelSettings, tracking: TrackingSettings,
                    motion: MotionSettings) -> dict:
@@ -140,7 +127,7 @@ def run_prediction(params_json: Path, tracks_parquet: Path, joints_csv: Path, ca
         DataError: unreadable or inconsistent inputs (named), or no tracked tip in the window.
     """
     n = campaign.string.n_points
-    coeffs, mu = read_estimate(params_json, n)
+    coeffs, mu = planned_parameters(n, read_json(params_json), str(params_json))
     t_j, q_j, _ = read_joint_table(joints_csv, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
     # every frame the log covers (the fit's compare_after_motion_s does not apply); E's w is not used
     compare_all = dataclasses.replace(EstimationSettings(), compare_after_motion_s=None)
