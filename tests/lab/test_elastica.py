@@ -327,12 +327,14 @@ def test_the_lab_imports_pyelastica_only_for_a_rod():
 
 
 def test_both_physics_check_the_set_points_alike():
-    """The chain and the rod take the controller's set-points through one check (lab.recording)."""
+    """The trial, the chain and the rod take the controller's set-points through one check (lab.recording)."""
     from stringcast.lab.recording import command_arrays
 
-    t, q = command_arrays([0, 1, 2], [[0, 1], [1, 2], [2, 3]], 2)
+    t, q = command_arrays([0, 1, 2], [[0, 1], [1, 2], [2, 3]], 2, "sim")
     assert t.dtype == q.dtype == np.float64 and q.shape == (3, 2)
-    with pytest.raises(ValueError, match=r"q_cmd must be \(3, 3\), got \(3, 2\)"):
-        command_arrays(t, q, 3)
+    with pytest.raises(ValueError, match=r"^sim: q_cmd must be \(3, 3\), got \(3, 2\)"):
+        command_arrays(t, q, 3, "sim")
     with pytest.raises(ValueError, match=r"got \(6,\)"):
-        command_arrays(t, q.ravel(), 2)
+        command_arrays(t, q.ravel(), 2, "sim")
+    with pytest.raises(ValueError, match=r"^run_trial: t_cmd must be \(K,\) strictly increasing"):
+        command_arrays([0, 2, 1], q, 2, "run_trial")

@@ -216,11 +216,12 @@ def simulate(phys: StringPhysics, arm: ArmSpec, t_cmd: np.ndarray, q_cmd: np.nda
         A :class:`Recording` from t_cmd[0] to t_cmd[-1] at every step.
 
     Raises:
-        ValueError: bad shapes; FloatingPointError: the simulation diverged.
+        ValueError: bad shapes or t_cmd not increasing (:func:`~stringcast.lab.recording.command_arrays`).
+        FloatingPointError: the simulation diverged.
     """
     import time
 
-    t_cmd, q_cmd = command_arrays(t_cmd, q_cmd, arm.n_joints)
+    t_cmd, q_cmd = command_arrays(t_cmd, q_cmd, arm.n_joints, "simulate")
     sim = ChainSim(phys, timestep)
     dt = sim.dt
     n = int(math.floor((t_cmd[-1] - t_cmd[0]) / dt + 1e-9)) + 1

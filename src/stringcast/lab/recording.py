@@ -59,14 +59,20 @@ class Recording:
         return np.stack([np.interp(times, self.t, self.q_arm[:, j]) for j in range(self.q_arm.shape[1])], axis=1)
 
 
-def command_arrays(t_cmd, q_cmd, n_joints: int) -> tuple[np.ndarray, np.ndarray]:
+def command_arrays(t_cmd, q_cmd, n_joints: int, caller: str) -> tuple[np.ndarray, np.ndarray]:
     """The controller's set-points as float arrays, checked: t_cmd (K,) s, q_cmd (K, n_joints) rad.
 
+    The one check of :func:`.trial.run_trial` and of both physics' simulate functions; ``caller``
+    names the function in the message.
+
     Raises:
-        ValueError: q_cmd is not (len(t_cmd), n_joints) (both shapes named).
+        ValueError: t_cmd not (K,) strictly increasing with K >= 2, or q_cmd not (K, n_joints)
+            (both shapes named).
     """
     t_cmd = np.asarray(t_cmd, float)
     q_cmd = np.asarray(q_cmd, float)
-    if q_cmd.ndim != 2 or q_cmd.shape != (len(t_cmd), n_joints):
-        raise ValueError(f"q_cmd must be ({len(t_cmd)}, {n_joints}), got {q_cmd.shape}")
+    if t_cmd.ndim != 1 or len(t_cmd) < 2 or np.any(np.diff(t_cmd) <= 0):
+        raise ValueError(f"{caller}: t_cmd must be (K,) strictly increasing, K >= 2")
+    if q_cmd.shape != (len(t_cmd), n_joints):
+        raise ValueError(f"{caller}: q_cmd must be ({len(t_cmd)}, {n_joints}), got {q_cmd.shape}")
     return t_cmd, q_cmd

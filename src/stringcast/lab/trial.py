@@ -37,6 +37,7 @@ from .encode import CODECS, FFV1Writer, open_writer, video_settings
 from .look import scene_look
 from .mjcf import StringPhysics
 from .physics import simulate
+from .recording import command_arrays
 from .rod import simulate_rod
 from .scene import FrameRenderer, StringLook
 from .truth import physics_truth, verdict, write_points
@@ -152,7 +153,7 @@ def run_trial(t_cmd: np.ndarray, q_cmd: np.ndarray, campaign: Campaign, config: 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     arm = campaign.arm
-    t_cmd, q_cmd = _checked_command(t_cmd, q_cmd, arm.n_joints)
+    t_cmd, q_cmd = command_arrays(t_cmd, q_cmd, arm.n_joints, "run_trial")
     lab = _lab(config)
     render = _render(lab)
     video = video_settings(config)
@@ -251,21 +252,6 @@ def _write_joint_log(path: Path, rec, t_cmd: np.ndarray, q_cmd: np.ndarray, lab:
     write_joint_table(path, t_cmd[keep], q_meas[keep],
                       {f"q{j + 1}_cmd_rad": q_cmd[keep, j] for j in range(q_cmd.shape[1])})
     return float(t_cmd[keep][0])
-
-
-def _checked_command(t_cmd: np.ndarray, q_cmd: np.ndarray, n_joints: int) -> tuple[np.ndarray, np.ndarray]:
-    """t_cmd (K,) s and q_cmd (K, J) rad as float arrays, checked.
-
-    Raises:
-        ValueError: t_cmd not (K,) strictly increasing with K >= 2, or q_cmd not (K, n_joints).
-    """
-    t_cmd = np.asarray(t_cmd, float)
-    q_cmd = np.asarray(q_cmd, float)
-    if t_cmd.ndim != 1 or len(t_cmd) < 2 or np.any(np.diff(t_cmd) <= 0):
-        raise ValueError("run_trial: t_cmd must be (K,) strictly increasing, K >= 2")
-    if q_cmd.shape != (len(t_cmd), n_joints):
-        raise ValueError(f"run_trial: q_cmd must be ({len(t_cmd)}, {n_joints}), got {q_cmd.shape}")
-    return t_cmd, q_cmd
 
 
 def _frame_clock(settings: Mapping, fps: float, t_end: float, lab: Mapping,

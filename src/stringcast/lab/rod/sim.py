@@ -179,9 +179,10 @@ def simulate_rod(phys: StringPhysics, arm: ArmSpec, t_cmd: np.ndarray, q_cmd: np
         t_cmd[-1], points (N, n_links + 1, 2) = the nodes.
 
     Raises:
-        ValueError: bad shapes; FloatingPointError: the simulation diverged.
+        ValueError: bad shapes or t_cmd not increasing (:func:`~stringcast.lab.recording.command_arrays`).
+        FloatingPointError: the simulation diverged.
     """
-    t_cmd, q_cmd = command_arrays(t_cmd, q_cmd, arm.n_joints)
+    t_cmd, q_cmd = command_arrays(t_cmd, q_cmd, arm.n_joints, "simulate_rod")
     mat = rod_material(phys)
     k = max(1, math.ceil(timestep / mat.dt_max - 1e-9))
     sim = RodSim(phys, timestep / k, mat)
