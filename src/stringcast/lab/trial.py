@@ -179,11 +179,9 @@ def run_trial(t_cmd: np.ndarray, q_cmd: np.ndarray, campaign: Campaign, config: 
                                                                     lab, rng_trig)
     n = campaign.string.n_points
     name = "video" + CODECS[video["codec"]] if render else None
-    if render:
-        gt_rows, size_mb, written = _film(out_dir / name, video, renderer, rec, t_trigger, n_frames, exposure, fps,
-                                          n, lpp)
-    else:
-        gt_rows, size_mb, written = _truth_rows(rec, t_trigger + np.arange(n_frames) / fps, n, lpp), 0.0, None
+    t_frames = t_trigger + np.arange(n_frames) / fps            # the exposure centres, s
+    size_mb, written = _film(out_dir / name, video, renderer, rec, t_frames, exposure, fps) if render else (0.0, None)
+    gt_rows = _truth_rows(rec, t_frames, n, lpp)
     wall_render = time.perf_counter() - wall1
 
     meta = ({"file": name} if render else {}) | {"fps": fps, "frames": n_frames}
@@ -227,8 +225,8 @@ def _render(lab: Mapping) -> bool:
 
 
 def _truth_rows(rec, t_frames: np.ndarray, n: int, lpp: int) -> list:
-    """Ground-truth rows (as :func:`_film` returns them) at the exposure centres ``t_frames`` (F,) s,
-    without filming: per frame (frame, t_s, point, x_m, y_m), each (n + 1,)."""
+    """Ground-truth rows at the exposure centres ``t_frames`` (F,) s, filmed or not: per frame
+    (frame, t_s, point, x_m, y_m), each (n + 1,): the string's n + 1 points, every ``lpp``-th link end."""
     pts = rec.at(np.asarray(t_frames, float))[:, ::lpp][:, : n + 1]
     return [(np.full(n + 1, k), np.full(n + 1, tc), np.arange(n + 1), p[:, 0], p[:, 1])
             for k, (tc, p) in enumerate(zip(t_frames, pts))]
@@ -279,27 +277,21 @@ def _frame_clock(settings: Mapping, fps: float, t_end: float, lab: Mapping,
     return exposure, t_trigger, t_trigger_written, n_frames
 
 
-def _film(path: Path, video: Mapping, renderer: FrameRenderer, rec, t_trigger: float, n_frames: int,
-          exposure: float, fps: float, n: int, lpp: int) -> tuple[list, float, str]:
+def _film(path: Path, video: Mapping, renderer: FrameRenderer, rec, t_frames: np.ndarray,
+          exposure: float, fps: float) -> tuple[float, str]:
     """Render and write the video (``video``: :func:`~.encode.video_settings`) of the simulation
-    ``rec``: n_frames exposures centred on t_trigger + k / fps, s.
+    ``rec``: an exposure centred on each of ``t_frames`` (F,) s.
 
-    Returns the ground-truth rows (per frame: frame, t_s, point, x_m, y_m, each (n + 1,): the string's
-    n + 1 points, every ``lpp``-th link end, at the exposure centre), the video's size, MB, and the
-    codec written (:func:`~.encode.open_writer`).
+    Returns the video's size, MB, and the codec written (:func:`~.encode.open_writer`).
     """
-    t_frames = t_trigger + np.arange(n_frames) / fps
-    gt_rows = []
     from tqdm import tqdm
 
     with atomic_path(path) as tmp:
         writer, written = open_writer(tmp, video, fps, renderer.cam.width, renderer.cam.height)
         with writer:
-            for k, tc in enumerate(tqdm(t_frames, desc="lab frames", unit="frame", disable=None, leave=False)):
+            for tc in tqdm(t_frames, desc="lab frames", unit="frame", disable=None, leave=False):
                 m = renderer.n_sub(rec.at(np.array([tc - exposure / 2, tc + exposure / 2])))
                 sub_t = tc + exposure * ((np.arange(m) + 0.5) / m - 0.5)
                 writer.write(renderer.render(rec.at(sub_t), rec.arm_at(sub_t), renderer.sensor.light(tc, exposure)))
-                pts = rec.at(np.array([tc]))[0][::lpp][: n + 1]
-                gt_rows.append((np.full(n + 1, k), np.full(n + 1, tc), np.arange(n + 1), pts[:, 0], pts[:, 1]))
         size_mb = tmp.stat().st_size / 1e6
-    return gt_rows, size_mb, written
+    return size_mb, written
