@@ -180,7 +180,6 @@ def check_physics(truth_json: Path, physics: str) -> None:
     from stringcast.core.files import DataError, read_json
 
     ran = read_json(truth_json).get("physics", "mujoco")
-    ran = ran.get("name", ran) if isinstance(ran, dict) else ran
     if ran != physics:
         raise DataError(f"{truth_json}: the lab ran {ran!r} physics, not lab.physics {physics!r}: does this "
                         f"checkout's lab implement {physics!r} (and record it in ground_truth.json's \"physics\")?")
