@@ -16,7 +16,7 @@ NAME=FILE`` (a YAML merged over the campaign's config, as the other two).
 Figures per physics and variant: ``median_mm`` (the median over campaigns of each campaign's
 median tip error, mm), ``mean_mm``, ``campaigns``; per variant other than ``paper``,
 ``paired_diff_mm`` (the mean over campaigns of its error minus the paper's) with a 95 % bootstrap
-interval (campaigns resampled, ``RESAMPLES``). ``rows``: every campaign's figures, and the E the
+interval (campaigns resampled, as ``loop.json``'s intervals). ``rows``: every campaign's figures, and the E the
 fit reached. The estimates are cached under ``--out`` (rerunning skips what exists).
 
 Run: ``python -m benchmarks.loop_prediction --work /path/to/loop/work [--physics mujoco] [--seeds 0 1 2]``
@@ -35,10 +35,10 @@ import numpy as np
 import yaml
 
 from benchmarks.common import ROOT, header, write
+from benchmarks.loop_summary import bootstrap_ci
 
 SECTIONS = ("model", "evaluation", "estimation")
 """The config sections an estimate reads that a variant may set (ours' motion settings plan, not fit)."""
-RESAMPLES = 10_000
 PAPER = {"estimation": {"optimizer": "random_search"}, "evaluation": {"w": 0.1}}
 
 
@@ -93,13 +93,10 @@ def one(camp: Path, name: str, overlay: dict, out: Path) -> dict:
             "verdict": pred.get("verdict", {}).get("status")}
 
 
-def paired(diffs: list[float], seed: int = 0) -> dict:
-    """The mean of paired differences, mm, with its 95 % bootstrap interval (campaigns resampled)."""
-    x = np.asarray(diffs, float)
-    rng = np.random.default_rng(seed)
-    means = x[rng.integers(0, len(x), (RESAMPLES, len(x)))].mean(axis=1)
-    lo, hi = np.percentile(means, [2.5, 97.5])
-    return {"paired_diff_mm": float(x.mean()), "paired_diff_ci95": [float(lo), float(hi)]}
+def paired(diffs: list[float]) -> dict:
+    """The mean of paired differences, mm, with its 95 % bootstrap interval (campaigns resampled,
+    :func:`benchmarks.loop_summary.bootstrap_ci` with one stratum)."""
+    return {"paired_diff_mm": float(np.mean(diffs)), "paired_diff_ci95": bootstrap_ci({"all": diffs})}
 
 
 def summarize(rows: list[dict], names: list[str]) -> dict:
