@@ -49,7 +49,7 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, n_frames: i
     campaign = resolve_campaign({"string": string_type, "target": 1}, cfg, f"gen_{seed}")
     cal = Calibration.from_json(d / "results" / "calibration.json")
     t_frames = frame_times(read_json(d / "results" / "sync.json"))
-    t_j, q_j, _ = read_joint_table(d / "trial_1" / "joints.csv", n_joints=campaign.arm.n_joints)
+    t_j, q_j = read_joint_table(d / "trial_1" / "joints.csv", n_joints=campaign.arm.n_joints)
     cam = read_json(d / "trial_1" / "ground_truth.json")["camera"]
 
     e_true = partial(mapping_error, cal, cam)

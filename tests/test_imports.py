@@ -142,16 +142,21 @@ def test_a_stage_imports_only_lower_layers(sub):
     assert bad == []
 
 
-def test_a_stage_loads_only_what_it_runs():
+def test_a_stage_loads_only_what_it_runs(tmp_path):
     """Lazy package faces: a fresh interpreter running the decode stage's entry has not loaded pandas,
-    sync's has not loaded SciPy's optimizers (the sweep's), and an unknown name is an AttributeError."""
+    sync's has not loaded SciPy's optimizers (the sweep's), the sweep reading a joint log still has
+    no pandas, and an unknown name is an AttributeError."""
     import subprocess
     import sys
 
+    log = tmp_path / "joints.csv"
+    log.write_text("t_s,q1_rad\n0,0\n0.002,0.1\n")
     code = ("import sys\nfrom stringcast.cli import stage_entry\nstage_entry('decode')\n"
             "print('pandas' in sys.modules)\nstage_entry('sync')\nprint('scipy.optimize' in sys.modules)\n"
             "stage_entry('sweep')\nprint('scipy.optimize' in sys.modules)\n"
+            f"from stringcast.core import read_joint_table\nread_joint_table({str(log)!r})\n"
+            "print('pandas' in sys.modules)\n"
             "import stringcast.sync as s\ntry:\n    s.no_such_name\nexcept AttributeError as e:\n    print(e)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split("\n")
-    assert out[:3] == ["False", "False", "True"]
-    assert "no attribute 'no_such_name'" in out[3]
+    assert out[:4] == ["False", "False", "True", "False"]
+    assert "no attribute 'no_such_name'" in out[4]

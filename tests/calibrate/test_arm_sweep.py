@@ -37,7 +37,7 @@ def postures(tmp_path_factory, config):
         run_trial(np.arange(len(q)) / rate, q, campaign, cfg, trial, seed=i, motion_start_s=0.06)
         with open_video(trial / "video.mkv") as v:
             rest = median_frame(v, 5)
-        t_j, q_log, _ = read_joint_table(trial / "joints.csv")
+        t_j, q_log = read_joint_table(trial / "joints.csv")
         out.append((rest, t_j, q_log, read_json(trial / "ground_truth.json")))
     return out, campaign
 

@@ -42,7 +42,7 @@ def still_arm(request, tmp_path_factory, config):
     run_trial(np.arange(len(q)) / rate, q, campaign, cfg, trial, seed=3, motion_start_s=0.1)
     with open_video(trial / "video.mkv") as v:
         rest = median_frame(v, 5)
-    _, q_log, _ = read_joint_table(trial / "joints.csv")
+    _, q_log = read_joint_table(trial / "joints.csv")
     return rest, read_json(trial / "ground_truth.json"), campaign, cfg, q_log[0], trial
 
 

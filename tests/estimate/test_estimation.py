@@ -330,7 +330,7 @@ def test_joint_estimation_fits_every_trial(settings, campaign, chi_true, tmp_pat
     make_trial(campaign, c, mu, tmp_path / "b", speed=0.6, t0=20.0)
     problems = []
     for d in ("a", "b"):
-        t, q, _ = read_joint_table(tmp_path / d / "joints.csv")
+        t, q = read_joint_table(tmp_path / d / "joints.csv")
         problems.append(es.build_problem(read_parquet(tmp_path / d / "tracks.parquet"), t, q, campaign,
                                          **_problem_settings(settings)))
     chi = np.random.default_rng(0).uniform(0.2, 0.8, (6, len(chi_true)))

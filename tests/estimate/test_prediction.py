@@ -44,7 +44,7 @@ def test_the_true_set_predicts_its_own_motion(settings, campaign, next_trial):
     assert doc["median_mm"] < 0.2 and doc["p95_mm"] < 0.5 and not doc["blew_up"]
     assert doc["valid_share"] == 1.0 and doc["valid_frames"] == doc["frames"] > 50
     assert doc["verdict"] == {"status": "ok", "reasons": []}
-    t, q, _ = read_joint_table(d / "joints.csv")
+    t, q = read_joint_table(d / "joints.csv")
     tip = df[df["point"] == campaign.string.n_points]
     live = tip[(tip["t_s"] >= motion_start(t, q)) & (tip["t_s"] <= motion_window(t, q)[1] + settings.motion.flight_window_s)
                & (tip["t_s"] <= t[-1])]
@@ -59,7 +59,7 @@ def test_a_shifted_tip_gives_the_shift(settings, campaign, next_trial):
     """The tracked tip moved 6 mm along x from the motion's start on (the rest state, and so the model,
     unchanged): the error is the shift, at every frame."""
     params, d, df = next_trial
-    t, q, _ = read_joint_table(d / "joints.csv")
+    t, q = read_joint_table(d / "joints.csv")
     moved = (df["point"] == campaign.string.n_points) & (df["t_s"] >= motion_start(t, q) - 0.01)
     df.loc[moved, "x_m"] += 0.006
     df.to_parquet(d / "tracks.parquet")

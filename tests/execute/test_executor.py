@@ -55,7 +55,7 @@ def test_plays_motion_with_pre_and_post_roll(tmp_path, campaign, config, fake_la
     np.testing.assert_allclose(call["q"][k0:k0 + len(q)], q)
     np.testing.assert_allclose(call["q"][-1], q[-1])
     assert call["seed"] == 7 and info["hit"] is False
-    t2, q2, _ = read_joint_table(out / "motion.csv")
+    t2, q2 = read_joint_table(out / "motion.csv")
     np.testing.assert_allclose(q2, q, atol=1e-8)
     assert (out / "motion.json").exists()
 

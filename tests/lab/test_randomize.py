@@ -224,12 +224,12 @@ def test_lossy_colour_video_reads_back_close_to_the_lossless_one(filmed, codec):
 
 def test_joint_log_at_motion_start_and_absent_trigger(filmed):
     d, s, truth = filmed["mjpeg"]
-    t, _, _ = read_joint_table(d / "joints.csv", "joints.csv", n_joints=3)
+    t, _ = read_joint_table(d / "joints.csv", "joints.csv", n_joints=3)
     assert t[0] == pytest.approx(MOTION_START, abs=1e-9) and truth["joint_log_start_s"] == t[0]
     assert truth["trigger_time_s"] < MOTION_START - 0.015           # the camera rolls before the log starts
     assert "trigger_time_s" not in read_video_meta(d / "video.yaml")
     assert truth["trigger_time_written_s"] is None
-    t_full, _, _ = read_joint_table(filmed["ffv1"][0] / "joints.csv", "joints.csv", n_joints=3)
+    t_full, _ = read_joint_table(filmed["ffv1"][0] / "joints.csv", "joints.csv", n_joints=3)
     assert t_full[0] == 0.0 and t_full[-1] == t[-1]
 
 

@@ -110,7 +110,7 @@ def test_first_plan_hits_and_is_consistent(tmp_path, campaign, small):
     assert res.d_min <= campaign.target.radius and res.min_y >= campaign.arm.floor_y
     # the written file holds the motion, and an independent re-run of the model on it gives the same
     # closest approach (in-memory values: the model string is chaotic, 1e-9 rad moves the tip by mm)
-    t, q, _ = read_joint_table(tmp_path / "motion.csv")
+    t, q = read_joint_table(tmp_path / "motion.csv")
     np.testing.assert_allclose(q, m.q, atol=1e-8)
     np.testing.assert_allclose(t, m.t, atol=1e-12)
     doc = read_json(tmp_path / "motion.json")

@@ -271,7 +271,7 @@ def test_a_joint_log_that_starts_at_the_motions_start_still_syncs_and_tracks(lab
     from stringcast.track.tracking import run_tracking
 
     root, trial, campaign, cfg, truth = lab_trial
-    t_j, q_j, _ = read_joint_table(trial / "joints.csv", n_joints=campaign.arm.n_joints)
+    t_j, q_j = read_joint_table(trial / "joints.csv", n_joints=campaign.arm.n_joints)
     start = motion_start(t_j, q_j)
     d = _with_joints(root, trial, "log_from_motion", t_from=start)
     with warnings.catch_warnings(record=True):
@@ -355,7 +355,7 @@ def test_the_sweep_refines_a_bent_mapping_and_a_late_clock(lab_trial, settings):
     true, bent = _bent_calibration(truth, campaign, k1_error=0.03)
     bent.to_json(root / "calibration_bent.json")
     late = _late_sync(root, trial, truth)
-    t_j, q_j, _ = read_joint_table(trial / "joints.csv", n_joints=campaign.arm.n_joints)
+    t_j, q_j = read_joint_table(trial / "joints.csv", n_joints=campaign.arm.n_joints)
     links = forward_kinematics(campaign.arm, q_j[::20])
     where = (links[:, 1:-1, None] + np.linspace(0, 1, 8)[None, None, :, None] * (links[:, 2:, None] - links[:, 1:-1, None]))
     where = where.reshape(-1, 2)   # points along the arm's links over the trial

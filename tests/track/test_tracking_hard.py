@@ -100,7 +100,7 @@ def _outside(m, truth, beyond_px=2.0):
 
 def _behind_arm(m, trial, arm, depth_mm=3.0):
     """Truth points at least ``depth_mm`` inside the arm's drawn outline (the arm is in front)."""
-    t_j, q_j, _ = read_joint_table(trial / "joints.csv")
+    t_j, q_j = read_joint_table(trial / "joints.csv")
     hidden = np.zeros(len(m), bool)
     for idx in m.groupby("frame").indices.values():
         t = float(m["t_s_true"].iloc[idx[0]])

@@ -241,7 +241,7 @@ def _board_check(trial_dir: Path, rest_image: np.ndarray, cal: Calibration, camp
     joints = trial_dir / "joints.csv"
     if not joints.exists():
         return None, verdict.add("warn", f"{joints} missing: the board-to-robot transform was not checked against the arm")
-    _, q, _ = read_joint_table(joints, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
+    _, q = read_joint_table(joints, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
     grey = rest_image if rest_image.ndim == 2 else cv2.cvtColor(rest_image, cv2.COLOR_BGR2GRAY)
     board = check_board_to_robot(grey.astype(np.float64), cal, campaign.arm, q[0], board_check)
     found = Verdict.from_dict(board.get("verdict"))

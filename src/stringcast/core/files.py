@@ -125,15 +125,85 @@ def read_parquet(path: str | Path, columns: list[str] | None = None) -> pd.DataF
     return df
 
 
-def _joint_columns(df: pd.DataFrame, path: Path) -> list[str]:
+def read_parquet_columns(path: str | Path, columns: list[str]) -> dict[str, np.ndarray]:
+    """The named columns of a Parquet file as NumPy arrays, read by ``pyarrow.parquet`` alone (no
+    pandas: the plan stage reads ``tracks.parquet`` so); the same values :func:`read_parquet` gives.
+
+    Raises:
+        DataError: a missing or unreadable file, or missing columns (named).
+    """
+    path = Path(path)
+    if not path.exists():
+        raise DataError(f"{path}: file not found")
+    try:
+        import pyarrow.parquet as pq
+
+        names = pq.read_schema(path).names
+        missing = [c for c in columns if c not in names]
+        table = None if missing else pq.read_table(path, columns=list(columns))
+    except Exception as exc:  # pyarrow raises several types for corrupt files
+        raise DataError(f"{path}: not a readable Parquet file: {exc}") from exc
+    if missing:
+        raise DataError(f"{path}: missing columns {missing}")
+    return {c: table.column(c).to_numpy() for c in columns}
+
+
+def _joint_columns(columns: list[str], path: Path) -> list[str]:
     cols = []
     j = 1
-    while f"q{j}_rad" in df.columns:
+    while f"q{j}_rad" in columns:
         cols.append(f"q{j}_rad")
         j += 1
     if not cols:
-        raise DataError(f"{path}: no joint columns q1_rad, q2_rad, ... in header {list(df.columns)}")
+        raise DataError(f"{path}: no joint columns q1_rad, q2_rad, ... in header {columns}")
     return cols
+
+
+_MISSING = {"", "nan", "NaN", "NA", "N/A", "null"}
+"""Cells read as a missing value (NaN), as ``pandas.read_csv`` reads them; refused with the NaN rows."""
+
+
+def _read_numeric_csv(path: Path) -> tuple[list[str], list[list[str]]]:
+    """The header and the non-blank rows of a CSV file, as strings (``csv`` module, UTF-8 with or
+    without a byte-order mark).
+
+    Raises:
+        DataError: missing, unreadable or empty file; a row with another field count than the header.
+    """
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as f:
+            rows = [r for r in csv.reader(f) if r]
+    except FileNotFoundError as exc:
+        raise DataError(f"{path}: file not found") from exc
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise DataError(f"{path}: not a readable CSV file: {exc}") from exc
+    if not rows:
+        raise DataError(f"{path}: not a readable CSV file: it is empty")
+    header, body = rows[0], rows[1:]
+    for i, r in enumerate(body):
+        if len(r) != len(header):
+            raise DataError(f"{path}: not a readable CSV file: row {i + 2} has {len(r)} fields, the header "
+                            f"{len(header)}")
+    return header, body
+
+
+def _column_floats(path: Path, header: list[str], body: list[list[str]], columns: list[str]) -> np.ndarray:
+    """(K, len(columns)) float: the named columns, parsed by Python's ``float`` (correctly rounded, as
+    ``pandas.read_csv``'s default parser on the project's files); a missing cell is NaN.
+
+    Raises:
+        DataError: a cell that is not a number (its row and column named).
+    """
+    idx = [header.index(c) for c in columns]
+    out = np.empty((len(body), len(idx)))
+    for i, r in enumerate(body):
+        for k, j in enumerate(idx):
+            cell = r[j].strip()
+            try:
+                out[i, k] = np.nan if cell in _MISSING else float(cell)
+            except ValueError:
+                raise DataError(f"{path}: row {i + 2}, column {columns[k]}: {cell!r} is not a number") from None
+    return out
 
 
 def joint_header_problem(columns, n_joints: int, arm_name: str | None = None) -> str | None:
@@ -174,8 +244,11 @@ def check_joint_header(path: str | Path, n_joints: int, arm_name: str | None = N
 
 
 def read_joint_table(path: str | Path, kind: str = "joints.csv", *, n_joints: int | None = None,
-                     arm_name: str | None = None) -> tuple[np.ndarray, np.ndarray, pd.DataFrame]:
-    """Read ``joints.csv`` or ``motion.csv``.
+                     arm_name: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Read ``joints.csv`` or ``motion.csv``: the time and joint columns, other columns ignored.
+
+    Read with the ``csv`` module and Python's ``float`` rather than pandas: the stages that read
+    nothing else tabular (sync, the sweep, plan) then never import pandas (0.2 s a process).
 
     Args:
         n_joints: the arm's joint count (``campaign.arm.n_joints``): the file must have exactly
@@ -183,29 +256,22 @@ def read_joint_table(path: str | Path, kind: str = "joints.csv", *, n_joints: in
         arm_name: the arm, named in the error.
 
     Returns:
-        t: (K,) seconds on the controller clock; q: (K, J) rad; and the whole table.
+        t: (K,) seconds on the controller clock; q: (K, J) rad.
 
     Raises:
-        DataError: missing file or columns (the arm's joint columns named), NaN values, or ``t_s``
-            not strictly increasing.
+        DataError: missing or unreadable file, a row with another field count than the header,
+            missing columns (the arm's joint columns named), a cell that is not a number, NaN
+            values (an empty cell is one), or ``t_s`` not strictly increasing.
     """
     path = Path(path)
-    try:
-        import pandas as pd
-
-        df = pd.read_csv(path)
-    except FileNotFoundError as exc:
-        raise DataError(f"{path}: file not found") from exc
-    except Exception as exc:
-        raise DataError(f"{path}: not a readable CSV file: {exc}") from exc
-    if "t_s" not in df.columns:
-        raise DataError(f"{path}: no 't_s' column in header {list(df.columns)}")
+    header, body = _read_numeric_csv(path)
+    if "t_s" not in header:
+        raise DataError(f"{path}: no 't_s' column in header {header}")
     if n_joints is not None:
-        problem = joint_header_problem(list(df.columns), n_joints, arm_name)
+        problem = joint_header_problem(header, n_joints, arm_name)
         if problem:
             raise DataError(f"{path}: {problem}")
-    cols = _joint_columns(df, path)
-    data = df[["t_s"] + cols].to_numpy(dtype=float)
+    data = _column_floats(path, header, body, ["t_s"] + _joint_columns(header, path))
     if len(data) < 2:
         raise DataError(f"{path}: fewer than two rows")
     bad = ~np.isfinite(data).all(axis=1)
@@ -216,7 +282,7 @@ def read_joint_table(path: str | Path, kind: str = "joints.csv", *, n_joints: in
     if np.any(dt <= 0):
         i = int(np.argmax(dt <= 0))
         raise DataError(f"{path}: t_s is not strictly increasing at row {i + 3} ({t[i]} then {t[i + 1]})")
-    return t, data[:, 1:], df
+    return t, data[:, 1:]
 
 
 def end_speed_shares(t_joints: np.ndarray, q_joints: np.ndarray, qd_max: np.ndarray,
@@ -318,16 +384,30 @@ def joint_log_span(t_joints: np.ndarray, joint_log: dict | None) -> tuple[float,
 
 def write_joint_table(path: str | Path, t: np.ndarray, q: np.ndarray,
                       extra: dict[str, np.ndarray] | None = None) -> None:
-    """Write ``joints.csv``/``motion.csv``: ``t_s, q1_rad..qJ_rad`` (+ extra columns)."""
-    q = np.asarray(q, float)
-    import pandas as pd
+    """Write ``joints.csv``/``motion.csv``: ``t_s, q1_rad..qJ_rad`` (+ extra columns), atomically.
 
-    df = pd.DataFrame({"t_s": np.asarray(t, float)})
-    for j in range(q.shape[1]):
-        df[f"q{j + 1}_rad"] = q[:, j]
-    for k, v in (extra or {}).items():
-        df[k] = v
-    write_csv(path, df)
+    Each value as ``%.9g`` (NaN as an empty cell): the bytes :func:`write_csv` (pandas) wrote, without
+    importing pandas in the stages that write nothing else tabular (plan).
+
+    Args:
+        t: (K,) s; q: (K, J) rad; extra: more (K,) float columns by name.
+
+    Raises:
+        ValueError: columns of another length than ``t``.
+    """
+    cols = {"t_s": np.asarray(t, float)}
+    q = np.asarray(q, float)
+    cols.update({f"q{j + 1}_rad": q[:, j] for j in range(q.shape[1])})
+    cols.update({k: np.asarray(v, float) for k, v in (extra or {}).items()})
+    K = len(cols["t_s"])
+    bad = [k for k, v in cols.items() if v.shape != (K,)]
+    if bad:
+        raise ValueError(f"write_joint_table({path}): columns {bad} are not ({K},) like t_s")
+    cells = [["" if np.isnan(x) else "%.9g" % x for x in v.tolist()] for v in cols.values()]
+    with atomic_path(path) as tmp:
+        with open(tmp, "w", newline="") as f:
+            f.write(",".join(cols) + "\n")
+            f.writelines(",".join(row) + "\n" for row in zip(*cells))
 
 
 def read_video_meta(path: str | Path) -> dict:
@@ -367,24 +447,26 @@ def find_video(trial_dir: str | Path) -> Path:
     return cands[0]
 
 
-def tracks_arrays(tracks: pd.DataFrame, n: int, source="tracks") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Long ``tracks.parquet`` table -> frames (F,), t (F,) s, xy (F, n+1, 2) m (NaN if absent), valid (F, n+1)."""
-    missing = [c for c in TRACK_COLUMNS if c not in tracks.columns]
+def tracks_arrays(tracks, n: int, source="tracks") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Long ``tracks.parquet`` table (a DataFrame, or a mapping of column arrays as
+    :func:`read_parquet_columns` gives) -> frames (F,), t (F,) s, xy (F, n+1, 2) m (NaN if
+    absent), valid (F, n+1)."""
+    missing = [c for c in TRACK_COLUMNS if c not in tracks]
     if missing:
         raise DataError(f"{source}: missing columns {missing}")
-    if len(tracks) == 0:
+    if len(tracks["frame"]) == 0:
         raise DataError(f"{source}: no rows")
-    pts = tracks["point"].to_numpy(dtype=np.int64)
+    pts = np.asarray(tracks["point"], dtype=np.int64)
     if pts.min() < 0 or pts.max() > n:
         raise DataError(f"{source}: point ids must be 0..{n} for this string (n = {n}), got {pts.min()}..{pts.max()}")
-    frames, fi = np.unique(tracks["frame"].to_numpy(dtype=np.int64), return_inverse=True)
+    frames, fi = np.unique(np.asarray(tracks["frame"], dtype=np.int64), return_inverse=True)
     t = np.full(len(frames), np.nan)
-    t[fi] = tracks["t_s"].to_numpy(dtype=float)
+    t[fi] = np.asarray(tracks["t_s"], dtype=float)
     xy = np.full((len(frames), n + 1, 2), np.nan)
-    xy[fi, pts, 0] = tracks["x_m"].to_numpy(dtype=float)
-    xy[fi, pts, 1] = tracks["y_m"].to_numpy(dtype=float)
+    xy[fi, pts, 0] = np.asarray(tracks["x_m"], dtype=float)
+    xy[fi, pts, 1] = np.asarray(tracks["y_m"], dtype=float)
     valid = np.zeros((len(frames), n + 1), bool)
-    valid[fi, pts] = tracks["valid"].to_numpy(dtype=bool)
+    valid[fi, pts] = np.asarray(tracks["valid"], dtype=bool)
     valid &= np.all(np.isfinite(xy), axis=-1)
     if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
         raise DataError(f"{source}: frame times t_s must be finite and increase with the frame number")

@@ -213,7 +213,7 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign,
         ConfigError: bad optimizer settings.
     """
     tracks = read_parquet(tracks_parquet, TRACK_COLUMNS)
-    t_j, q_j, _ = read_joint_table(joints_csv, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
+    t_j, q_j = read_joint_table(joints_csv, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
     problem_settings = dict(model=model, evaluation=evaluation, estimation=estimation, tracking=tracking)
     problem = build_problem(tracks, t_j, q_j, campaign, **problem_settings, source=str(tracks_parquet))
     prev = read_json(prev_params_json) if prev_params_json else None
@@ -222,7 +222,7 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign,
     seed = int(estimation.seed) + k
     earlier_problems = []
     for tr, jo in earlier:
-        t_e, q_e, _ = read_joint_table(jo, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
+        t_e, q_e = read_joint_table(jo, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
         earlier_problems.append(build_problem(read_parquet(tr, TRACK_COLUMNS), t_e, q_e, campaign,
                                               **problem_settings, source=str(tr)))
     est = estimate(problem, model, estimation, chi0, k, seed, earlier=tuple(earlier_problems))

@@ -97,7 +97,7 @@ def execute(motion_csv: Path, backend: str, out_dir: Path, campaign_yaml: Path |
         raise ConfigError(f"executor: unknown backend {backend!r} (known: {', '.join(BACKENDS)})")
     campaign = campaign_yaml if isinstance(campaign_yaml, Campaign) else load_campaign(campaign_yaml, config)
     arm = campaign.arm
-    t, q, _ = read_joint_table(motion_csv, "motion.csv", n_joints=arm.n_joints, arm_name=arm.name)
+    t, q = read_joint_table(motion_csv, "motion.csv", n_joints=arm.n_joints, arm_name=arm.name)
     check_timing(t, arm.controller_rate, str(motion_csv))
     assert_within_limits(arm, q, 1.0 / arm.controller_rate, source=str(motion_csv))
     if (out_dir / "joints.csv").exists():

@@ -265,7 +265,7 @@ def read_motion(csv: Path, json: Path | None = None) -> Motion:
     Raises:
         DataError: unreadable files, or t not starting at 0.
     """
-    t, q, _ = read_joint_table(csv, "motion.csv")
+    t, q = read_joint_table(csv, "motion.csv")
     if abs(t[0]) > 1e-9:
         raise DataError(f"{csv}: a motion file starts at t_s = 0, got {t[0]}")
     json = Path(json) if json else Path(csv).with_suffix(".json")

@@ -70,7 +70,7 @@ from stringcast.model import ensemble_parameters, first_parameters, planned_para
 from .motion import Motion, read_motion_json, time_grid
 from .search import draw_candidates, keep_best, residual_correction, start_postures
 from .prediction import Predictor
-from stringcast.core import TRACK_COLUMNS, read_joint_table, read_parquet
+from stringcast.core import TRACK_COLUMNS, read_joint_table, read_parquet_columns
 from .residual import observed_miss, observed_tip
 
 
@@ -364,8 +364,8 @@ def run_plan(params_json: Path, played_motion_json: Path, campaign: Campaign, ou
         if tracks_parquet is None or joints_csv is None:
             raise ConfigError("motion.residual_correction and motion.replan_miss_mm need the played trial's "
                               "tracks.parquet and joints.csv")
-        t_j, q_j, _ = read_joint_table(joints_csv, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
-        observed = observed_tip(read_parquet(tracks_parquet, TRACK_COLUMNS), t_j, q_j, previous.q,
+        t_j, q_j = read_joint_table(joints_csv, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
+        observed = observed_tip(read_parquet_columns(tracks_parquet, TRACK_COLUMNS), t_j, q_j, previous.q,
                                 campaign.string.n_points, campaign.arm.controller_rate, str(tracks_parquet))
         miss = observed_miss(*observed[:3], campaign.target.xy, previous.T + float(motion.flight_window_s))
     observed = observed if residual else None

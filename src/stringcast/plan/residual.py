@@ -148,7 +148,8 @@ def observed_tip(tracks_df, t_log: np.ndarray, q_log: np.ndarray, q_cmd: np.ndar
     """The played motion's tracked tip on motion time.
 
     Args:
-        tracks_df: tracks.parquet's long table (t_s on the joint log's clock).
+        tracks_df: tracks.parquet's long table, or its columns (:func:`~stringcast.core.read_parquet_columns`);
+            t_s on the joint log's clock.
         t_log (K,) s, q_log (K, J) rad: the measured joints; q_cmd (M, J) rad: the played motion file.
         n: the string's points (the tip is point n).
 

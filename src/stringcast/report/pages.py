@@ -73,7 +73,7 @@ def _fmt(x, spec=".2f", unit=""):
 
 
 def _motion_window(data_dir: Path, motion: MotionSettings, arm) -> tuple[float, float, dict]:
-    t, q, _ = read_joint_table(data_dir / "joints.csv", n_joints=arm.n_joints, arm_name=arm.name)
+    t, q = read_joint_table(data_dir / "joints.csv", n_joints=arm.n_joints, arm_name=arm.name)
     played = read_json(data_dir / "motion.json") if (data_dir / "motion.json").exists() else {}
     t0 = motion_start(t, q)
     T = float(played.get("T_s", t[-1] - t0))
@@ -99,7 +99,7 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, ou
     nxt = read_json(results_dir / "motion.json")
     tracks = read_parquet(results_dir / "tracks.parquet", TRACK_COLUMNS)
     fit = read_parquet(results_dir / "fit.parquet")
-    t_j, q_j, _ = read_joint_table(data_dir / "joints.csv", n_joints=campaign.arm.n_joints,
+    t_j, q_j = read_joint_table(data_dir / "joints.csv", n_joints=campaign.arm.n_joints,
                                     arm_name=campaign.arm.name)
     t0, t1, played = _motion_window(data_dir, settings.motion, campaign.arm)
     tgt = campaign.target.xy
@@ -112,7 +112,7 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, ou
                 "src": figs.tip_paths(tip_fit["t_s"].to_numpy(), tip_fit[["x_tracked_m", "y_tracked_m"]].to_numpy(),
                                       tip_fit["t_s"].to_numpy(), tip_fit[["x_sim_m", "y_sim_m"]].to_numpy(),
                                       tgt, campaign.target.radius)}]
-    t_n, q_n, _ = read_joint_table(results_dir / "motion.csv", n_joints=campaign.arm.n_joints,
+    t_n, q_n = read_joint_table(results_dir / "motion.csv", n_joints=campaign.arm.n_joints,
                                     arm_name=campaign.arm.name)
     figures.append({"id": "fig-arm-paths", "caption": "Grasp-point paths of the motion played in this trial "
                     "(measured joints) and of the next motion (paper Fig. 8b).",

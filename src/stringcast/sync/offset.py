@@ -168,7 +168,7 @@ def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaig
     meta = read_video_meta(video_yaml)
     doc = {"fps": float(meta["fps"]), "frames": int(meta["frames"]), "trigger_time_s": meta.get("trigger_time_s")}
     joints_csv = trial_dir / "joints.csv"
-    t_j, q_j, _ = read_joint_table(joints_csv, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
+    t_j, q_j = read_joint_table(joints_csv, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
     if sync.method == "trigger":
         doc.update(_trigger_doc(meta, video_yaml), verdict=Verdict())
         warns = []

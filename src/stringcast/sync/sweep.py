@@ -129,7 +129,7 @@ def run_sweep(trial_dir: str | Path, calibration_json: str | Path, sync_json: st
     """
     trial_dir = Path(trial_dir)
     calibration, sync_doc = Calibration.from_json(calibration_json), read_json(sync_json)
-    t_j, q_j, _ = read_joint_table(trial_dir / "joints.csv", n_joints=campaign.arm.n_joints)
+    t_j, q_j = read_joint_table(trial_dir / "joints.csv", n_joints=campaign.arm.n_joints)
     t_frames = frame_times(sync_doc)
     if sweep.frames == 0 or calibration.K is None or not calibration.corner_ids:
         why = ("switched off (sweep.frames: 0)" if sweep.frames == 0

@@ -101,7 +101,7 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
     st = tracking
     cal = Calibration.from_json(calibration_json)
     sync = read_json(sync_json)
-    t_j, q_j, _ = read_joint_table(trial_dir / "joints.csv", n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
+    t_j, q_j = read_joint_table(trial_dir / "joints.csv", n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
     arm, n = campaign.arm, campaign.string.n_points
     vpath = find_video(trial_dir)
     video = open_trial_video(vpath, frames_npy)
