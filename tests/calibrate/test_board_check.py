@@ -8,7 +8,7 @@ import pytest
 
 from conftest import small_camera_config
 from stringcast.calibrate.board_check import check_board_to_robot
-from stringcast.calibrate.link_profiles import edge_pair_centre
+from stringcast.calibrate.link_profiles import edge_pair_centre, edge_pair_centre_reference
 from stringcast.core.files import read_joint_table, read_json
 
 POSTURES = {"reaching": [0.3, -1.5, -0.4], "folded": [2.0, -1.6, -1.5]}
@@ -84,6 +84,29 @@ def test_edge_pair_centre_prefers_the_pair_of_the_right_width():
     c = edge_pair_centre(prof, 0.0005, v[0], 0.6 * 0.1, 1.1 * 0.1)
     assert c == pytest.approx(0.049, abs=0.001)
     assert edge_pair_centre(np.full(len(v), 0.6), 0.0005, v[0], 0.06, 0.11) is None
+
+
+def test_edge_pair_centre_equals_its_loop_reference():
+    """The vectorised pair search returns exactly the reference loops' centre, ties included: 8-bit
+    profiles (equal gradients everywhere) of a link over clutter, noise, and NaN or flat ones."""
+    rng = np.random.default_rng(4)
+    v = np.arange(-60, 60.5, 0.5) / 1000
+    got = []
+    for k in range(600):
+        prof = rng.normal(0.5, 0.02 + 0.1 * (k % 3), len(v))
+        lo, w = rng.uniform(-0.05, 0.02), rng.uniform(0.02, 0.06)
+        prof[(v > lo) & (v < lo + w)] -= rng.uniform(0.05, 0.4)
+        if k % 4 == 0:
+            prof = np.round(prof * 255) / 255              # quantised: ties among edge strengths
+        if k % 50 == 7:
+            prof[rng.integers(len(v))] = np.nan
+        if k % 50 == 9:
+            prof[:] = 0.5
+        args = (prof, 0.0005, v[0], 0.6 * w, 1.1 * w)
+        ref = edge_pair_centre_reference(*args)
+        assert edge_pair_centre(*args) == ref
+        got.append(ref is not None)
+    assert 0.5 < np.mean(got) < 1.0                         # both outcomes are exercised
 
 
 def test_calibration_stage_records_the_check_and_warns(still_arm, tmp_path, settings):

@@ -41,8 +41,26 @@ def edge_pair_centre(profile: np.ndarray, step: float, v0: float, width_lo: floa
     Edges are local maxima of |gradient|, of either sign (a link in front of a darker
     region on one side and a lighter one on the other has two rising edges). Pair
     strength = the weaker edge's |gradient|, so one strong clutter edge cannot win with a
-    faint partner.
+    faint partner. The 12 strongest edges' pairs are scored at once; the first strongest in
+    the order of :func:`edge_pair_centre_reference`'s loops wins, so the two agree exactly.
     """
+    found = _edge_peaks(profile)
+    if found is None:
+        return None
+    g, a, peaks = found
+    i, j = peaks[:, None], peaks[None, :]
+    sep = (j - i) * step
+    s = np.where((j > i) & (width_lo <= sep) & (sep <= width_hi), np.minimum(a[i], a[j]), 0.0)
+    k = int(np.argmax(s))               # row-major: the loops' order, first of equals
+    if not s.flat[k] > 0.0:
+        return None
+    bi, bj = peaks[k // len(peaks)], peaks[k % len(peaks)]
+    return v0 + step * 0.5 * (_refine(g, bi) + _refine(g, bj))
+
+
+def _edge_peaks(profile: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """(gradient, |gradient|, the indices of its 12 largest local maxima, strongest first), or None
+    when the profile has a NaN or fewer than two maxima."""
     if not np.all(np.isfinite(profile)):
         return None
     g = np.gradient(profile)
@@ -50,7 +68,16 @@ def edge_pair_centre(profile: np.ndarray, step: float, v0: float, width_lo: floa
     peaks = np.nonzero((a[1:-1] >= a[:-2]) & (a[1:-1] > a[2:]))[0] + 1
     if len(peaks) < 2:
         return None
-    peaks = peaks[np.argsort(a[peaks])[::-1][:12]]
+    return g, a, peaks[np.argsort(a[peaks])[::-1][:12]]
+
+
+def edge_pair_centre_reference(profile: np.ndarray, step: float, v0: float, width_lo: float,
+                               width_hi: float) -> float | None:
+    """:func:`edge_pair_centre` as plain loops over the pairs (the reference the tests hold it to)."""
+    found = _edge_peaks(profile)
+    if found is None:
+        return None
+    g, a, peaks = found
     best, centre = 0.0, None
     for i in peaks:
         for j in peaks:
@@ -100,12 +127,12 @@ def link_profiles(image, calibration, arm, q, st: BoardCheckSettings) -> list[tu
         nrm = np.array([-e[1], e[0]])
         step = st.step_mm / 1000
         us = np.linspace(u0, u1, int(st.rows))
+        ws = [w0 + (w1 - w0) * u for u in us]
+        vs = [np.arange(-(w / 2 + st.margin_mm / 1000), w / 2 + st.margin_mm / 1000 + step / 2, step) for w in ws]
+        # every profile of the link sampled in one call (pointwise: the same values as row by row)
+        samples = _sample(image, calibration, np.concatenate([a + u * (b - a) + v[:, None] * nrm for u, v in zip(us, vs)]))
         found = []
-        for u in us:
-            w = w0 + (w1 - w0) * u
-            half = w / 2 + st.margin_mm / 1000
-            v = np.arange(-half, half + step / 2, step)
-            prof = _sample(image, calibration, a + u * (b - a) + v[:, None] * nrm)
+        for u, w, v, prof in zip(us, ws, vs, np.split(samples, np.cumsum([len(v) for v in vs])[:-1])):
             prof = gaussian_filter1d(prof, 1.0 / st.step_mm) if np.all(np.isfinite(prof)) else prof
             c = edge_pair_centre(prof, step, v[0], st.width_range[0] * w, st.width_range[1] * w)
             if c is not None:
