@@ -12,14 +12,15 @@ if TYPE_CHECKING:
     from .arm_sweep import sweep_rows
     from .board_check import check_board_to_robot
     from .calib_views import write_calib_views
-    from .calibration import Calibration, run_calibration
+    from .calibration import run_calibration
+    from .mapping import Calibration
     from .refine import board_corner_points, mapping_standard_error, refine_mapping
 
 __getattr__, __dir__ = lazy_exports(__name__, {
     "sweep_rows": ".arm_sweep",
     "check_board_to_robot": ".board_check",
     "write_calib_views": ".calib_views",
-    "Calibration": ".calibration",
+    "Calibration": ".mapping",
     "run_calibration": ".calibration",
     "board_corner_points": ".refine",
     "mapping_standard_error": ".refine",
