@@ -188,7 +188,7 @@ def ruggedness(campaign, d: Path, settings, chi_star: np.ndarray, seed: int = 0)
     from stringcast.core.files import TRACK_COLUMNS, read_joint_table, read_parquet
 
     t_j, q_j = read_joint_table(d / "trial_1" / "joints.csv", n_joints=campaign.arm.n_joints,
-                                    arm_name=campaign.arm.name)
+                                 arm_name=campaign.arm.name)
     problem = build_problem(read_parquet(d / "tracks.parquet", TRACK_COLUMNS), t_j, q_j, campaign,
                             model=settings.model, evaluation=settings.evaluation, estimation=settings.estimation,
                             tracking=settings.tracking)

@@ -182,7 +182,7 @@ def synthesize_trial(k: int, trial_dir: Path, results_dir: Path, campaign, model
         return read_json(record_path) | {"reused": True}
     truth = read_parquet(Path(trial_dir) / "ground_truth.parquet", ["frame", "t_s", "point", "x_m", "y_m"])
     t_j, q_j = read_joint_table(Path(trial_dir) / "joints.csv", n_joints=campaign.arm.n_joints,
-                                    arm_name=campaign.arm.name)
+                                 arm_name=campaign.arm.name)
     n = campaign.string.n_points
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), int(k), 27]))
     df, sync_s = draw_tracks(truth, t_j, q_j, campaign.arm, n, model, rng)

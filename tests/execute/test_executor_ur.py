@@ -8,6 +8,7 @@ import json
 import sys
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from stringcast.core.arm import JointLimitError, motion_window
@@ -204,7 +205,8 @@ def test_full_play_logs_every_cycle(tmp_path, campaign, config, settings):
     _, _, _, dt, look, gain = next(c[1] for c in arm.calls if c[0] == "servoJ")
     assert dt == pytest.approx(1 / rate) and look == 0.1 and gain == 300
     # the log: the workflow's reader, strictly increasing t from 0, stale packages dropped
-    tj, qj, df = read_joint_table(out / "joints.csv")
+    tj, qj = read_joint_table(out / "joints.csv")
+    df = pd.read_csv(out / "joints.csv")
     assert list(df.columns) == ["t_s", "q1_rad", "q2_rad", "q3_rad", "q1_cmd_rad", "q2_cmd_rad", "q3_cmd_rad"]
     assert tj[0] == 0 and np.all(np.diff(tj) > 0)
     doc = json.loads((out / "executor.json").read_text())
@@ -255,9 +257,9 @@ def test_interrupt_or_error_stops_arm_and_leaves_partial_log(tmp_path, campaign,
     assert names.index("stopScript") > i_stop
     assert "servoJ" not in names[i_stop:]                       # nothing sent after the stop
     assert not (out / "joints.csv").exists()                    # never taken for a recorded trial
-    tj, qj, df = read_joint_table(out / "joints.partial.csv")
+    tj, qj = read_joint_table(out / "joints.partial.csv")
     assert np.all(np.diff(tj) > 0) and tj[0] == 0
-    assert len(tj) == 299 and "q1_cmd_rad" in df.columns
+    assert len(tj) == 299 and "q1_cmd_rad" in pd.read_csv(out / "joints.partial.csv").columns
     doc = json.loads((out / "executor.json").read_text())
     assert doc["partial"] is True and doc["joints"] == "joints.partial.csv"
     assert type(exc).__name__ in doc["reason"]

@@ -100,7 +100,7 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, ou
     tracks = read_parquet(results_dir / "tracks.parquet", TRACK_COLUMNS)
     fit = read_parquet(results_dir / "fit.parquet")
     t_j, q_j = read_joint_table(data_dir / "joints.csv", n_joints=campaign.arm.n_joints,
-                                    arm_name=campaign.arm.name)
+                                 arm_name=campaign.arm.name)
     t0, t1, played = _motion_window(data_dir, settings.motion, campaign.arm)
     tgt = campaign.target.xy
     t_tr, xy_tr, valid = _tracked(tracks, n)
@@ -113,7 +113,7 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, ou
                                       tip_fit["t_s"].to_numpy(), tip_fit[["x_sim_m", "y_sim_m"]].to_numpy(),
                                       tgt, campaign.target.radius)}]
     t_n, q_n = read_joint_table(results_dir / "motion.csv", n_joints=campaign.arm.n_joints,
-                                    arm_name=campaign.arm.name)
+                                 arm_name=campaign.arm.name)
     figures.append({"id": "fig-arm-paths", "caption": "Grasp-point paths of the motion played in this trial "
                     "(measured joints) and of the next motion (paper Fig. 8b).",
                     "src": figs.arm_paths({"played (measured)": hand_pose(campaign.arm, q_j)[:, :2],
