@@ -43,7 +43,8 @@ import json
 import tempfile
 import time
 import traceback
-from dataclasses import asdict
+from contextlib import contextmanager
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -104,7 +105,8 @@ def _plane_errors(calibration_json: Path, camera: dict) -> tuple[float, float]:
     return float(np.median(e)), float(np.max(e))
 
 
-def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str = "estimate", start: str = "film") -> dict:
+def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str = "estimate", start: str = "film",
+              results: str = "results", bias: tuple[float, float] | None = None) -> dict:
     """Film one drawn setup and run the pipeline's stages on it, from ``start`` up to ``until``
     (:data:`STAGES`; a stage before ``start`` whose output is in ``work`` is read, not rerun);
     its figures against the truth."""
@@ -134,11 +136,12 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str 
            "codec_written": read_json(trial / "ground_truth.json")["video"].get("codec_written")}
     if until == "film":
         return row
-    out = d / "results"
+    out = d / results
     out.mkdir(parents=True, exist_ok=True)
     try:
         if not _kept("calibrate", start, out / "calibration.json"):
-            run_calibration(trial, calib, campaign, out / "calibration.json", **stage_kwargs(run_calibration, settings))
+            with biased_intrinsics(*(bias or (0.0, 0.0))):
+                run_calibration(trial, calib, campaign, out / "calibration.json", **stage_kwargs(run_calibration, settings))
         cal_doc = read_json(out / "calibration.json")
         row["fx_error_pct"], row["principal_point_error_px"] = _calibration_errors(cal_doc, setup)
         row["calibration_verdict"] = _verdict(cal_doc)
@@ -186,6 +189,34 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str 
         row["error"] = f"{type(exc).__name__}: {exc}"
         row["traceback"] = traceback.format_exc(limit=3)
     return row
+
+
+@contextmanager
+def biased_intrinsics(fx_share: float = 0.0, pp_share: float = 0.0):
+    """Within the block, every intrinsics the calibration stage judges comes out with fx and fy
+    scaled by ``1 + fx_share`` and the principal point moved by ``pp_share`` of the image width
+    along x: a calibration set that misleads by that much (the benchmark's emulation, for
+    ``benchmarks/intrinsics_bias.py``; the stage's checks then judge these intrinsics, and the
+    later stages use them). No change when both are 0."""
+    if not (fx_share or pp_share):
+        yield
+        return
+    from unittest import mock
+
+    import stringcast.calibrate.calibration as stage
+
+    real = stage.judged_intrinsics
+
+    def biased(views, flags, st, *args, **kwargs):
+        intr, quality, verdict = real(views, flags, st, *args, **kwargs)
+        K = np.array(intr.K, float)
+        K[0, 0] *= 1 + fx_share
+        K[1, 1] *= 1 + fx_share
+        K[0, 2] += pp_share * intr.image_size[0]
+        return replace(intr, K=K), quality, verdict
+
+    with mock.patch.object(stage, "judged_intrinsics", biased):
+        yield
 
 
 def _kept(stage: str, start: str, output: Path) -> bool:
