@@ -33,13 +33,14 @@ setup (``complete: false`` until the last), so a run can be stopped and ``--resu
 ``--quick``: 3 setups.
 
 Run: ``python -m benchmarks.generalization [--setups 24] [--first 0] [--work DIR] [--jobs 2]
-[--until film|calibrate|sync|sweep|track|estimate] [--from calibrate|sync|sweep|track|estimate] [--resume] [--quick]``.
+[--until film|...|estimate] [--from calibrate|sync|sweep|track|estimate|figures] [--resume] [--quick]``.
 """
 from __future__ import annotations
 
 import argparse
 import itertools
 import json
+import shutil
 import tempfile
 import time
 import traceback
@@ -73,8 +74,9 @@ def _calibration_errors(cal: dict, setup) -> tuple[float | None, float | None]:
     return float(fx_err), float(np.hypot(K[0, 2] - cx0, K[1, 2] - cy0))
 
 
-STAGES = ("film", "calibrate", "sync", "sweep", "track", "estimate")
-"""The steps of one setup, in order; ``--until`` stops after one of them."""
+STAGES = ("film", "calibrate", "sync", "sweep", "track", "estimate", "figures")
+"""The steps of one setup, in order; ``--until`` stops after one of them (``figures``: as ``estimate``),
+``--from figures`` reads every stage's outputs where they are there and only measures them."""
 
 
 def swing_grid(n: int = 13) -> np.ndarray:
@@ -126,19 +128,23 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str 
     d = work / f"setup_{seed}"
     campaign = resolve_campaign({"string": string_type, "target": 1}, cfg, f"gen_{seed}")
     trial, calib = d / "trial_1", d / "calib"
-    t0 = time.perf_counter()
-    if not (trial / "ground_truth.json").exists() or not calib.exists():
-        run_first_plan(campaign, d / "motion.csv", d / "motion.json", seed=seed, **stage_kwargs(run_first_plan, settings))
-        execute(d / "motion.csv", "virtual", trial, campaign, settings.executor, cfg, seed=seed)
-        write_calibration_clip(campaign, cfg, calib, seed=seed)
-    filmed_s = time.perf_counter() - t0
-    row = {"seed": seed, "string_type": string_type, "draw": asdict(setup), "film_seconds": filmed_s,
-           "codec_written": read_json(trial / "ground_truth.json")["video"].get("codec_written")}
-    if until == "film":
-        return row
-    out = d / results
-    out.mkdir(parents=True, exist_ok=True)
-    try:
+    row = {"seed": seed, "string_type": string_type, "draw": asdict(setup)}
+    try:   # a stage that refuses, or the lab failing to film, is a result: its message is the verdict
+        t0 = time.perf_counter()
+        # the lab writes each folder's ground_truth.json last: without it, a run was stopped while filming
+        if not (trial / "ground_truth.json").exists():
+            shutil.rmtree(trial, ignore_errors=True)
+            run_first_plan(campaign, d / "motion.csv", d / "motion.json", seed=seed, **stage_kwargs(run_first_plan, settings))
+            execute(d / "motion.csv", "virtual", trial, campaign, settings.executor, cfg, seed=seed)
+        if not (calib / "ground_truth.json").exists():
+            shutil.rmtree(calib, ignore_errors=True)
+            write_calibration_clip(campaign, cfg, calib, seed=seed)
+        row["film_seconds"] = time.perf_counter() - t0
+        row["codec_written"] = read_json(trial / "ground_truth.json")["video"].get("codec_written")
+        if until == "film":
+            return row
+        out = d / results
+        out.mkdir(parents=True, exist_ok=True)
         if not _kept("calibrate", start, out / "calibration.json"):
             with biased_intrinsics(*(bias or (0.0, 0.0))):
                 run_calibration(trial, calib, campaign, out / "calibration.json", **stage_kwargs(run_calibration, settings))
@@ -171,8 +177,9 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str 
         row["sweep"] = geo.get("sweep")
         if until == "sweep":
             return row
-        tracks = run_tracking(trial, out / "geometry.json", out / "clock.json", campaign, out / "tracks.parquet",
-                              **stage_kwargs(run_tracking, settings))
+        tracks = (pd.read_parquet(out / "tracks.parquet") if _kept("track", start, out / "tracking.json") else
+                  run_tracking(trial, out / "geometry.json", out / "clock.json", campaign, out / "tracks.parquet",
+                               **stage_kwargs(run_tracking, settings)))
         e, share = tracking_errors(tracks, pd.read_parquet(trial / "ground_truth.parquet"))
         row.update(tracking_median_mm=float(np.median(e)) if len(e) else None,
                    tracking_p95_mm=float(np.percentile(e, 95)) if len(e) else None, valid_share=float(share))
@@ -181,10 +188,11 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str 
         row["valid_share_moving"] = read_json(out / "tracking.json").get("valid_share")
         if until == "track":
             return row
-        est = run_estimation(out / "tracks.parquet", trial / "joints.csv", campaign, None, 1, out / "params.json",
-                             out / "fit.parquet", **stage_kwargs(run_estimation, settings))
+        if not _kept("estimate", start, out / "params.json"):
+            run_estimation(out / "tracks.parquet", trial / "joints.csv", campaign, None, 1, out / "params.json",
+                           out / "fit.parquet", **stage_kwargs(run_estimation, settings))
         params = read_json(out / "params.json")
-        row["E_mm"], row["fit_verdict"] = est.E_m * 1000, _verdict(params)
+        row["E_mm"], row["fit_verdict"] = params["E_mm"], _verdict(params)
     except Exception as exc:   # a stage that refuses is a result: its message is the verdict
         row["error"] = f"{type(exc).__name__}: {exc}"
         row["traceback"] = traceback.format_exc(limit=3)
