@@ -21,7 +21,7 @@ The injected fx or principal-point error itself is not counted against the pipel
 ``results/bench/intrinsics_bias.json`` holds the counts per variant and every row.
 
 Run: ``python -m benchmarks.intrinsics_bias --work DIR [--seeds 0 1 ...] [--variants fx+2.5 pp+2]
-[--until track|estimate] [--jobs 2]``.
+[--until track|estimate] [--jobs 2] [--from figures]``.
 """
 from __future__ import annotations
 
@@ -51,9 +51,11 @@ def outcome(row: dict) -> str:
     return "silent"
 
 
-def run(work: Path, seeds: list[int], variants: list[str], until: str = "track", jobs: int = 1) -> dict:
+def run(work: Path, seeds: list[int], variants: list[str], until: str = "track", jobs: int = 1,
+        start: str = "calibrate") -> dict:
     """Run the variants over the seeds (string types as in the generalization run: 1 + seed % 7);
-    returns the JSON it wrote last (rewritten as each setup ends)."""
+    returns the JSON it wrote last (rewritten as each setup ends). ``start``: as the
+    generalization's ``--from`` (``figures``: every variant's outputs read where they are there)."""
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     from stringcast.core import load_config
@@ -61,7 +63,7 @@ def run(work: Path, seeds: list[int], variants: list[str], until: str = "track",
     config = load_config()
     rows = []
     with ProcessPoolExecutor(max_workers=max(1, jobs)) as pool:
-        futures = {pool.submit(run_setup, seed, 1 + seed % 7, config, work, until, "calibrate",
+        futures = {pool.submit(run_setup, seed, 1 + seed % 7, config, work, until, start,
                                f"results_{v}", VARIANTS[v]): v for v in variants for seed in seeds}
         for fut in as_completed(futures):
             row = fut.result() | {"variant": futures[fut]}
@@ -92,8 +94,10 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--variants", nargs="+", choices=sorted(VARIANTS), default=["fx+2.5", "pp+2"])
     p.add_argument("--until", choices=("track", "estimate"), default="track", help="the last stage run")
     p.add_argument("--jobs", type=int, default=1, help="setups run side by side (processes)")
+    p.add_argument("--from", dest="start", choices=("calibrate", "figures"), default="calibrate",
+                   help="figures: read each variant's outputs where they are there (a run's rows gathered again)")
     args = p.parse_args(argv)
-    run(args.work, args.seeds, args.variants, args.until, args.jobs)
+    run(args.work, args.seeds, args.variants, args.until, args.jobs, args.start)
 
 
 if __name__ == "__main__":
