@@ -185,7 +185,8 @@ def ruggedness(campaign, d: Path, settings, chi_star: np.ndarray, seed: int = 0)
     """E around ``chi_star`` (module doc): {"steps", "E_ratio" (dirs, steps), "basin_radius_chi",
     "pocket" (per radius), "dt_halved_mm"}."""
     from stringcast.estimate.problem import build_problem, make_objective
-    from stringcast.core.files import TRACK_COLUMNS, read_joint_table, read_parquet
+    from stringcast.core.files import TRACK_COLUMNS, read_parquet
+    from stringcast.core.joint_log import read_joint_table
 
     t_j, q_j = read_joint_table(d / "trial_1" / "joints.csv", n_joints=campaign.arm.n_joints,
                                  arm_name=campaign.arm.name)

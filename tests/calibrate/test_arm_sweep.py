@@ -4,7 +4,8 @@ import pytest
 
 from conftest import small_camera_config
 from stringcast.calibrate.arm_sweep import sweep_rows
-from stringcast.core.files import read_joint_table, read_json
+from stringcast.core.files import read_json
+from stringcast.core.joint_log import read_joint_table
 
 POSTURES = ([0.3, -1.5, -0.4], [2.0, -1.6, -1.5], [1.2, -0.6, -0.9], [0.6, -2.2, 0.5])
 

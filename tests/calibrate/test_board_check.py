@@ -9,7 +9,8 @@ import pytest
 from conftest import small_camera_config
 from stringcast.calibrate.board_check import check_board_to_robot
 from stringcast.calibrate.link_profiles import edge_pair_centre, edge_pair_centre_reference
-from stringcast.core.files import read_joint_table, read_json
+from stringcast.core.files import read_json
+from stringcast.core.joint_log import read_joint_table
 
 POSTURES = {"reaching": [0.3, -1.5, -0.4], "folded": [2.0, -1.6, -1.5]}
 

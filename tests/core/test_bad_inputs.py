@@ -13,13 +13,8 @@ import numpy as np
 import pytest
 
 from stringcast.calibrate.calibration import run_calibration
-from stringcast.core.files import (
-    DataError,
-    check_joint_coverage,
-    check_joint_header,
-    read_joint_table,
-    read_video_meta,
-)
+from stringcast.core.files import DataError, read_video_meta
+from stringcast.core.joint_log import check_joint_coverage, check_joint_header, read_joint_table
 from stringcast.video.container import check_frame_count, open_video
 
 

@@ -1,8 +1,9 @@
 import numpy as np
 import pytest
 
-from stringcast.core.files import (DataError, atomic_path, read_joint_table, read_video_meta, write_joint_table,
-                              write_json, read_json)
+from stringcast.core.files import DataError, atomic_path, read_video_meta, write_json, read_json
+
+from stringcast.core.joint_log import read_joint_table, write_joint_table
 
 
 def test_joint_table_round_trip(tmp_path):

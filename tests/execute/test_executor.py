@@ -6,7 +6,8 @@ import pytest
 from stringcast.core.arm import JointLimitError
 from stringcast.core import ConfigError
 from stringcast.execute.executor import build_command, execute
-from stringcast.core.files import DataError, read_joint_table, write_joint_table, write_json
+from stringcast.core.files import DataError, write_json
+from stringcast.core.joint_log import read_joint_table, write_joint_table
 
 
 @pytest.fixture

@@ -16,7 +16,8 @@ from stringcast.core import ConfigError
 from stringcast.execute.executor import execute
 from stringcast.core import ExecutorSettings
 from stringcast.execute.ur_rtde import StartPostureError, URMapping, URSettings
-from stringcast.core.files import read_joint_table, write_joint_table, write_json
+from stringcast.core.files import write_json
+from stringcast.core.joint_log import read_joint_table, write_joint_table
 
 UPRIGHT = np.radians([0.0, -90.0, 0.0, -90.0, 0.0, 0.0])  # UR's straight-up pose
 

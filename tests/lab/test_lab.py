@@ -16,7 +16,8 @@ import pytest
 
 from stringcast.core.arm import hand_pose
 from stringcast.core import ConfigError, resolve_campaign
-from stringcast.core.files import read_joint_table, read_parquet, read_video_meta
+from stringcast.core.files import read_parquet, read_video_meta
+from stringcast.core.joint_log import read_joint_table
 from stringcast.lab import (CameraModel, ChainSim, IdealCanvas, StringPhysics, build_renderer, run_trial,
                             servo_lag, write_calibration_clip)
 from stringcast.lab.scene import StringLook

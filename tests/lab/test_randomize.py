@@ -14,7 +14,8 @@ import pytest
 
 from stringcast.core import ConfigError, resolve_campaign
 from stringcast.core.config import validate
-from stringcast.core.files import read_joint_table, read_video_meta
+from stringcast.core.files import read_video_meta
+from stringcast.core.joint_log import read_joint_table
 from stringcast.lab import (CameraModel, apply_setup, build_renderer, draw_setup, h264_backend, run_trial,
                             write_calibration_clip)
 from stringcast.lab.look import LUMA_BGR, ArmLook, scene_look

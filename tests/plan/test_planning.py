@@ -9,7 +9,8 @@ from stringcast.plan import planning as pn
 from stringcast.core.arm import check_limits
 from stringcast.core import PARAM_NAMES, ConfigError, resolve_campaign
 from stringcast.execute.executor import execute
-from stringcast.core.files import DataError, read_joint_table, read_json, write_json
+from stringcast.core.files import DataError, read_json, write_json
+from stringcast.core.joint_log import read_joint_table
 from stringcast.model.string_model import closest_approach_batch
 
 

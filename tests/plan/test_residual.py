@@ -9,7 +9,8 @@ import pytest
 from stringcast.plan import motion as mo
 from stringcast.plan import planning as pn
 from stringcast.execute.executor import build_command
-from stringcast.core.files import DataError, write_joint_table, write_json, write_parquet
+from stringcast.core.files import DataError, write_json, write_parquet
+from stringcast.core.joint_log import write_joint_table
 from stringcast.model.string_model import closest_approach_batch, simulate
 from stringcast.plan.residual import motion_delay, observed_miss, observed_tip, tip_residual
 

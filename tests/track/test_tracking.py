@@ -12,7 +12,8 @@ from stringcast.core import TrackingSettings
 from stringcast.core.arm import forward_kinematics
 from stringcast.calibrate.calibration import Calibration
 from stringcast.track.centreline import mismatch_split, resample_by_arc, trace_path
-from stringcast.core.files import read_json, write_joint_table, write_json
+from stringcast.core.files import read_json, write_json
+from stringcast.core.joint_log import write_joint_table
 from stringcast.video.decode_ahead import prefetch
 from stringcast.track.tracking import draw_arm_mask, run_tracking
 

@@ -19,7 +19,8 @@ import pytest
 from stringcast.core.arm import hand_pose
 from stringcast.core import settings_from_config
 from stringcast.core import resolve_campaign
-from stringcast.core.files import read_joint_table, read_video_meta, write_json
+from stringcast.core.files import read_video_meta, write_json
+from stringcast.core.joint_log import read_joint_table
 from stringcast.lab import apply_preset, build_renderer, run_trial
 from stringcast.lab.scene import arm_shapes
 
