@@ -2,7 +2,6 @@ import numpy as np
 import pytest
 
 from stringcast.core.files import DataError, atomic_path, read_video_meta, write_json, read_json
-
 from stringcast.core.joint_log import read_joint_table, write_joint_table
 
 

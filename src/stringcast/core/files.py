@@ -101,11 +101,6 @@ def write_parquet(path: str | Path, df: pd.DataFrame) -> None:
         df.to_parquet(tmp, engine="pyarrow", index=False)
 
 
-def write_csv(path: str | Path, df: pd.DataFrame, float_format: str = "%.9g") -> None:
-    with atomic_path(path) as tmp:
-        df.to_csv(tmp, index=False, float_format=float_format)
-
-
 def read_parquet(path: str | Path, columns: list[str] | None = None) -> pd.DataFrame:
     path = Path(path)
     if not path.exists():
@@ -210,5 +205,5 @@ def tracks_arrays(tracks, n: int, source="tracks") -> tuple[np.ndarray, np.ndarr
 
 
 __all__ = ["BEFORE_SWEEP", "TRACK_COLUMNS", "DataError", "atomic_path", "find_video", "read_json", "read_parquet",
-           "read_parquet_columns", "read_video_meta", "tracks_arrays", "trial_result", "write_csv", "write_json",
+           "read_parquet_columns", "read_video_meta", "tracks_arrays", "trial_result", "write_json",
            "write_parquet", "write_text", "write_yaml"]

@@ -31,20 +31,29 @@ _MISSING = {"", "nan", "NaN", "NA", "N/A", "null"}
 """Cells read as a missing value (NaN), as ``pandas.read_csv`` reads them; refused with the NaN rows."""
 
 
-def _read_numeric_csv(path: Path) -> tuple[list[str], list[list[str]]]:
-    """The header and the non-blank rows of a CSV file, as strings (``csv`` module, UTF-8 with or
-    without a byte-order mark).
+def _csv_rows(path: Path, header_only: bool = False) -> list[list[str]]:
+    """The non-blank rows of a CSV file as strings (``csv`` module, UTF-8 with or without a
+    byte-order mark); only the first line with ``header_only``.
 
     Raises:
-        DataError: missing, unreadable or empty file; a row with another field count than the header.
+        DataError: a missing or unreadable file (named).
     """
     try:
         with open(path, newline="", encoding="utf-8-sig") as f:
-            rows = [r for r in csv.reader(f) if r]
+            return [next(csv.reader(f), [])] if header_only else [r for r in csv.reader(f) if r]
     except FileNotFoundError as exc:
         raise DataError(f"{path}: file not found") from exc
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise DataError(f"{path}: not a readable CSV file: {exc}") from exc
+
+
+def _read_numeric_csv(path: Path) -> tuple[list[str], list[list[str]]]:
+    """The header and the non-blank rows of a CSV file, as strings (:func:`_csv_rows`).
+
+    Raises:
+        DataError: missing, unreadable or empty file; a row with another field count than the header.
+    """
+    rows = _csv_rows(path)
     if not rows:
         raise DataError(f"{path}: not a readable CSV file: it is empty")
     header, body = rows[0], rows[1:]
@@ -99,14 +108,7 @@ def check_joint_header(path: str | Path, n_joints: int, arm_name: str | None = N
         DataError: the file is missing, or lacks (or has more than) the arm's joint columns (named).
     """
     path = Path(path)
-    try:
-        with open(path, newline="", encoding="utf-8-sig") as f:
-            header = next(csv.reader(f), [])
-    except FileNotFoundError as exc:
-        raise DataError(f"{path}: file not found") from exc
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
-        raise DataError(f"{path}: not a readable CSV file: {exc}") from exc
-    problem = joint_header_problem(header, n_joints, arm_name)
+    problem = joint_header_problem(_csv_rows(path, header_only=True)[0], n_joints, arm_name)
     if problem:
         raise DataError(f"{path}: {problem}")
 
@@ -254,8 +256,8 @@ def write_joint_table(path: str | Path, t: np.ndarray, q: np.ndarray,
                       extra: dict[str, np.ndarray] | None = None) -> None:
     """Write ``joints.csv``/``motion.csv``: ``t_s, q1_rad..qJ_rad`` (+ extra columns), atomically.
 
-    Each value as ``%.9g`` (NaN as an empty cell): the bytes :func:`write_csv` (pandas) wrote, without
-    importing pandas in the stages that write nothing else tabular (plan).
+    Each value as ``%.9g`` (NaN as an empty cell): the bytes pandas' ``to_csv(float_format="%.9g")``
+    wrote, without importing pandas in the stages that write nothing else tabular (plan).
 
     Args:
         t: (K,) s; q: (K, J) rad; extra: more (K,) float columns by name.
