@@ -118,7 +118,7 @@ def read_joint_table(path: str | Path, kind: str = "joints.csv", *, n_joints: in
     """Read ``joints.csv`` or ``motion.csv``: the time and joint columns, other columns ignored.
 
     Read with the ``csv`` module and Python's ``float`` rather than pandas: the stages that read
-    nothing else tabular (sync, the sweep, plan) then never import pandas (0.2 s a process).
+    nothing else tabular (sync, the sweep, plan) then never import pandas, a large part of their start-up.
 
     Args:
         n_joints: the arm's joint count (``campaign.arm.n_joints``): the file must have exactly
