@@ -14,7 +14,7 @@ if TYPE_CHECKING:
     from .calib_views import write_calib_views
     from .calibration import run_calibration
     from .mapping import Calibration
-    from .refine import board_corner_points, mapping_standard_error, refine_mapping
+    from .refine import PARAMETERS, board_corner_points, mapping_standard_error, refine_mapping
 
 __getattr__, __dir__ = lazy_exports(__name__, {
     "sweep_rows": ".arm_sweep",
@@ -22,10 +22,11 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "write_calib_views": ".calib_views",
     "Calibration": ".mapping",
     "run_calibration": ".calibration",
+    "PARAMETERS": ".refine",
     "board_corner_points": ".refine",
     "mapping_standard_error": ".refine",
     "refine_mapping": ".refine",
 })
 
-__all__ = ["Calibration", "board_corner_points", "check_board_to_robot", "mapping_standard_error", "refine_mapping",
+__all__ = ["PARAMETERS", "Calibration", "board_corner_points", "check_board_to_robot", "mapping_standard_error", "refine_mapping",
            "run_calibration", "sweep_rows", "write_calib_views"]

@@ -14,10 +14,15 @@ the distortion (k1, k2), its centre (cx, cy, with the camera matrix's) and H, fr
   centre, p the FK point, n the link's normal, v the point's velocity along n and dt the
   clock's error (fitted too, when asked: the moving rows then measure the sync);
 * each board corner the calibration used: map(u_c) = its robot-frame point, within the
-  board's reprojection error.
+  board's reprojection error;
+* optionally a Gaussian prior on the lens parameters freed (``prior_sd``): how far the trial
+  may move the calibration's k1 and principal point. The rows pin the mapping where the arm
+  reaches; the prior keeps a lens parameter that the rows barely see (a principal point under
+  a weak distortion) from wandering, and so from bending the mapping beyond the arm's reach.
 
-``scipy.optimize.least_squares`` with a Huber loss solves it; the rows' noise scale is taken
-from the rows themselves (their median absolute deviation after a first fit), not set.
+``scipy.optimize.least_squares`` solves it, with a Huber loss on the rows and corners and a
+plain quadratic on the prior; the rows' noise scale is taken from the rows themselves (their
+median absolute deviation after a first fit), not set.
 """
 from __future__ import annotations
 
@@ -57,19 +62,35 @@ def _robust_sigma(r: np.ndarray) -> float:
     return max(float(1.4826 * np.median(np.abs(r - np.median(r)))), 1e-5)
 
 
-def _residuals(free_theta, free, base, u_rows, rows, u_corners, xy_corners, sigma_rows, sigma_corners):
+def _residuals(free_theta, free, base, u_rows, rows, u_corners, xy_corners, sigma_rows, sigma_corners, prior_sd):
     theta = np.zeros(len(PARAMETERS))
     theta[free] = free_theta   # dt stays 0 unless it is free
     cal = _calibration(base, theta)
     m = cal.pixel_to_robot(u_rows) - rows[:, 1:3]
     r_rows = (np.sum(m * rows[:, 3:5], 1) - rows[:, 6] * theta[DT]) / sigma_rows
     r_corners = ((cal.pixel_to_robot(u_corners) - xy_corners) / sigma_corners).ravel()
-    return np.concatenate([r_rows, r_corners])
+    return np.concatenate([r_rows, r_corners, (free_theta / prior_sd)[np.isfinite(prior_sd)]])
+
+
+def _huber_then_quadratic(scale: float, n_robust: int):
+    """``least_squares``' loss (rho, rho', rho'' of z = r**2): Huber of scale ``scale`` on the first
+    ``n_robust`` residuals (rows, corners), plain least squares on the rest (the prior)."""
+    def loss(z):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = z / scale ** 2
+            inner = s <= 1
+            rho = np.empty((3, len(z)))
+            rho[0] = np.where(inner, s, 2 * np.sqrt(s) - 1) * scale ** 2
+            rho[1] = np.where(inner, 1.0, 1 / np.sqrt(s))
+            rho[2] = np.where(inner, 0.0, -0.5 * s ** -1.5) / scale ** 2
+        rho[:, n_robust:] = [[*z[n_robust:]], [1.0] * (len(z) - n_robust), [0.0] * (len(z) - n_robust)]
+        return rho
+    return loss
 
 
 def refine_mapping(calibration: Calibration, rows: np.ndarray, corners_xy: np.ndarray,
                    max_speed_m_s: float | None = None, fit: tuple[str, ...] = ("H", "dt"),
-                   huber: float = 2.0) -> dict:
+                   huber: float = 2.0, prior_sd: dict[str, float] | None = None) -> dict:
     """Refit the mapping (and the clock) to the arm's rows and the board's corners.
 
     Args:
@@ -82,6 +103,8 @@ def refine_mapping(calibration: Calibration, rows: np.ndarray, corners_xy: np.nd
             clock, did best on the generalization setups (docs/results.md, "The arm's sweep"): freeing the
             distortion too let it bend where the arm does not reach.
         huber: the Huber loss's scale, in units of the rows' own noise.
+        prior_sd: {parameter name: standard deviation} of a zero-mean Gaussian prior on the
+            change of a freed parameter (k1; cx, cy in px); a freed parameter not named has none.
 
     Returns:
         ``{"calibration" (refined), "theta" (13,), "covariance" (P, P) of the free parameters,
@@ -102,12 +125,17 @@ def refine_mapping(calibration: Calibration, rows: np.ndarray, corners_xy: np.nd
     u_rows = calibration.robot_to_pixel(use[:, 1:3] + use[:, 5:6] * use[:, 3:5])
     u_corners = calibration.robot_to_pixel(corners_xy)
     sigma_corners = max(calibration.reprojection_error_px, 0.1) * float(np.median(calibration.m_per_px(u_corners)))
+    sd = np.array([(prior_sd or {}).get(PARAMETERS[i], np.inf) for i in free], float)
+    if np.any(sd <= 0):
+        raise ValueError(f"refine_mapping: prior standard deviations must be > 0, got {prior_sd}")
+    # no prior: scipy's own Huber (the same numbers as before the prior existed)
+    loss = _huber_then_quadratic(huber, len(use) + u_corners.size) if np.isfinite(sd).any() else "huber"
     x = np.zeros(len(free))
     sigma = _robust_sigma(use[:, 5])
     for _ in range(2):  # the rows' noise from the residuals of the previous fit
         used = sigma
-        sol = least_squares(_residuals, x, loss="huber", f_scale=huber, x_scale="jac",
-                            args=(free, calibration, u_rows, use, u_corners, corners_xy, used, sigma_corners))
+        sol = least_squares(_residuals, x, loss=loss, f_scale=huber if loss == "huber" else 1.0, x_scale="jac",
+                            args=(free, calibration, u_rows, use, u_corners, corners_xy, used, sigma_corners, sd))
         x = sol.x
         r = sol.fun[:len(use)] * used
         sigma = _robust_sigma(r)

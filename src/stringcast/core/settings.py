@@ -326,8 +326,14 @@ class SweepSettings(_Section):
     huber: float = _f(2.0, "the fit's Huber loss scale, in units of the rows' own noise (their median absolute deviation)")
     tolerance_mm: float = _f(1.0, "the mapping must be known to this over where the string can be (the tracking's median goal), mm")
     clock_tolerance_ms: float = _f(0.5, "the clock must be known to this (the sync goal), ms")
+    fit_lens: bool = _f(True, "also refit k1 and the principal point (within the priors below); the mapping's uncertainty then includes how far that moves it from the homography-only fit")
+    principal_point_prior: float = _f(0.02, "standard deviation of the principal point's move, as a share of the image width (real calibrations: a few per cent)")
+    k1_prior: float = _f(0.02, "standard deviation of k1's move (what fx a few per cent off does to k1 at k1 ~ -0.2)")
 
     def __post_init__(self):
+        if self.principal_point_prior <= 0 or self.k1_prior <= 0:
+            raise ConfigError(f"sweep: principal_point_prior and k1_prior must be > 0, got {self.principal_point_prior}, "
+                              f"{self.k1_prior}")
         if self.frames < 0 or self.passes < 1 or self.min_rows < 20:
             raise ConfigError(f"sweep: frames >= 0, passes >= 1 and min_rows >= 20 needed, got {self.frames}, "
                               f"{self.passes}, {self.min_rows}")
