@@ -21,7 +21,7 @@ The injected fx or principal-point error itself is not counted against the pipel
 ``results/bench/intrinsics_bias.json`` holds the counts per variant and every row.
 
 Run: ``python -m benchmarks.intrinsics_bias --work DIR [--seeds 0 1 ...] [--variants fx+2.5 pp+2]
-[--until track|estimate] [--jobs 2] [--from figures]``.
+[--until track|estimate] [--jobs 2] [--from sweep|figures]``.
 """
 from __future__ import annotations
 
@@ -94,8 +94,9 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--variants", nargs="+", choices=sorted(VARIANTS), default=["fx+2.5", "pp+2"])
     p.add_argument("--until", choices=("track", "estimate"), default="track", help="the last stage run")
     p.add_argument("--jobs", type=int, default=1, help="setups run side by side (processes)")
-    p.add_argument("--from", dest="start", choices=("calibrate", "figures"), default="calibrate",
-                   help="figures: read each variant's outputs where they are there (a run's rows gathered again)")
+    p.add_argument("--from", dest="start", choices=("calibrate", "sweep", "figures"), default="calibrate",
+                   help="sweep: keep each variant's biased calibration and sync, rerun from the sweep on; figures: read "
+                        "each variant's outputs where they are there (a run's rows gathered again)")
     args = p.parse_args(argv)
     run(args.work, args.seeds, args.variants, args.until, args.jobs, args.start)
 
