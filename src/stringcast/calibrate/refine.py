@@ -55,6 +55,8 @@ PARAMETERS = ("h0", "h1", "h2", "h3", "h4", "h5", "h6", "h7", "k1", "k2", "cx", 
 """The fit's parameters: the homography's correction, the distortion's, its centre's, the clock's."""
 GROUPS = {"H": PARAMETERS[:8], "k1": ("k1",), "k2": ("k2",), "c": ("cx", "cy"), "dt": ("dt",)}
 DT = PARAMETERS.index("dt")
+LENS = slice(PARAMETERS.index("k1"), PARAMETERS.index("cy") + 1)
+"""The lens's parameters in theta (k1, k2, cx, cy): the pixels' undistortion depends on these alone."""
 
 
 def _robust_sigma(r: np.ndarray) -> float:
@@ -62,13 +64,31 @@ def _robust_sigma(r: np.ndarray) -> float:
     return max(float(1.4826 * np.median(np.abs(r - np.median(r)))), 1e-5)
 
 
-def _residuals(free_theta, free, base, u_rows, rows, u_corners, xy_corners, sigma_rows, sigma_corners, prior_sd):
+class _Undistorted:
+    """The rows' and corners' pixels (N, 2) undistorted under the lens of theta, kept per lens: a
+    finite-difference step in the homography or the clock reuses its point's undistortion
+    (``Calibration.undistort`` is most of a residual's cost)."""
+
+    def __init__(self, base: Calibration, uv: np.ndarray):
+        self.base, self.uv, self.kept = base, uv, {}
+
+    def __call__(self, theta: np.ndarray, cal: Calibration) -> np.ndarray:
+        key = theta[LENS].tobytes()
+        if key not in self.kept:
+            if len(self.kept) > 8:
+                self.kept.clear()
+            self.kept[key] = cal.undistort(self.uv)
+        return self.kept[key]
+
+
+def _residuals(free_theta, free, base, undistorted, rows, xy_corners, sigma_rows, sigma_corners, prior_sd):
     theta = np.zeros(len(PARAMETERS))
     theta[free] = free_theta   # dt stays 0 unless it is free
     cal = _calibration(base, theta)
-    m = cal.pixel_to_robot(u_rows) - rows[:, 1:3]
+    xy = apply_homography(cal.H_pixel_to_robot, undistorted(theta, cal))   # cal.pixel_to_robot of rows, corners
+    m = xy[:len(rows)] - rows[:, 1:3]
     r_rows = (np.sum(m * rows[:, 3:5], 1) - rows[:, 6] * theta[DT]) / sigma_rows
-    r_corners = ((cal.pixel_to_robot(u_corners) - xy_corners) / sigma_corners).ravel()
+    r_corners = ((xy[len(rows):] - xy_corners) / sigma_corners).ravel()
     return np.concatenate([r_rows, r_corners, (free_theta / prior_sd)[np.isfinite(prior_sd)]])
 
 
@@ -130,12 +150,13 @@ def refine_mapping(calibration: Calibration, rows: np.ndarray, corners_xy: np.nd
         raise ValueError(f"refine_mapping: prior standard deviations must be > 0, got {prior_sd}")
     # no prior: scipy's own Huber (the same numbers as before the prior existed)
     loss = _huber_then_quadratic(huber, len(use) + u_corners.size) if np.isfinite(sd).any() else "huber"
+    undistorted = _Undistorted(calibration, np.concatenate([u_rows, u_corners]))
     x = np.zeros(len(free))
     sigma = _robust_sigma(use[:, 5])
     for _ in range(2):  # the rows' noise from the residuals of the previous fit
         used = sigma
         sol = least_squares(_residuals, x, loss=loss, f_scale=huber if loss == "huber" else 1.0, x_scale="jac",
-                            args=(free, calibration, u_rows, use, u_corners, corners_xy, used, sigma_corners, sd))
+                            args=(free, calibration, undistorted, use, corners_xy, used, sigma_corners, sd))
         x = sol.x
         r = sol.fun[:len(use)] * used
         sigma = _robust_sigma(r)
