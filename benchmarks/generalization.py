@@ -57,6 +57,22 @@ SILENT = {"tracking_p95_mm": 5.0, "sync_error_ms": 1.0, "principal_point_share":
 """The issue's limits beyond which an all-ok setup is a silent failure."""
 
 
+def string_type(seed: int) -> int:
+    """The string type (1-7) a setup's seed films: cycling with the seed, whichever seeds a run takes."""
+    return 1 + seed % 7
+
+
+def _filmed(trial: Path, string_type_: int) -> bool:
+    """Whether ``trial`` holds a finished film of this string type: the lab writes ``ground_truth.json``
+    last, and the benchmark ``film.json`` (the string type filmed) after it."""
+    marker = trial.parent / "film.json"
+    if not (trial / "ground_truth.json").exists():
+        return False
+    if marker.exists():
+        return json.loads(marker.read_text()).get("string_type") == string_type_
+    return True   # filmed before the marker existed
+
+
 def _verdict(doc: dict | None) -> str:
     """A stage's verdict status from its JSON (``ok`` when the stage wrote none)."""
     return str(((doc or {}).get("verdict") or {}).get("status", "ok"))
@@ -131,11 +147,12 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str 
     row = {"seed": seed, "string_type": string_type, "draw": asdict(setup)}
     try:   # a stage that refuses, or the lab failing to film, is a result: its message is the verdict
         t0 = time.perf_counter()
-        # the lab writes each folder's ground_truth.json last: without it, a run was stopped while filming
-        if not (trial / "ground_truth.json").exists():
+        # without ground_truth.json (the lab writes it last) a run was stopped while filming; film.json says which string
+        if not _filmed(trial, string_type):
             shutil.rmtree(trial, ignore_errors=True)
             run_first_plan(campaign, d / "motion.csv", d / "motion.json", seed=seed, **stage_kwargs(run_first_plan, settings))
             execute(d / "motion.csv", "virtual", trial, campaign, settings.executor, cfg, seed=seed)
+            (d / "film.json").write_text(json.dumps({"seed": seed, "string_type": string_type}))
         if not (calib / "ground_truth.json").exists():
             shutil.rmtree(calib, ignore_errors=True)
             write_calibration_clip(campaign, cfg, calib, seed=seed)
@@ -337,7 +354,7 @@ def run(quick: bool = False, setups: int = 24, first: int = 0, work: Path | None
     done = _resumed(work, seeds, until) if resume else {}
     rows, doc = [], {}
     with ProcessPoolExecutor(max_workers=max(1, jobs)) as pool:
-        futures = [pool.submit(run_setup, seed, 1 + i % 7, config, work, until, start) for i, seed in enumerate(seeds)
+        futures = [pool.submit(run_setup, seed, string_type(seed), config, work, until, start) for seed in seeds
                    if seed not in done]
         for k, fut in enumerate(itertools.chain(done.values(), as_completed(futures))):   # lazily: each as it ends
             row = fut if isinstance(fut, dict) else fut.result()

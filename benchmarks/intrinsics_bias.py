@@ -29,7 +29,7 @@ import argparse
 from pathlib import Path
 
 from benchmarks.common import header, write
-from benchmarks.generalization import run_setup
+from benchmarks.generalization import run_setup, string_type
 
 VARIANTS = {"fx+2.5": (0.025, 0.0), "fx-2.5": (-0.025, 0.0), "pp+2": (0.0, 0.02)}
 """(fx share, principal-point share of the image width) per variant name."""
@@ -63,7 +63,7 @@ def run(work: Path, seeds: list[int], variants: list[str], until: str = "track",
     config = load_config()
     rows = []
     with ProcessPoolExecutor(max_workers=max(1, jobs)) as pool:
-        futures = {pool.submit(run_setup, seed, 1 + seed % 7, config, work, until, start,
+        futures = {pool.submit(run_setup, seed, string_type(seed), config, work, until, start,
                                f"results_{v}", VARIANTS[v]): v for v in variants for seed in seeds}
         for fut in as_completed(futures):
             row = fut.result() | {"variant": futures[fut]}

@@ -37,3 +37,20 @@ def test_biased_intrinsics_moves_what_the_calibration_stage_judges(monkeypatch):
 ])
 def test_outcome(row, want):
     assert outcome(row) == want
+
+
+def test_a_setups_string_follows_its_seed_and_a_film_of_another_string_is_not_reused(tmp_path):
+    """The string type cycles with the seed, not with a setup's place in the run (seeds 3 and 4 run on
+    their own were once filmed with types 1 and 2); a finished film is reused only for its own type."""
+    import json
+
+    from benchmarks.generalization import _filmed, string_type
+
+    assert [string_type(s) for s in (0, 3, 4, 6, 7, 10)] == [1, 4, 5, 7, 1, 4]
+    trial = tmp_path / "setup_3" / "trial_1"
+    trial.mkdir(parents=True)
+    assert not _filmed(trial, 4)                                  # stopped while filming: no ground truth
+    (trial / "ground_truth.json").write_text("{}")
+    assert _filmed(trial, 4)                                      # filmed before the marker existed
+    (tmp_path / "setup_3" / "film.json").write_text(json.dumps({"seed": 3, "string_type": 1}))
+    assert not _filmed(trial, 4) and _filmed(trial, 1)
