@@ -31,7 +31,8 @@ def test_a_file_sets_some_keys_and_a_mapping_merges_over_its_default():
                                         ({"estimation": {"optimizer": "bfgs"}}, "estimation.optimizer"),
                                         ({"motion": {"planner": "magic"}}, "motion.planner"),
                                         ({"tracking": {"mode": "laser"}}, "tracking.mode"),
-                                        ({"model": {"dt_s": 0.0}}, "model.dt_s")])
+                                        ({"model": {"dt_s": 0.0}}, "model.dt_s"),
+                                        ({"sweep": {"k1_prior": 0.0}}, "sweep: .*k1_prior must be > 0")])
 def test_a_wrong_setting_is_an_error_naming_it(doc, match):
     with pytest.raises(ConfigError, match=match):
         settings_from_config(doc)

@@ -331,14 +331,11 @@ class SweepSettings(_Section):
     k1_prior: float = _f(0.02, "standard deviation of k1's move (what fx a few per cent off does to k1 at k1 ~ -0.2)")
 
     def __post_init__(self):
-        if self.principal_point_prior <= 0 or self.k1_prior <= 0:
-            raise ConfigError(f"sweep: principal_point_prior and k1_prior must be > 0, got {self.principal_point_prior}, "
-                              f"{self.k1_prior}")
         if self.frames < 0 or self.passes < 1 or self.min_rows < 20:
             raise ConfigError(f"sweep: frames >= 0, passes >= 1 and min_rows >= 20 needed, got {self.frames}, "
                               f"{self.passes}, {self.min_rows}")
-        if self.huber <= 0 or self.tolerance_mm <= 0 or self.clock_tolerance_ms <= 0:
-            raise ConfigError("sweep: huber, tolerance_mm and clock_tolerance_ms must be > 0")
+        if min(self.huber, self.tolerance_mm, self.clock_tolerance_ms, self.principal_point_prior, self.k1_prior) <= 0:
+            raise ConfigError("sweep: huber, tolerance_mm, clock_tolerance_ms, principal_point_prior and k1_prior must be > 0")
 
 
 @dataclass(frozen=True)
