@@ -40,11 +40,14 @@ STAGES = ("decode", "calibrate", "sync", "sweep", "track", "estimate", "plan")
 
 
 def _project(work: Path) -> Path:
-    """A project root in ``work`` that runs the repository's workflow and config on its own data/."""
+    """A project root in ``work`` that runs this checkout's workflow and config on its own data/
+    (links left by another checkout, or dangling, are pointed here again)."""
     root = work / "project"
     root.mkdir(parents=True, exist_ok=True)
     for name in ("Snakefile", "workflow", "config"):
         link = root / name
+        if link.is_symlink() and link.readlink() != ROOT / name:
+            link.unlink()
         if not link.exists():
             link.symlink_to(ROOT / name)
     return root
