@@ -28,5 +28,5 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "refine_mapping": ".refine",
 })
 
-__all__ = ["PARAMETERS", "Calibration", "board_corner_points", "check_board_to_robot", "mapping_standard_error", "refine_mapping",
-           "run_calibration", "sweep_rows", "write_calib_views"]
+__all__ = ["PARAMETERS", "Calibration", "board_corner_points", "check_board_to_robot", "mapping_standard_error",
+           "refine_mapping", "run_calibration", "sweep_rows", "write_calib_views"]

@@ -69,8 +69,8 @@ class _Undistorted:
     finite-difference step in the homography or the clock reuses its point's undistortion
     (``Calibration.undistort`` is most of a residual's cost)."""
 
-    def __init__(self, base: Calibration, uv: np.ndarray):
-        self.base, self.uv, self.kept = base, uv, {}
+    def __init__(self, uv: np.ndarray):
+        self.uv, self.kept = uv, {}
 
     def __call__(self, theta: np.ndarray, cal: Calibration) -> np.ndarray:
         key = theta[LENS].tobytes()
@@ -103,7 +103,7 @@ def _huber_then_quadratic(scale: float, n_robust: int):
             rho[0] = np.where(inner, s, 2 * np.sqrt(s) - 1) * scale ** 2
             rho[1] = np.where(inner, 1.0, 1 / np.sqrt(s))
             rho[2] = np.where(inner, 0.0, -0.5 * s ** -1.5) / scale ** 2
-        rho[:, n_robust:] = [[*z[n_robust:]], [1.0] * (len(z) - n_robust), [0.0] * (len(z) - n_robust)]
+        rho[0, n_robust:], rho[1, n_robust:], rho[2, n_robust:] = z[n_robust:], 1.0, 0.0
         return rho
     return loss
 
@@ -119,9 +119,10 @@ def refine_mapping(calibration: Calibration, rows: np.ndarray, corners_xy: np.nd
         corners_xy: (C, 2) m, robot-frame points of the board corners the calibration used.
         max_speed_m_s: rows faster than this along their normal are left out (None: all; the
             moving rows are what measure the clock).
-        fit: the parameter groups fitted (:data:`GROUPS`). The default, the homography and the
-            clock, did best on the generalization setups (docs/results.md, "The arm's sweep"): freeing the
-            distortion too let it bend where the arm does not reach.
+        fit: the parameter groups fitted (:data:`GROUPS`); default the homography and the clock.
+            Freeing the distortion without a prior let it bend where the arm does not reach; the sweep
+            frees k1 and the principal point under ``prior_sd`` (:func:`stringcast.sync.sweep.lens_fit`;
+            docs/results.md, "the sweep refits the lens").
         huber: the Huber loss's scale, in units of the rows' own noise.
         prior_sd: {parameter name: standard deviation} of a zero-mean Gaussian prior on the
             change of a freed parameter (k1; cx, cy in px); a freed parameter not named has none.
@@ -150,7 +151,7 @@ def refine_mapping(calibration: Calibration, rows: np.ndarray, corners_xy: np.nd
         raise ValueError(f"refine_mapping: prior standard deviations must be > 0, got {prior_sd}")
     # no prior: scipy's own Huber (the same numbers as before the prior existed)
     loss = _huber_then_quadratic(huber, len(use) + u_corners.size) if np.isfinite(sd).any() else "huber"
-    undistorted = _Undistorted(calibration, np.concatenate([u_rows, u_corners]))
+    undistorted = _Undistorted(np.concatenate([u_rows, u_corners]))
     x = np.zeros(len(free))
     sigma = _robust_sigma(use[:, 5])
     for _ in range(2):  # the rows' noise from the residuals of the previous fit
