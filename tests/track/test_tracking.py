@@ -495,3 +495,54 @@ def test_end_ball_is_the_same_whichever_spur_the_walk_ends_on():
     band[29:32, 10:80] = 1.0
     band[28:33, 76:80] = 1.0                              # 5 px against 3 px: a band of tape, not a ball
     assert locate_end(cv2.GaussianBlur(band, (0, 0), 1.0), straight[:-3]).ball is None
+
+
+def _crossing_frame(tracker, st, tips=1):
+    """A 4 px string hanging 150 px (L = 0.3 m at 2 mm/px) from (10, 100) behind a link across rows
+    60-80 (masked), and ``tips`` - 1 more stretches coming out below the link: the segmentation,
+    the guard band and the grasp's walk as :meth:`FrameTracker.track` runs them."""
+    bg = np.full((200, 200), 120, np.float32)
+    frame = bg.copy()
+    cv2.line(frame, (100, 10), (100, 158), 70.0, 4)   # its round cap: the tip at row ~160
+    for k in range(1, tips):
+        cv2.line(frame, (100 - 40 * k, 82), (100 - 40 * k, 150), 70.0, 4)
+    frame = cv2.GaussianBlur(frame, (0, 0), 1.2) + np.random.default_rng(1).normal(0, 2.0, bg.shape).astype(np.float32)
+    arm = np.zeros(bg.shape, bool)
+    arm[60:80, 10:190] = True
+    frame[arm] = 60.0
+    absd, fg = tracker._segment(frame, bg, tracker.sigma, arm)
+    absd[arm] = 0.0
+    k = 2 * round(st.arm_guard_px) + 1
+    guarded = cv2.dilate(arm.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))) > 0
+    tracker._bg = bg
+    walk = tracker._centreline(fg & ~guarded, np.array([10.0, 100.0]), 30.0, 5.0)[0]
+    return absd, guarded, walk
+
+
+@pytest.mark.parametrize("tips", [1, 2])
+def test_the_string_beyond_the_arm_is_anchored_at_its_tip(campaign, settings, tips):
+    """A swing lays the string across a link (generalization seed 6: 43 of 80 lost frames): the walk
+    from the grasp stops at the arm and no point past it was trusted. The one stretch that comes
+    out below the link and ends free gives the points within its length of the tip, where they
+    are; with two such stretches, which one is the string's is a guess, and none are taken."""
+    from stringcast.track.beyond_arm import tip_stretch
+    from stringcast.track.frame_tracker import FrameTrack, FrameTracker
+
+    st = settings.tracking
+    tracker = FrameTracker(np.full((200, 200), 120, np.float32), (4.0, 0.0), _calibration(), campaign, st)
+    absd, guarded, walk = _crossing_frame(tracker, st, tips)
+    assert walk[-1][0] < 60                                   # the grasp's walk stops above the link
+    found = tip_stretch(tracker._skel, tracker._skel_at, walk, guarded, absd, tracker._bg, tracker._width, st,
+                        6.0, 15.0)
+    assert (found is None) == (tips == 2)
+    n = campaign.string.n_points
+    none = FrameTrack(np.full((n, 2), np.nan), np.zeros(n, bool), np.zeros((0, 2)))
+    ft = tracker._with_beyond(none, absd, guarded, walk, _calibration().pixel_to_robot(walk[:, ::-1]), 0.002,
+                              (0, 0))
+    if tips == 2:
+        assert not ft.valid.any()
+        return
+    i = np.flatnonzero(ft.valid) + 1                           # points 1..n
+    assert i.min() >= 5 and i.max() == n and len(i) >= 4    # the tip and the points within ~75 px of it
+    true = ORIGIN + M_PER_PX * np.column_stack([np.full(len(i), 100.0), -(10.0 + 15.0 * i)])
+    assert np.abs(ft.positions[i - 1] - true).max() < 0.003    # within 1.5 px, along the string

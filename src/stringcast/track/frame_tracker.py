@@ -23,6 +23,7 @@ from .centreline import (
     refine_centreline,
     resample_by_arc,
 )
+from .beyond_arm import near_arm, tip_stretch
 from .ends import clean_end, locate_end, string_continues
 from .junctions import Zones, walk_skeleton
 from .markers import band_points, path_contrast
@@ -115,32 +116,18 @@ class FrameTracker:
         self._bg = self.bg[y0:y1, x0:x1]
         rho = st.grasp_clear_mm / 1000 / scale
         found = self._centreline(fg, g, st.grasp_search_mm / 1000 / scale, rho)
-        if found is None:
-            return none()
+        if found is None:  # no walk from the grasp: the string may still come out from behind the arm
+            return self._with_beyond(none(), absd, arm, np.zeros((0, 2)), cal.pixel_to_robot(gpx[None]), scale, (y0, x0))
         pts, bridged, branch, fold = found
         end = pts[-1].astype(int)
         free_end = bool(not end_cut(end, arm, (y0, x0), (H, W), self._width) and np.hypot(*(end - g)) > 2 * rho
                         and clean_end(pts, self._skel, self._skel_at, absd, self._bg, st,
                                       st.end_touch_mm / 1000 / scale))
         hidden_start = np.hypot(*(pts[0] - g)) > rho + 3 or self._fallback
+        behind = not free_end and near_arm(pts[-1], arm, self._width + 4)  # the string goes on behind the arm
+        walked = pts
         loop_back = np.hypot(*(end - g)) <= 2 * rho  # the walk came back to the grasp
-        pts = odd_smooth(refine_centreline(absd, pts), 1.5, twice=True)
-        if free_end:  # the skeleton stops short of a free end: move the end to the string's end
-            fe = locate_end(absd, pts)
-            free_end = not string_continues(absd, pts, fe.edge, fe.tangent, self._width, st.end_contrast_min)
-        if free_end:  # a spur within two widths of a free end is its lump's (a clay ball forks the skeleton)
-            cum_px = arc_length(pts)
-            fold &= cum_px < cum_px[-1] - 2 * self._width
-        branch = branch | fold
-        ball = fe.ball if free_end else None
-        if ball is not None:  # a ball's centre, from its contrast (the walk ends on either spur of its fork)
-            k = len(pts) - int(np.argmax(np.hypot(*(pts[::-1] - ball[0]).T) > ball[1]))
-            pts, bridged, branch = np.vstack([pts[:k], ball[0]]), np.r_[bridged[:k], False], np.r_[branch[:k], False]
-        elif free_end and fe.extension > 0.05:
-            t = pts[-1] - pts[-2]
-            pts = np.vstack([pts, pts[-1] + fe.extension * t / max(float(np.hypot(*t)), 1e-9)])
-            bridged = np.r_[bridged, False]
-            branch = np.r_[branch, False]
+        pts, bridged, branch, free_end = self._refine(absd, pts, bridged, branch, fold, free_end)
         cum_px = arc_length(pts)
         gap = np.nonzero(bridged & (np.r_[0.0, np.diff(cum_px)] > 2.5))[0]
         ev_px = np.sort(np.concatenate([cum_px[branch], cum_px[gap - 1], cum_px[gap]]))
@@ -172,6 +159,8 @@ class FrameTracker:
             hi = events[0] if len(events) else np.inf
             if free_end:
                 hi = min(hi, float(s_poly[-1]))
+        elif behind:  # the grasp's side holds no point: only the stretch beyond the arm may
+            return self._with_beyond(none(px), absd, arm, walked, xy, scale, (y0, x0))
         else:
             return none(px)
         s_t = self.s_targets - shift  # the targets' polyline arc
@@ -186,7 +175,68 @@ class FrameTracker:
             pos, valid = band_points(frame, px, obs & (np.arange(len(obs)) >= len(head)), s_poly, s_t, trusted,
                                      free_end, path_contrast(absd, pts), cal, st)
         pos[~valid] = np.nan
-        return FrameTrack(pos, valid, px, D if free_end and not hidden_start else math.nan)
+        done = FrameTrack(pos, valid, px, D if free_end and not hidden_start else math.nan)
+        return self._with_beyond(done, absd, arm, walked, xy, scale, (y0, x0)) if behind else done
+
+    def _with_beyond(self, done: FrameTrack, absd, arm, walked, xy, scale: float, origin) -> FrameTrack:
+        """``done`` (the grasp's side, its walk ``walked`` (M, 2) ROI px ending by the arm, its polyline xy
+        (K, 2) m) with the points of the string's stretch beyond the arm (:mod:`stringcast.track.beyond_arm`),
+        anchored at its free end: point s_i lies L - s_i back from the tip. None are taken (``done`` as it
+        is) without exactly one such stretch, in markers mode, or when the stretch, the grasp's side
+        and the straight line between them are together longer than the string (+ the anchor tolerance)."""
+        st, n = self.st, self.n
+        found = None if st.mode != "markerless" or self._skel is None else tip_stretch(
+            self._skel, self._skel_at, walked, arm, absd, self._bg, self._width, st, st.end_touch_mm / 1000 / scale,
+            self.L / n / scale)
+        if found is None:
+            return done
+        pts, bridged, amb = found
+        pts, bridged, amb, free_end = self._refine(absd, pts, bridged, amb, np.zeros(len(pts), bool), True)
+        if not free_end:
+            return done
+        cum_px = arc_length(pts)
+        gap = np.nonzero(bridged & (np.r_[0.0, np.diff(cum_px)] > 2.5))[0]
+        ev_px = np.concatenate([[0.0], cum_px[amb], cum_px[gap - 1], cum_px[gap]])
+        pts, obs = decimate_path(pts, ~bridged[1:], st.arc_step_px, sub=4)
+        px = pts[:, ::-1] + [origin[1], origin[0]]  # (x, y) image px, from the arm's rim to the tip
+        far = self.cal.pixel_to_robot(px)
+        s_poly = arc_length(far)
+        last = float(np.max(np.interp(ev_px, np.linspace(0.0, cum_px[-1], len(pts)), s_poly)))
+        D = self.L - st.tip_shortfall_mm / 1000 - float(s_poly[-1])  # the length before the stretch
+        tol = max(st.anchor_tol_mm / 1000, 0.01 * self.L, st.anchor_tol_px * scale)
+        if float(s_poly[-1]) - last < self.L / n or D < arc_length(xy)[-1] + float(np.linalg.norm(far[0] - xy[-1])) - tol:
+            return done  # a branch by the tip (which end is the tip?), or more string than there is
+        s_t = self.s_targets - D
+        pos, valid = resample_by_arc(far, obs, s_t, st.end_tolerance_mm / 1000)
+        valid &= (s_t >= last) & ~done.valid
+        positions = np.where(valid[:, None], pos, done.positions)
+        path = np.vstack([done.path_px, px]) if len(done.path_px) else px
+        return FrameTrack(positions, valid | done.valid, path, math.nan)
+
+    def _refine(self, absd, pts, bridged, branch, fold, free_end):
+        """Sub-pixel centreline of a walk (M, 2) (row, col); a free end moved to the string's end (or a
+        clay ball's centre) and dropped if string-like contrast goes on past it; spurs within two
+        widths of a free end are its lump's, others mark the path (``fold``) as ambiguous.
+        Returns pts, bridged, branch (ambiguous) and free_end."""
+        st = self.st
+        pts = odd_smooth(refine_centreline(absd, pts), 1.5, twice=True)
+        if free_end:  # the skeleton stops short of a free end: move the end to the string's end
+            fe = locate_end(absd, pts)
+            free_end = not string_continues(absd, pts, fe.edge, fe.tangent, self._width, st.end_contrast_min)
+        if free_end:  # a spur within two widths of a free end is its lump's (a clay ball forks the skeleton)
+            cum_px = arc_length(pts)
+            fold = fold & (cum_px < cum_px[-1] - 2 * self._width)
+        branch = branch | fold
+        ball = fe.ball if free_end else None
+        if ball is not None:  # a ball's centre, from its contrast (the walk ends on either spur of its fork)
+            k = len(pts) - int(np.argmax(np.hypot(*(pts[::-1] - ball[0]).T) > ball[1]))
+            pts, bridged, branch = np.vstack([pts[:k], ball[0]]), np.r_[bridged[:k], False], np.r_[branch[:k], False]
+        elif free_end and fe.extension > 0.05:
+            t = pts[-1] - pts[-2]
+            pts = np.vstack([pts, pts[-1] + fe.extension * t / max(float(np.hypot(*t)), 1e-9)])
+            bridged = np.r_[bridged, False]
+            branch = np.r_[branch, False]
+        return pts, bridged, branch, free_end
 
     def _segment(self, img: np.ndarray, bg: np.ndarray, sigma: np.ndarray, arm: np.ndarray):
         """Smoothed |I - g B| (gain g for flicker) and its hysteresis foreground outside the arm."""
@@ -230,6 +280,7 @@ class FrameTracker:
         vertices within rho px of the grasp are dropped (there the string mixes with the
         fingertips).
         """
+        self._skel = None  # no skeleton in this frame (yet)
         x, y, w, h = cv2.boundingRect(fg.astype(np.uint8))
         if w == 0:
             return None

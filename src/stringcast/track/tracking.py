@@ -37,7 +37,9 @@ Settings: tracking settings (:class:`~stringcast.core.TrackingSettings`).
    gripper) anchors the arc at the free end, valid after the last ambiguity (a branch
    joining the walk, a guess at a crossing, a bridged gap) and, for a missing length D, not
    within D past the hidden head (a loop at the fingers); without a free end, at the grasp, valid before the
-   first ambiguity. Invalid points keep NaN positions: never a guess.
+   first ambiguity. Where the walk stops at the arm (the string passes behind a link), the one
+   stretch that comes out from behind it and ends free (:mod:`stringcast.track.beyond_arm`) adds
+   its points, anchored at the tip in the same way. Invalid points keep NaN positions: never a guess.
 6. **Verdict** (:mod:`stringcast.track.quality`, ``tracking.json``): the valid share,
    consecutive points farther apart than the string between them and the hanging string's
    jitter, judged (warn with the likely cause); the measured length against L, reported.
