@@ -54,3 +54,11 @@ def draw_arm_mask(shape, poses_px, arm: ArmSpec, st: TrackingSettings, m_per_px:
             r = px(radii[min(j, len(radii) - 1)]) + grow
             cv2.circle(m, tuple(int(v) for v in fix(p[j])), round(r * 2 ** sh), 1, -1, cv2.LINE_8, sh)
     return m.astype(bool)
+
+
+def near_arm(p: np.ndarray, arm: np.ndarray, reach: float) -> bool:
+    """Whether the guarded arm mask ``arm`` (h, w) has a pixel within ``reach`` px of p (row, col)."""
+    r = int(np.ceil(reach))
+    r0, c0 = max(0, int(p[0]) - r), max(0, int(p[1]) - r)
+    rr, cc = np.nonzero(arm[r0:int(p[0]) + r + 1, c0:int(p[1]) + r + 1])
+    return bool(len(rr)) and bool(np.any(np.hypot(rr + r0 - p[0], cc + c0 - p[1]) <= reach))

@@ -18,22 +18,9 @@ import numpy as np
 from stringcast.core import TrackingSettings
 from .centreline import arc_length
 from .ends import clean_end
-from .junctions import Zones, walk_skeleton
+from .arm_mask import near_arm
+from .junctions import Zones, _degree, walk_skeleton
 
-
-def _ends(skel: np.ndarray) -> np.ndarray:
-    """(K, 2) (row, col) of the skeleton's end pixels (one 8-neighbour)."""
-    k = np.ones((3, 3), np.float32)
-    n = cv2.filter2D(skel.astype(np.float32), -1, k, borderType=cv2.BORDER_CONSTANT) - 1
-    return np.argwhere(skel & (n == 1))
-
-
-def near_arm(p: np.ndarray, arm: np.ndarray, reach: float) -> bool:
-    """Whether the guarded arm mask ``arm`` (h, w) has a pixel within ``reach`` px of p (row, col)."""
-    r = int(np.ceil(reach))
-    r0, c0 = max(0, int(p[0]) - r), max(0, int(p[1]) - r)
-    rr, cc = np.nonzero(arm[r0:int(p[0]) + r + 1, c0:int(p[1]) + r + 1])
-    return bool(len(rr)) and bool(np.any(np.hypot(rr + r0 - p[0], cc + c0 - p[1]) <= reach))
 
 
 def tip_stretch(skel: np.ndarray, skel_at: np.ndarray, walked: np.ndarray, arm: np.ndarray, absd: np.ndarray,
@@ -65,7 +52,7 @@ def tip_stretch(skel: np.ndarray, skel_at: np.ndarray, walked: np.ndarray, arm: 
     taken = set(np.unique(comp[w[inside, 0], w[inside, 1]]).tolist()) | {0}
     sizes = np.bincount(comp.ravel(), minlength=ncomp)
     reach = width_px + 4
-    ends = _ends(skel)
+    ends = np.argwhere(skel & (_degree(skel) == 1))  # end pixels: one 8-neighbour
     found = []
     zones = None
     for c in range(1, ncomp):

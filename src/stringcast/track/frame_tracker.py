@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 from skimage.morphology import skeletonize
 
-from .arm_mask import draw_arm_mask
+from .arm_mask import draw_arm_mask, near_arm
 from stringcast.calibrate import Calibration
 from stringcast.core import TrackingSettings
 from .centreline import (
@@ -23,7 +23,7 @@ from .centreline import (
     refine_centreline,
     resample_by_arc,
 )
-from .beyond_arm import near_arm, tip_stretch
+from .beyond_arm import tip_stretch
 from .ends import clean_end, locate_end, string_continues
 from .junctions import Zones, walk_skeleton
 from .markers import band_points, path_contrast
@@ -50,6 +50,14 @@ class FrameTrack:
             raise ValueError("FrameTrack: valid points need positions and invalid ones NaN")
 
 
+def _events_px(pts: np.ndarray, bridged: np.ndarray, ambiguous: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Arc length (px) along a walk pts (M, 2) of each vertex, (M,), and of its ambiguities, sorted:
+    the ``ambiguous`` (M,) vertices and both ends of each bridged gap longer than 2.5 px."""
+    cum_px = arc_length(pts)
+    gap = np.nonzero(bridged & (np.r_[0.0, np.diff(cum_px)] > 2.5))[0]
+    return cum_px, np.sort(np.concatenate([cum_px[ambiguous], cum_px[gap - 1], cum_px[gap]]))
+
+
 def end_cut(end, arm: np.ndarray, origin, image_shape, width_px: float) -> bool:
     """Whether a skeleton walk's end may be cut by the arm or the image's edge, not the string's own.
 
@@ -68,9 +76,7 @@ def end_cut(end, arm: np.ndarray, origin, image_shape, width_px: float) -> bool:
     row, col = end[0] + origin[0], end[1] + origin[1]
     if not (r <= row < image_shape[0] - r and r <= col < image_shape[1] - r):
         return True
-    r0, c0 = max(0, int(end[0] - r)), max(0, int(end[1] - r))
-    rr, cc = np.nonzero(arm[r0:int(end[0] + r) + 1, c0:int(end[1] + r) + 1])
-    return bool(len(rr)) and bool(np.any(np.hypot(rr + r0 - end[0], cc + c0 - end[1]) <= r))
+    return near_arm(end, arm, r)
 
 
 class FrameTracker:
@@ -128,9 +134,7 @@ class FrameTracker:
         walked = pts
         loop_back = np.hypot(*(end - g)) <= 2 * rho  # the walk came back to the grasp
         pts, bridged, branch, free_end = self._refine(absd, pts, bridged, branch, fold, free_end)
-        cum_px = arc_length(pts)
-        gap = np.nonzero(bridged & (np.r_[0.0, np.diff(cum_px)] > 2.5))[0]
-        ev_px = np.sort(np.concatenate([cum_px[branch], cum_px[gap - 1], cum_px[gap]]))
+        cum_px, ev_px = _events_px(pts, bridged, branch)
         pts, obs = decimate_path(pts, ~bridged[1:], st.arc_step_px, sub=4)
         head = hidden_arc(g, pts)  # grasp -> first visible vertex, under the gripper's mask
         px = np.vstack([head, pts])[:, ::-1] + [x0, y0]  # (x, y) image px, grasp first
@@ -143,7 +147,7 @@ class FrameTracker:
         if hidden_start:
             events = np.r_[L_head, events]
         D = self.L - st.tip_shortfall_mm / 1000 - float(s_poly[-1])  # missing length if the end is the tip
-        tol = max(st.anchor_tol_mm / 1000, 0.01 * self.L, st.anchor_tol_px * scale)  # both ends +-1 px
+        tol = self._anchor_tol(scale)
         slack = L_head - float(np.linalg.norm(xy[len(head)] - xy[0]))  # the head may be shorter, not below its chord
         lo, hi, shift, split = -np.inf, np.inf, 0.0, None
         if free_end and len(events) and float(s_poly[-1]) - events[-1] < self.L / n:
@@ -194,16 +198,15 @@ class FrameTracker:
         pts, bridged, amb, free_end = self._refine(absd, pts, bridged, amb, np.zeros(len(pts), bool), True)
         if not free_end:
             return done
-        cum_px = arc_length(pts)
-        gap = np.nonzero(bridged & (np.r_[0.0, np.diff(cum_px)] > 2.5))[0]
-        ev_px = np.concatenate([[0.0], cum_px[amb], cum_px[gap - 1], cum_px[gap]])
+        cum_px, ev_px = _events_px(pts, bridged, amb)
+        ev_px = np.r_[0.0, ev_px]  # the rim the stretch comes out of is an ambiguity too
         pts, obs = decimate_path(pts, ~bridged[1:], st.arc_step_px, sub=4)
         px = pts[:, ::-1] + [origin[1], origin[0]]  # (x, y) image px, from the arm's rim to the tip
         far = self.cal.pixel_to_robot(px)
         s_poly = arc_length(far)
         last = float(np.max(np.interp(ev_px, np.linspace(0.0, cum_px[-1], len(pts)), s_poly)))
         D = self.L - st.tip_shortfall_mm / 1000 - float(s_poly[-1])  # the length before the stretch
-        tol = max(st.anchor_tol_mm / 1000, 0.01 * self.L, st.anchor_tol_px * scale)
+        tol = self._anchor_tol(scale)
         if float(s_poly[-1]) - last < self.L / n or D < arc_length(xy)[-1] + float(np.linalg.norm(far[0] - xy[-1])) - tol:
             return done  # a branch by the tip (which end is the tip?), or more string than there is
         s_t = self.s_targets - D
@@ -212,6 +215,12 @@ class FrameTracker:
         positions = np.where(valid[:, None], pos, done.positions)
         path = np.vstack([done.path_px, px]) if len(done.path_px) else px
         return FrameTrack(positions, valid | done.valid, path, math.nan)
+
+    def _anchor_tol(self, scale: float) -> float:
+        """How far (m) a walk's length may miss L and its free end still be the tip: ``anchor_tol_mm``,
+        1 % of L or ``anchor_tol_px`` (both ends +-1 px) at ``scale`` m/px, whichever is largest."""
+        st = self.st
+        return max(st.anchor_tol_mm / 1000, 0.01 * self.L, st.anchor_tol_px * scale)
 
     def _refine(self, absd, pts, bridged, branch, fold, free_end):
         """Sub-pixel centreline of a walk (M, 2) (row, col); a free end moved to the string's end (or a
