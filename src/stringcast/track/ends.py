@@ -183,7 +183,7 @@ def end_lump(absdiff: np.ndarray, pts: np.ndarray, edge: float, t: np.ndarray):
     return ("sleeve" if length > 1.5 * w_lump else "ball"), w_lump
 
 
-UP = 4
+BALL_UPSAMPLE = 4
 """A ball's window is upsampled this many times before its rim is thresholded: on the pixel grid the
 deepest point moved in steps of ~0.5 px as noise flipped rim pixels (generalization seed 21, a 6 px
 ball at 2.6 mm per px: the tip at rest jittered by 1.3 mm)."""
@@ -199,7 +199,8 @@ def _ball_centre(absdiff: np.ndarray, pts: np.ndarray, edge: float, t: np.ndarra
     the lab: 2-2.6 times; a light band of tape at the tip: 1.2 times). The centre is found from
     the contrast, not the walk: near half the ball's width back from its far edge, the deepest
     point of the foreground at half the contrast there (the maximum of its distance transform,
-    ``cv2.distanceTransform``; the centroid of the top 1 px of it). None also where that centre
+    ``cv2.distanceTransform``; the centroid of the top 1 px of it), on the window upsampled
+    :data:`BALL_UPSAMPLE` times (bilinear, ``cv2.resize``). None also where that centre
     is farther than the radius from the walk's end (the walk does not end inside it).
     """
     j = len(pts) // 2
@@ -212,11 +213,12 @@ def _ball_centre(absdiff: np.ndarray, pts: np.ndarray, edge: float, t: np.ndarra
     if r0 < 0 or c0_ < 0 or r0 + 2 * h + 1 > absdiff.shape[0] or c0_ + 2 * h + 1 > absdiff.shape[1]:
         return None
     win = absdiff[r0:r0 + 2 * h + 1, c0_:c0_ + 2 * h + 1]
-    fine = cv2.resize(win, None, fx=UP, fy=UP, interpolation=cv2.INTER_LINEAR)   # its rim to 1 / UP px
+    k = BALL_UPSAMPLE   # fine pixel j lies at (j + 0.5) / k - 0.5 of the window
+    fine = cv2.resize(win, None, fx=k, fy=k, interpolation=cv2.INTER_LINEAR)
     dt = cv2.distanceTransform((fine > 0.5 * float(win.max())).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-    rr, cc = np.nonzero(dt >= float(dt.max()) - UP)   # the deepest point inside the blob: its centre, which
-    wts = dt[rr, cc] - (float(dt.max()) - UP) + 1e-6  # the string's stretch into the ball does not move
-    c = (np.array([float(wts @ rr), float(wts @ cc)]) / wts.sum() + 0.5) / UP - 0.5 + [r0, c0_]
+    rr, cc = np.nonzero(dt >= float(dt.max()) - k)   # the deepest point inside the blob: its centre, which
+    wts = dt[rr, cc] - (float(dt.max()) - k) + 1e-6  # the string's stretch into the ball does not move
+    c = (np.array([float(wts @ rr), float(wts @ cc)]) / wts.sum() + 0.5) / k - 0.5 + [r0, c0_]
     return (c, r) if np.hypot(*(c - pts[-1])) <= r else None   # the walk ends inside the ball
 
 
