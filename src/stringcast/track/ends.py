@@ -14,7 +14,7 @@ from typing import NamedTuple
 
 import cv2
 import numpy as np
-from scipy.ndimage import map_coordinates
+from scipy.ndimage import distance_transform_edt, map_coordinates
 
 from stringcast.core import TrackingSettings
 from .centreline import arc_length
@@ -216,8 +216,8 @@ def _ball_centre(absdiff: np.ndarray, pts: np.ndarray, edge: float, t: np.ndarra
     the lab: 2-2.6 times; a light band of tape at the tip: 1.2 times). The centre is found from
     the contrast, not the walk: near half the ball's width back from its far edge, the deepest
     point of the foreground at half the contrast there (the maximum of its distance transform,
-    ``cv2.distanceTransform``; the centroid of the top 1 px of it), on the window upsampled
-    :data:`BALL_UPSAMPLE` times (bilinear, ``cv2.resize``). None also where that centre
+    ``scipy.ndimage.distance_transform_edt``; the centroid of the top 1 px of it), on the window
+    upsampled :data:`BALL_UPSAMPLE` times (bilinear). None also where that centre
     is farther than the radius from the walk's end (the walk does not end inside it).
     """
     j = len(pts) // 2
@@ -232,9 +232,9 @@ def _ball_centre(absdiff: np.ndarray, pts: np.ndarray, edge: float, t: np.ndarra
     win = absdiff[r0:r0 + 2 * h + 1, c0_:c0_ + 2 * h + 1]
     k = BALL_UPSAMPLE   # fine pixel j lies at (j + 0.5) / k - 0.5 of the window
     fine = _upsampled(win, k)
-    dt = cv2.distanceTransform((fine > 0.5 * float(win.max())).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    dt = distance_transform_edt(fine > 0.5 * float(win.max()))   # exact, and the same bits in any process
     rr, cc = np.nonzero(dt >= float(dt.max()) - k)   # the deepest point inside the blob: its centre, which
-    wts = dt[rr, cc].astype(np.float64) - (float(dt.max()) - k) + 1e-6  # the string's stretch into the ball does not move
+    wts = dt[rr, cc] - (float(dt.max()) - k) + 1e-6  # the string's stretch into the ball does not move
     total = math.fsum(wts)   # exactly rounded sums: the same bits whichever memory the frame came from
     c = (np.array([math.fsum(wts * rr), math.fsum(wts * cc)]) / total + 0.5) / k - 0.5 + [r0, c0_]
     return (c, r) if np.hypot(*(c - pts[-1])) <= r else None   # the walk ends inside the ball
