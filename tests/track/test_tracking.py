@@ -579,14 +579,3 @@ def test_a_small_ball_is_found_to_a_fraction_of_a_pixel():
     print(np.round(errors, 2), errors.std(axis=0))
     assert np.max(np.hypot(*errors.T)) < 0.4
     assert np.all(errors.std(axis=0) < 0.06)
-
-
-def test_the_ball_window_is_upsampled_as_opencv_does_it():
-    """``ends._upsampled`` is ``cv2.resize``'s bilinear upsampling (fine pixel j at (j + 0.5) / k - 0.5, edges
-    replicated), written elementwise so that its bits do not depend on where the frame lies in memory."""
-    from stringcast.track.ends import _upsampled
-
-    win = np.random.default_rng(1).random((13, 11)).astype(np.float32)
-    for k in (2, 4):
-        np.testing.assert_allclose(_upsampled(win, k), cv2.resize(win, None, fx=k, fy=k, interpolation=cv2.INTER_LINEAR),
-                                   atol=1e-6)

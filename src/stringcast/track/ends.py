@@ -189,23 +189,6 @@ deepest point moved in steps of ~0.5 px as noise flipped rim pixels (generalizat
 ball at 2.6 mm per px: the tip at rest jittered by 1.3 mm)."""
 
 
-def _upsampled(win: np.ndarray, k: int) -> np.ndarray:
-    """(h k, w k) float64 bilinear upsampling of win (h, w), fine pixel j at (j + 0.5) / k - 0.5 of
-    the coarse grid, edges replicated (``cv2.resize``'s ``INTER_LINEAR``). Written elementwise:
-    OpenCV's vector code rounds differently with the source's memory alignment, and tracking must
-    give the same bits from a decoded frame cache as from the video (``benchmarks/tracking.py``)."""
-    out = np.asarray(win, np.float64)
-    for axis in (0, 1):
-        n = out.shape[axis]
-        pos = np.clip((np.arange(n * k) + 0.5) / k - 0.5, 0.0, n - 1.0)
-        i0 = np.minimum(pos.astype(int), max(n - 2, 0))
-        f = pos - i0
-        a, b = np.take(out, i0, axis=axis), np.take(out, np.minimum(i0 + 1, n - 1), axis=axis)
-        shape = (-1, 1) if axis == 0 else (1, -1)
-        out = a * (1.0 - f).reshape(shape) + b * f.reshape(shape)
-    return out
-
-
 def _ball_centre(absdiff: np.ndarray, pts: np.ndarray, edge: float, t: np.ndarray, w_lump: float):
     """The centre (2,) (row, col) and radius (px) of the ball of width ``w_lump`` that ends the
     path (far ``edge`` px past its last vertex along ``t``), or None.
@@ -217,7 +200,7 @@ def _ball_centre(absdiff: np.ndarray, pts: np.ndarray, edge: float, t: np.ndarra
     the contrast, not the walk: near half the ball's width back from its far edge, the deepest
     point of the foreground at half the contrast there (the maximum of its distance transform,
     ``scipy.ndimage.distance_transform_edt``; the centroid of the top 1 px of it), on the window
-    upsampled :data:`BALL_UPSAMPLE` times (bilinear). None also where that centre
+    upsampled :data:`BALL_UPSAMPLE` times (bilinear, ``cv2.resize``). None also where that centre
     is farther than the radius from the walk's end (the walk does not end inside it).
     """
     j = len(pts) // 2
@@ -231,12 +214,11 @@ def _ball_centre(absdiff: np.ndarray, pts: np.ndarray, edge: float, t: np.ndarra
         return None
     win = absdiff[r0:r0 + 2 * h + 1, c0_:c0_ + 2 * h + 1]
     k = BALL_UPSAMPLE   # fine pixel j lies at (j + 0.5) / k - 0.5 of the window
-    fine = _upsampled(win, k)
+    fine = cv2.resize(win, None, fx=k, fy=k, interpolation=cv2.INTER_LINEAR)
     dt = distance_transform_edt(fine > 0.5 * float(win.max()))   # exact, and the same bits in any process
     rr, cc = np.nonzero(dt >= float(dt.max()) - k)   # the deepest point inside the blob: its centre, which
     wts = dt[rr, cc] - (float(dt.max()) - k) + 1e-6  # the string's stretch into the ball does not move
-    total = math.fsum(wts)   # exactly rounded sums: the same bits whichever memory the frame came from
-    c = (np.array([math.fsum(wts * rr), math.fsum(wts * cc)]) / total + 0.5) / k - 0.5 + [r0, c0_]
+    c = (np.array([float(wts @ rr), float(wts @ cc)]) / wts.sum() + 0.5) / k - 0.5 + [r0, c0_]
     return (c, r) if np.hypot(*(c - pts[-1])) <= r else None   # the walk ends inside the ball
 
 
