@@ -11,6 +11,7 @@ import numpy as np
 from skimage.morphology import skeletonize
 
 from .arm_mask import draw_arm_mask, near_arm
+from .board_zone import board_outline_px, over_board
 from stringcast.calibrate import Calibration
 from stringcast.core import TrackingSettings
 from .centreline import (
@@ -58,23 +59,26 @@ def _events_px(pts: np.ndarray, bridged: np.ndarray, ambiguous: np.ndarray) -> t
     return cum_px, np.sort(np.concatenate([cum_px[ambiguous], cum_px[gap - 1], cum_px[gap]]))
 
 
-def end_cut(end, arm: np.ndarray, origin, image_shape, width_px: float) -> bool:
-    """Whether a skeleton walk's end may be cut by the arm or the image's edge, not the string's own.
+def end_cut(end, arm: np.ndarray, origin, image_shape, width_px: float, board: np.ndarray | None = None) -> bool:
+    """Whether a skeleton walk's end may be cut by the arm, the image's edge or the board, not the string's own.
 
     The skeleton stops about half a string's width short of the foreground's end, and the
     foreground stops at the guarded arm mask or the image's edge; blur and fading take up to
     another half width and a few px. An end within ``width_px + 4`` px of either is therefore
     taken as cut (ends of generalization seed 11 cut by a joint disc lay 4.6-6.7 px from it at a
-    3.8 px width; seed 2's free tip 12.9 px from a disc at 5.5 px must stay free).
+    3.8 px width; seed 2's free tip 12.9 px from a disc at 5.5 px must stay free). So is an end
+    over the calibration board or within that reach of it (:mod:`~stringcast.track.board_zone`):
+    the board's squares of the string's own shade hide it.
 
     Args:
         end: (row, col) of the end in the ROI, px. arm: (h, w) bool guarded arm mask of the ROI.
         origin: (row, col) of the ROI in the image. image_shape: (H, W). width_px: the string's
-            width in the foreground, px.
+            width in the foreground, px. board: the board's outline in the image
+            (:func:`~stringcast.track.board_zone.board_outline_px`), or None.
     """
     r = math.ceil(width_px) + 4
     row, col = end[0] + origin[0], end[1] + origin[1]
-    if not (r <= row < image_shape[0] - r and r <= col < image_shape[1] - r):
+    if not (r <= row < image_shape[0] - r and r <= col < image_shape[1] - r) or over_board(board, (col, row), r):
         return True
     return near_arm(end, arm, r)
 
@@ -95,6 +99,7 @@ class FrameTracker:
         self.sigma = (np.sqrt(noise[0] + noise[1] * np.clip(bg, 0, None)) * k).astype(np.float32)
         self.L, self.n, self.arm = campaign.string.length, campaign.string.n_points, campaign.arm
         self.s_targets = np.arange(1, self.n + 1) * self.L / self.n
+        self.board = board_outline_px(cal, campaign.setup.board)
 
     def track(self, frame: np.ndarray, poses_px: np.ndarray) -> FrameTrack:
         """Track one frame (H, W); poses_px (P, J + 2, 2): the arm in px at P instants of the
@@ -126,7 +131,7 @@ class FrameTracker:
             return self._with_beyond(none(), absd, arm, np.zeros((0, 2)), cal.pixel_to_robot(gpx[None]), scale, (y0, x0))
         pts, bridged, branch, fold = found
         end = pts[-1].astype(int)
-        free_end = bool(not end_cut(end, arm, (y0, x0), (H, W), self._width) and np.hypot(*(end - g)) > 2 * rho
+        free_end = bool(not end_cut(end, arm, (y0, x0), (H, W), self._width, self.board) and np.hypot(*(end - g)) > 2 * rho
                         and clean_end(pts, self._skel, self._skel_at, absd, self._bg, st,
                                       st.end_touch_mm / 1000 / scale))
         hidden_start = np.hypot(*(pts[0] - g)) > rho + 3 or self._fallback
@@ -192,8 +197,8 @@ class FrameTracker:
         found = None if st.mode != "markerless" or self._skel is None else tip_stretch(
             self._skel, self._skel_at, walked, arm, absd, self._bg, self._width, st, st.end_touch_mm / 1000 / scale,
             self.L / n / scale)
-        if found is None:
-            return done
+        if found is None or over_board(self.board, found[0][-1, ::-1] + origin[::-1], self._width + 4):
+            return done  # no stretch, or its end over the board (a square may hide the rest)
         pts, bridged, amb = found
         pts, bridged, amb, free_end = self._refine(absd, pts, bridged, amb, np.zeros(len(pts), bool), True)
         if not free_end:
