@@ -579,3 +579,61 @@ def test_a_small_ball_is_found_to_a_fraction_of_a_pixel():
     print(np.round(errors, 2), errors.std(axis=0))
     assert np.max(np.hypot(*errors.T)) < 0.4
     assert np.all(errors.std(axis=0) < 0.06)
+
+
+
+def test_the_board_outline_follows_the_calibration():
+    """The board's outline is where the calibration maps the board: its centre is over the board, a
+    point 3 px outside an edge is within a 4 px margin of it and 6 px outside is not; with barrel
+    distortion the sides bow (a side's middle lies off the chord between its corners); a calibration
+    without ``board_to_robot`` has no outline."""
+    from stringcast.core.specs import BoardSpec
+    from stringcast.track.board_zone import board_outline_px, over_board
+
+    board = BoardSpec(4, 3, 0.06, 0.045, "DICT_5X5_100")
+    B = np.array([[1.0, 0.0, ORIGIN[0] + 100 * M_PER_PX], [0.0, -1.0, ORIGIN[1] - 120 * M_PER_PX], [0.0, 0.0, 1.0]])
+    flat = Calibration(_calibration().H_pixel_to_robot, (SIZE, SIZE), None, None, 0.1, 40, board_to_robot=B)
+    out = board_outline_px(flat, board)        # the board spans cols 100-220, rows 120-210
+    assert over_board(out, (160, 165), 0.0) and over_board(out, (223, 165), 4.0)
+    assert not over_board(out, (226, 165), 4.0) and not over_board(out, (160, 90), 4.0)
+    K = np.array([[400.0, 0, 180], [0, 400, 180], [0, 0, 1]])
+    cal = Calibration(_calibration().H_pixel_to_robot, (SIZE, SIZE), K, np.array([-0.3, 0, 0, 0, 0]), 0.1, 40,
+                      board_to_robot=B)
+    rim = board_outline_px(cal, board)[:, 0]
+    def bow(r):  # the top side's middle (r[8]) off the chord between its corners (r[0], r[16]), px
+        (cx, cy), (mx, my) = (r[16] - r[0]) / np.hypot(*(r[16] - r[0])), r[8] - r[0]
+        return abs(float(cx * my - cy * mx))
+    assert bow(rim) > 0.3 and bow(out[:, 0]) < 0.01
+    assert board_outline_px(_calibration(), board) is None and not over_board(None, (160, 165), 100.0)
+
+
+def test_an_end_over_the_board_is_not_taken_for_the_tip(campaign, settings):
+    """Over the ChArUco board a square of the string's own shade hides it, and a walk that stops there
+    is not at the tip (generalization seed 10: string 4's end hung over a black square at rest, and
+    taken as the tip it put points 7-15 105 mm up the string). So an end over the board is never
+    trusted as the tip, even a true one: here a dark string (L = 0.3 m, 150 px) hangs with its tip
+    over a black square, seen (lighter than the square, as dark as the wall above it). With the board's outline (the calibration's ``board_to_robot``) its points
+    are anchored at the grasp (no length mismatch is measured) and lie on the string; without it,
+    the same end is the tip."""
+    from stringcast.track.frame_tracker import FrameTracker
+
+    # the board's top-left corner at px (col 55, row 110); the board's y axis down the image (robot -y)
+    B = np.array([[1.0, 0.0, ORIGIN[0] + 55 * M_PER_PX], [0.0, -1.0, ORIGIN[1] - 110 * M_PER_PX], [0.0, 0.0, 1.0]])
+    cal = Calibration(_calibration().H_pixel_to_robot, (200, 200), None, None, 0.1, 40, board_to_robot=B)
+    bg = np.full((200, 200), 120, np.float32)
+    sq = round(campaign.setup.board.square / M_PER_PX)        # 30 px
+    for i in range(3):
+        for j in range(5):
+            bg[110 + sq * i:110 + sq * (i + 1), 55 + sq * j:55 + sq * (j + 1)] = 20.0 if (i + j) % 2 == 0 else 120.0
+    frame = bg.copy()
+    cv2.line(frame, (100, 10), (100, 158), 70.0, 4)           # its tip at row ~160, over the black square
+    frame = cv2.GaussianBlur(frame, (0, 0), 1.2) + np.random.default_rng(2).normal(0, 2.0, bg.shape).astype(np.float32)
+    poses = np.array([[[100.0, -400.0], [100.0, -250.0], [100.0, -120.0], [100.0, -40.0], [100.0, 10.0]]] * 3)
+    n, step = campaign.string.n_points, campaign.string.length / campaign.string.n_points
+    true = ORIGIN + [100 * M_PER_PX, -10 * M_PER_PX] + np.column_stack([np.zeros(n), -step * np.arange(1, n + 1)])
+    tracker = FrameTracker(bg, (4.0, 0.0), cal, campaign, settings.tracking)
+    ft = tracker.track(frame, poses)
+    assert ft.valid[:8].all() and np.isnan(ft.length_mismatch_m)
+    assert np.nanmax(np.hypot(*(ft.positions - true).T)[ft.valid]) < 2 * M_PER_PX
+    tracker.board = None                                     # without the board: the end is the tip
+    assert np.isfinite(tracker.track(frame, poses).length_mismatch_m)
