@@ -28,7 +28,8 @@ Settings: tracking settings (:class:`~stringcast.core.TrackingSettings`).
    within ``end_touch_mm`` of the string's own earlier stretch, no branch within a point
    spacing, no arm, image edge or calibration board within a string width + 4 px:
    :func:`~stringcast.track.frame_tracker.end_cut`, no string-like contrast going on past it:
-   :func:`string_continues`) is extended to where the contrast fades, or to a clay ball's centre (:func:`~stringcast.track.ends.locate_end`).
+   :func:`string_continues`) is extended to where the contrast fades, or to a clay ball's
+   centre (:func:`~stringcast.track.ends.locate_end`).
 5. **Metric resampling** (:func:`resample_by_arc`): :meth:`Calibration.pixel_to_robot`, arc
    length from the grasp, points at s_i = i L / n. With a trusted free end whose length
    agrees with L (within ``anchor_tol_mm`` / ``anchor_tol_px``), the mismatch is shared
