@@ -132,8 +132,8 @@ class FrameTracker:
         pts, bridged, branch, fold = found
         end = pts[-1].astype(int)
         free_end = bool(not end_cut(end, arm, (y0, x0), (H, W), self._width, self.board)
-                        and np.hypot(*(end - g)) > 2 * rho and clean_end(pts, self._skel, self._skel_at, absd, self._bg, st,
-                                      st.end_touch_mm / 1000 / scale))
+                        and np.hypot(*(end - g)) > 2 * rho
+                        and clean_end(pts, self._skel, self._skel_at, absd, self._bg, st, st.end_touch_mm / 1000 / scale))
         hidden_start = np.hypot(*(pts[0] - g)) > rho + 3 or self._fallback
         behind = not free_end and near_arm(pts[-1], arm, self._width + 4)  # the string goes on behind the arm
         walked = pts
