@@ -1,12 +1,14 @@
-"""The calibration board's outline in the image: where a skeleton walk's end is not the string's.
+"""The calibration board's outline in the image: where a skeleton walk's end may not be the string's.
 
 The ChArUco board stands in the swing plane and is seen in every trial. Its squares and its
 markers' cells are dark and light, so a string of either shade vanishes against one of them:
 a walk that stops over the board may stop where the string crosses a square of its own shade,
 not at its tip (generalization seed 10: string 4's end hung over a black square at rest, and
-taken as the tip it put points 7-15 105 mm up the string). The board's pose is known from the
-calibration (``board_to_robot`` and the pixel <-> plane mapping), so its outline is drawn from
-that, not guessed from the image.
+taken as the tip it put points 7-15 105 mm up the string). Over the board an end is therefore
+the tip only where the walk's length agrees with L
+(:meth:`~stringcast.track.frame_tracker.FrameTracker.track`), and a stretch beyond the arm that
+ends there is not taken. The board's pose is known from the calibration (``board_to_robot`` and
+the pixel <-> plane mapping), so its outline is drawn from that, not guessed from the image.
 """
 from __future__ import annotations
 

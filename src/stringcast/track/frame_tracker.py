@@ -59,26 +59,23 @@ def _events_px(pts: np.ndarray, bridged: np.ndarray, ambiguous: np.ndarray) -> t
     return cum_px, np.sort(np.concatenate([cum_px[ambiguous], cum_px[gap - 1], cum_px[gap]]))
 
 
-def end_cut(end, arm: np.ndarray, origin, image_shape, width_px: float, board: np.ndarray | None = None) -> bool:
-    """Whether a skeleton walk's end may be cut by the arm, the image's edge or the board, not the string's own.
+def end_cut(end, arm: np.ndarray, origin, image_shape, width_px: float) -> bool:
+    """Whether a skeleton walk's end may be cut by the arm or the image's edge, not the string's own.
 
     The skeleton stops about half a string's width short of the foreground's end, and the
     foreground stops at the guarded arm mask or the image's edge; blur and fading take up to
     another half width and a few px. An end within ``width_px + 4`` px of either is therefore
     taken as cut (ends of generalization seed 11 cut by a joint disc lay 4.6-6.7 px from it at a
-    3.8 px width; seed 2's free tip 12.9 px from a disc at 5.5 px must stay free). So is an end
-    over the calibration board or within that reach of it (:mod:`~stringcast.track.board_zone`):
-    the board's squares of the string's own shade hide it.
+    3.8 px width; seed 2's free tip 12.9 px from a disc at 5.5 px must stay free).
 
     Args:
         end: (row, col) of the end in the ROI, px. arm: (h, w) bool guarded arm mask of the ROI.
         origin: (row, col) of the ROI in the image. image_shape: (H, W). width_px: the string's
-            width in the foreground, px. board: the board's outline in the image
-            (:func:`~stringcast.track.board_zone.board_outline_px`), or None.
+            width in the foreground, px.
     """
     r = math.ceil(width_px) + 4
     row, col = end[0] + origin[0], end[1] + origin[1]
-    if not (r <= row < image_shape[0] - r and r <= col < image_shape[1] - r) or over_board(board, (col, row), r):
+    if not (r <= row < image_shape[0] - r and r <= col < image_shape[1] - r):
         return True
     return near_arm(end, arm, r)
 
@@ -131,7 +128,7 @@ class FrameTracker:
             return self._with_beyond(none(), absd, arm, np.zeros((0, 2)), cal.pixel_to_robot(gpx[None]), scale, (y0, x0))
         pts, bridged, branch, fold = found
         end = pts[-1].astype(int)
-        free_end = bool(not end_cut(end, arm, (y0, x0), (H, W), self._width, self.board)
+        free_end = bool(not end_cut(end, arm, (y0, x0), (H, W), self._width)
                         and np.hypot(*(end - g)) > 2 * rho
                         and clean_end(pts, self._skel, self._skel_at, absd, self._bg, st, st.end_touch_mm / 1000 / scale))
         hidden_start = np.hypot(*(pts[0] - g)) > rho + 3 or self._fallback
@@ -139,6 +136,7 @@ class FrameTracker:
         walked = pts
         loop_back = np.hypot(*(end - g)) <= 2 * rho  # the walk came back to the grasp
         pts, bridged, branch, free_end = self._refine(absd, pts, bridged, branch, fold, free_end)
+        on_board = over_board(self.board, pts[-1, ::-1] + [x0, y0], self._width + 4)
         cum_px, ev_px = _events_px(pts, bridged, branch)
         pts, obs = decimate_path(pts, ~bridged[1:], st.arc_step_px, sub=4)
         head = hidden_arc(g, pts)  # grasp -> first visible vertex, under the gripper's mask
@@ -157,6 +155,8 @@ class FrameTracker:
         lo, hi, shift, split = -np.inf, np.inf, 0.0, None
         if free_end and len(events) and float(s_poly[-1]) - events[-1] < self.L / n:
             free_end = False  # a branch joins within a point spacing of the end: is the tip this end or the branch's?
+        if free_end and on_board and abs(D) > tol:  # a square of the string's shade may hide the rest: over the
+            free_end = False                        # board the end is the tip only where the length says so
         if free_end and abs(D) <= tol:  # both anchors agree: share the mismatch (head, visible arc, free end)
             split = mismatch_split(D, np.array([scale * st.end_sigma_px + slack, st.scale_sigma * (float(
                 s_poly[-1]) - L_head), scale * st.end_sigma_px]))

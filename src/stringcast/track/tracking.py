@@ -26,7 +26,7 @@ Settings: tracking settings (:class:`~stringcast.core.TrackingSettings`).
    refinement across the path, smoothing that keeps bends, chords of ``arc_step_px`` joined
    by a spline; a free end (:func:`clean_end`: not fading, not at an occluder's rim, not
    within ``end_touch_mm`` of the string's own earlier stretch, no branch within a point
-   spacing, no arm, image edge or calibration board within a string width + 4 px:
+   spacing, no arm or image edge within a string width + 4 px:
    :func:`~stringcast.track.frame_tracker.end_cut`, no string-like contrast going on past it:
    :func:`string_continues`) is extended to where the contrast fades, or to a clay ball's
    centre (:func:`~stringcast.track.ends.locate_end`).
@@ -37,8 +37,10 @@ Settings: tracking settings (:class:`~stringcast.core.TrackingSettings`).
    (:func:`mismatch_split`); a longer mismatch (the start hidden or folded behind the
    gripper) anchors the arc at the free end, valid after the last ambiguity (a branch
    joining the walk, a guess at a crossing, a bridged gap) and, for a missing length D, not
-   within D past the hidden head (a loop at the fingers); without a free end, at the grasp, valid before the
-   first ambiguity. Where the walk stops at the arm (the string passes behind a link), the one
+   within D past the hidden head (a loop at the fingers); but an end over the calibration
+   board is the tip only where its length agrees (a square of the string's shade may hide the
+   rest: :mod:`stringcast.track.board_zone`). Without a free end, the arc is anchored at the
+   grasp, valid before the first ambiguity. Where the walk stops at the arm (the string passes behind a link), the one
    stretch that comes out from behind it and ends free (:mod:`stringcast.track.beyond_arm`) adds
    its points, anchored at the tip in the same way. Invalid points keep NaN positions: never a guess.
 6. **Verdict** (:mod:`stringcast.track.quality`, ``tracking.json``): the valid share,
