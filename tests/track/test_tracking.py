@@ -587,7 +587,7 @@ def test_the_board_outline_follows_the_calibration():
     point 3 px outside an edge is within a 4 px margin of it and 6 px outside is not; with barrel
     distortion the sides bow (a side's middle lies off the chord between its corners); a calibration
     without ``board_to_robot`` has no outline."""
-    from stringcast.core.specs import BoardSpec
+    from stringcast.core import BoardSpec
     from stringcast.track.board_zone import board_outline_px, over_board
 
     board = BoardSpec(4, 3, 0.06, 0.045, "DICT_5X5_100")

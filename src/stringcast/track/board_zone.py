@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 
 from stringcast.calibrate import Calibration
-from stringcast.core.specs import BoardSpec
+from stringcast.core import BoardSpec
 
 
 def board_outline_px(cal: Calibration, board: BoardSpec, per_side: int = 16) -> np.ndarray | None:
@@ -25,7 +25,7 @@ def board_outline_px(cal: Calibration, board: BoardSpec, per_side: int = 16) -> 
     Args:
         cal: the trial's calibration; its ``board_to_robot`` (3, 3) maps board-frame m to the
             robot frame, :meth:`Calibration.robot_to_pixel` maps on into (distorted) image px.
-        board: the board's layout (:class:`~stringcast.core.specs.BoardSpec`; ``squares_x`` x
+        board: the board's layout (:class:`~stringcast.core.BoardSpec`; ``squares_x`` x
             ``squares_y`` squares of ``square`` m, OpenCV's board frame).
         per_side: points per side (lens distortion bends the sides).
 
