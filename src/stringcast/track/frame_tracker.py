@@ -128,15 +128,14 @@ class FrameTracker:
             return self._with_beyond(none(), absd, arm, np.zeros((0, 2)), cal.pixel_to_robot(gpx[None]), scale, (y0, x0))
         pts, bridged, branch, fold = found
         end = pts[-1].astype(int)
-        free_end = bool(not end_cut(end, arm, (y0, x0), (H, W), self._width)
-                        and np.hypot(*(end - g)) > 2 * rho
-                        and clean_end(pts, self._skel, self._skel_at, absd, self._bg, st, st.end_touch_mm / 1000 / scale))
+        free_end = bool(not end_cut(end, arm, (y0, x0), (H, W), self._width) and np.hypot(*(end - g)) > 2 * rho
+                        and clean_end(pts, self._skel, self._skel_at, absd, self._bg, st,
+                                      st.end_touch_mm / 1000 / scale))
         hidden_start = np.hypot(*(pts[0] - g)) > rho + 3 or self._fallback
         behind = not free_end and near_arm(pts[-1], arm, self._width + 4)  # the string goes on behind the arm
         walked = pts
         loop_back = np.hypot(*(end - g)) <= 2 * rho  # the walk came back to the grasp
         pts, bridged, branch, free_end = self._refine(absd, pts, bridged, branch, fold, free_end)
-        on_board = over_board(self.board, pts[-1, ::-1] + [x0, y0], self._width + 4)
         cum_px, ev_px = _events_px(pts, bridged, branch)
         pts, obs = decimate_path(pts, ~bridged[1:], st.arc_step_px, sub=4)
         head = hidden_arc(g, pts)  # grasp -> first visible vertex, under the gripper's mask
@@ -155,8 +154,8 @@ class FrameTracker:
         lo, hi, shift, split = -np.inf, np.inf, 0.0, None
         if free_end and len(events) and float(s_poly[-1]) - events[-1] < self.L / n:
             free_end = False  # a branch joins within a point spacing of the end: is the tip this end or the branch's?
-        if free_end and on_board and abs(D) > tol:  # a square of the string's shade may hide the rest: over the
-            free_end = False                        # board the end is the tip only where the length says so
+        if free_end and abs(D) > tol and over_board(self.board, px[-1], self._width + 4):
+            free_end = False  # a square of the string's shade may hide the rest: over the board, only the length says tip
         if free_end and abs(D) <= tol:  # both anchors agree: share the mismatch (head, visible arc, free end)
             split = mismatch_split(D, np.array([scale * st.end_sigma_px + slack, st.scale_sigma * (float(
                 s_poly[-1]) - L_head), scale * st.end_sigma_px]))
