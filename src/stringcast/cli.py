@@ -14,7 +14,7 @@ import os
 import sys
 from pathlib import Path
 
-from stringcast.core import METHOD_CONFIGS
+from stringcast import warm
 
 
 CONFIG_ENV = "STRINGCAST_CONFIG"
@@ -235,6 +235,8 @@ def cmd_calib_clip(args):
 def campaign_config_paths(args) -> list[str]:
     """The config files ``stringcast campaign`` merges over the project's config/config.yaml, in
     order: each ``--config``, then ``--method``'s file (ours: config/ours.yaml) last."""
+    from stringcast.core import METHOD_CONFIGS
+
     return (config_paths(args) or []) + [str(c) for c in METHOD_CONFIGS[args.method]]
 
 
@@ -286,6 +288,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run one subcommand; its exit status. A workflow stage runs in the run's warm server where
+    there is one (:mod:`stringcast.warm`), else here."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    code = warm.run_in_server(argv)
+    if code is not None:
+        return code
     from stringcast.core import ConfigError, DataError, JointLimitError
 
     args = build_parser().parse_args(argv)
@@ -295,6 +303,29 @@ def main(argv: list[str] | None = None) -> int:
         print(f"stringcast {args.command}: error: {exc}", file=sys.stderr)
         return 2
     return 0
+
+
+def preload_stages() -> None:
+    """Import every workflow stage and what they import when first used (the config's schema check,
+    Parquet), and set up numba's compiler (0.4 s, shared by every cached kernel a job then loads)
+    with a throwaway function that starts no threads: the warm server's preload."""
+    import jsonschema  # noqa: F401
+    import numba
+    import pyarrow.dataset  # noqa: F401
+    import pyarrow.parquet  # noqa: F401
+
+    for command in STAGES:
+        stage_entry(command)
+    numba.njit(lambda x: x + 1)(1)
+
+
+def warm_server(argv: list[str] | None = None) -> None:
+    """The workflow's warm server (:data:`stringcast.warm.SERVER_ENTRY`; arguments SOCKET
+    PARENT_PID): forks each workflow stage's job from a process that has imported them all."""
+    args = sys.argv[1:] if argv is None else argv
+    if len(args) != 2 or not args[1].isdigit():
+        sys.exit("usage: warm_server SOCKET PARENT_PID")
+    warm.serve(args[0], preload_stages, lambda a: a[0] in STAGES, main, parent=int(args[1]), log=sys.stdout)
 
 
 if __name__ == "__main__":
