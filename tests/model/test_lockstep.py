@@ -167,3 +167,28 @@ def test_atan2_lane_is_the_scalar_atan2():
     lane = np.array([atan2_lane(a, b) for a, b in zip(y, x)])
     np.testing.assert_array_equal(lane, [kernels.atan2(a, b) for a, b in zip(y, x)])
     np.testing.assert_array_equal(np.signbit(lane), np.signbit(np.arctan2(y, x)))
+
+
+def test_the_batch_kernels_cache_is_dropped_when_an_inlined_file_changes(tmp_path):
+    """numba keys a cached kernel on its own file's text; the batch kernels inline lockstep and
+    kernels, so their cache must go when those change (an old step ran after such an edit)."""
+    from types import SimpleNamespace
+
+    from stringcast.model.batch_kernels import drop_stale_cache
+
+    src, cache = tmp_path / "step.py", tmp_path / "cache"
+    cache.mkdir()
+    fake = SimpleNamespace(_cache=SimpleNamespace(_cache_path=str(cache)))
+    compiled = [cache / "bk.f-1.py311.nbi", cache / "bk.f-1.py311.1.nbc"]
+    other = cache / "lockstep.g-2.py311.nbi"
+    src.write_text("step = 1\n")
+    for f in (*compiled, other):
+        f.write_bytes(b"x")
+    assert drop_stale_cache(fake, [src], "bk")                     # no hash kept yet: dropped
+    assert not any(f.exists() for f in compiled) and other.exists()
+    for f in compiled:
+        f.write_bytes(b"x")
+    assert not drop_stale_cache(fake, [src], "bk") and all(f.exists() for f in compiled)   # unchanged: kept
+    src.write_text("step = 2\n")
+    assert drop_stale_cache(fake, [src], "bk") and not any(f.exists() for f in compiled)
+    assert not drop_stale_cache(SimpleNamespace(), [src], "bk")    # no cache (cache=False): nothing to do

@@ -8,15 +8,19 @@ blows up keeps stepping (masked) until the block ends; its outputs are NaN / inf
 docs/string_model.md's "Blow-up" says. A block stops early once every lane blew up.
 
 Everything here assumes inputs already checked by ``stringcast.model.string_model``.
-The compiled code is cached keyed on this file alone: touch it after editing ``lockstep``.
+numba keys the compiled code on this file's text alone; :func:`drop_stale_cache` deletes it
+when ``lockstep`` or ``kernels``, inlined here, have changed.
 """
 from __future__ import annotations
 
+import hashlib
 import math
+from pathlib import Path
 
 import numpy as np
 from numba import njit, prange
 
+from . import kernels, lockstep
 from .lockstep import LANES, OK, PX, PY, ROW, VX, VY, W, any_ok, new_block, set_hand, step_block
 
 _U = np.uint64
@@ -240,3 +244,39 @@ def closest_batch_kernel(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, d
         _closest_block(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, t_start, t_end,
                        targets, target_idx, target_dt, g, lmax, blk * LANES, d_min, t_min, min_y, ok)
     return d_min, t_min, min_y, ok
+
+
+def drop_stale_cache(dispatcher, sources, name: str = "batch_kernels") -> bool:
+    """Delete this file's cached kernels if the files they inline have changed since they were cached.
+
+    numba keys a cached kernel on the text of the file that defines it (numba 0.68: its hash),
+    so an edit of ``lockstep``'s step or of ``kernels``' helpers, inlined here, would leave the
+    old compiled step running. The hash of ``sources`` is kept beside the cache (``<name>.inlined``);
+    where it differs, every ``<name>.*.nbi``/``.nbc`` file there is deleted, and the kernels are
+    compiled afresh on first use. Returns whether it deleted.
+
+    Args:
+        dispatcher: one of this file's cached kernels (its cache's folder is the one checked).
+        sources: paths of the inlined files.
+    """
+    folder = getattr(getattr(dispatcher, "_cache", None), "_cache_path", None)
+    if folder is None:
+        return False
+    digest = hashlib.sha256(b"".join(Path(p).read_bytes() for p in sources)).hexdigest()
+    stamp = Path(folder) / f"{name}.inlined"
+    try:
+        if stamp.read_text() == digest:
+            return False
+    except OSError:
+        pass
+    for f in Path(folder).glob(f"{name}.*.nb[ic]"):
+        f.unlink(missing_ok=True)
+    try:
+        Path(folder).mkdir(parents=True, exist_ok=True)
+        stamp.write_text(digest)
+    except OSError:
+        pass
+    return True
+
+
+drop_stale_cache(simulate_batch_kernel, [lockstep.__file__, kernels.__file__])

@@ -25,10 +25,9 @@ dependence analysis and left the lane loops scalar. Division by zero gives inf/N
 A lane that blows up is marked and keeps stepping on its own inf/NaN values, which never
 reach the other lanes.
 
-Numba's cache (``cache=True``) keys a function on its own file only: the batch runs in
-``batch_kernels`` inline this module's functions, so after editing this file touch
-``batch_kernels.py`` too (or delete the ``*.nbi``/``*.nbc`` files in ``__pycache__``),
-or they keep running the old step.
+Numba's cache (``cache=True``) keys a function on its own file's text only: the batch runs
+in ``batch_kernels`` inline this module's functions, and ``batch_kernels.drop_stale_cache``
+deletes their cached code when this file (or ``kernels``) has changed.
 """
 from __future__ import annotations
 
@@ -37,7 +36,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .kernels import DAMPING_SAFETY, TWO_PI
+from .kernels import DAMPING_SAFETY, TWO_PI, fma
 
 _U = np.uint64
 LANES = 16
@@ -70,23 +69,23 @@ _KERNEL = dict(cache=True, fastmath=False, error_model="numpy")
 def atan2_lane(y, x):
     """atan2(y, x) in rad without branches: :func:`kernels.atan2` bit for bit for finite (y, x) != (0, 0).
 
-    The same Cephes steps written as selects, one division serving the optional range
-    reduction ((r - 1) / (r + 1), else r / 1), so a loop over lanes vectorises. Non-finite
+    The same Cephes steps written as selects, so a loop over lanes vectorises. Non-finite
     arguments or (0, 0) give NaN or a meaningless angle: only a blown-up lane, already
     marked, passes them.
     """
     ax = abs(x)
     ay = abs(y)
     swap = ay > ax
-    r = (ax if swap else ay) / (ay if swap else ax)
-    big = r > 0.66
-    r = (r - 1.0 if big else r) / (r + 1.0 if big else 1.0)
+    num = ax if swap else ay
+    den = ay if swap else ax
+    big = num > 0.66 * den
+    r = (num - den if big else num) / (num + den if big else den)
     off = _QUARTER_PI if big else 0.0
     extra = 0.5 * _MOREBITS if big else 0.0
     z = r * r
-    p = (((_P0 * z + _P1) * z + _P2) * z + _P3) * z + _P4
-    q = ((((z + _Q0) * z + _Q1) * z + _Q2) * z + _Q3) * z + _Q4
-    a = off + (r * z * p / q + r + extra)
+    p = fma(fma(fma(fma(_P0, z, _P1), z, _P2), z, _P3), z, _P4)
+    q = fma(fma(fma(fma(z + _Q0, z, _Q1), z, _Q2), z, _Q3), z, _Q4)
+    a = off + (fma(r * z, p / q, r) + extra)
     a = _HALF_PI - a if swap else a
     a = math.pi - a if math.copysign(1.0, x) < 0.0 else a
     return math.copysign(a, y)
@@ -99,7 +98,7 @@ def _segment(S, P, o, w, lmax, l0):
     q = o - ROW
     dx = S[o + PX + w] - S[q + PX + w]
     dy = S[o + PY + w] - S[q + PY + w]
-    l = math.sqrt(dx * dx + dy * dy)
+    l = math.sqrt(fma(dx, dx, dy * dy))
     good = (l <= lmax) & (l > 0.0)
     P[OK + w] *= 1.0 if good else 0.0          # the flag stays exactly 1.0 or 0.0
     il = 1.0 / l
@@ -107,8 +106,8 @@ def _segment(S, P, o, w, lmax, l0):
     uy = dy * il
     dvx = S[o + VX + w] - S[q + VX + w]
     dvy = S[o + VY + w] - S[q + VY + w]
-    om = (ux * dvy - uy * dvx) * il
-    fe = P[K_S + w] * (l - l0) + P[C_S + w] * (ux * dvx + uy * dvy)
+    om = fma(ux, dvy, -(uy * dvx)) * il
+    fe = fma(P[K_S + w], l - l0, P[C_S + w] * fma(ux, dvx, uy * dvy))
     S[o + UX + w] = ux
     S[o + UY + w] = uy
     S[o + LEN + w] = l
@@ -141,10 +140,10 @@ def step_block(S, P, n, l0, psi0, dt, g, lmax):
     for w in range(W):                          # segment 1 and the hand spring
         ux, uy, l, il, om, fe = _segment(S, P, o, w, lmax, l0)
         th0 = atan2_lane(uy, ux) - P[PHI + w] - psi0
-        th0 = th0 - TWO_PI * math.floor((th0 + math.pi) / TWO_PI)
-        tau0 = -P[K_PH + w] * th0 - P[C_PH + w] * (om - P[DPHI + w])
-        S[o + FX + w] = -fe * ux + -tau0 * il * uy
-        S[o + FY + w] = -fe * uy + tau0 * il * ux
+        th0 = fma(-TWO_PI, math.floor((th0 + math.pi) / TWO_PI), th0)
+        tau0 = fma(-P[K_PH + w], th0, -(P[C_PH + w] * (om - P[DPHI + w])))
+        S[o + FX + w] = fma(-tau0 * il, uy, -fe * ux)
+        S[o + FY + w] = fma(tau0 * il, ux, -fe * uy)
     for s in range(_2, _U(n) + _1):             # segment s and the bending at node s - 1
         o = s * ROW
         q = o - ROW
@@ -154,23 +153,23 @@ def step_block(S, P, n, l0, psi0, dt, g, lmax):
             pux = S[q + UX + w]
             puy = S[q + UY + w]
             pil = S[q + IL + w]
-            th = atan2_lane(pux * uy - puy * ux, pux * ux + puy * uy)
+            th = atan2_lane(fma(pux, uy, -(puy * ux)), fma(pux, ux, puy * uy))
             tension = 0.5 * (S[q + LEN + w] + l) >= l0
             k_h, c_h, k_sh, c_sh = P[K_H + w], P[C_H + w], P[K_SH + w], P[C_SH + w]
             kb = k_sh if tension else k_h
             cb = c_sh if tension else c_h
             ac = pil + il                       # node 0's 1/mu is 0: lam's last term vanishes at s = 2
-            lam = (ac * ac * S[q + IMU + w] + il * il * S[o + IMU + w]) + pil * pil * S[qq + IMU + w]
-            ceff = cb / (1.0 + sdt * cb * lam)  # the locally implicit damper
-            tau = -kb * th - ceff * (om - S[q + OM + w])
+            lam = fma(pil * pil, S[qq + IMU + w], fma(ac * ac, S[q + IMU + w], il * il * S[o + IMU + w]))
+            ceff = cb / fma(sdt * cb, lam, 1.0)  # the locally implicit damper
+            tau = fma(-kb, th, -(ceff * (om - S[q + OM + w])))
             f1x = -tau * il * uy
             f1y = tau * il * ux
             f2x = -tau * pil * puy
             f2y = tau * pil * pux
             S[o + FX + w] = -fe * ux + f1x
             S[o + FY + w] = -fe * uy + f1y
-            S[q + FX + w] = S[q + FX + w] + fe * ux - (f1x + f2x)
-            S[q + FY + w] = S[q + FY + w] + fe * uy - (f1y + f2y)
+            S[q + FX + w] = fma(fe, ux, S[q + FX + w]) - (f1x + f2x)
+            S[q + FY + w] = fma(fe, uy, S[q + FY + w]) - (f1y + f2y)
             S[qq + FX + w] += f2x
             S[qq + FY + w] += f2y
     for s in range(_1, _U(n) + _1):             # drag, v += a dt, p += v dt
@@ -178,13 +177,13 @@ def step_block(S, P, n, l0, psi0, dt, g, lmax):
         for w in range(W):
             vx = S[o + VX + w]
             vy = S[o + VY + w]
-            d = P[C_C1 + w] + P[C_C2 + w] * math.sqrt(vx * vx + vy * vy)
-            vx += (S[o + FX + w] - d * vx) * S[o + IMU + w] * dt
-            vy += ((S[o + FY + w] - d * vy) * S[o + IMU + w] - g) * dt
+            d = fma(P[C_C2 + w], math.sqrt(fma(vx, vx, vy * vy)), P[C_C1 + w])
+            vx = fma(fma(-d, vx, S[o + FX + w]) * S[o + IMU + w], dt, vx)
+            vy = fma(fma(-d, vy, S[o + FY + w]) * S[o + IMU + w] - g, dt, vy)
             S[o + VX + w] = vx
             S[o + VY + w] = vy
-            S[o + PX + w] += vx * dt
-            S[o + PY + w] += vy * dt
+            S[o + PX + w] = fma(vx, dt, S[o + PX + w])
+            S[o + PY + w] = fma(vy, dt, S[o + PY + w])
 
 
 @njit(**_KERNEL)
