@@ -325,7 +325,11 @@ def warm_server(argv: list[str] | None = None) -> None:
     args = sys.argv[1:] if argv is None else argv
     if len(args) != 2 or not args[1].isdigit():
         sys.exit("usage: warm_server SOCKET PARENT_PID")
-    warm.serve(args[0], preload_stages, lambda a: a[0] in STAGES, main, parent=int(args[1]), log=sys.stdout)
+    try:
+        warm.serve(args[0], preload_stages, lambda a: a[0] in STAGES, main, parent=int(args[1]), log=sys.stdout)
+    finally:   # without the interpreter's teardown of every stage's modules (1 s that Snakemake waits for)
+        sys.stdout.flush()
+        os._exit(0)
 
 
 if __name__ == "__main__":
