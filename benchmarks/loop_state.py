@@ -13,7 +13,8 @@ would have written into ``results/<campaign>/trial_<k>/``:
   a type it lacks); each point marked invalid (NaN) with probability 1 - valid_share, the
   tracking's measured share of valid points 1..n; frames outside the joint log invalid, as the
   tracker marks them. Every frame time is the true one plus one sync error per trial, drawn
-  from ``generalization.json``'s measured per-setup sync errors (after the arm's sweep). Point 0,
+  from the measured sync errors after the arm's sweep (``generalization.json``'s per setup, else
+  ``sync.json``'s per case: :func:`error_model`). Point 0,
   the grasp, is the forward kinematics of the measured joints at those times, as tracking puts it.
 * ``tracking.json``: the tracking's own self-measures and verdict
   (:func:`stringcast.track.quality.tracking_quality`) of those points, plus ``state_mode``.
@@ -91,32 +92,40 @@ class ErrorModel:
 
 def error_model(string_type: int, source_dir: Path) -> ErrorModel:
     """The measured error for ``string_type`` from ``source_dir``'s ``tracking.json`` (per-type median,
-    p95, valid share; the overall ones for a type it lacks) and ``generalization.json`` (per-setup
-    sync errors).
+    p95, valid share; the overall ones for a type it lacks) and the measured sync errors after the
+    arm's sweep: ``generalization.json``'s per setup (the setup family), or, where there is none,
+    ``sync.json``'s per case (the default camera, the trigger withheld). ``source`` says which.
 
     Raises:
         DataError: a file missing (named, with how to make it) or lacking those keys.
     """
     from stringcast.core.files import DataError, read_json
 
-    docs = {}
-    for name, how in (("tracking", "python -m benchmarks.tracking"), ("generalization", "python -m benchmarks.generalization")):
-        path = Path(source_dir) / f"{name}.json"
-        if not path.exists():
-            raise DataError(f"{path}: the state mode's error model needs it ({how}, or --state-source DIR)")
-        docs[name] = (path, read_json(path))
-    (tp, tr), (gp, gen) = docs["tracking"], docs["generalization"]
+    tp = Path(source_dir) / "tracking.json"
+    if not tp.exists():
+        raise DataError(f"{tp}: the state mode's error model needs it (python -m benchmarks.tracking, or "
+                        "--state-source DIR)")
+    gp = next((p for p in (Path(source_dir) / "generalization.json", Path(source_dir) / "sync.json") if p.exists()),
+              None)
+    if gp is None:
+        raise DataError(f"{Path(source_dir) / 'generalization.json'} (or sync.json): the state mode's sync errors "
+                        "need one (python -m benchmarks.generalization or benchmarks.sync, or --state-source DIR)")
+    tr, gen = read_json(tp), read_json(gp)
     per = (tr.get("per_string") or {}).get(str(string_type))
     fig = per if per else tr
     try:
-        sync = tuple(float(r["sync_error_ms"]) for r in gen["per_setup"] if r.get("sync_error_ms") is not None)
+        if gp.name == "generalization.json":
+            rows, key, what = gen["per_setup"], "sync_error_ms", "per_setup[].sync_error_ms"
+        else:
+            rows, key, what = list(gen["cases"].values()), "swept_offset_error_ms", "cases.*.swept_offset_error_ms"
+        sync = tuple(float(r[key]) for r in rows if r.get(key) is not None)
         model = ErrorModel(float(fig["median_mm"]), float(fig["p95_mm"]), float(fig["valid_share"]), sync, {
             "tracking": {"file": str(tp), "git_commit": tr.get("git_commit"), "created": tr.get("created"),
                          "figures": f"per_string.{string_type}" if per else "overall"},
-            "generalization": {"file": str(gp), "git_commit": gen.get("git_commit"), "created": gen.get("created"),
-                               "figures": "per_setup[].sync_error_ms", "setups": len(sync)}})
-    except (KeyError, TypeError, ValueError) as exc:
-        raise DataError(f"{tp} / {gp}: no usable median_mm, p95_mm, valid_share or per_setup sync_error_ms: {exc}")
+            "sync": {"file": str(gp), "git_commit": gen.get("git_commit"), "created": gen.get("created"),
+                     "figures": what, "count": len(sync)}})
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise DataError(f"{tp} / {gp}: no usable median_mm, p95_mm, valid_share or {key}: {exc}")
     return model
 
 

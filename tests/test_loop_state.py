@@ -39,8 +39,17 @@ def test_error_model_reads_the_measured_figures(tmp_path):
     assert (m1.median_mm, m1.p95_mm, m1.valid_share, m1.sync_errors_ms) == (0.35, 2.4, 0.75, (0.05, -0.27))
     assert (m5.median_mm, m5.p95_mm) == (0.3, 1.5) and m5.source["tracking"]["figures"] == "overall"
     assert m1.source["tracking"]["git_commit"] == "abc" and m1.as_dict()["sigma_log"] == pytest.approx(m1.sigma_log)
+    assert m1.source["sync"]["file"].endswith("generalization.json")
     (src / "generalization.json").unlink()
     with pytest.raises(DataError, match=r"generalization\.json.*benchmarks\.generalization"):
+        error_model(1, src)
+    # without the setup family's figures: the sync benchmark's, per case (the default camera)
+    write_json(src / "sync.json", {"cases": {"1": {"swept_offset_error_ms": 0.02}, "5": {"swept_offset_error_ms": -0.1},
+                                             "7": {"swept_offset_error_ms": None}}, "git_commit": "def"})
+    m = error_model(1, src)
+    assert m.sync_errors_ms == (0.02, -0.1) and m.source["sync"]["figures"] == "cases.*.swept_offset_error_ms"
+    (src / "tracking.json").unlink()
+    with pytest.raises(DataError, match=r"tracking\.json.*benchmarks\.tracking"):
         error_model(1, src)
 
 

@@ -102,6 +102,7 @@ class ModelSettings(_Section):
     dt_s: float = _f(1.0e-4, "integration step of the string model, s")
     psi0_deg: float = _f(0.0, "the string's rest direction in the hand frame, deg")
     first_mu: float = _f(1.0, "relative masses for the first plan (Table 2 has no mass row)")
+    first_mu_weight: float | None = _f(None, "first plan: relative mass of a point carrying a weight (null: first_mu)")
     ranges: Mapping[str, tuple] = _f({
         "k_s": (1.0e+3, 1.0e+6), "c_s": (1.0, 10.0), "k_h": (1.0e-3, 10.0), "c_h": (1.0e-3, 10.0),
         "k_sh": (1.0e-4, 1.0), "c_sh": (1.0e-4, 1.0), "C_c1": (1.0e-6, 10.0), "C_c2": (1.0e-6, 10.0),

@@ -191,15 +191,17 @@ class StringSpec:
         """Rest segment length L / n, m."""
         return self.length / self.n_points
 
+    def weight_points(self) -> list[int]:
+        """Model points (1..n) carrying a weight: each weight's nearest point."""
+        return sorted({int(min(self.n_points, max(1, round(at / self.l0)))) for at, _ in self.weights})
+
     def special_points(self) -> list[int]:
         """Model points (1..n) where a weight or stiff section sits (paper Table 4).
 
         A weight falls on the nearest point; a stiff section covers every point
         whose arc position lies inside it (at least the nearest one).
         """
-        pts: set[int] = set()
-        for at, _ in self.weights:
-            pts.add(int(min(self.n_points, max(1, round(at / self.l0)))))
+        pts = set(self.weight_points())
         for a, b in self.stiff_sections:
             inside = [i for i in range(1, self.n_points + 1) if a - 1e-9 <= i * self.l0 <= b + 1e-9]
             if not inside:

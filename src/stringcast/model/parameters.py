@@ -24,7 +24,8 @@ from stringcast.core import ConfigError, DataError, ModelSettings, MotionSetting
 # Parameter sets the model is simulated with
 # ---------------------------------------------------------------------------
 def first_parameters(model: ModelSettings, motion: MotionSettings, string) -> tuple[np.ndarray, np.ndarray]:
-    """The first plan's set: coeffs (10,) Table 2 minima, mu (n,) = ``model.first_mu``; k_s per
+    """The first plan's set: coeffs (10,) Table 2 minima, mu (n,) = ``model.first_mu``, but
+    ``model.first_mu_weight`` (where set) at the points carrying a weight; k_s per
     ``motion.first_k_s`` (below). ``model``, ``motion``: model and motion settings
     (:class:`~stringcast.core.ModelSettings`, :class:`~stringcast.core.MotionSettings`).
 
@@ -45,6 +46,8 @@ def first_parameters(model: ModelSettings, motion: MotionSettings, string) -> tu
     """
     lo, hi, _ = model_ranges(model)
     mu = np.full(string.n_points, float(model.first_mu))
+    if model.first_mu_weight is not None:
+        mu[np.asarray(string.weight_points(), int) - 1] = float(model.first_mu_weight)
     coeffs = lo.copy()
     mode = str(motion.first_k_s)
     if mode not in ("carrying", "max"):
@@ -146,11 +149,14 @@ def encode(coeffs: np.ndarray, mu_groups: np.ndarray, model: ModelSettings) -> n
 def start_chi(prev_params: Mapping | None, string, model: ModelSettings, motion: MotionSettings,
               source="params.json") -> np.ndarray:
     """chi_best at m = 0: the previous estimate's chi, else that of the first plan's set
-    (:func:`first_parameters`: Table 2 minima but k_s, masses ``model.first_mu``)."""
-    n_groups = int(string.mass_groups().max()) + 1
+    (:func:`first_parameters`: Table 2 minima but k_s, its masses per mass group)."""
+    groups = string.mass_groups()
+    n_groups = int(groups.max()) + 1
     if prev_params is None:
-        coeffs, _ = first_parameters(model, motion, string)
-        return encode(coeffs, np.full(n_groups, float(model.first_mu)), model)
+        coeffs, mu = first_parameters(model, motion, string)
+        mu_groups = np.full(n_groups, float(model.first_mu))
+        mu_groups[groups] = mu          # group 0 the plain points, g >= 1 the g-th special point
+        return encode(coeffs, mu_groups, model)
     chi = prev_params.get("chi")
     if chi is not None and len(chi) == len(PARAM_NAMES) + n_groups:
         return np.clip(np.asarray(chi, float), 0.0, 1.0)
