@@ -305,17 +305,23 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+PRELOAD_SKIPS = ("report-trial", "report-campaign")
+"""Stages the warm server does not import: the reports (matplotlib, Jinja2: 0.7 s of CPU that the
+video's decode shares) come after the next motion, and their jobs import them themselves."""
+
+
 def preload_stages() -> None:
-    """Import every workflow stage and what they import when first used (the config's schema check,
-    Parquet), and set up numba's compiler (0.4 s, shared by every cached kernel a job then loads)
-    with a throwaway function that starts no threads: the warm server's preload."""
+    """Import the workflow's stages up to the next motion and what they import when first used (the
+    config's schema check, Parquet), and set up numba's compiler (0.4 s, shared by every cached kernel
+    a job then loads) with a throwaway function that starts no threads: the warm server's preload."""
     import jsonschema  # noqa: F401
     import numba
     import pyarrow.dataset  # noqa: F401
     import pyarrow.parquet  # noqa: F401
 
     for command in STAGES:
-        stage_entry(command)
+        if command not in PRELOAD_SKIPS:
+            stage_entry(command)
     numba.njit(lambda x: x + 1)(1)
 
 
