@@ -226,8 +226,9 @@ def _run_job(run, argv: list[str], cwd: str, env: dict, fds: list[int]) -> None:
     code = 1
     try:
         for target, fd in enumerate(fds):
-            os.dup2(fd, target)
-            os.close(fd)
+            if fd != target:
+                os.dup2(fd, target)
+                os.close(fd)
         os.chdir(cwd)
         os.environ.clear()
         os.environ.update(env)
