@@ -89,6 +89,12 @@ METHODS = {
     "paper": {"estimation": {"optimizer": "random_search"}, "motion": {"planner": "paper"}},
     "ours": yaml.safe_load(OURS_CONFIG.read_text()),   # one place for ours' settings
 }
+ABLATIONS = {
+    # ours with one setting taken back, run only by name (--only, loop.smk's methods=...) and left
+    # out of loop.json: an A/B of that setting on the same code and campaigns
+    "ours_uniform_first": {**METHODS["ours"], "model": {**(METHODS["ours"].get("model") or {}),
+                                                         "first_mu_weight": None}},
+}
 PHYSICS = ("mujoco", "elastica")
 MODES = ("state", "video")
 STATE_SOURCE = ROOT / "results" / "bench"
@@ -136,11 +142,12 @@ def method_config(config: dict, method: str, seed: int, physics: str = "mujoco",
     ``lab.physics`` and, in the state mode, ``lab.render: false``.
 
     Raises:
-        KeyError: unknown method (not in ``METHODS``).
+        KeyError: unknown method (not in ``METHODS`` or ``ABLATIONS``).
     """
     from stringcast.core import merge_config
 
-    cfg = merge_config(copy.deepcopy({k: v for k, v in config.items() if k != "_path"}), METHODS[method])
+    overlay = METHODS[method] if method in METHODS else ABLATIONS[method]
+    cfg = merge_config(copy.deepcopy({k: v for k, v in config.items() if k != "_path"}), overlay)
     cfg.setdefault("estimation", {})["seed"] = int(seed)   # the config file may leave a section to its defaults
     cfg.setdefault("motion", {})["seed"] = int(seed)
     cfg["lab"] = dict(cfg.get("lab") or {}, physics=physics)
@@ -386,8 +393,8 @@ def main(argv: list[str] | None = None) -> None:
     if not a.work:
         ap.error("--only needs --work (where the campaign's run.json goes)")
     k, s, m = int(a.only[0]), int(a.only[1]), a.only[2]
-    if k not in PAPER_TARGET or m not in METHODS:
-        ap.error(f"--only {k} {s} {m}: a type 1-7 and a method of {', '.join(METHODS)}")
+    if k not in PAPER_TARGET or (m not in METHODS and m not in ABLATIONS):
+        ap.error(f"--only {k} {s} {m}: a type 1-7 and a method of {', '.join([*METHODS, *ABLATIONS])}")
     from stringcast.core import load_config
 
     for p in spec.physics:

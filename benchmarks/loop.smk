@@ -46,7 +46,7 @@ wildcard_constraints:
     mode=r"state|video",
     type=r"\d+",
     seed=r"\d+",
-    method=r"[a-z]+",
+    method=r"[a-z_]+",
 
 
 rule all:
