@@ -19,6 +19,11 @@ Methods are config overlays:
   ``stringcast campaign --method ours`` use), one file for both physics. Each line's reason is
   in the file; the evidence, and what was tried and left out, is in docs/method.md.
 
+Ablations (``ABLATIONS``) are ours with one setting taken back, to A/B it on the same code and
+campaigns; they run only by name (``--only 1 0 ours_uniform_first``, or loop.smk's
+``methods="ours_uniform_first"``) and loop.json leaves them out: ``ours_uniform_first`` plans the
+first motion with uniform masses (``model.first_mu_weight: null``, ours before 0fe8d58).
+
 A seed ``s`` sets the lab's noise (the campaign's seed: camera noise, joint noise, trigger
 error), the pipeline's own searches (``estimation.seed`` and ``motion.seed`` = ``s``) and, in
 the state mode, the drawn tracking error, so the seeds differ in both the lab and the method.
