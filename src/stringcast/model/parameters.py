@@ -13,7 +13,6 @@ Shared by the estimation and planning stages, so neither reaches into the other.
 """
 from __future__ import annotations
 
-import dataclasses
 from typing import Mapping
 
 import numpy as np
@@ -150,14 +149,11 @@ def encode(coeffs: np.ndarray, mu_groups: np.ndarray, model: ModelSettings) -> n
 def start_chi(prev_params: Mapping | None, string, model: ModelSettings, motion: MotionSettings,
               source="params.json") -> np.ndarray:
     """chi_best at m = 0: the previous estimate's chi, else that of the first plan's set
-    (:func:`first_parameters`: Table 2 minima but k_s, its masses per mass group) with every
-    mass at ``model.first_mu``: ``model.first_mu_weight`` shapes the first motion only (a search
-    started from a weight 10 times heavier fitted the first trial 2-5 times worse in the loop
-    benchmark, docs/method.md)."""
+    (:func:`first_parameters`: Table 2 minima but k_s, its masses per mass group)."""
     groups = string.mass_groups()
     n_groups = int(groups.max()) + 1
     if prev_params is None:
-        coeffs, mu = first_parameters(dataclasses.replace(model, first_mu_weight=None), motion, string)
+        coeffs, mu = first_parameters(model, motion, string)
         mu_groups = np.full(n_groups, float(model.first_mu))
         mu_groups[groups] = mu          # group 0 the plain points, g >= 1 the g-th special point
         return encode(coeffs, mu_groups, model)
