@@ -19,10 +19,11 @@ Methods are config overlays:
   ``stringcast campaign --method ours`` use), one file for both physics. Each line's reason is
   in the file; the evidence, and what was tried and left out, is in docs/method.md.
 
-Ablations (``ABLATIONS``) are ours with one setting taken back, to A/B it on the same code and
-campaigns; they run only by name (``--only 1 0 ours_uniform_first``, or loop.smk's
-``methods="ours_uniform_first"``) and loop.json leaves them out: ``ours_uniform_first`` plans the
-first motion with uniform masses (``model.first_mu_weight: null``, ours before 0fe8d58).
+Variants (``VARIANTS``) are ours with one setting changed, to A/B it on the same code and
+campaigns; they run only by name (``--only 1 0 ours_first_mu_weight``, or loop.smk's
+``methods="ours_first_mu_weight"``) and loop.json leaves them out: ``ours_first_mu_weight`` plans
+the first motion with each weight's point at 10 times a plain one's mass (tried in ours from
+0fe8d58, left out: docs/method.md).
 
 A seed ``s`` sets the lab's noise (the campaign's seed: camera noise, joint noise, trigger
 error), the pipeline's own searches (``estimation.seed`` and ``motion.seed`` = ``s``) and, in
@@ -94,11 +95,11 @@ METHODS = {
     "paper": {"estimation": {"optimizer": "random_search"}, "motion": {"planner": "paper"}},
     "ours": yaml.safe_load(OURS_CONFIG.read_text()),   # one place for ours' settings
 }
-ABLATIONS = {
-    # ours with one setting taken back, run only by name (--only, loop.smk's methods=...) and left
+VARIANTS = {
+    # ours with one setting changed, run only by name (--only, loop.smk's methods=...) and left
     # out of loop.json: an A/B of that setting on the same code and campaigns
-    "ours_uniform_first": {**METHODS["ours"], "model": {**(METHODS["ours"].get("model") or {}),
-                                                         "first_mu_weight": None}},
+    "ours_first_mu_weight": {**METHODS["ours"], "model": {**(METHODS["ours"].get("model") or {}),
+                                                           "first_mu_weight": 10.0}},
 }
 PHYSICS = ("mujoco", "elastica")
 MODES = ("state", "video")
@@ -147,11 +148,11 @@ def method_config(config: dict, method: str, seed: int, physics: str = "mujoco",
     ``lab.physics`` and, in the state mode, ``lab.render: false``.
 
     Raises:
-        KeyError: unknown method (not in ``METHODS`` or ``ABLATIONS``).
+        KeyError: unknown method (not in ``METHODS`` or ``VARIANTS``).
     """
     from stringcast.core import merge_config
 
-    overlay = METHODS[method] if method in METHODS else ABLATIONS[method]
+    overlay = METHODS[method] if method in METHODS else VARIANTS[method]
     cfg = merge_config(copy.deepcopy({k: v for k, v in config.items() if k != "_path"}), overlay)
     cfg.setdefault("estimation", {})["seed"] = int(seed)   # the config file may leave a section to its defaults
     cfg.setdefault("motion", {})["seed"] = int(seed)
@@ -398,8 +399,8 @@ def main(argv: list[str] | None = None) -> None:
     if not a.work:
         ap.error("--only needs --work (where the campaign's run.json goes)")
     k, s, m = int(a.only[0]), int(a.only[1]), a.only[2]
-    if k not in PAPER_TARGET or (m not in METHODS and m not in ABLATIONS):
-        ap.error(f"--only {k} {s} {m}: a type 1-7 and a method of {', '.join([*METHODS, *ABLATIONS])}")
+    if k not in PAPER_TARGET or (m not in METHODS and m not in VARIANTS):
+        ap.error(f"--only {k} {s} {m}: a type 1-7 and a method of {', '.join([*METHODS, *VARIANTS])}")
     from stringcast.core import load_config
 
     for p in spec.physics:

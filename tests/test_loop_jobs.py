@@ -113,15 +113,15 @@ def test_spec_and_run_config(config):
     assert run_dir(Path("/w"), 5, 1, "ours", "elastica", "state").name == "loop_elastica_state_s5_seed1_ours"
 
 
-def test_an_ablation_is_ours_less_one_setting(config):
-    """``ours_uniform_first`` is ours with first_mu_weight taken back, and loop.json's spec refuses it."""
+def test_a_variant_is_ours_with_one_setting_changed(config):
+    """``ours_first_mu_weight`` is ours with first_mu_weight set, and loop.json's spec refuses it."""
     ours = method_config(config, "ours", 0, "mujoco", "state")
-    ablation = method_config(config, "ours_uniform_first", 0, "mujoco", "state")
-    assert ours["model"]["first_mu_weight"] is not None and ablation["model"]["first_mu_weight"] is None
-    ours["model"].pop("first_mu_weight"), ablation["model"].pop("first_mu_weight")
-    assert ours == ablation
-    with pytest.raises(ValueError, match="method ours_uniform_first"):
-        Spec(methods=("ours_uniform_first",))
+    variant = method_config(config, "ours_first_mu_weight", 0, "mujoco", "state")
+    assert ours["model"].get("first_mu_weight") is None and variant["model"]["first_mu_weight"] == 10.0
+    variant["model"].pop("first_mu_weight"), ours["model"].pop("first_mu_weight", None)
+    assert ours == variant
+    with pytest.raises(ValueError, match="method ours_first_mu_weight"):
+        Spec(methods=("ours_first_mu_weight",))
 
 
 def test_a_lab_that_ran_other_physics_is_refused(tmp_path):
