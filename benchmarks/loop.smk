@@ -21,14 +21,22 @@ if "work" not in config:
         "benchmarks/loop.smk: give the campaigns' folder: --config work=DIR"
     )
 WORK = Path(str(config["work"])).resolve()
-TYPES = str(config.get("types", "1 2 3 4 5 6 7")).split()
-SEEDS = str(config.get("seeds", "0 1 2 3 4")).split()
-METHODS = str(config.get("methods", "paper ours")).split()
-PHYSICS = str(config.get("physics", "mujoco elastica")).split()
+
+
+def words(key, default):
+    """A --config list as words; Snakemake reads key="" as None (none) and key=3 as an int."""
+    value = config.get(key, default)
+    return [] if value is None else str(value).split()
+
+
+TYPES = words("types", "1 2 3 4 5 6 7")
+SEEDS = words("seeds", "0 1 2 3 4")
+METHODS = words("methods", "paper ours")
+PHYSICS = words("physics", "mujoco elastica")
 MODE = str(config.get("mode", "state"))
-VIDEO_TYPES = str(config.get("video_types", " ".join(TYPES))).split()
-VIDEO_SEEDS = str(config.get("video_seeds", "0")).split() if MODE == "state" else []
-VIDEO_METHODS = str(config.get("video_methods", "ours")).split()
+VIDEO_TYPES = words("video_types", " ".join(TYPES))
+VIDEO_SEEDS = words("video_seeds", "0") if MODE == "state" else []
+VIDEO_METHODS = words("video_methods", "ours")
 CORES = int(config.get("campaign_cores", 2))
 PY = sys.executable
 REPO = Path(workflow.basedir).parent
