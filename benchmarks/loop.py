@@ -96,10 +96,9 @@ METHODS = {
     "ours": yaml.safe_load(OURS_CONFIG.read_text()),   # one place for ours' settings
 }
 VARIANTS = {
-    # ours with one setting changed, run only by name (--only, loop.smk's methods=...) and left
-    # out of loop.json: an A/B of that setting on the same code and campaigns
-    "ours_first_mu_weight": {**METHODS["ours"], "model": {**(METHODS["ours"].get("model") or {}),
-                                                           "first_mu_weight": 10.0}},
+    # ours with one setting changed (merged over ours), run only by name (--only, loop.smk's
+    # methods=...) and left out of loop.json: an A/B of that setting on the same code and campaigns
+    "ours_first_mu_weight": {"model": {"first_mu_weight": 10.0}},
 }
 PHYSICS = ("mujoco", "elastica")
 MODES = ("state", "video")
@@ -152,8 +151,10 @@ def method_config(config: dict, method: str, seed: int, physics: str = "mujoco",
     """
     from stringcast.core import merge_config
 
-    overlay = METHODS[method] if method in METHODS else VARIANTS[method]
-    cfg = merge_config(copy.deepcopy({k: v for k, v in config.items() if k != "_path"}), overlay)
+    overlays = [METHODS[method]] if method in METHODS else [METHODS["ours"], VARIANTS[method]]
+    cfg = copy.deepcopy({k: v for k, v in config.items() if k != "_path"})
+    for overlay in overlays:
+        merge_config(cfg, overlay)
     cfg.setdefault("estimation", {})["seed"] = int(seed)   # the config file may leave a section to its defaults
     cfg.setdefault("motion", {})["seed"] = int(seed)
     cfg["lab"] = dict(cfg.get("lab") or {}, physics=physics)
