@@ -80,8 +80,9 @@ def server(tmp_path):
     os.waitpid(pid, 0)
 
 
-def _client(args, sock, cwd, **kw):
-    env = {**os.environ, warm.ENV_SOCKET: str(sock), "WARM_TEST": "from the client", "OPENBLAS_NUM_THREADS": "1"}
+def _client(args, sock, cwd, env_extra=None, **kw):
+    env = {**os.environ, warm.ENV_SOCKET: str(sock), "WARM_TEST": "from the client", "OPENBLAS_NUM_THREADS": "1",
+           **(env_extra or {})}
     return subprocess.Popen([sys.executable, "-c", "import sys; from stringcast.cli import main; sys.exit(main())",
                              *args], cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kw)
 
@@ -187,3 +188,33 @@ def test_start_server_only_for_local_runs_and_not_when_switched_off(tmp_path, mo
     finally:
         warm.stop_server()
     assert warm.ENV_SOCKET not in os.environ and not os.path.exists(path)
+
+
+def test_a_stage_waits_for_a_starting_server_but_not_for_a_gone_one(tmp_path, monkeypatch):
+    path, log = tmp_path / "warm.sock", tmp_path / "warm.log"
+    pid = os.fork()
+    if pid == 0:   # a server still importing for a second when the clients start
+        try:
+            with open(log, "w") as fh:
+                warm.serve(str(path), lambda: time.sleep(1.0), lambda a: a[0] == "nap", _nap,
+                           parent=os.getppid(), log=fh)
+        finally:
+            os._exit(0)
+    try:
+        monkeypatch.setenv(warm.ENV_SOCKET, str(path))
+        monkeypatch.setenv(warm.ENV_SERVER_PID, str(pid))
+        t0 = time.monotonic()
+        assert warm.run_in_server(["nap", "0", "0"], wait_s=0.0) is None   # decode's way: cold at once
+        assert time.monotonic() - t0 < 0.5 and not path.exists()
+        proc = _client(["nap", "0", "4"], path, tmp_path, env_extra={warm.ENV_SERVER_PID: str(pid)})
+        out, _ = proc.communicate(timeout=60)
+        assert proc.returncode == 4 and out == "out from the job\n"
+        job_pid = int((tmp_path / "job.txt").read_text().split()[0])
+        assert job_pid != proc.pid and f"pid {job_pid}: stringcast nap 0 4" in log.read_text()
+    finally:
+        os.kill(pid, signal.SIGTERM)
+        os.waitpid(pid, 0)
+    monkeypatch.setenv(warm.ENV_SOCKET, str(tmp_path / "never.sock"))
+    t0 = time.monotonic()
+    assert warm.run_in_server(["nap", "0", "0"], wait_s=30.0) is None   # its server is gone: no wait
+    assert time.monotonic() - t0 < 1.0

@@ -96,21 +96,30 @@ def stage_sections(command: str) -> tuple[str, ...]:
     return sections_read_from_source(STAGES[command])
 
 
-def _run(command: str, args, *positional):
-    """Run ``command``'s stage on ``positional`` (its own order) and the settings it takes."""
+def _run(command: str, args, *positional, **keywords):
+    """Run ``command``'s stage on ``positional`` (its own order), ``keywords`` and the settings it takes."""
     func = stage_entry(command)
-    return func(*positional, **_settings(func, args))
+    return func(*positional, **keywords, **_settings(func, args))
 
 
 def cmd_calib_views(args):
     views = _run("calib-views", args, Path(args.calib_dir), _campaign(args), Path(args.out))
     print(f"calibration views: {len(views)} of the board's {views.found} in {args.calib_dir} -> {args.out}")
+    if args.out_intrinsics:
+        from stringcast.calibrate.calib_views import write_campaign_intrinsics
+
+        intr = write_campaign_intrinsics(Path(args.out), _campaign(args), Path(args.out_intrinsics),
+                                         **_settings(write_campaign_intrinsics, args))
+        print(f"intrinsics of the views: reprojection error {intr.rms_px:.3f} px over {intr.n_views} views "
+              f"-> {args.out_intrinsics}")
 
 
 def cmd_calibrate(args):
     calib_dir = Path(args.calib_dir) if args.calib_dir and Path(args.calib_dir).is_dir() else None
     calib = Path(args.calib_views) if args.calib_views else calib_dir
-    cal = _run("calibrate", args, Path(args.trial_dir), calib, _campaign(args), Path(args.out))
+    intrinsics = Path(args.intrinsics) if args.intrinsics and calib is not None else None
+    cal = _run("calibrate", args, Path(args.trial_dir), calib, _campaign(args), Path(args.out),
+               intrinsics_json=intrinsics)
     bc = (cal.board_check or {}).get("residual_mm")
     extra = "" if bc is None else f", board-to-robot check {bc:.1f} mm"
     print(f"calibration: reprojection error {cal.reprojection_error_px:.3f} px{extra}, {cal.verdict.status} -> {args.out}")
@@ -291,7 +300,7 @@ def main(argv: list[str] | None = None) -> int:
     """Run one subcommand; its exit status. A workflow stage runs in the run's warm server where
     there is one (:mod:`stringcast.warm`), else here."""
     argv = sys.argv[1:] if argv is None else list(argv)
-    code = warm.run_in_server(argv)
+    code = warm.run_in_server(argv, wait_s=0.0 if argv[:1] and argv[0] in START_AT_ONCE else WARM_WAIT_S)
     if code is not None:
         return code
     from stringcast.core import ConfigError, DataError, JointLimitError
@@ -305,6 +314,12 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+START_AT_ONCE = ("decode",)
+"""Stages that run cold at once rather than wait for a starting warm server: the video's decode, a
+trial's first job, imports only OpenCV and NumPy, and every later stage waits for it."""
+WARM_WAIT_S = 30.0
+"""How long any other stage waits for a starting warm server (its imports take 2-3 s) rather than
+import the same stages itself, beside the decode (:func:`stringcast.warm.run_in_server`)."""
 PRELOAD_SKIPS = ("report-trial", "report-campaign")
 """Stages the warm server does not import: the reports (matplotlib, Jinja2: 0.7 s of CPU that the
 video's decode shares) come after the next motion, and their jobs import them themselves."""

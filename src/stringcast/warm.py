@@ -47,6 +47,9 @@ from typing import Callable
 
 ENV_SOCKET = "STRINGCAST_WARM"
 """The server's socket, set by :func:`start_server` for the jobs of the run."""
+ENV_SERVER_PID = "STRINGCAST_WARM_PID"
+"""The server's process id, set with :data:`ENV_SOCKET`: a client that finds no socket yet waits
+while that process lives (it is still importing the stages)."""
 ENV_SWITCH = "STRINGCAST_WARM_START"
 """``0``: no warm server (every job cold)."""
 LOG_NAME = os.path.join(".snakemake", "stringcast_warm.log")
@@ -60,12 +63,17 @@ _HEADER = struct.Struct("!I")   # the request's length; the three standard strea
 _SERVER: tuple | None = None    # (process, directory) of the server this process started
 
 
-def run_in_server(argv: list[str]) -> int | None:
+def run_in_server(argv: list[str], wait_s: float = 0.0) -> int | None:
     """Run ``stringcast argv`` in the warm server named by ``$STRINGCAST_WARM``; its exit status.
 
     Returns None, having started nothing, where there is no server to reach, it declines
     (``argv`` is not a workflow stage) or a standard stream cannot be passed: the caller then
     runs the command itself. A job killed by a signal kills this process with the same signal.
+
+    ``wait_s``: where the server is still starting (no socket yet, its process
+    ``$STRINGCAST_WARM_PID`` alive), wait up to this many seconds for it rather than run cold.
+    The first jobs of a run start beside the server's imports; a job that would import the same
+    stages cold spends that CPU twice, taken from the jobs beside it (the video's decode).
 
     Raises:
         RuntimeError: the server died after the job had started (its outcome is unknown).
@@ -73,6 +81,8 @@ def run_in_server(argv: list[str]) -> int | None:
     path = os.environ.get(ENV_SOCKET)
     if not path or not sys.platform.startswith("linux"):
         return None
+    if wait_s > 0 and not os.path.exists(path):
+        _wait_for_server(path, os.environ.get(ENV_SERVER_PID, ""), wait_s)
     try:
         for fd in (0, 1, 2):
             os.fstat(fd)                             # a closed standard stream cannot be passed on
@@ -103,6 +113,18 @@ def run_in_server(argv: list[str]) -> int | None:
         os.kill(os.getpid(), sig)
         return 128 + sig
     return int(outcome[1])
+
+
+def _wait_for_server(path: str, pid: str, wait_s: float) -> None:
+    """Until the socket ``path`` exists, the server's process ``pid`` (decimal text) is gone, or
+    ``wait_s`` seconds have passed."""
+    end = time.monotonic() + wait_s
+    while pid.isdigit() and not os.path.exists(path) and time.monotonic() < end:
+        try:
+            os.kill(int(pid), 0)
+        except OSError:   # gone (or not ours): nothing to wait for
+            return
+        time.sleep(0.02)
 
 
 def _kill(pid: int, sig: int) -> None:
@@ -233,6 +255,7 @@ def _run_job(run, argv: list[str], cwd: str, env: dict, fds: list[int]) -> None:
         os.environ.clear()
         os.environ.update(env)
         os.environ.pop(ENV_SOCKET, None)       # the job itself runs here, never in a server again
+        os.environ.pop(ENV_SERVER_PID, None)
         signal.signal(signal.SIGINT, signal.default_int_handler)
         for sig in (signal.SIGTERM, signal.SIGHUP, signal.SIGCHLD):
             signal.signal(sig, signal.SIG_DFL)
@@ -327,6 +350,7 @@ def start_server(local: bool, workdir: str = ".") -> str | None:
         return None
     _SERVER = (proc, directory)
     os.environ[ENV_SOCKET] = path
+    os.environ[ENV_SERVER_PID] = str(proc.pid)
     return path
 
 
@@ -334,6 +358,7 @@ def stop_server() -> None:
     """Stop the server :func:`start_server` started (the workflow's ``onsuccess`` and ``onerror``)."""
     global _SERVER
     os.environ.pop(ENV_SOCKET, None)
+    os.environ.pop(ENV_SERVER_PID, None)
     if _SERVER is None:
         return
     proc, directory = _SERVER
