@@ -55,6 +55,8 @@ def _add_analysis_commands(add) -> None:
     sp.add_argument("--calib-dir", required=True, help="data/<campaign>/calib/: ChArUco clip or images")
     sp.add_argument("--campaign", required=True, help=campaign_help)
     sp.add_argument("--out", required=True, help="calib_views.npz to write (the views' corners, for calibrate)")
+    sp.add_argument("--out-intrinsics", help="intrinsics.json to write as well: the views' own intrinsics, fitted "
+                                             "and judged once for every trial's calibrate")
 
     sp = add("calibrate", "ChArUco calibration of one trial -> calibration.json")
     sp.add_argument("--trial-dir", required=True, help=trial_help)
@@ -62,6 +64,8 @@ def _add_analysis_commands(add) -> None:
                                         "if not given or not a folder, the board's homography only")
     sp.add_argument("--calib-views", help="the campaign's calib_views.npz (its board views, found once); read instead "
                                           "of searching the calib folder")
+    sp.add_argument("--intrinsics", help="the campaign's intrinsics.json (`calib-views --out-intrinsics`, fitted to "
+                                         "those views once); read instead of refitting them (the same result)")
     sp.add_argument("--campaign", required=True, help=campaign_help)
     sp.add_argument("--out", required=True, help="calibration.json to write (intrinsics, board pose, px errors)")
 

@@ -156,6 +156,41 @@ def test_the_campaigns_views_found_once_give_the_trials_calibration_exactly(stil
         run_calibration(trial, tmp_path / "broken.npz", campaign, tmp_path / "x.json", **st)
 
 
+def test_the_campaigns_intrinsics_fitted_once_give_the_trials_calibration_exactly(still_arm, tmp_path, settings):
+    """intrinsics.json (the views' own fit, once per campaign) read back by a trial's calibration gives
+    the calibration that refits them, byte for byte, with and without the trial's board joining the
+    views; one fitted to other views or other settings is refused, by name."""
+    import dataclasses
+
+    from stringcast.calibrate import write_calib_views
+    from stringcast.calibrate.calib_views import write_campaign_intrinsics
+    from stringcast.calibrate.calibration import run_calibration
+    from stringcast.core import DataError
+    from stringcast.lab import write_calibration_clip
+
+    _, _, campaign, cfg, _, trial = still_arm
+    calib = write_calibration_clip(campaign, cfg, tmp_path / "calib", seed=5, n_frames=14)
+    views_npz, intr_json = tmp_path / "calib_views.npz", tmp_path / "intrinsics.json"
+    write_calib_views(calib, campaign, views_npz, calibration=settings.calibration)
+    for board_view in (True, False):
+        cal_st = dataclasses.replace(settings.calibration, board_view=board_view)
+        st = {"board_check": settings.board_check, "calibration": cal_st}
+        intr = write_campaign_intrinsics(views_npz, campaign, intr_json, calibration=cal_st)
+        assert intr.n_views >= 3 and read_json(intr_json)["verdict"]["status"] in ("ok", "warn", "fail")
+        run_calibration(trial, views_npz, campaign, tmp_path / "refit.json", **st)
+        run_calibration(trial, views_npz, campaign, tmp_path / "cached.json", intrinsics_json=intr_json, **st)
+        assert (tmp_path / "cached.json").read_bytes() == (tmp_path / "refit.json").read_bytes()
+    other = dataclasses.replace(settings.calibration, jackknife_groups=5)
+    with pytest.raises(DataError, match="intrinsics.json: fitted to other calibration settings"):
+        run_calibration(trial, views_npz, campaign, tmp_path / "x.json", intrinsics_json=intr_json,
+                        board_check=settings.board_check, calibration=other)
+    write_calib_views(calib, campaign, views_npz, calibration=dataclasses.replace(settings.calibration, max_views=4))
+    with pytest.raises(DataError, match="intrinsics.json: fitted to other calibration views"):
+        run_calibration(trial, views_npz, campaign, tmp_path / "x.json", intrinsics_json=intr_json,
+                        board_check=settings.board_check, calibration=dataclasses.replace(settings.calibration,
+                                                                                          board_view=False))
+
+
 # ------------------------------------------------------------ an arm without joint discs
 
 def _plain_arm_image(calibration, arm, q, rng, blotchy: bool):

@@ -1,6 +1,6 @@
-# Calibration: intrinsics from data/<campaign>/calib/ (if present; its board views found
-# once per campaign) and the pixel-to-plane homography from the ChArUco board in the
-# trial's video.
+# Calibration: intrinsics from data/<campaign>/calib/ (if present; its board views found,
+# and fitted on their own, once per campaign) and the pixel-to-plane homography from the
+# ChArUco board in the trial's video.
 
 
 rule calib_views:
@@ -8,7 +8,8 @@ rule calib_views:
         calib="data/{campaign}/calib",
         campaign="data/{campaign}/campaign.yaml",
     output:
-        "results/{campaign}/calib_views.npz",
+        views="results/{campaign}/calib_views.npz",
+        intrinsics="results/{campaign}/intrinsics.json",
     log:
         "results/{campaign}/logs/calib_views.log",
     benchmark:
@@ -21,7 +22,7 @@ rule calib_views:
         lab=campaign_lab_entries,
     shell:
         '{params.cli} calib-views --calib-dir "{input.calib}" --campaign "{input.campaign}" '
-        '--out "{output}" > "{log}" 2>&1'
+        '--out "{output.views}" --out-intrinsics "{output.intrinsics}" > "{log}" 2>&1'
 
 
 rule calibrate:

@@ -150,14 +150,16 @@ def trial_video(wildcards):
 
 
 def calib_input(wildcards):
-    """The campaign's calibration views (rule calib_views) if it has a board clip for intrinsics
-    in data/<campaign>/calib/; found once, read by every trial's calibrate."""
+    """The campaign's board views and their intrinsics (rule calib_views), if it has calib/."""
     d = Path("data", wildcards.campaign, "calib")
-    return [f"results/{wildcards.campaign}/calib_views.npz"] if d.is_dir() else []
+    r = f"results/{wildcards.campaign}"
+    return [f"{r}/calib_views.npz", f"{r}/intrinsics.json"] if d.is_dir() else []
 
 
 def calib_arg(wildcards, input):
-    return f'--calib-views "{input.calib[0]}"' if input.calib else ""
+    if not input.calib:
+        return ""
+    return f'--calib-views "{input.calib[0]}" --intrinsics "{input.calib[1]}"'
 
 
 def previous_params(wildcards):

@@ -10,9 +10,16 @@ each trial's ``calibrate`` reads the views back: the same :class:`~stringcast.ca
 The file is NumPy's ``.npz`` (``np.load`` opens it anywhere): per view ``object_points_<k>``
 (N_k, 1, 3) float32 m and ``image_points_<k>`` (N_k, 1, 2) float32 px, and ``meta`` (a JSON
 string: image_size, found, names, source).
+
+The views' own intrinsics (:func:`~stringcast.calibrate.intrinsics.judged_intrinsics`, the
+fit a trial's board view is checked against before it joins the views) are the same for every
+trial too: :func:`write_campaign_intrinsics` fits them once, to ``results/<campaign>/intrinsics.json``
+(K, distortion, their measures and verdict), and each trial's calibration reads them back
+(:func:`read_campaign_intrinsics`) rather than refit them beside its decode.
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from contextlib import contextmanager
@@ -21,9 +28,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from stringcast.core import CalibrationSettings, DataError, atomic_path
+from stringcast.core import CalibrationSettings, DataError, Verdict, atomic_path, write_json
 from stringcast.video import FRAME_SUFFIXES, open_video
-from .charuco import Views, select_calibration_views
+from .charuco import Intrinsics, Views, select_calibration_views
 
 _VIDEO_SUFFIXES = (".mkv", ".avi", ".mp4", ".mov")
 
@@ -104,3 +111,71 @@ def read_calib_views(path: str | Path) -> tuple[Views, str]:
     except (OSError, KeyError, ValueError, TypeError) as exc:
         raise DataError(f"{path}: not a calibration views file ({exc}); delete it to find the views again") from exc
     return views, str(meta["source"])
+
+
+def camera_flags(campaign) -> int:
+    """The ``cv2.calibrateCamera`` flags the campaign's camera entry asks for (``fix_k3``: ``CALIB_FIX_K3``)."""
+    return cv2.CALIB_FIX_K3 if campaign.setup.camera.get("fix_k3") else 0
+
+
+def _views_digest(views: Views) -> str:
+    """SHA-256 of the views' corners, image size and names: which views intrinsics were fitted to."""
+    h = hashlib.sha256(json.dumps([list(views.image_size), list(views.names)]).encode())
+    for o, i in zip(views.object_points, views.image_points):
+        h.update(np.ascontiguousarray(o, np.float32).tobytes())
+        h.update(np.ascontiguousarray(i, np.float32).tobytes())
+    return h.hexdigest()
+
+
+def write_campaign_intrinsics(views_npz: str | Path, campaign, out: str | Path, *,
+                              calibration: CalibrationSettings = CalibrationSettings()) -> Intrinsics:
+    """Fit and judge the views of ``views_npz`` (:func:`write_calib_views`) once for the campaign
+    (:func:`~stringcast.calibrate.intrinsics.judged_intrinsics`, on one OpenCV thread as a trial's
+    calibration fits) and write them to ``out`` (JSON, atomically). Returns the intrinsics.
+
+    The file holds K (3, 3) px, dist (5,) (k1, k2, p1, p2, k3), rms_px, per_view_rms_px, the
+    views' counts, the fit's flags, ``quality`` and ``verdict`` (as ``calibration.json``), and
+    what they were made from: the views' digest, the flags and the ``calibration`` settings.
+
+    Raises:
+        DataError: as :func:`read_calib_views`; too few views to fit.
+    """
+    from .intrinsics import judged_intrinsics
+
+    views, source = read_calib_views(views_npz)
+    flags = camera_flags(campaign)
+    with single_threaded_opencv():
+        intr, quality, verdict = judged_intrinsics(views, flags, calibration)
+    write_json(out, {"source": source, "views_digest": _views_digest(views), "camera_flags": flags,
+                     "settings": calibration.as_dict(), "K": intr.K, "dist": intr.dist, "rms_px": intr.rms_px,
+                     "n_views": intr.n_views, "image_size": list(intr.image_size),
+                     "views_rejected": intr.views_rejected, "views_found": intr.views_found, "std": intr.std,
+                     "per_view_rms_px": list(intr.per_view_rms_px), "flags": intr.flags,
+                     "quality": quality, "verdict": verdict.as_dict()})
+    return intr
+
+
+def read_campaign_intrinsics(path: str | Path, views: Views, campaign, calibration: CalibrationSettings
+                             ) -> tuple[Intrinsics, dict, Verdict]:
+    """The intrinsics :func:`write_campaign_intrinsics` wrote: (intrinsics (no views or poses), their
+    quality measures, their verdict), as ``judged_intrinsics`` returned them.
+
+    Raises:
+        DataError: not a readable intrinsics file, or made from other views, camera flags or
+            ``calibration`` settings than these (the file is named; delete it to refit).
+    """
+    try:
+        doc = json.loads(Path(path).read_text())
+        intr = Intrinsics(np.asarray(doc["K"], float), np.asarray(doc["dist"], float), float(doc["rms_px"]),
+                          int(doc["n_views"]), tuple(doc["image_size"]), int(doc["views_rejected"]),
+                          int(doc["views_found"]), None if doc["std"] is None else np.asarray(doc["std"], float),
+                          tuple(float(e) for e in doc["per_view_rms_px"]), flags=int(doc["flags"]))
+        made = (doc["views_digest"], int(doc["camera_flags"]), doc["settings"])
+        quality, verdict = doc["quality"], Verdict.from_dict(doc["verdict"])
+    except (OSError, KeyError, ValueError, TypeError) as exc:
+        raise DataError(f"{path}: not a campaign intrinsics file ({exc}); delete it to fit the views again") from exc
+    now = (_views_digest(views), camera_flags(campaign), json.loads(json.dumps(calibration.as_dict())))
+    for what, then, current in zip(("calibration views", "camera's fix_k3", "calibration settings"), made, now):
+        if then != current:
+            raise DataError(f"{path}: fitted to other {what} than this trial's; delete it to fit the views again")
+    return intr, quality, verdict

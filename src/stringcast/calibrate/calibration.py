@@ -46,7 +46,7 @@ from stringcast.core import (BoardCheckSettings, CalibrationSettings, DataError,
 from stringcast.video import open_video
 
 from .board_check import check_board_to_robot
-from .calib_views import find_calib_views, read_calib_views, single_threaded_opencv
+from .calib_views import camera_flags, find_calib_views, read_calib_views, read_campaign_intrinsics, single_threaded_opencv
 from .charuco import Intrinsics, calibrate_intrinsics, detect_charuco
 from .intrinsics import board_view_check, judged_intrinsics
 from .mapping import Calibration, apply_homography
@@ -150,7 +150,7 @@ def median_frame(video, n: int = 5) -> np.ndarray:
 
 
 def run_calibration(trial_dir: str | Path, calib_dir: str | Path | None, campaign, out_json: str | Path,
-                    n_median: int = 5, *, board_check: BoardCheckSettings,
+                    n_median: int = 5, intrinsics_json: str | Path | None = None, *, board_check: BoardCheckSettings,
                     calibration: CalibrationSettings = CalibrationSettings()) -> Calibration:
     """Calibrate one trial and write ``calibration.json`` (reproducibly: :func:`~stringcast.calibrate.calib_views.single_threaded_opencv`).
 
@@ -164,6 +164,9 @@ def run_calibration(trial_dir: str | Path, calib_dir: str | Path | None, campaig
     file, a warning above ``board_check.warn_mm``). The file's ``verdict`` gathers them.
 
     Args:
+        intrinsics_json: the campaign's views' own intrinsics, fitted once
+            (``intrinsics.json`` of :func:`~stringcast.calibrate.calib_views.write_campaign_intrinsics`),
+            read instead of refitted; None: fitted here. The result is the same.
         board_check: board-check settings (:class:`~stringcast.core.BoardCheckSettings`); the
             check looks for the arm's outline (``campaign.arm``).
         calibration: intrinsics settings (:class:`~stringcast.core.CalibrationSettings`;
@@ -171,22 +174,29 @@ def run_calibration(trial_dir: str | Path, calib_dir: str | Path | None, campaig
 
     Raises:
         DataError: no board / too few corners in the trial frames or the calibration views,
-            or mismatched image sizes (the file is named).
+            mismatched image sizes, or an ``intrinsics_json`` made from other views or settings
+            (the file is named).
     """
     with single_threaded_opencv():
-        return _run_calibration(Path(trial_dir), calib_dir, campaign, out_json, n_median, board_check, calibration)
+        return _run_calibration(Path(trial_dir), calib_dir, campaign, out_json, n_median, board_check, calibration,
+                                intrinsics_json)
 
 
-def _intrinsics(calib_dir: Path, board, setup, image: np.ndarray, detection, source: str, st: CalibrationSettings):
-    """(Intrinsics, their measures, the board view's check or None, verdict) from calib/ and the trial's board."""
+def _intrinsics(calib_dir: Path, board, campaign, image: np.ndarray, detection, source: str, st: CalibrationSettings,
+                intrinsics_json: Path | None = None):
+    """(Intrinsics, their measures, the board view's check or None, verdict) from calib/ (the views'
+    own fit read from ``intrinsics_json`` if given) and the trial's board."""
     calib = Path(calib_dir)
     views, where = read_calib_views(calib) if calib.is_file() else find_calib_views(calib, board, st)
-    flags = cv2.CALIB_FIX_K3 if setup.camera.get("fix_k3") else 0
+    flags = camera_flags(campaign)
     size = (image.shape[1], image.shape[0])
     if tuple(views.image_size) != size:
         raise DataError(f"{source}: image is {size[0]}x{size[1]} but the calibration views in {where} are "
                         f"{views.image_size[0]}x{views.image_size[1]}")
-    intr, quality, verdict = judged_intrinsics(views, flags, st)
+    if intrinsics_json is not None:
+        intr, quality, verdict = read_campaign_intrinsics(intrinsics_json, views, campaign, st)
+    else:
+        intr, quality, verdict = judged_intrinsics(views, flags, st)
     if not st.board_view:
         return intr, quality, None, verdict
     corners, ids = detection
@@ -200,7 +210,7 @@ def _intrinsics(calib_dir: Path, board, setup, image: np.ndarray, detection, sou
 
 
 def _run_calibration(trial_dir: Path, calib_dir, campaign, out_json, n_median: int,
-                     board_check: BoardCheckSettings, st: CalibrationSettings) -> Calibration:
+                     board_check: BoardCheckSettings, st: CalibrationSettings, intrinsics_json=None) -> Calibration:
     setup = campaign.setup
     board = setup.board.make()
     vpath = find_video(trial_dir)
@@ -210,7 +220,8 @@ def _run_calibration(trial_dir: Path, calib_dir, campaign, out_json, n_median: i
     detection = detect_plane_board(img, board, source)
     intr, quality, check, verdict = None, None, None, Verdict()
     if calib_dir is not None:
-        intr, quality, check, verdict = _intrinsics(Path(calib_dir), board, setup, img, detection, source, st)
+        intr, quality, check, verdict = _intrinsics(Path(calib_dir), board, campaign, img, detection, source, st,
+                                                    None if intrinsics_json is None else Path(intrinsics_json))
     else:
         verdict = verdict.add("warn", "no calib/ views: homography only, lens distortion is not corrected; "
                                       "film the board in varied poses into calib/ for intrinsics")
