@@ -70,3 +70,23 @@ def test_a_bent_mapping_is_measured_row_by_row(postures, settings):
     assert np.median(miss) < 0.0005 and np.percentile(miss, 90) < 0.0015
     straight = _rows(postures, np.eye(3), settings)
     assert np.median(np.abs(straight[:, 5])) < 0.0005
+
+
+def test_point_motions_are_the_reference_point_by_point(config):
+    """The rows' velocities: every material point's motion at once equals it point by point, on
+    postures of the lab arm and on points near and between its links."""
+    from stringcast.calibrate.arm_sweep import point_motion_reference, point_motions
+    from stringcast.core import forward_kinematics, resolve_campaign
+
+    arm = resolve_campaign({"string": 1, "target": 1}, config, "pm").arm
+    rng = np.random.default_rng(3)
+    for q in POSTURES:
+        q = np.asarray(q)
+        mid = forward_kinematics(arm, q)
+        ends = tuple(forward_kinematics(arm, q + d) for d in rng.normal(0, 0.02, (2, len(q))))
+        s, u = rng.integers(0, len(mid) - 1, 40), rng.uniform(-0.1, 1.1, (40, 1))
+        pts = mid[s] + u * (mid[s + 1] - mid[s]) + rng.normal(0, 0.02, (40, 2))
+        got = point_motions(mid, ends, pts)
+        want = np.array([point_motion_reference(mid, ends, p) for p in pts])
+        assert got.shape == (40, 2) and np.abs(want).max() > 1e-4
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-15)

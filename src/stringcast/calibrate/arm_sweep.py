@@ -74,7 +74,7 @@ def sweep_rows(frames, calibration, arm, t_frames: np.ndarray, t_j: np.ndarray, 
             ends = (forward_kinematics(arm, q_minus), forward_kinematics(arm, q_plus))
             for pts, nrm, off in _link_rows(np.asarray(image, np.float32), calibration, arm, q_mid, st):
                 # the same material points a little earlier and later: their motion along the normal
-                speed = [float(_point_motion(mid, ends, p) @ nrm) / (2 * dt_s) for p in pts]
+                speed = (point_motions(mid, ends, pts) @ nrm / (2 * dt_s)).tolist()
                 out += [[k, p[0], p[1], nrm[0], nrm[1], o, v] for p, o, v in zip(pts, off, speed)]
         return out
 
@@ -84,9 +84,31 @@ def sweep_rows(frames, calibration, arm, t_frames: np.ndarray, t_j: np.ndarray, 
     return np.asarray(out, float).reshape(-1, len(ROW_FIELDS))
 
 
-def _point_motion(mid: np.ndarray, ends: tuple[np.ndarray, np.ndarray], p) -> np.ndarray:
+def point_motions(mid: np.ndarray, ends: tuple[np.ndarray, np.ndarray], pts) -> np.ndarray:
+    """Displacements (n, 2) m of the arm's material points at pts (n, 2) m on the posture ``mid``
+    (FK points (J + 2, 2) m) from the posture ends[0] to ends[1]: each point is carried by the link
+    nearest to it (the first of equals). :func:`point_motion_reference` point by point, at once."""
+    p = np.asarray(pts, float).reshape(-1, 2)
+    a, ab = mid[:-1], mid[1:] - mid[:-1]                                 # (S, 2) the links
+    rel = p[:, None, :] - a[None]                                        # (n, S, 2)
+    u = np.clip((rel * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-12), 0, 1)
+    seg = np.argmin(np.linalg.norm(rel - u[..., None] * ab, axis=-1), axis=1)
+    a0, b0 = mid[seg], mid[seg + 1]
+    e0 = (b0 - a0) / np.linalg.norm(b0 - a0, axis=1, keepdims=True)
+    r = p - a0
+    lon, lat = (r * e0).sum(1), r[:, 1] * e0[:, 0] - r[:, 0] * e0[:, 1]
+    moved = []
+    for f in ends:
+        a1, b1 = f[seg], f[seg + 1]
+        e1 = (b1 - a1) / np.linalg.norm(b1 - a1, axis=1, keepdims=True)
+        moved.append(a1 + lon[:, None] * e1 + lat[:, None] * np.c_[-e1[:, 1], e1[:, 0]])
+    return moved[1] - moved[0]
+
+
+def point_motion_reference(mid: np.ndarray, ends: tuple[np.ndarray, np.ndarray], p) -> np.ndarray:
     """Displacement (2,) m of the arm's material point at p on the posture ``mid`` (FK points
-    (J + 2, 2) m) from the posture ends[0] to ends[1]: the point is carried by the link nearest to it."""
+    (J + 2, 2) m) from the posture ends[0] to ends[1]: the point is carried by the link nearest to it.
+    One point in plain steps: the reference :func:`point_motions` is held to."""
     seg = int(np.argmin([_dist_to_segment(p, mid[s], mid[s + 1]) for s in range(len(mid) - 1)]))
     moved = []
     for f in ends:
