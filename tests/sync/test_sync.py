@@ -424,3 +424,41 @@ def test_strip_sampling_kernel_is_the_reference_bit_for_bit(lens):
     assert ((uv < 0) | (uv > [319, 239])).any(axis=1).sum() > 20      # the edge case is exercised
     with pytest.raises(ValueError, match="image must be"):
         sample_strips(image[0], cal, arm, q, hw, 8, 11, segments, shift)
+
+
+def test_a_frame_smoothed_only_where_the_strips_are_gives_the_whole_frames_samples(monkeypatch):
+    """smoothed_strips (the frame smoothed in the strips' window) gives sample_strips of the whole frame
+    smoothed: to the bit where the window is OpenCV's vector width apart (this machine), to 1e-4 grey
+    levels in any case; a window that misses a sample falls back to the whole frame, exactly."""
+    from stringcast.calibrate.calibration import Calibration
+    from stringcast.core import load_config, resolve_campaign
+    from stringcast.sync import arm_match
+    from stringcast.sync.arm_match import sample_strips, segment_half_widths, smooth, smoothed_strips, strip_window
+
+    arm = resolve_campaign({"string": 1, "target": 1}, load_config(None), "k").arm
+    rng = np.random.default_rng(5)
+    frame = (rng.random((480, 640)) * 255).astype(np.uint8)
+    K = np.array([[600.0, 0, 322.0], [0, 601.0, 238.0], [0, 0, 1]])
+    t = np.array([-0.45, -0.3, 2.5])
+    H = np.linalg.inv(K @ np.column_stack([[1.0, 0, 0], [0, 1.0, 0], t]))
+    cal = Calibration(H, (640, 480), K, np.array([-0.2, 0.05, 1e-3, -5e-4, 0.01]))
+    segments = np.arange(1, arm.n_joints + 1)                      # the segments after the first link
+    hw = segment_half_widths(arm, 0.01)[segments]
+    q0 = np.array([0.4, -1.4, -0.5])[: arm.n_joints]
+    q = q0 + rng.normal(0, 0.01, (9, arm.n_joints))               # one frame's candidate offsets
+    shift = np.array([0.001, -0.002])
+    window = strip_window(cal, arm, q, hw, segments, shift, frame.shape, 1.0)
+    assert window is not None and (window[1] - window[0]) * (window[3] - window[2]) < 0.5 * frame.size
+    whole = sample_strips(smooth(frame, 1.0), cal, arm, q, hw, 8, 11, segments, shift)
+    r0, r1, c0, c1 = window
+    direct = sample_strips(smooth(frame[r0:r1, c0:c1], 1.0), cal, arm, q, hw, 8, 11, segments, shift, (r0, c0),
+                           frame.shape)
+    part = smoothed_strips(frame, 1.0, cal, arm, q, hw, 8, 11, segments, shift)
+    assert np.array_equal(part, direct)                             # the window's samples, no fallback
+    assert part.dtype == whole.dtype == np.float32 and np.all(np.isfinite(part))
+    np.testing.assert_allclose(part, whole, rtol=0, atol=1e-4)
+    small = (window[0] + 20, window[1] - 20, window[2], window[3])  # a window that misses samples
+    monkeypatch.setattr(arm_match, "strip_window", lambda *a: small)
+    assert np.isnan(sample_strips(smooth(frame[small[0]:small[1], small[2]:small[3]], 1.0), cal, arm, q, hw, 8, 11,
+                                  segments, shift, small[:3:2], frame.shape)).any()
+    assert np.array_equal(smoothed_strips(frame, 1.0, cal, arm, q, hw, 8, 11, segments, shift), whole)

@@ -95,7 +95,8 @@ def _camera(calibration) -> np.ndarray:
 
 
 def sample_strips(image: np.ndarray, calibration, arm, q: np.ndarray, half_widths: np.ndarray, n_u: int, n_v: int,
-                  segments: np.ndarray, shift: np.ndarray) -> np.ndarray:
+                  segments: np.ndarray, shift: np.ndarray, origin: tuple[int, int] = (0, 0),
+                  frame_shape: tuple[int, int] | None = None) -> np.ndarray:
     """``image`` (H, W) sampled at the strips of postures q (T, J) rad moved by ``shift`` (2,) m: (T, S, n_u, n_v)
     of the image's dtype.
 
@@ -107,19 +108,63 @@ def sample_strips(image: np.ndarray, calibration, arm, q: np.ndarray, half_width
     (T, S, n_u, n_v, 2) point array. It is the sync stage's inner loop (some 100 000 points per
     frame) at about half the reference's time.
 
+    ``image`` may be a window of a frame of ``frame_shape`` (H, W), from row and column ``origin``:
+    the values are then the frame's, NaN where a sample's pixels are not all in the window.
+
     Raises:
         ValueError: an image that is not (H, W) with H, W >= 2.
     """
     img = np.ascontiguousarray(image)
     if img.ndim != 2 or min(img.shape) < 2:
         raise ValueError(f"sample_strips: image must be (H, W) with H, W >= 2, got {img.shape}")
+    h, w = img.shape if frame_shape is None else frame_shape
     fk = np.ascontiguousarray(forward_kinematics(arm, np.atleast_2d(q)))
     u = np.linspace(0.15, 0.85, n_u)
     v = np.ascontiguousarray(np.linspace(-1.0, 1.0, n_v)[None, :] * np.asarray(half_widths, float)[:, None])
     out = np.empty((len(fk), len(segments), n_u, n_v), img.dtype)
     strips_kernel(img, fk, np.asarray(segments, np.int64), u, v, np.asarray(shift, float),
-                   np.asarray(calibration._H_inv, float), _camera(calibration), out)
+                   np.asarray(calibration._H_inv, float), _camera(calibration), out, int(origin[0]), int(origin[1]),
+                   int(h), int(w))
     return out
+
+
+WINDOW_COLUMNS = 64
+"""A strip window's columns start and run in multiples of this: OpenCV's vector loops then cover the
+window's columns as they cover the frame's, and its smoothing gives the frame's values bit for bit."""
+
+
+def strip_window(calibration, arm, q: np.ndarray, half_widths: np.ndarray, segments: np.ndarray,
+                 shift: np.ndarray, frame_shape: tuple[int, int], sigma: float) -> tuple[int, int, int, int] | None:
+    """The frame's window (r0, r1, c0, c1) px that the strips of postures q (T, J) rad need, smoothed by
+    ``sigma`` px: the strips' corners in the image (:func:`strip_points` with 2 x 2 samples), out by the
+    Gaussian's reach (4 sigma), the bilinear's next pixel and 2 px for the strips' edges bowed by the
+    lens; columns in whole :data:`WINDOW_COLUMNS`. None where that is over half the frame or not finite."""
+    h, w = frame_shape
+    uv = calibration.robot_to_pixel((strip_points(arm, np.atleast_2d(q), half_widths, 2, 2, segments)
+                                     + shift).reshape(-1, 2))
+    if not np.all(np.isfinite(uv)):
+        return None
+    pad = int(np.ceil(4 * max(sigma, 0.0))) + 3
+    c, r = np.clip(uv[:, 0], 0, w - 1), np.clip(uv[:, 1], 0, h - 1)
+    r0, r1 = max(0, int(r.min()) - pad), min(h, int(r.max()) + 2 + pad)
+    c0 = max(0, int(c.min()) - pad) // WINDOW_COLUMNS * WINDOW_COLUMNS
+    c1 = min(w, c0 + -(-(int(c.max()) + 2 + pad - c0) // WINDOW_COLUMNS) * WINDOW_COLUMNS)
+    return None if (r1 - r0) * (c1 - c0) > 0.5 * h * w else (r0, r1, c0, c1)
+
+
+def smoothed_strips(frame: np.ndarray, sigma: float, calibration, arm, q: np.ndarray, half_widths: np.ndarray,
+                    n_u: int, n_v: int, segments: np.ndarray, shift: np.ndarray) -> np.ndarray:
+    """``sample_strips(smooth(frame, sigma), ...)``, smoothing only the window the strips need
+    (:func:`strip_window`; the whole frame where none is worth it or a sample falls outside it): the
+    sync stage's work per frame, of which smoothing the whole frame was half. (T, S, n_u, n_v) float32."""
+    window = strip_window(calibration, arm, q, half_widths, segments, shift, frame.shape, sigma)
+    if window is not None:
+        r0, r1, c0, c1 = window
+        out = sample_strips(smooth(frame[r0:r1, c0:c1], sigma), calibration, arm, q, half_widths, n_u, n_v,
+                            segments, shift, (r0, c0), frame.shape)
+        if not np.isnan(out).any():
+            return out
+    return sample_strips(smooth(frame, sigma), calibration, arm, q, half_widths, n_u, n_v, segments, shift)
 
 
 def ncc_segments(samples: np.ndarray, template: np.ndarray) -> np.ndarray:

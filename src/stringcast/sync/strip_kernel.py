@@ -9,11 +9,12 @@ from numba import njit
 
 
 @njit(inline="always", fastmath=False, error_model="numpy")
-def _pixel_value(img, x, y, Hi, cam):
-    """img bilinear at the pixel of plane point (x, y) m: Hi (3, 3) plane -> undistorted pixel homography
-    (as ``cv2.perspectiveTransform``), cam (10,) ``arm_match._camera`` (distortion as ``Calibration.distort``),
-    the edge pixels held beyond the image (``map_coordinates``, order 1, mode "nearest")."""
-    h, w = img.shape
+def _pixel_value(img, x, y, Hi, cam, r0, c0, h, w):
+    """The (h, w) frame bilinear at the pixel of plane point (x, y) m: Hi (3, 3) plane -> undistorted pixel
+    homography (as ``cv2.perspectiveTransform``), cam (10,) ``arm_match._camera`` (distortion as
+    ``Calibration.distort``), the edge pixels held beyond the frame (``map_coordinates``, order 1, mode
+    "nearest"). img is the frame's window from row r0, column c0 (the whole frame: 0, 0); NaN where the
+    pixel and its neighbours are not all in the window."""
     z = Hi[2, 0] * x + Hi[2, 1] * y + Hi[2, 2]
     z = 1.0 / z if abs(z) > 2.220446049250313e-16 else 0.0
     u = (Hi[0, 0] * x + Hi[0, 1] * y + Hi[0, 2]) * z
@@ -30,14 +31,18 @@ def _pixel_value(img, x, y, Hi, cam):
     c = min(max(u, 0.0), w - 1.0)
     i, j = min(int(r), h - 2), min(int(c), w - 2)
     a, b = r - i, c - j
+    i, j = i - r0, j - c0
+    if i < 0 or j < 0 or i + 1 >= img.shape[0] or j + 1 >= img.shape[1]:
+        return np.nan
     return ((1 - a) * ((1 - b) * img[i, j] + b * img[i, j + 1])
             + a * ((1 - b) * img[i + 1, j] + b * img[i + 1, j + 1]))
 
 
 @njit(cache=True, fastmath=False, error_model="numpy")
-def strips_kernel(img, fk, segments, u, v, shift, Hi, cam, out):
+def strips_kernel(img, fk, segments, u, v, shift, Hi, cam, out, r0, c0, h, w):
     """out[t, s, a, b] = :func:`_pixel_value` at strip point a + u[a] d + v[s, b] nrm + shift of segment
-    segments[s] (from joint fk[t, j] to fk[t, j + 1], (T, J + 2, 2) m), as :func:`~stringcast.sync.arm_match.strip_points` computes it."""
+    segments[s] (from joint fk[t, j] to fk[t, j + 1], (T, J + 2, 2) m), as :func:`~stringcast.sync.arm_match.strip_points` computes it;
+    img is the (h, w) frame's window from row r0, column c0."""
     for t in range(fk.shape[0]):
         for s in range(segments.shape[0]):
             j = segments[s]
@@ -49,4 +54,4 @@ def strips_kernel(img, fk, segments, u, v, shift, Hi, cam, out):
                 for b in range(v.shape[1]):
                     x = ax + u[a] * dx + v[s, b] * -ey + shift[0]
                     y = ay + u[a] * dy + v[s, b] * ex + shift[1]
-                    out[t, s, a, b] = _pixel_value(img, x, y, Hi, cam)
+                    out[t, s, a, b] = _pixel_value(img, x, y, Hi, cam, r0, c0, h, w)

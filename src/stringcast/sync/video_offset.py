@@ -102,6 +102,9 @@ def estimate_offset(video, calibration, arm, t_j: np.ndarray, q_j: np.ndarray,
     def strip_samples(image, q):  # sample(image, calibration, strips(q)), bit for bit, in one pass
         return sync_arm.sample_strips(image, calibration, arm, q, hw, n_u, n_v, segments, shift)
 
+    def frame_strips(frame, q):  # strip_samples(smooth(frame, sig), q), smoothing only where the strips are
+        return sync_arm.smoothed_strips(frame, sig, calibration, arm, q, hw, n_u, n_v, segments, shift)
+
     rest_pts = strips(q_j[0])
     rest_s = sync_arm.smooth(rest, sig)
     template = strip_samples(rest_s, q_j[0][None])[0]  # sample(rest_s, calibration, rest_pts); loads the kernel before any fork
@@ -110,9 +113,9 @@ def estimate_offset(video, calibration, arm, t_j: np.ndarray, q_j: np.ndarray,
     except ValueError as exc:
         raise DataError(f"{video.path}: sync from the video needs the arm to move: {exc}") from exc
     search, step = st.search_ms / 1000, st.step_ms / 1000
-    coarse = partial(_coarse_search, video, calibration, sig, rest_pts, rest_s, template, strips, n_rest, t_j, q_j,
+    coarse = partial(_coarse_search, video, calibration, frame_strips, rest_s, template, strips, n_rest, t_j, q_j,
                      fps, st)
-    fine = partial(_fine_search, video, sig, template, strip_samples, t_j, q_j, fps, (t_on, t_off), search,
+    fine = partial(_fine_search, video, template, frame_strips, t_j, q_j, fps, (t_on, t_off), search,
                    step, len(segments), st, workers if isinstance(video, CachedVideo) else 1, {})
     coarse_s, (taus, total, best, frames, tau_ks, per_frame) = _recentred_search(coarse, fine, trigger_s, step, st)
     if not best:
@@ -163,17 +166,17 @@ def _rest_and_board(video, calibration, arm, q0: np.ndarray, st: SyncSettings,
     return n_rest, rest, board, shift
 
 
-def _coarse_search(video, calibration, sig: float, rest_pts: np.ndarray, rest_s: np.ndarray, template: np.ndarray,
+def _coarse_search(video, calibration, frame_strips, rest_s: np.ndarray, template: np.ndarray,
                    strips, n_rest: int, t_j: np.ndarray, q_j: np.ndarray, fps: float, st: SyncSettings) -> float:
     """The coarse offset, s (:func:`stringcast.sync_arm.coarse_offset`): every frame's match with the rest
     template against the predicted match of the rest image at the arm's logged postures (1 ms grid).
-    ``strips(q)``: the shifted strip points of postures q.
+    ``strips(q)``: the shifted strip points of postures q; ``frame_strips(frame, q)``: the frame, smoothed,
+    sampled there.
 
     Raises:
         DataError: the first frames do not show the arm still at the log's first posture.
     """
-    rest_ncc = np.array([sync_arm.ncc(sync_arm.sample(sync_arm.smooth(f, sig), calibration, rest_pts), template)
-                         for _, f in video])
+    rest_ncc = np.array([sync_arm.ncc(frame_strips(f, q_j[:1])[0], template) for _, f in video])
     if np.mean(rest_ncc[:n_rest]) < 0.9:
         raise DataError(f"{video.path}: the first frames do not show the arm still at the joint log's first "
                         "posture; sync needs the video to start before the motion")
@@ -184,12 +187,12 @@ def _coarse_search(video, calibration, sig: float, rest_pts: np.ndarray, rest_s:
     return sync_arm.coarse_offset(rest_ncc, fps, tp, pred, st.coarse_step_ms / 1000)
 
 
-def _fine_search(video, sig: float, template: np.ndarray, strip_samples, t_j: np.ndarray, q_j: np.ndarray,
+def _fine_search(video, template: np.ndarray, frame_strips, t_j: np.ndarray, q_j: np.ndarray,
                  fps: float, window: tuple[float, float], search: float, step: float, n_seg: int, st: SyncSettings,
                  workers: int, memo: dict, tau0: float) -> tuple[np.ndarray, np.ndarray, list, np.ndarray, np.ndarray, np.ndarray]:
     """Each motion frame's match over the candidate offsets taus = tau0 +- search (step), s.
 
-    ``strip_samples(image, q)``: the smoothed frame sampled at the (shifted) strips of postures q (T, J).
+    ``frame_strips(frame, q)``: the frame, smoothed, sampled at the (shifted) strips of postures q (T, J).
 
     The frames are matched by ``workers`` forked processes (:func:`~stringcast.core.forked.forked_map`)
     where the video is a :class:`~stringcast.video.CachedVideo` (any frame, no decoding); the result
@@ -226,9 +229,8 @@ def _fine_search(video, sig: float, template: np.ndarray, strip_samples, t_j: np
         out = []
         for k in ks:
             need = np.flatnonzero([g not in memo.get(int(k), ()) for g in grid])
-            out.append((need, sync_arm.ncc_segments(strip_samples(
-                sync_arm.smooth(video.read(int(k)), sig), joints_at(taus[need] + k / fps, t_j, q_j)), template)
-                if len(need) else None))
+            out.append((need, sync_arm.ncc_segments(frame_strips(
+                video.read(int(k)), joints_at(taus[need] + k / fps, t_j, q_j)), template) if len(need) else None))
         return out
 
     matches = (m for part in forked_map(match, chunked(frames, FRAMES_PER_TASK), workers) for m in part)
