@@ -452,7 +452,7 @@ def test_a_frame_smoothed_only_where_the_strips_are_gives_the_whole_frames_sampl
     whole = sample_strips(smooth(frame, 1.0), cal, arm, q, hw, 8, 11, segments, shift)
     r0, r1, c0, c1 = window
     direct = sample_strips(smooth(frame[r0:r1, c0:c1], 1.0), cal, arm, q, hw, 8, 11, segments, shift, (r0, c0),
-                           frame.shape)
+                           frame.shape)                             # the window's whole inside read
     part = smoothed_strips(frame, 1.0, cal, arm, q, hw, 8, 11, segments, shift)
     assert np.array_equal(part, direct)                             # the window's samples, no fallback
     assert part.dtype == whole.dtype == np.float32 and np.all(np.isfinite(part))

@@ -133,35 +133,48 @@ WINDOW_COLUMNS = 64
 window's columns as they cover the frame's, and its smoothing gives the frame's values bit for bit."""
 
 
+def _reach(sigma: float) -> int:
+    """Pixels a Gaussian of ``sigma`` px reaches in ``cv2.GaussianBlur`` (float images: radius round(4 sigma)), or more."""
+    return int(np.ceil(4 * sigma)) + 1 if sigma > 0 else 0
+
+
 def strip_window(calibration, arm, q: np.ndarray, half_widths: np.ndarray, segments: np.ndarray,
                  shift: np.ndarray, frame_shape: tuple[int, int], sigma: float) -> tuple[int, int, int, int] | None:
-    """The frame's window (r0, r1, c0, c1) px that the strips of postures q (T, J) rad need, smoothed by
-    ``sigma`` px: the strips' corners in the image (:func:`strip_points` with 2 x 2 samples), out by the
-    Gaussian's reach (4 sigma), the bilinear's next pixel and 2 px for the strips' edges bowed by the
-    lens; columns in whole :data:`WINDOW_COLUMNS`. None where that is over half the frame or not finite."""
+    """The frame's window (r0, r1, c0, c1) px to smooth by ``sigma`` px for the strips of postures q (T, J)
+    rad: the strips' corners in the image (:func:`strip_points` with 2 x 2 samples), out by the
+    Gaussian's reach twice (its edge band, where the window's border changes the smoothing, is not read)
+    and 3 px for the bilinear's next pixel and the strips' edges bowed by the lens; columns in whole
+    :data:`WINDOW_COLUMNS`. None where that is over half the frame or not finite."""
     h, w = frame_shape
     uv = calibration.robot_to_pixel((strip_points(arm, np.atleast_2d(q), half_widths, 2, 2, segments)
                                      + shift).reshape(-1, 2))
     if not np.all(np.isfinite(uv)):
         return None
-    pad = int(np.ceil(4 * max(sigma, 0.0))) + 3
+    pad = 2 * _reach(sigma) + 3
     c, r = np.clip(uv[:, 0], 0, w - 1), np.clip(uv[:, 1], 0, h - 1)
-    r0, r1 = max(0, int(r.min()) - pad), min(h, int(r.max()) + 2 + pad)
+    r0, r1 = max(0, int(r.min()) - pad), min(h, int(r.max()) + 1 + pad)
     c0 = max(0, int(c.min()) - pad) // WINDOW_COLUMNS * WINDOW_COLUMNS
-    c1 = min(w, c0 + -(-(int(c.max()) + 2 + pad - c0) // WINDOW_COLUMNS) * WINDOW_COLUMNS)
+    c1 = min(w, c0 + -(-(int(c.max()) + 1 + pad - c0) // WINDOW_COLUMNS) * WINDOW_COLUMNS)
     return None if (r1 - r0) * (c1 - c0) > 0.5 * h * w else (r0, r1, c0, c1)
 
 
 def smoothed_strips(frame: np.ndarray, sigma: float, calibration, arm, q: np.ndarray, half_widths: np.ndarray,
                     n_u: int, n_v: int, segments: np.ndarray, shift: np.ndarray) -> np.ndarray:
     """``sample_strips(smooth(frame, sigma), ...)``, smoothing only the window the strips need
-    (:func:`strip_window`; the whole frame where none is worth it or a sample falls outside it): the
-    sync stage's work per frame, of which smoothing the whole frame was half. (T, S, n_u, n_v) float32."""
-    window = strip_window(calibration, arm, q, half_widths, segments, shift, frame.shape, sigma)
+    (:func:`strip_window`): the sync stage's work per frame, of which smoothing the whole frame was half.
+    Only the window's inside, a Gaussian's reach from its border (where the border is not the frame's),
+    is read; where a sample needs more, or no window is worth it, the whole frame is smoothed.
+    (T, S, n_u, n_v) float32."""
+    h, w = frame.shape
+    window = strip_window(calibration, arm, q, half_widths, segments, shift, (h, w), sigma)
     if window is not None:
         r0, r1, c0, c1 = window
-        out = sample_strips(smooth(frame[r0:r1, c0:c1], sigma), calibration, arm, q, half_widths, n_u, n_v,
-                            segments, shift, (r0, c0), frame.shape)
+        e = _reach(sigma)
+        top, left = (e if r0 > 0 else 0), (e if c0 > 0 else 0)
+        inner = smooth(frame[r0:r1, c0:c1], sigma)[top:r1 - r0 - (e if r1 < h else 0),
+                                                   left:c1 - c0 - (e if c1 < w else 0)]
+        out = sample_strips(inner, calibration, arm, q, half_widths, n_u, n_v, segments, shift,
+                            (r0 + top, c0 + left), (h, w))
         if not np.isnan(out).any():
             return out
     return sample_strips(smooth(frame, sigma), calibration, arm, q, half_widths, n_u, n_v, segments, shift)
