@@ -259,3 +259,21 @@ def test_an_arm_that_cannot_be_checked_says_why(lab_camera, settings):
     assert "one direction" in r["verdict"]["reasons"][0]
     blank = check_board_to_robot(np.full((1024, 1024), 128.0), cal, arm, q, settings.board_check)
     assert "no arm segment" in blank["verdict"]["reasons"][0]
+
+
+def test_profiles_smoothed_together_are_each_profile_smoothed_alone():
+    """link_profiles smooths a link's profiles of one length in one call: the values of each alone, a
+    profile with a NaN (off the image) left as it is."""
+    from scipy.ndimage import gaussian_filter1d
+
+    from stringcast.calibrate.link_profiles import _smoothed_profiles
+
+    rng = np.random.default_rng(1)
+    lengths = [37] * 10 + [41] * 5 + [37] * 3
+    samples = rng.normal(size=sum(lengths))
+    samples[40] = np.nan
+    got = _smoothed_profiles(samples, lengths, 2.5)
+    alone = [gaussian_filter1d(p, 2.5) if np.all(np.isfinite(p)) else p
+             for p in np.split(samples, np.cumsum(lengths)[:-1])]
+    assert [len(g) for g in got] == lengths and np.isnan(got[1]).sum() == 1
+    assert all(np.array_equal(a, b, equal_nan=True) for a, b in zip(got, alone))

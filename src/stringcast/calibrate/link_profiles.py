@@ -132,13 +132,27 @@ def link_profiles(image, calibration, arm, q, st: BoardCheckSettings) -> list[tu
         # every profile of the link sampled in one call (pointwise: the same values as row by row)
         samples = _sample(image, calibration, np.concatenate([a + u * (b - a) + v[:, None] * nrm for u, v in zip(us, vs)]))
         found = []
-        for u, w, v, prof in zip(us, ws, vs, np.split(samples, np.cumsum([len(v) for v in vs])[:-1])):
-            prof = gaussian_filter1d(prof, 1.0 / st.step_mm) if np.all(np.isfinite(prof)) else prof
+        for u, w, v, prof in zip(us, ws, vs, _smoothed_profiles(samples, [len(v) for v in vs], 1.0 / st.step_mm)):
             c = edge_pair_centre(prof, step, v[0], st.width_range[0] * w, st.width_range[1] * w)
             if c is not None:
                 found.append((u, c))
         u_c = np.asarray(found, float).reshape(-1, 2)
         out.append((a, b, nrm, u_c[:, 0], u_c[:, 1], len(us)))
+    return out
+
+
+def _smoothed_profiles(samples: np.ndarray, lengths: list[int], sigma: float) -> list[np.ndarray]:
+    """The profiles (``samples`` cut into ``lengths``), each smoothed by ``gaussian_filter1d`` (sigma in
+    samples) where it is finite throughout, else as it is; the profiles of one length in one call
+    (row by row the same values)."""
+    profiles = np.split(samples, np.cumsum(lengths)[:-1])
+    out = list(profiles)
+    for n in set(lengths):
+        rows = [i for i, p in enumerate(profiles) if len(p) == n and np.all(np.isfinite(p))]
+        if rows:
+            smoothed = gaussian_filter1d(np.stack([profiles[i] for i in rows]), sigma, axis=-1)
+            for i, row in zip(rows, smoothed):
+                out[i] = row
     return out
 
 
