@@ -218,3 +218,45 @@ def test_a_stage_waits_for_a_starting_server_but_not_for_a_gone_one(tmp_path, mo
     t0 = time.monotonic()
     assert warm.run_in_server(["nap", "0", "0"], wait_s=30.0) is None   # its server is gone: no wait
     assert time.monotonic() - t0 < 1.0
+
+
+_NUMBA_SERVER = '''
+import sys
+from stringcast import warm
+
+
+def run(argv):
+    import numba
+    from numba import njit, prange
+
+    @njit(parallel=True)                 # compiled in the job: numba re-reads the environment
+    def total(n):
+        s = 0.0
+        for i in prange(n):
+            s += i
+        return s
+
+    print(total(10), numba.get_num_threads(), numba.config.NUMBA_NUM_THREADS)
+    return 0
+
+
+warm.serve(sys.argv[1], lambda: __import__("numba"), lambda a: a[0] == "numba", run, parent=int(sys.argv[2]))
+'''
+
+
+def test_a_job_compiles_numba_kernels_on_its_own_thread_count(tmp_path):
+    """A job whose NUMBA_NUM_THREADS is not the server's compiles a parallel kernel and runs it on its own
+    count, as it would cold (a pool started on the server's count refused every later compile)."""
+    script, sock = tmp_path / "server.py", tmp_path / "warm.sock"
+    script.write_text(_NUMBA_SERVER)
+    server = subprocess.Popen([sys.executable, str(script), str(sock), str(os.getpid())],
+                              env={**os.environ, "NUMBA_NUM_THREADS": "2"})
+    try:
+        assert _wait_for(sock.exists, 60), "the warm server never opened its socket"
+        proc = _client(["numba"], sock, tmp_path, env_extra={"NUMBA_NUM_THREADS": "1"})
+        out, err = proc.communicate(timeout=120)
+        assert proc.returncode == 0, err
+        assert out.split() == ["45.0", "1", "1"]
+    finally:
+        server.terminate()
+        server.wait(timeout=30)

@@ -296,10 +296,14 @@ def _std_streams():
 def _thread_counts(env: dict) -> None:
     """Apply the job's thread counts to the libraries the server loaded, which read theirs from the
     server's environment when they were loaded: the BLAS (OpenBLAS's variables first) and
-    OpenMP by ``threadpoolctl``, numba by ``NUMBA_NUM_THREADS`` (it may only lower it). Snakemake sets
-    ``OMP_NUM_THREADS``, ``OPENBLAS_NUM_THREADS`` and others to a rule's threads, and a BLAS on
+    OpenMP by ``threadpoolctl``, numba's configuration re-read from the job's environment (as a cold
+    job reads it at import) before its thread pool starts, and its ``NUMBA_NUM_THREADS`` used. Snakemake sets ``OMP_NUM_THREADS``,
+    ``OPENBLAS_NUM_THREADS``, ``NUMBA_NUM_THREADS`` and others to a rule's threads, and a BLAS on
     another number of threads sums in another order: without this a warm job's calibration differed
-    from a cold one's in the 7th digit."""
+    from a cold one's in the 7th digit. A numba pool started on the server's count refused every
+    later compile in the job (numba re-reads the environment then: "Cannot set NUMBA_NUM_THREADS to a
+    different value once the threads have been launched"), wherever a rule's threads were not the
+    machine's CPUs and a kernel was not yet in numba's cache (a fresh clone)."""
     from threadpoolctl import threadpool_limits
 
     def count(*names):
@@ -313,10 +317,12 @@ def _thread_counts(env: dict) -> None:
     limits = {api: n for api, n in limits.items() if n is not None}
     if limits:
         threadpool_limits(limits=limits)
-    if "numba" in sys.modules and count("NUMBA_NUM_THREADS"):
+    if "numba" in sys.modules:
         import numba
 
-        numba.set_num_threads(min(count("NUMBA_NUM_THREADS"), numba.config.NUMBA_NUM_THREADS))
+        numba.config.reload_config()   # the job's NUMBA_* (the server started no thread pool)
+        if count("NUMBA_NUM_THREADS"):     # the pool is the server's size: the job uses its own count of it
+            numba.set_num_threads(min(count("NUMBA_NUM_THREADS"), numba.config.NUMBA_NUM_THREADS))
 
 
 def _note(log, text: str) -> None:
