@@ -136,3 +136,17 @@ def test_stage_progress_prints_each_stage_start_and_end_from_snakemake_lines():
     assert re.fullmatch(r"\[campaign c, trial 1\] calibrate done, \d+\.\d s \(1/3\)", shown[2])
     assert re.fullmatch(r"\[campaign c, trial 1\] decode done, \d+\.\d s \(2/3\)", shown[3])
     assert len(shown) == 4 and p.tail[-1] == "3 of 3 steps (100%) done"
+
+
+def test_calibrate_refuses_campaign_intrinsics_without_their_views(tmp_path, capsys, monkeypatch):
+    """`calibrate --intrinsics` without the views they were fitted to is an error naming the file (exit 2),
+    not intrinsics silently dropped."""
+    from stringcast import warm
+    from stringcast.cli import main
+
+    monkeypatch.delenv(warm.ENV_SOCKET, raising=False)
+    code = main(["calibrate", "--trial-dir", str(tmp_path / "trial_1"), "--intrinsics", str(tmp_path / "intrinsics.json"),
+                 "--campaign", str(tmp_path / "campaign.yaml"), "--out", str(tmp_path / "calibration.json")])
+    err = capsys.readouterr().err
+    assert code == 2 and "intrinsics.json: campaign intrinsics need the views" in err
+    assert not (tmp_path / "calibration.json").exists()

@@ -117,7 +117,12 @@ def cmd_calib_views(args):
 def cmd_calibrate(args):
     calib_dir = Path(args.calib_dir) if args.calib_dir and Path(args.calib_dir).is_dir() else None
     calib = Path(args.calib_views) if args.calib_views else calib_dir
-    intrinsics = Path(args.intrinsics) if args.intrinsics and calib is not None else None
+    if args.intrinsics and calib is None:
+        from stringcast.core import DataError
+
+        raise DataError(f"{args.intrinsics}: campaign intrinsics need the views they were fitted to "
+                        "(--calib-views or a --calib-dir folder)")
+    intrinsics = Path(args.intrinsics) if args.intrinsics else None
     cal = _run("calibrate", args, Path(args.trial_dir), calib, _campaign(args), Path(args.out),
                intrinsics_json=intrinsics)
     bc = (cal.board_check or {}).get("residual_mm")
