@@ -64,8 +64,8 @@ def _add_analysis_commands(add) -> None:
                                         "if not given or not a folder, the board's homography only")
     sp.add_argument("--calib-views", help="the campaign's calib_views.npz (its board views, found once); read instead "
                                           "of searching the calib folder")
-    sp.add_argument("--intrinsics", help="the campaign's intrinsics.json (`calib-views --out-intrinsics`, fitted to "
-                                         "those views once); read instead of refitting them (the same result)")
+    sp.add_argument("--intrinsics", help="the campaign's intrinsics.json (fitted to those views once by the "
+                                         "calib_views rule); read instead of refitting them (the same result)")
     sp.add_argument("--campaign", required=True, help=campaign_help)
     sp.add_argument("--out", required=True, help="calibration.json to write (intrinsics, board pose, px errors)")
 
