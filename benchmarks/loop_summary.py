@@ -90,7 +90,8 @@ def per_string(runs: list[dict], types: list[int], methods: list[str]) -> dict:
 def summarize(runs: list[dict], types: list[int], methods: list[str]) -> dict:
     """One physics' entry of loop.json (docs/results.md): per_string; per method ``campaigns``, the mean
     (type means averaged), max, all-hit flag, first-shot hit rate and the median next-motion prediction
-    error over every loop step; ``mean_ours_ci95``; and over the campaigns both methods ran,
+    error over every loop step, and the campaigns that ended in an error (``failed_*``, [type, seed];
+    counted as ``CAP`` without a hit); ``mean_ours_ci95``; and over the campaigns both methods ran,
     ``paired_campaigns``, ``paired_mean_*`` and ``paired_diff_ci95`` (ours minus the paper's)."""
     per = per_string(runs, types, methods)
     out = {"per_string": per, "campaigns_per_method": {}}
@@ -108,6 +109,8 @@ def summarize(runs: list[dict], types: list[int], methods: list[str]) -> dict:
                                              if mine else None)
         out[f"prediction_error_mm_{lab}"] = _median(steps)
         out[f"prediction_steps_{lab}"] = len(steps)
+        # a campaign that ended in an error counts as CAP executions without a hit: named, never silent
+        out[f"failed_{lab}"] = sorted([int(r["string"]), int(r["seed"])] for r in mine if r["error"])
     out["paper_table3_mean"] = float(np.mean([PAPER_TABLE3[k] for k in types]))
     out["paired_diff_ci95"] = None
     if len(methods) > 1:  # the campaigns (type, seed) every method finished: a like-for-like comparison
@@ -216,6 +219,9 @@ def table(entry: dict, methods: list[str]) -> str:
                                                          for m in methods) + " |")
     lines.append("| next-motion prediction error, mm (median over steps) | | | "
                  + " | ".join(_f(entry.get(f"prediction_error_mm_{LABELS[m]}"), ".1f") for m in methods) + " |")
+    if any(entry.get(f"failed_{LABELS[m]}") for m in methods):
+        lines.append("| ended in an error (type, seed; counted as 8*) | | | " + " | ".join(
+            ", ".join(f"{k}/{s}" for k, s in entry.get(f"failed_{LABELS[m]}") or []) or "-" for m in methods) + " |")
     if entry.get("paired_campaigns"):
         lines.append(f"| mean over the {entry['paired_campaigns']} campaigns both methods finished | | | "
                      + " | ".join(_f(entry.get(f"paired_mean_{LABELS[m]}")) for m in methods) + " |")

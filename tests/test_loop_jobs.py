@@ -96,6 +96,10 @@ def test_summary_intervals_first_shots_and_predictions():
     paper_steps = [20.0, 30.0] * 9 + [20.0, 30.0, 40.0] * 6
     paper_steps[0] = np.inf
     assert out["prediction_error_mm_paper_method"] == pytest.approx(np.median(paper_steps))
+    assert out["failed_ours"] == [] and out["failed_paper_method"] == []
+    crashed = dict(runs[0], error="RuntimeError: snakemake failed", executions=None, hit=False)
+    out = summarize([crashed] + runs[1:], [1, 2, 3], ["paper", "ours"])
+    assert out["failed_ours"] == [[1, 0]] and out["max_ours"] == 8 and not out["all_hit_ours"]
     assert bootstrap_ci({1: [2, 2, 2]}) == [2.0, 2.0] and bootstrap_ci({1: []}) is None
     assert bootstrap_ci({1: [1, 3]}, seed=4) == bootstrap_ci({1: [1, 3]}, seed=4)     # seeded
 
