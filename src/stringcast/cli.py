@@ -106,7 +106,7 @@ def cmd_calib_views(args):
     views = _run("calib-views", args, Path(args.calib_dir), _campaign(args), Path(args.out))
     print(f"calibration views: {len(views)} of the board's {views.found} in {args.calib_dir} -> {args.out}")
     if args.out_intrinsics:
-        from stringcast.calibrate.calib_views import write_campaign_intrinsics
+        from stringcast.calibrate import write_campaign_intrinsics
 
         intr = write_campaign_intrinsics(Path(args.out), _campaign(args), Path(args.out_intrinsics),
                                          **_settings(write_campaign_intrinsics, args))

@@ -11,7 +11,7 @@ from stringcast.core import lazy_exports
 if TYPE_CHECKING:
     from .arm_sweep import sweep_rows
     from .board_check import check_board_to_robot
-    from .calib_views import write_calib_views
+    from .calib_views import write_calib_views, write_campaign_intrinsics
     from .calibration import run_calibration
     from .mapping import Calibration
     from .refine import PARAMETERS, board_corner_points, mapping_standard_error, refine_mapping
@@ -20,6 +20,7 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "sweep_rows": ".arm_sweep",
     "check_board_to_robot": ".board_check",
     "write_calib_views": ".calib_views",
+    "write_campaign_intrinsics": ".calib_views",
     "Calibration": ".mapping",
     "run_calibration": ".calibration",
     "PARAMETERS": ".refine",
@@ -29,4 +30,5 @@ __getattr__, __dir__ = lazy_exports(__name__, {
 })
 
 __all__ = ["PARAMETERS", "Calibration", "board_corner_points", "check_board_to_robot", "mapping_standard_error",
-           "refine_mapping", "run_calibration", "sweep_rows", "write_calib_views"]
+           "refine_mapping", "run_calibration", "sweep_rows", "write_calib_views",
+           "write_campaign_intrinsics"]

@@ -31,6 +31,7 @@ import numpy as np
 from stringcast.core import CalibrationSettings, DataError, Verdict, atomic_path, write_json
 from stringcast.video import FRAME_SUFFIXES, open_video
 from .charuco import Intrinsics, Views, select_calibration_views
+from .intrinsics import judged_intrinsics
 
 _VIDEO_SUFFIXES = (".mkv", ".avi", ".mp4", ".mov")
 
@@ -140,8 +141,6 @@ def write_campaign_intrinsics(views_npz: str | Path, campaign, out: str | Path, 
     Raises:
         DataError: as :func:`read_calib_views`; too few views to fit.
     """
-    from .intrinsics import judged_intrinsics
-
     views, source = read_calib_views(views_npz)
     flags = camera_flags(campaign)
     with single_threaded_opencv():
