@@ -103,12 +103,13 @@ def _run(command: str, args, *positional, **keywords):
 
 
 def cmd_calib_views(args):
-    views = _run("calib-views", args, Path(args.calib_dir), _campaign(args), Path(args.out))
+    campaign = _campaign(args)
+    views = _run("calib-views", args, Path(args.calib_dir), campaign, Path(args.out))
     print(f"calibration views: {len(views)} of the board's {views.found} in {args.calib_dir} -> {args.out}")
     if args.out_intrinsics:
         from stringcast.calibrate import write_campaign_intrinsics
 
-        intr = write_campaign_intrinsics(Path(args.out), _campaign(args), Path(args.out_intrinsics),
+        intr = write_campaign_intrinsics(Path(args.out), campaign, Path(args.out_intrinsics),
                                          **_settings(write_campaign_intrinsics, args))
         print(f"intrinsics of the views: reprojection error {intr.rms_px:.3f} px over {intr.n_views} views "
               f"-> {args.out_intrinsics}")
