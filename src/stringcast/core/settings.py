@@ -175,6 +175,8 @@ class MotionSettings(_Section):
     flight_window_s: float = _f(0.5, "the tip may hit up to this long after the motion ends, s")
     max_candidates: int = _f(20000, "candidates searched at most per plan")
     extra_after_hit: int = _f(200, "keep searching this many candidates after the first hit, take the closest")
+    aim_radius_mm: float | None = _f(None, "the first hit that starts extra_after_hit's count must pass this close under "
+                                           "the planning set, mm (null: the target's radius, the paper)")
     batch: int = _f(64, "candidates simulated per numba batch")
     seed: int = _f(0, "the planner's random seed (with the trial number)")
     floor_margin_m: float = _f(0.05, "the hanging string must clear the floor by this at the start posture, m")
@@ -198,6 +200,8 @@ class MotionSettings(_Section):
     def __post_init__(self):
         _one_of("motion", "planner", self.planner, PLANNERS)
         _one_of("motion", "first_k_s", self.first_k_s, ("carrying", "max"))
+        if self.aim_radius_mm is not None and not float(self.aim_radius_mm) > 0:
+            raise ConfigError(f"motion.aim_radius_mm: > 0 mm or null; got {self.aim_radius_mm}")
 
 
 @dataclass(frozen=True)
