@@ -77,6 +77,19 @@ def test_prior_ensemble_spans_table2_and_carries_its_weight(settings, campaign):
     assert encode(coeffs[0], mu[0, :1], settings.model).shape == (len(PARAM_NAMES) + 1,)
 
 
+def test_prior_ensemble_takes_first_k_s_max(settings, campaign):
+    """With motion.first_k_s: max every member takes Table 2's largest k_s, as the first set does
+    (the carrying lift above it only for members too heavy for it); the other entries are the
+    same draw as with carrying."""
+    hi_k_s = settings.model.ranges["k_s"][1]
+    carrying, mu_c = _prior(settings, campaign.string, 32, np.random.default_rng(3))
+    stiff, mu_s = _prior(_with(settings, first_k_s="max"), campaign.string, 32, np.random.default_rng(3))
+    np.testing.assert_array_equal(stiff[:, 0], np.maximum(carrying[:, 0], hi_k_s))
+    assert np.all(stiff[:, 0] >= hi_k_s) and np.any(carrying[:, 0] < hi_k_s)
+    np.testing.assert_array_equal(stiff[:, 1:], carrying[:, 1:])
+    np.testing.assert_array_equal(mu_s, mu_c)
+
+
 def test_first_plan_with_prior_ensemble(tmp_path, campaign, small):
     """motion.first_ensemble: the first plan is scored under K random sets, and says so in motion.json."""
     cfg = _with(small, first_ensemble=6, first_extra_after_hit=32, robust_screen_mm=200.0)

@@ -72,7 +72,8 @@ def prior_ensemble(model: ModelSettings, motion: MotionSettings, string, k: int,
     chi ~ U[0, 1]^(10 + G) (eq. 2, log-uniform over every range, one mass per group of
     :meth:`StringSpec.mass_groups`), with k_s lifted per set as in :func:`first_parameters`
     (top-segment static strain <= ``motion.first_max_strain``; for heavy sets above Table 2's
-    maximum), so that no member hangs stretched beyond the model's blow-up limit. Before any
+    maximum), so that no member hangs stretched beyond the model's blow-up limit; with
+    ``motion.first_k_s: max`` every member takes Table 2's largest k_s, as the first set does. Before any
     execution nothing is known of the string; a motion that hits under many of these sets is
     one whose tip path depends little on the parameters.
 
@@ -88,6 +89,8 @@ def prior_ensemble(model: ModelSettings, motion: MotionSettings, string, k: int,
     chi = rng.uniform(0.0, 1.0, (int(k), len(PARAM_NAMES) + int(groups.max()) + 1))
     coeffs, mu = decode(chi, model, groups)
     coeffs[:, 0] = np.maximum(coeffs[:, 0], _k_s_carrying(motion, string, mu))
+    if str(motion.first_k_s) == "max":        # as first_parameters: strings barely stretch
+        coeffs[:, 0] = np.maximum(coeffs[:, 0], model_ranges(model)[1][0])
     return coeffs, mu
 
 
