@@ -111,6 +111,22 @@ def test_first_plan_with_prior_ensemble(tmp_path, campaign, small):
     assert res.hit_share >= base_share
 
 
+def test_aim_radius_starts_the_count_at_a_pass_near_the_centre(tmp_path, campaign, small):
+    """motion.aim_radius_mm: the count of extra_after_hit candidates starts at the first candidate
+    within the aim radius, so with no extra candidates the plan passes within it (null: within the
+    target's radius, the paper); a radius of 0 or below is refused naming the key."""
+    cfg = _with(small, extra_after_hit=0)
+    kw = dict(seed=0, model=cfg.model)
+    edge = pn.run_first_plan(campaign, tmp_path / "a.csv", tmp_path / "a.json", motion=cfg.motion, **kw)
+    aim_m = 0.5 * edge.d_min
+    aimed = pn.run_first_plan(campaign, tmp_path / "b.csv", tmp_path / "b.json",
+                              motion=replace(cfg.motion, aim_radius_mm=aim_m * 1000), **kw)
+    assert edge.hit and aimed.hit, aimed.message
+    assert aimed.d_min <= aim_m < edge.d_min and aimed.candidates > edge.candidates
+    with pytest.raises(pn.ConfigError, match="motion.aim_radius_mm"):
+        _with(small, aim_radius_mm=0.0)
+
+
 def test_first_plan_hits_and_is_consistent(tmp_path, campaign, small):
     res = pn.run_first_plan(campaign, tmp_path / "motion.csv", tmp_path / "motion.json", seed=0, model=small.model, motion=small.motion)
     m = res.motion

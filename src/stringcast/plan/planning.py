@@ -19,10 +19,10 @@ from an initial posture q0):
   d_min <= target radius, min_y >= floor and a valid simulation. After the first
   hit the search goes on for ``motion.extra_after_hit`` candidates and returns the
   hit with the smallest d_min; without a hit it returns the closest candidate with
-  ``hit=False`` and a message. Our choice (``motion.aim_radius_mm``, ours: 5): the hit that
-  starts that count must pass within the aim radius, not merely within the target's, so the
-  search does not settle for a motion at the target's edge that any model error pushes out
-  (docs/method.md, "Aim at the centre").
+  ``hit=False`` and a message. An option (``motion.aim_radius_mm``, off in ours): the hit
+  that starts that count must pass within the aim radius, not merely within the target's, so
+  the search does not settle for a motion at the target's edge (measured, no gain:
+  docs/method.md, "Aim at the centre").
 
 * Planner (``motion.planner``): ``paper`` (default) is the above. ``robust`` (later
   motions) also scores candidates under an ensemble: the best K parameter sets of the
