@@ -29,6 +29,7 @@ import numpy as np
 import yaml
 
 from benchmarks.common import header, write
+from benchmarks.loop import run_dir
 from benchmarks.loop_summary import CAP, bootstrap_ci, executions
 
 SPLITS = ("choosing", "judging", "all")
@@ -48,7 +49,7 @@ def load_runs(work: Path, method: str) -> dict[tuple[str, int, int], dict]:
     out = {}
     for path in sorted(Path(work).glob(f"loop_*_state_s*_seed*_{method}/run.json")):
         rec = json.loads(path.read_text())
-        if path.parent.name != f"loop_{rec['physics']}_state_s{rec['string']}_seed{rec['seed']}_{method}":
+        if path.parent != run_dir(Path(work), rec["string"], rec["seed"], method, rec["physics"], "state"):
             continue                     # another method whose name ends in this one's
         out[(rec["physics"], int(rec["string"]), int(rec["seed"]))] = rec
     if not out:
@@ -107,7 +108,7 @@ def main() -> None:
     keys = sorted(set(base) & set(variant))
     doc = header("loop_ab", False)
     k0 = keys[0]
-    dirs = [Path(w) / f"loop_{k0[0]}_state_s{k0[1]}_seed{k0[2]}_{m}" for w, m in ((bw, bm), (vw, vm))]
+    dirs = [run_dir(Path(w), k0[1], k0[2], m, k0[0], "state") for w, m in ((bw, bm), (vw, vm))]
     doc.update(base={"work": bw, "method": bm, "git_commits": sorted({base[k]["git_commit"] for k in keys})},
                variant={"work": vw, "method": vm, "git_commits": sorted({variant[k]["git_commit"] for k in keys})},
                settings_differ=config_difference(*dirs),
