@@ -338,3 +338,29 @@ def test_both_physics_check_the_set_points_alike():
         command_arrays(t, q.ravel(), 2, "sim")
     with pytest.raises(ValueError, match=r"^run_trial: t_cmd must be \(K,\) strictly increasing"):
         command_arrays([0, 2, 1], q, 2, "run_trial")
+
+
+@pytest.mark.filterwarnings("ignore:lab \\(elastica\\)")          # the diverging run's settle warns
+def test_a_diverged_swing_is_run_again_at_half_the_step(monkeypatch):
+    """simulate_rod: a run that blows up (here: a stable step claimed 6 times too large) is run again
+    from the start at half the step until it holds, and says so; one that never holds raises."""
+    import dataclasses
+
+    from stringcast.core import ArmSpec, load_config
+    from stringcast.lab.rod import sim as rod_sim
+
+    cfg = load_config(Path(__file__).resolve().parents[2] / "config" / "config.yaml")
+    arm = ArmSpec.from_config("a", cfg["arms"]["ur5e_planar"])
+    t_cmd, q_cmd, _ = _wrist_flick()
+    phys = _phys(length=0.15, n_links=10, weights=((0.15, 0.005, 0.016),))
+    true_dt = rod_material(phys).dt_max
+    monkeypatch.setattr(rod_sim, "rod_material", lambda p: dataclasses.replace(rod_material(p), dt_max=6 * true_dt))
+    rec = simulate_rod(phys, arm, t_cmd, q_cmd, 5e-5, 0.008, settle_s=0.02)
+    k0 = max(1, math.ceil(5e-5 / (6 * true_dt) - 1e-9))
+    assert rec.detail["refinements"] >= 1                       # the first run diverged ...
+    assert rec.detail["steps_per_sample"] == k0 * 2 ** rec.detail["refinements"]
+    assert np.isfinite(rec.points).all() and np.ptp(rec.points[:, -1, 0]) > 0.02   # ... the last one swung
+
+    monkeypatch.setattr(rod_sim, "REFINEMENTS", 0)
+    with pytest.raises(FloatingPointError, match="diverged"):
+        simulate_rod(phys, arm, t_cmd, q_cmd, 5e-5, 0.008, settle_s=0.02)

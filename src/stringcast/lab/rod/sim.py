@@ -15,6 +15,9 @@ from .material import CORD_E_AXIAL, G_ACC, RodMaterial, rod_material
 from .plugins import HandPath, directors, plugin_classes
 from .statics import hanging_nodes, rod_equilibrium
 
+REFINEMENTS = 2
+"""How many times :func:`simulate_rod` halves a diverged run's step and runs it again."""
+
 
 _SIMULATOR: list = []
 
@@ -168,6 +171,12 @@ def simulate_rod(phys: StringPhysics, arm: ArmSpec, t_cmd: np.ndarray, q_cmd: np
     rod's half-step clock), the rod steps at dt = timestep / k (k the fewest whole steps per sample
     within the stable step), and the nodes are recorded every ``timestep`` s.
 
+    The stable step (:func:`~stringcast.lab.rod.material.stable_step`) is the undamped wave
+    limit; a fast swing of a stiff, damped rod can still blow up at it (seen once in 350 loop
+    campaigns: type 7, seed 7, at t = 1.21 s). A diverged run is therefore run again from the
+    start at half the step, up to ``REFINEMENTS`` times; the recording's ``detail`` says how
+    many steps per sample it took (``steps_per_sample``) and how many restarts (``refinements``).
+
     Args:
         phys: the string (``phys.n_links`` elements). arm: the planar arm.
         t_cmd: (K,) s, q_cmd: (K, J) rad, the controller's set-points.
@@ -180,11 +189,26 @@ def simulate_rod(phys: StringPhysics, arm: ArmSpec, t_cmd: np.ndarray, q_cmd: np
 
     Raises:
         ValueError: bad shapes or t_cmd not increasing (:func:`~stringcast.lab.recording.command_arrays`).
-        FloatingPointError: the simulation diverged.
+        FloatingPointError: the simulation diverged at every step tried.
     """
     t_cmd, q_cmd = command_arrays(t_cmd, q_cmd, arm.n_joints, "simulate_rod")
     mat = rod_material(phys)
-    k = max(1, math.ceil(timestep / mat.dt_max - 1e-9))
+    k0 = max(1, math.ceil(timestep / mat.dt_max - 1e-9))
+    for refinement in range(REFINEMENTS + 1):
+        try:
+            rec = _swing(phys, mat, arm, t_cmd, q_cmd, timestep, k0 * 2 ** refinement, servo_lag_s, settle_s,
+                         progress)
+        except FloatingPointError as err:
+            if refinement == REFINEMENTS:
+                raise FloatingPointError(f"{err}, also at {REFINEMENTS} halvings of the step") from err
+            continue
+        rec.detail["refinements"] = refinement
+        return rec
+
+
+def _swing(phys: StringPhysics, mat: RodMaterial, arm: ArmSpec, t_cmd: np.ndarray, q_cmd: np.ndarray, timestep: float,
+           k: int, servo_lag_s: float, settle_s: float, progress: bool) -> Recording:
+    """:func:`simulate_rod` at k rod steps per recorded sample. Raises FloatingPointError: it diverged."""
     sim = RodSim(phys, timestep / k, mat)
     n = int(math.floor((t_cmd[-1] - t_cmd[0]) / timestep + 1e-9)) + 1
     t = t_cmd[0] + timestep * np.arange(n)
