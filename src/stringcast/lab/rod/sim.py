@@ -172,8 +172,8 @@ def simulate_rod(phys: StringPhysics, arm: ArmSpec, t_cmd: np.ndarray, q_cmd: np
     within the stable step), and the nodes are recorded every ``timestep`` s.
 
     The stable step (:func:`~stringcast.lab.rod.material.stable_step`) is the undamped wave
-    limit; a fast swing of a stiff, damped rod can still blow up at it (seen once in 350 loop
-    campaigns: type 7, seed 7, at t = 1.21 s). A diverged run is therefore run again from the
+    limit; a fast swing of a damped, weighted rod can still blow up at it (seen once in stop 47's
+    140 loop campaigns: type 7, seed 7, at t = 1.21 s). A diverged run is therefore run again from the
     start at half the step, up to ``REFINEMENTS`` times; the recording's ``detail`` says how
     many steps per sample it took (``steps_per_sample``) and how many restarts (``refinements``).
 
