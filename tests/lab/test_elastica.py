@@ -184,15 +184,20 @@ def test_clamp_follows_the_hand():
     assert worst_tangent < math.radians(10)                # element 0's shear: GA = 11 N, ~1 N across
 
 
-def test_simulate_rod_records_the_lagged_hand():
-    """simulate_rod's Recording: sites = nodes every lab.timestep_s, site 0 at the lagged arm's
-    hand, the first element along its gripper axis, the joints those of the servo."""
+def _weighted_flick():
+    """(phys, arm, t_cmd, q_cmd): a 0.15 m rod with a weight at its tip, the UR5e's wrist flick."""
     from stringcast.core import ArmSpec, load_config
 
     cfg = load_config(Path(__file__).resolve().parents[2] / "config" / "config.yaml")
     arm = ArmSpec.from_config("a", cfg["arms"]["ur5e_planar"])
     t_cmd, q_cmd, _ = _wrist_flick()
-    phys = _phys(length=0.15, n_links=10, weights=((0.15, 0.005, 0.016),))
+    return _phys(length=0.15, n_links=10, weights=((0.15, 0.005, 0.016),)), arm, t_cmd, q_cmd
+
+
+def test_simulate_rod_records_the_lagged_hand():
+    """simulate_rod's Recording: sites = nodes every lab.timestep_s, site 0 at the lagged arm's
+    hand, the first element along its gripper axis, the joints those of the servo."""
+    phys, arm, t_cmd, q_cmd = _weighted_flick()
     rec = simulate_rod(phys, arm, t_cmd, q_cmd, 5e-5, 0.008, settle_s=0.02)
     assert rec.physics == "elastica" and rec.points.shape == (len(rec.t), 11, 2)
     assert rec.t[1] - rec.t[0] == pytest.approx(5e-5) and rec.t[-1] == pytest.approx(t_cmd[-1], abs=5e-5)
@@ -346,13 +351,9 @@ def test_a_diverged_swing_is_run_again_at_half_the_step(monkeypatch):
     from the start at half the step until it holds, and says so; one that never holds raises."""
     import dataclasses
 
-    from stringcast.core import ArmSpec, load_config
     from stringcast.lab.rod import sim as rod_sim
 
-    cfg = load_config(Path(__file__).resolve().parents[2] / "config" / "config.yaml")
-    arm = ArmSpec.from_config("a", cfg["arms"]["ur5e_planar"])
-    t_cmd, q_cmd, _ = _wrist_flick()
-    phys = _phys(length=0.15, n_links=10, weights=((0.15, 0.005, 0.016),))
+    phys, arm, t_cmd, q_cmd = _weighted_flick()
     true_dt = rod_material(phys).dt_max
     monkeypatch.setattr(rod_sim, "rod_material", lambda p: dataclasses.replace(rod_material(p), dt_max=6 * true_dt))
     rec = simulate_rod(phys, arm, t_cmd, q_cmd, 5e-5, 0.008, settle_s=0.02)
