@@ -266,6 +266,35 @@ def test_compare_after_motion_cuts_the_window(settings, campaign, chi_true, tmp_
     assert len(es.build_problem(df, t, q, campaign, **none).frame_t) == len(whole.frame_t)
 
 
+def test_a_rest_point_folded_within_its_segment_is_refilled(settings, campaign, chi_true, tmp_path):
+    """Point 1 tracked 12 mm below the grasp at rest (the string leaves a tilted gripper and folds back
+    within the first segment): taken as is, the model's first segment starts 18 mm short and the stiff
+    axial spring throws the chain while the arm is still; with estimation.rest_min_chord_share the point
+    is filled like a hidden one, every segment starts at l0, and the chain stays near the tracked pose."""
+    c, mu = prm.decode(chi_true, settings.model, campaign.string.mass_groups())
+    df, t, q, p0 = make_trial(campaign, c, mu, tmp_path)
+    grasp = df[df["point"] == 0][["x_m", "y_m"]].to_numpy()
+    one = df["point"] == 1
+    df.loc[one, ["x_m", "y_m"]] = grasp + (p0[0] - grasp[0]) * (0.012 / campaign.string.l0)
+    still = lambda prob: prob.frame_t < motion_start(t, q)
+
+    def rest_drift(prob):
+        sim, ok = es.simulate_fit(prob, settings.model, chi_true)
+        assert ok
+        return np.linalg.norm(sim[still(prob)][:, 1:] - p0[None, 1:], axis=2).max()
+
+    as_tracked = es.build_problem(df, t, q, campaign, **_problem_settings(settings))
+    refilled = es.build_problem(df, t, q, campaign, **_problem_settings(settings, rest_min_chord_share=0.9))
+    assert as_tracked.folded_points == () and refilled.folded_points == (1,) and refilled.fallback_points == ()
+    seg = np.linalg.norm(np.diff(np.vstack([refilled.hand[0, :2], refilled.p_init]), axis=0), axis=1)
+    # this chain hangs stretched by its load (chord > 2 l0): point 1 halfway on the line, never short
+    assert seg[0] == pytest.approx(seg[1], rel=1e-9) and seg[0] >= campaign.string.l0
+    np.testing.assert_allclose(refilled.p_init[1:], as_tracked.p_init[1:])
+    assert rest_drift(refilled) < 2e-3 < rest_drift(as_tracked)
+    with pytest.raises(ConfigError, match="rest_min_chord_share"):
+        _est(settings, rest_min_chord_share=0.0)
+
+
 def test_hidden_rest_points_start_the_model_at_rest(settings, campaign, chi_true, tmp_path):
     """Points 1-3 never tracked (a gripper hides them): the filled rest state keeps the hidden segments
     at (at least) l0, so the model starts at rest and, while the arm is still, stays near the true pose."""

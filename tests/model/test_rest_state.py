@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from stringcast.model.rest_state import fill_rest_pose
+from stringcast.model.rest_state import fill_rest_pose, folded_points
 
 L0 = 0.03
 
@@ -63,3 +63,19 @@ def test_nothing_hidden_changes_nothing_and_bad_shapes_are_refused():
         fill_rest_pose(grasp, 0.0, truth[:, :1], L0)
     with pytest.raises(ValueError, match="l0"):
         fill_rest_pose(grasp, 0.0, truth, 0.0)
+
+
+def test_a_point_folded_within_its_segment_is_named_and_the_next_measured_from_the_point_kept():
+    """Point 1 sits 10 mm from the grasp (the string folds over inside the gripper's segment): named; point 2,
+    two segments below the grasp, is then measured from the grasp and kept; a hidden point is never named."""
+    grasp = np.array([0.1, 0.5])
+    known = _arc_chain(6, 0.0, grasp=grasp)
+    assert folded_points(grasp, known, L0, 0.9) == ()
+    known[0] = grasp + (0.0, -0.01)
+    known[3] = np.nan
+    assert folded_points(grasp, known, L0, 0.9) == (1,)
+    known[5] = known[4] + (0.005, -0.02)              # 20.6 mm below point 5: folded too, the last point
+    assert folded_points(grasp, known, L0, 0.9) == (1, 6)
+    assert folded_points(grasp, known, L0, 0.3) == ()
+    with pytest.raises(ValueError, match="min_share"):
+        folded_points(grasp, known, L0, 1.5)

@@ -173,6 +173,9 @@ def estimate(problem: EstimationProblem, model: ModelSettings, estimation: Estim
     if problem.fallback_points:
         msgs.append(f"points {list(problem.fallback_points)} were never tracked at rest: their initial state "
                     "is filled with rest-length segments between the tracked points around them")
+    if problem.folded_points:
+        msgs.append(f"points {list(problem.folded_points)} sit nearer the point above than the model's segments "
+                    "allow at rest (the string folds within a segment): their initial state is filled so too")
     return Estimate(coeffs=coeffs, mu=mu, chi=best_chi, E_m=float(top_E[0]), E_i=E_i,
                     history=rec.history, optimizer=name, seed=int(seed), n_evaluations=len(all_E),
                     n_blown_up=blown, seconds=time.perf_counter() - t0,
@@ -256,7 +259,8 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign,
         "verdict": {**verdict.as_dict(), "likely_cause": cause}, "fit_check": figures,
         "t_motion_start_s": problem.t_motion_start,
         "t_sim_start_s": problem.frame_t[0], "frames_compared": len(problem.frame_t),
-        "rest_fallback_points": list(problem.fallback_points), "dt_s": problem.dt})
+        "rest_fallback_points": list(problem.fallback_points),
+        "rest_folded_points": list(problem.folded_points), "dt_s": problem.dt})
     write_parquet(out_fit_parquet, fit_table(tracks, problem, sim, campaign.string.n_points))
     return est
 

@@ -154,7 +154,7 @@ def _rest_figures(problem: EstimationProblem, d: np.ndarray, va: np.ndarray, res
     g0 = np.array([np.interp(problem.frame_t[0], problem.hand_t, problem.hand[:, j]) for j in (0, 1)])
     i = np.arange(1, problem.n_points + 1)
     gap = np.linalg.norm(problem.p_init - g0, axis=1) - i * problem.l0
-    known = np.setdiff1d(i, problem.fallback_points) - 1
+    known = np.setdiff1d(i, problem.fallback_points + problem.folded_points) - 1
     return {"rest_error_mm": float(np.median(d[rv]) * 1000) if tracked_rest else None,
             "rest_gap_share": float(max(0.0, gap[known].max()) / L) if len(known) else None}
 

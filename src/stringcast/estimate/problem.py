@@ -11,7 +11,9 @@ Choices where the paper is silent: the rest state p_init is the median of the
 valid tracked positions over the last ``tracking.rest_frames`` frames before the
 motion starts (:func:`stringcast.core.arm.motion_start`); points never valid there are
 filled with l0 segments between the known points around them
-(:func:`stringcast.model.rest_state.fill_rest_pose`, reported in ``Estimate.message``).
+(:func:`stringcast.model.rest_state.fill_rest_pose`, reported in ``Estimate.message``), and so,
+with ``estimation.rest_min_chord_share`` (our option), are tracked points where the string folds
+within one segment (:func:`stringcast.model.rest_state.folded_points`).
 The simulation starts at the first of those frames and is compared at every later
 frame up to the end of the joint log, or (``estimation.compare_after_motion_s``, our
 option) up to that long after the arm stops (:func:`stringcast.core.arm.motion_window`).
@@ -27,7 +29,7 @@ import pandas as pd
 from stringcast.core import (Campaign, DataError, EstimationSettings, EvaluationSettings, ModelSettings,
                              TrackingSettings, hand_pose, motion_start, motion_window, tracks_arrays)
 from stringcast.model import decode
-from stringcast.model import fill_rest_pose
+from stringcast.model import fill_rest_pose, folded_points
 from stringcast.model import simulate_batch
 from .evaluation import evaluation_value, per_point_errors
 
@@ -50,6 +52,7 @@ class EstimationProblem:
         dt: integration step, s. mass_groups: (n,) int (0 = mu_others).
         w: tip weighting of eq. (6).
         fallback_points: points (1..n) never valid at rest (p_init filled by ``fill_rest_pose``).
+        folded_points: tracked points (1..n) filled so too, the string folding within their segment.
         t_motion_start: s, when the joint log starts to move.
     """
 
@@ -66,6 +69,7 @@ class EstimationProblem:
     mass_groups: np.ndarray
     w: float
     fallback_points: tuple = ()
+    folded_points: tuple = ()
     t_motion_start: float = 0.0
 
     def __post_init__(self):
@@ -101,7 +105,7 @@ def build_problem(tracks_df: pd.DataFrame, t_joints: np.ndarray, q_joints: np.nd
         t_joints: (K,) s; q_joints: (K, J) rad, the measured joint log.
         model, evaluation, estimation, tracking: the settings read (:class:`~stringcast.core.ModelSettings`:
             ``dt_s``, ``psi0_deg``; :class:`~stringcast.core.EvaluationSettings`: ``w``;
-            :class:`~stringcast.core.EstimationSettings`: ``compare_after_motion_s``;
+            :class:`~stringcast.core.EstimationSettings`: ``compare_after_motion_s``, ``rest_min_chord_share``;
             :class:`~stringcast.core.TrackingSettings`: ``rest_frames``).
 
     Raises:
@@ -143,7 +147,11 @@ def build_problem(tracks_df: pd.DataFrame, t_joints: np.ndarray, q_joints: np.nd
         if ok.any():
             known[i - 1] = np.median(xy[rest[ok], i], axis=0)
     psi0 = np.radians(float(model.psi0_deg))
-    p_init, fallback = fill_rest_pose(hand[0, :2], hand[0, 2] + psi0, known, s.l0)
+    share = estimation.rest_min_chord_share
+    folded = () if share is None else folded_points(hand[0, :2], known, s.l0, float(share))
+    known[[i - 1 for i in folded]] = np.nan
+    p_init, filled = fill_rest_pose(hand[0, :2], hand[0, 2] + psi0, known, s.l0)
+    fallback = tuple(i for i in filled if i not in folded)
     if not valid[use, 1:].any():
         raise DataError(f"{source}: no valid tracked point 1..{n} in the frames to compare")
     tracked = np.where(valid[use, 1:, None], xy[use, 1:], 0.0)
@@ -151,7 +159,7 @@ def build_problem(tracks_df: pd.DataFrame, t_joints: np.ndarray, q_joints: np.nd
         hand_t=hand_t, hand=hand, p_init=p_init, frame_t=t[use], frames=frames[use], tracked=tracked,
         valid=valid[use, 1:], l0=s.l0, psi0=psi0,
         dt=float(model.dt_s), mass_groups=s.mass_groups(),
-        w=float(evaluation.w), fallback_points=tuple(fallback),
+        w=float(evaluation.w), fallback_points=fallback, folded_points=folded,
         t_motion_start=t_move)
 
 

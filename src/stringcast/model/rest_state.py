@@ -15,6 +15,12 @@ circular arc), bent to the side that continues the segment above (at the grasp: 
 string's rest direction in the hand, phi_h + psi0). Where the two known points are
 l0 x (segments) apart or more, the points are spaced evenly on the straight line. Hidden
 points below the last known one hang straight down, l0 apart.
+
+A tracked point can be as much at odds with the model as a missing one: where the string
+bends within one segment (it leaves a tilted gripper sideways or upwards and folds over to
+hang down), the chord from the point above to it is far shorter than l0, and the model's
+straight segment starts compressed by as much. :func:`folded_points` names such points, so
+that the caller fills them like hidden ones (``estimation.rest_min_chord_share``).
 """
 from __future__ import annotations
 
@@ -61,6 +67,39 @@ def fill_rest_pose(grasp: np.ndarray, direction0: float, known: np.ndarray, l0: 
         p[i:below] = _polygon(p[i - 1], p[below], below - i + 1, l0, above_dir)[1:-1]
         i = below
     return p[1:], tuple(int(j) for j in np.nonzero(~ok)[0] + 1)
+
+
+def folded_points(grasp: np.ndarray, known: np.ndarray, l0: float, min_share: float) -> tuple:
+    """Tracked rest points whose chord to the point above is shorter than ``min_share`` l0 (module doc).
+
+    Walks down from the grasp point; a point closer than ``min_share * l0`` to the last point kept
+    (the grasp for point 1) is named and skipped, so the next one is measured from the same kept
+    point (two or more segments, which an arc of l0 segments can always join). Untracked (NaN)
+    points are skipped and never named.
+
+    Args:
+        grasp: (2,) m, the grasp point p_0. known: (n, 2) m, tracked rest positions (NaN: not tracked).
+        l0: m, rest segment length. min_share: in (0, 1], the shortest chord of one segment, over l0.
+
+    Returns:
+        The 1-based numbers of the folded points, ascending.
+
+    Raises:
+        ValueError: bad shapes, l0 <= 0 or min_share outside (0, 1].
+    """
+    known = np.asarray(known, float)
+    if known.ndim != 2 or known.shape[1] != 2 or np.shape(grasp) != (2,) or not l0 > 0 or not 0 < min_share <= 1:
+        raise ValueError(f"folded_points: expected grasp (2,), known (n, 2), l0 > 0, 0 < min_share <= 1; got "
+                         f"{np.shape(grasp)}, {known.shape}, {l0}, {min_share}")
+    last, last_i, folded = np.asarray(grasp, float), 0, []
+    for i, p in enumerate(known, start=1):
+        if not np.all(np.isfinite(p)):
+            continue
+        if i - last_i == 1 and np.hypot(*(p - last)) < min_share * l0:
+            folded.append(i)
+            continue
+        last, last_i = p, i
+    return tuple(folded)
 
 
 def _polygon(a: np.ndarray, b: np.ndarray, m: int, l0: float, above_dir: float) -> np.ndarray:
