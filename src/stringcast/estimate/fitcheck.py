@@ -23,7 +23,11 @@ Figures (``None`` where the frames to compute one are missing):
 * ``rest_error_mm``: the median error over the valid rest entries (None with fewer than
   ``MIN_FRAMES`` rest frames tracked); ``rest_gap_share``: how far beyond its own length any
   tracked rest point hangs from the grasp point, max_i (|p_i - grasp| - i l0) / L (0 when none
-  does): a hanging string cannot do that, however stiff or heavy it is.
+  does): a hanging string cannot do that, however stiff or heavy it is; ``rest_folded_points``:
+  the tracked rest points nearer the point above than :data:`~stringcast.model.FOLD_CHORD_SHARE`
+  l0 (:func:`~stringcast.model.folded_points`; those the problem refilled, with
+  ``estimation.rest_min_chord_share``): the string folds within a segment there, which the model's
+  straight segments cannot start from, so it moves while the arm is still.
 * ``best_shift_ms``, ``best_shift_frames``, ``shift_gain``: the time that, added to the frames'
   times, makes tracked and simulated points agree best (the median error over the moving
   entries, searched over whole frame periods up to a quarter of the motion), and the error
@@ -42,6 +46,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from stringcast.model import FOLD_CHORD_SHARE, folded_points
 from .problem import EstimationProblem
 
 MIN_FRAMES = 3
@@ -155,8 +160,10 @@ def _rest_figures(problem: EstimationProblem, d: np.ndarray, va: np.ndarray, res
     i = np.arange(1, problem.n_points + 1)
     gap = np.linalg.norm(problem.p_init - g0, axis=1) - i * problem.l0
     known = np.setdiff1d(i, problem.fallback_points + problem.folded_points) - 1
+    folds = problem.folded_points or folded_points(g0, problem.p_init, problem.l0, FOLD_CHORD_SHARE)
     return {"rest_error_mm": float(np.median(d[rv]) * 1000) if tracked_rest else None,
-            "rest_gap_share": float(max(0.0, gap[known].max()) / L) if len(known) else None}
+            "rest_gap_share": float(max(0.0, gap[known].max()) / L) if len(known) else None,
+            "rest_folded_points": [int(i) for i in folds]}
 
 
 def _time_figures(problem: EstimationProblem, sim: np.ndarray, d: np.ndarray, va: np.ndarray, moving: np.ndarray,

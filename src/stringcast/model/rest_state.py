@@ -21,12 +21,18 @@ bends within one segment (it leaves a tilted gripper sideways or upwards and fol
 hang down), the chord from the point above to it is far shorter than l0, and the model's
 straight segment starts compressed by as much. :func:`folded_points` names such points, so
 that the caller fills them like hidden ones (``estimation.rest_min_chord_share``).
+:data:`FOLD_CHORD_SHARE` is the share the fit's verdict reads such a fold at.
 """
 from __future__ import annotations
 
 import math
 
 import numpy as np
+
+FOLD_CHORD_SHARE = 0.9
+"""A chord under 0.9 l0: the string turns by about 90 deg within the segment (an arc of length l0
+turning by theta spans l0 sin(theta / 2) / (theta / 2)); a straight hanging segment's chord is l0
+to tracking noise (under 2 % of l0 on the lab's camera family, medians of the rest frames)."""
 
 
 def fill_rest_pose(grasp: np.ndarray, direction0: float, known: np.ndarray, l0: float) -> tuple[np.ndarray, tuple]:
