@@ -295,6 +295,31 @@ def test_a_rest_point_folded_within_its_segment_is_refilled(settings, campaign, 
         _est(settings, rest_min_chord_share=0.0)
 
 
+def test_rest_settle_starts_every_set_at_its_own_rest(settings, campaign, chi_true, tmp_path):
+    """estimation.rest_settle_s: the tracked rest pose bent 20 mm off the string's own rest; started there
+    the chain swings while the arm is still; relaxed first, it starts (and stays) at the set's own rest,
+    and E, fitted on the true set, is lower."""
+    c, mu = prm.decode(chi_true, settings.model, campaign.string.mass_groups())
+    df, t, q, p0 = make_trial(campaign, c, mu, tmp_path)
+    rest = df["t_s"] < motion_start(t, q)
+    bend = np.clip(df["point"].to_numpy() - 3, 0, None) * 0.004      # points below 3 pushed sideways
+    df.loc[rest, "x_m"] += bend[rest.to_numpy()]
+    plain = es.build_problem(df, t, q, campaign, **_problem_settings(settings))
+    settled = es.build_problem(df, t, q, campaign, **_problem_settings(settings, rest_settle_s=2.0))
+    assert plain.settle_s == 0.0 and settled.settle_s == 2.0
+    np.testing.assert_allclose(settled.p_init, plain.p_init)
+    still = plain.frame_t < motion_start(t, q)
+    (sim_plain, ok1), (sim_settled, ok2) = (es.simulate_fit(p, settings.model, chi_true) for p in (plain, settled))
+    assert ok1 and ok2
+    move = lambda sim: np.linalg.norm(sim[still] - sim[still][:1], axis=2).max()
+    assert move(sim_settled) < 1e-3 < move(sim_plain)
+    np.testing.assert_allclose(sim_settled[0], p0, atol=2e-3)
+    E = [es.make_objective(p, settings.model)(chi_true[None])[0] for p in (plain, settled)]
+    assert E[1] < E[0]
+    with pytest.raises(ConfigError, match="rest_settle_s"):
+        _est(settings, rest_settle_s=0.0)
+
+
 def test_hidden_rest_points_start_the_model_at_rest(settings, campaign, chi_true, tmp_path):
     """Points 1-3 never tracked (a gripper hides them): the filled rest state keeps the hidden segments
     at (at least) l0, so the model starts at rest and, while the arm is still, stays near the true pose."""

@@ -146,6 +146,7 @@ class EstimationSettings(_Section):
     compare_after_motion_s: float | None = _f(None, "compare frames up to this long after the arm stops, s (null: the whole joint log, as the paper)")
     joint_trials: int = _f(1, "trials fitted at once: 1 the last (paper), N the last N, 0 every trial so far")
     rest_min_chord_share: float | None = _f(None, "a tracked rest point nearer the point above than this share of l0 is filled like a hidden one: the string folds within that segment (null: off, the paper)")
+    rest_settle_s: float | None = _f(None, "the model first relaxes under the still hand from the tracked rest pose for up to this long (the planner's dynamic relaxation), s (null: starts at the tracked pose, the paper)")
     cmaes_first_start: str = _f("centre", "CMA-ES on trial 1 without a first look: from the centre of the box (centre) or from chi_best (best)")
     verdict_error_share: tuple = _f((0.18, 0.25), "fit verdict: [warn, fail] when the fit's median error over the moving frames exceeds these shares of the string's length")
     verdict_skill: tuple = _f((0.45, 0.25), "fit verdict: [warn, fail] when the fit explains at most this share of the error of a string carried without swinging (1 - error / that error)")
@@ -159,6 +160,8 @@ class EstimationSettings(_Section):
         share = self.rest_min_chord_share
         if share is not None and not 0 < float(share) <= 1:
             raise ConfigError(f"estimation.rest_min_chord_share: null or in (0, 1]; got {share}")
+        if self.rest_settle_s is not None and not float(self.rest_settle_s) > 0:
+            raise ConfigError(f"estimation.rest_settle_s: null or > 0 s; got {self.rest_settle_s}")
         pairs = {"verdict_error_share": 1, "verdict_skill": -1, "verdict_shift_gain": -1}
         for name, order in pairs.items():
             pair = tuple(getattr(self, name))

@@ -30,7 +30,7 @@ from stringcast.core import (Campaign, DataError, EstimationSettings, Evaluation
                              TrackingSettings, hand_pose, motion_start, motion_window, tracks_arrays)
 from stringcast.model import decode
 from stringcast.model import fill_rest_pose, folded_points
-from stringcast.model import simulate_batch
+from stringcast.model import relax_batch, simulate_batch
 from .evaluation import evaluation_value, per_point_errors
 
 MIN_REST_FRAMES = 3
@@ -53,6 +53,8 @@ class EstimationProblem:
         w: tip weighting of eq. (6).
         fallback_points: points (1..n) never valid at rest (p_init filled by ``fill_rest_pose``).
         folded_points: tracked points (1..n) filled so too, the string folding within their segment.
+        settle_s: s, > 0: every simulation first relaxes from p_init under the still hand for up to
+            this long (:func:`stringcast.model.relax_batch`); 0: it starts at p_init.
         t_motion_start: s, when the joint log starts to move.
     """
 
@@ -70,6 +72,7 @@ class EstimationProblem:
     w: float
     fallback_points: tuple = ()
     folded_points: tuple = ()
+    settle_s: float = 0.0
     t_motion_start: float = 0.0
 
     def __post_init__(self):
@@ -160,22 +163,34 @@ def build_problem(tracks_df: pd.DataFrame, t_joints: np.ndarray, q_joints: np.nd
         valid=valid[use, 1:], l0=s.l0, psi0=psi0,
         dt=float(model.dt_s), mass_groups=s.mass_groups(),
         w=float(evaluation.w), fallback_points=fallback, folded_points=folded,
+        settle_s=float(estimation.rest_settle_s or 0.0),
         t_motion_start=t_move)
+
+
+def _simulate(problem: EstimationProblem, coeffs: np.ndarray, mu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(B, F, n, 2) m and (B,) ok: B sets along the problem's hand path from its start state (p_init, or,
+    with ``settle_s``, each set's own rest near it)."""
+    b = len(coeffs)
+    if problem.settle_s <= 0:
+        return simulate_batch(coeffs, mu, problem.hand_t, problem.hand[None], np.zeros(b, np.int64),
+                              problem.p_init[None], problem.l0, problem.psi0, problem.dt, problem.frame_t)
+    start, fine = relax_batch(coeffs, mu, problem.hand[0], problem.p_init, problem.l0, problem.psi0, problem.dt,
+                              problem.settle_s)
+    start = np.where(fine[:, None, None], start, problem.p_init[None])      # a blown-up set: E = inf below
+    hands = np.ascontiguousarray(np.broadcast_to(problem.hand, (b, *problem.hand.shape)))
+    pos, ok = simulate_batch(coeffs, mu, problem.hand_t, hands, np.arange(b, dtype=np.int64), start,
+                             problem.l0, problem.psi0, problem.dt, problem.frame_t)
+    return pos, np.asarray(ok, bool) & fine
 
 
 def make_objective(problem: EstimationProblem, model: ModelSettings) -> Callable[[np.ndarray], np.ndarray]:
     """E (eqs. 4-6) of a batch: chi (B, D) -> E (B,) in m, +inf where the simulation blew up; chi decoded
     over the model settings' ranges (:class:`~stringcast.core.ModelSettings`)."""
 
-    hand = problem.hand[None]
-    p_init = problem.p_init[None]
-
     def objective(chi: np.ndarray) -> np.ndarray:
         coeffs, mu = decode(chi, model, problem.mass_groups)
         b = len(chi)
-        pos, ok = simulate_batch(np.ascontiguousarray(coeffs), np.ascontiguousarray(mu), problem.hand_t, hand,
-                                 np.zeros(b, np.int64), p_init, problem.l0, problem.psi0, problem.dt,
-                                 problem.frame_t)
+        pos, ok = _simulate(problem, np.ascontiguousarray(coeffs), np.ascontiguousarray(mu))
         E = np.asarray(evaluation_value(problem.tracked, problem.valid, pos, problem.w), float).reshape(b)
         return np.where(np.asarray(ok, bool) & np.isfinite(E), E, np.inf)
 
@@ -208,8 +223,7 @@ def simulate_fit(problem: EstimationProblem, model: ModelSettings, chi: np.ndarr
     """Simulated points (F, n, 2) at ``problem.frame_t`` for one chi, and whether the run stayed valid."""
 
     coeffs, mu = decode(np.atleast_2d(chi), model, problem.mass_groups)
-    pos, ok = simulate_batch(coeffs, mu, problem.hand_t, problem.hand[None], np.zeros(1, np.int64),
-                             problem.p_init[None], problem.l0, problem.psi0, problem.dt, problem.frame_t)
+    pos, ok = _simulate(problem, np.ascontiguousarray(coeffs), np.ascontiguousarray(mu))
     return np.asarray(pos)[0], bool(np.asarray(ok)[0])
 
 
