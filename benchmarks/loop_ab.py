@@ -88,7 +88,8 @@ def compare(base: dict, variant: dict, keys: list) -> dict:
     for side, runs in (("base", base), ("variant", variant)):
         missed = [k for k in keys if not (runs[k]["hit"] and runs[k]["executions"] == 1)]
         second = [runs[k] for k in missed if runs[k]["executions"] and runs[k]["executions"] >= 2]
-        pred = [r["prediction"][0]["median_mm"] for r in second if r.get("prediction")]
+        pred = [r["prediction"][0]["median_mm"] for r in second
+                if r.get("prediction") and r["prediction"][0].get("median_mm") is not None]   # None: not judged
         out[side] = {"mean": float(ex[side].mean()), "max": int(ex[side].max()),
                      "first_shot_hits": int(first[side].sum()),
                      "hit_at_second_after_a_miss": [sum(executions(r) == 2 for r in second), len(missed)],

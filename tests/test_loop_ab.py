@@ -45,6 +45,9 @@ def test_two_runs_paired_by_physics_type_and_seed(tmp_path):
     # one campaign per type: the type-stratified interval is the mean itself
     assert m["paired_diff_ci95"] == pytest.approx([-0.5, -0.5])
     e = compare(a, b, [("elastica", 1, 0)])
+    assert e["variant"]["second_step_prediction_error_mm_median"] == 10.0
+    b[("elastica", 1, 0)]["prediction"][0]["median_mm"] = None      # a prediction not judged: left out
+    assert compare(a, b, [("elastica", 1, 0)])["variant"]["second_step_prediction_error_mm_median"] is None
     assert e["base"]["mean"] == 8 and e["base"]["max"] == 8 and e["paired_diff_mean"] == -6
     with pytest.raises(FileNotFoundError, match="no state-mode campaigns of method 'paper'"):
         load_runs(base, "paper")
