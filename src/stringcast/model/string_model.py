@@ -214,6 +214,15 @@ def _targets(target_xy, target_dt, target_idx, B: int):
     return t, idx, tdt
 
 
+def _relaxation(relax: float | None, g: float, n: int, l0: float, dt: float) -> tuple[float, int]:
+    """The dynamic relaxation's damping, 1/s (default 2 sqrt(g / (n l0)), about critical for the
+    pendulum mode), and its rest test's interval in steps (every millisecond of simulated time):
+    one definition for the planner's equilibrium and the fit's settled start."""
+    if relax is None:
+        relax = 2.0 * math.sqrt(max(g, 1e-9) / (n * l0))
+    return float(relax), max(1, int(round(1e-3 / dt)))
+
+
 def relax_batch(coeffs, mu, hand_pose, p_init, l0, psi0, dt, t_relax, *, g: float = G, max_stretch: float = 3.0,
                 relax: float | None = None):
     """B candidates relaxed from one pose under a still hand for at most ``t_relax`` s.
@@ -241,10 +250,8 @@ def relax_batch(coeffs, mu, hand_pose, p_init, l0, psi0, dt, t_relax, *, g: floa
     l0, dt, lmax = _scalars(l0, dt, max_stretch)
     if not (t_relax > 0) or not np.all(np.isfinite(p)):
         raise ValueError(f"relax_batch: need t_relax > 0 and a finite p_init (got {t_relax})")
-    if relax is None:
-        relax = 2.0 * math.sqrt(max(g, 1e-9) / (n * l0))
-    check = max(1, int(round(1e-3 / dt)))
-    pos, status = _bk.settle_batch_kernel(c, m, hp, p, l0, float(psi0), dt, float(g), lmax, float(relax), 1e-4,
+    relax, check = _relaxation(relax, g, n, l0, dt)
+    pos, status = _bk.settle_batch_kernel(c, m, hp, p, l0, float(psi0), dt, float(g), lmax, relax, 1e-4,
                                           float(t_relax), check)
     ok = status != 1
     pos[~ok] = np.nan
@@ -290,11 +297,9 @@ def hanging_equilibrium(coeffs, mu, hand_pose, l0, psi0, n, dt=1e-4, tol=1e-4, t
     hp = _f64(hand_pose, "hand_pose", 1, 3)
     l0, dt, lmax = _scalars(l0, dt, max_stretch)
     p0 = straight_hanging(c[0], m[0], hp, l0, n, g=g)
-    if relax is None:
-        relax = 2.0 * math.sqrt(max(g, 1e-9) / (n * l0))
-    check = max(1, int(round(1e-3 / dt)))
+    relax, check = _relaxation(relax, g, n, l0, dt)
     pos, status = _k.settle(c[0], m[0], hp, p0, l0, float(psi0), dt, float(g), lmax,
-                            float(relax), float(tol), float(t_max), check)
+                            relax, float(tol), float(t_max), check)
     if status == 1:
         top = np.linalg.norm(p0[0] - hp[:2]) / l0
         raise RuntimeError(
