@@ -86,6 +86,22 @@ def test_settles_still_from_any_gripper_angle():
     assert np.argmin(nodes[:, 1]) == len(nodes) - 1
 
 
+def test_the_hanging_rod_does_not_depend_on_the_hands_turn_count():
+    """phi_h is the arm's joint sum, unwrapped: a gripper 22 deg left of down is 4.32 rad as often as
+    -1.96 rad. The rod hangs alike from both, and from neither with a loop: below the clamped element
+    every node lies lower than the one before (at 4.32 rad the start once wound it by -338 deg)."""
+    phys = _phys(weights=())
+    shapes = []
+    for phi in (DOWN - 0.4, DOWN - 0.4 + 2 * math.pi, DOWN + 1.2, DOWN + 1.2 - 2 * math.pi):
+        sim = RodSim(phys)
+        assert sim.reset_hanging(np.array([0.5, 0.2, phi])) < 1e-9
+        nodes = sim.nodes()
+        assert np.all(np.diff(nodes[1:, 1]) < 0)
+        shapes.append(nodes)
+    assert np.abs(shapes[0] - shapes[1]).max() < 1e-9
+    assert np.abs(shapes[2] - shapes[3]).max() < 1e-9
+
+
 # ------------------------------------------------------------------------------- dynamics
 def _bessel_period(L: float, lam: float, M: float) -> float:
     """Fundamental period, s, of a heavy string of length L m, lam kg/m, pinned at its top with a

@@ -5,6 +5,7 @@ Small and fast: a 150 mm string of 10 links filmed by a 320 x 240 camera at
 board beside it, while the wrist flicks.
 """
 import copy
+import math
 import dataclasses
 import json
 from pathlib import Path
@@ -125,6 +126,22 @@ def test_chain_hangs_still(campaign, config):
     assert after[0] == pytest.approx(pose[:2], abs=1e-5)  # grasp at the hand
     assert after[-1, 1] < pose[1] - 0.9 * phys.length    # hangs nearly straight down
     assert np.argmin(after[:, 1]) == len(after) - 1       # the weighted tip is lowest
+
+
+def test_the_hanging_chain_does_not_depend_on_the_hands_turn_count(campaign, config):
+    """phi_h is the arm's joint sum, unwrapped: the chain hangs alike from phi_h and phi_h + 2 pi, and
+    without a loop (each site below the one before, past the first link; at 4.32 rad the start once
+    wound the chain by -338 deg and the equilibrium kept it)."""
+    phys = StringPhysics.from_campaign(campaign, config)
+    shapes = []
+    for phi in (-math.pi / 2 - 0.4, 3 * math.pi / 2 - 0.4, 1.2 - math.pi / 2, 1.2 - 5 * math.pi / 2):
+        sim = ChainSim(phys, 5e-5)
+        sim.equilibrium(np.array([0.6, 0.1, phi]))
+        sites = sim.sites()
+        assert np.all(np.diff(sites[1:, 1]) < 0)
+        shapes.append(sites)
+    assert np.abs(shapes[0] - shapes[1]).max() < 1e-6
+    assert np.abs(shapes[2] - shapes[3]).max() < 1e-6
 
 
 def _release_horizontal(phys):

@@ -121,11 +121,15 @@ class ChainSim:
 
     # -- state ---------------------------------------------------------------
     def reset_hanging(self, pose: np.ndarray) -> None:
-        """Place the driver at ``pose`` (x, y, phi_h) at rest with the string straight down."""
+        """Place the driver at ``pose`` (x, y, phi_h) at rest with the string straight down.
+
+        The first hinge turns the first link to -y the short way, within half a turn: its spring is
+        linear in the angle, so from -pi/2 - phi_h unwrapped (phi_h = 4.3 rad, the arm's joint sum)
+        the chain started wound by -338 deg and :meth:`equilibrium` kept that loop."""
         d = self.data
         self.mujoco.mj_resetData(self.model, d)
         d.qpos[:3] = pose
-        d.qpos[3] = -math.pi / 2 - pose[2]  # first link points along -y
+        d.qpos[3] = (-math.pi / 2 - pose[2] + math.pi) % (2 * math.pi) - math.pi  # first link along -y
         self.mujoco.mj_forward(self.model, d)
 
     def sites(self) -> np.ndarray:

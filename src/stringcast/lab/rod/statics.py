@@ -16,8 +16,11 @@ from .plugins import directors
 
 def hanging_angles(mat: RodMaterial, phi_h: float) -> np.ndarray:
     """(n,) element angles, rad, of the rod hanging at rest from a clamp at angle ``phi_h`` rad
-    (element 0 = phi_h). Starts from straight down (-pi/2) and takes the minimum the minimiser
-    reaches from there."""
+    (element 0 = phi_h). Starts from straight down and takes the minimum the minimiser reaches
+    from there. Straight down is taken within half a turn of phi_h (the angles are not wrapped in
+    the energy): from -pi/2 itself, a clamp at phi_h = 4.3 rad (the arm's joint sum, 22 deg left
+    of down) started the rod wound by -338 deg at its first junction, and the minimiser kept a loop
+    a hanging cord does not have."""
     from scipy.optimize import minimize
 
     n, l = mat.n, mat.l
@@ -33,7 +36,8 @@ def hanging_angles(mat: RodMaterial, phi_h: float) -> np.ndarray:
         g[1:] += k * dth
         return e, g[1:]
 
-    x0 = np.full(n - 1, -np.pi / 2)
+    down = phi_h + (-np.pi / 2 - phi_h + np.pi) % (2 * np.pi) - np.pi      # -pi/2 (mod 2 pi), nearest phi_h
+    x0 = np.full(n - 1, down)
     res = minimize(fun, x0, jac=True, method="L-BFGS-B", options={"gtol": 1e-12, "ftol": 1e-15, "maxiter": 5000})
     return np.concatenate([[phi_h], res.x])
 
