@@ -63,9 +63,10 @@ that explains more wins; ties go in the order geometry, clock, tracking, model.
 * tracking: the valid share above; tracking's verdict.
 * model: the early third of the moving frames fits (error at most ``EARLY_RATIO`` = 0.5 of the
   late third's): the model follows the motion and loses the string later; the error at rest
-  where the string folds within a segment (above: of ours' fits in the stored loop runs, seeds
-  0-9 of both physics on the lab's exact points, 86 of the 94 with an error at rest over 2 mm
-  had a folded point, 2 of the 46 others); and, when nothing
+  where the string folds within a segment (above: of ours' fits in the loop runs of stops 45-47,
+  seeds 0-9 of both physics on the lab's exact points, whose strings started curled under a
+  gripper pointing left of down, 86 of the 94 with an error at rest over 2 mm had a folded point,
+  2 of the 46 others); and, when nothing
   else stands out, the model by default.
 
 Reported in ``fit_check`` but not judged: ``speed_correlation`` (the error's rank correlation
