@@ -18,8 +18,9 @@ points below the last known one hang straight down, l0 apart.
 
 A tracked point can be as much at odds with the model as a missing one: where the string
 bends within one segment (a curl near the clamp: the labs' strings under a gripper pointing
-left of down had one until their start state was fixed at 3c83cc8; a cord stored coiled can), the chord from the point above to it is far shorter than l0, and the model's
-straight segment starts compressed by as much. :func:`folded_points` names such points, so
+left of down had one until their start state was fixed at 3c83cc8; a cord stored coiled can),
+the chord from the point above to it is far shorter than l0, and the model's straight segment
+starts compressed by as much. :func:`folded_points` names such points, so
 that the caller fills them like hidden ones (``estimation.rest_min_chord_share``).
 :data:`FOLD_CHORD_SHARE` is the share the fit's verdict reads such a fold at.
 """
