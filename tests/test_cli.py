@@ -138,13 +138,11 @@ def test_stage_progress_prints_each_stage_start_and_end_from_snakemake_lines():
     assert len(shown) == 4 and p.tail[-1] == "3 of 3 steps (100%) done"
 
 
-def test_calibrate_refuses_campaign_intrinsics_without_their_views(tmp_path, capsys, monkeypatch):
+def test_calibrate_refuses_campaign_intrinsics_without_their_views(tmp_path, capsys):
     """`calibrate --intrinsics` without the views they were fitted to is an error naming the file (exit 2),
     not intrinsics silently dropped."""
-    from stringcast import warm
     from stringcast.cli import main
 
-    monkeypatch.delenv(warm.ENV_SOCKET, raising=False)
     code = main(["calibrate", "--trial-dir", str(tmp_path / "trial_1"), "--intrinsics", str(tmp_path / "intrinsics.json"),
                  "--campaign", str(tmp_path / "campaign.yaml"), "--out", str(tmp_path / "calibration.json")])
     err = capsys.readouterr().err

@@ -100,8 +100,7 @@ def test_the_package_has_no_import_circle():
 
 def test_the_top_level_reads_like_the_loop():
     names = sorted(p.name for p in PKG.iterdir() if not p.name.startswith(("_", ".")) and p.name != "py.typed")
-    # warm.py: the workflow's jobs forked from one warm process (the command line's start-up)
-    assert names == sorted([*SUBPACKAGES, "campaign.py", "cli.py", "cli_parser.py", "warm.py"])
+    assert names == sorted([*SUBPACKAGES, "campaign.py", "cli.py", "cli_parser.py"])
 
 
 def test_function_level_imports_only_in_the_cli():

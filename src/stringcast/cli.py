@@ -14,8 +14,6 @@ import os
 import sys
 from pathlib import Path
 
-from stringcast import warm
-
 
 CONFIG_ENV = "STRINGCAST_CONFIG"
 """Environment variable with the config files a job reads (``os.pathsep``-separated), set by
@@ -303,12 +301,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run one subcommand; its exit status. A workflow stage runs in the run's warm server where
-    there is one (:mod:`stringcast.warm`), else here."""
+    """Run one subcommand; its exit status."""
     argv = sys.argv[1:] if argv is None else list(argv)
-    code = warm.run_in_server(argv, wait_s=0.0 if argv[:1] and argv[0] in START_AT_ONCE else WARM_WAIT_S)
-    if code is not None:
-        return code
     from stringcast.core import ConfigError, DataError, JointLimitError
 
     args = build_parser().parse_args(argv)
@@ -318,45 +312,6 @@ def main(argv: list[str] | None = None) -> int:
         print(f"stringcast {args.command}: error: {exc}", file=sys.stderr)
         return 2
     return 0
-
-
-START_AT_ONCE = ("decode",)
-"""Stages that run cold at once rather than wait for a starting warm server: the video's decode, a
-trial's first job, imports only OpenCV and NumPy, and every later stage waits for it."""
-WARM_WAIT_S = 30.0
-"""How long any other stage waits for a starting warm server (its imports take 2-3 s) rather than
-import the same stages itself, beside the decode (:func:`stringcast.warm.run_in_server`)."""
-PRELOAD_SKIPS = ("report-trial", "report-campaign")
-"""Stages the warm server does not import: the reports (matplotlib, Jinja2: 0.7 s of CPU that the
-video's decode shares) come after the next motion, and their jobs import them themselves."""
-
-
-def preload_stages() -> None:
-    """Import the workflow's stages up to the next motion and what they import when first used (the
-    config's schema check, Parquet), and set up numba's compiler (0.4 s, shared by every cached kernel
-    a job then loads) with a throwaway function that starts no threads: the warm server's preload."""
-    import jsonschema  # noqa: F401
-    import numba
-    import pyarrow.dataset  # noqa: F401
-    import pyarrow.parquet  # noqa: F401
-
-    for command in STAGES:
-        if command not in PRELOAD_SKIPS:
-            stage_entry(command)
-    numba.njit(lambda x: x + 1)(1)
-
-
-def warm_server(argv: list[str] | None = None) -> None:
-    """The workflow's warm server (:data:`stringcast.warm.SERVER_ENTRY`; arguments SOCKET
-    PARENT_PID): forks each workflow stage's job from a process that has imported them all."""
-    args = sys.argv[1:] if argv is None else argv
-    if len(args) != 2 or not args[1].isdigit():
-        sys.exit("usage: warm_server SOCKET PARENT_PID")
-    try:
-        warm.serve(args[0], preload_stages, lambda a: a[0] in STAGES, main, parent=int(args[1]), log=sys.stdout)
-    finally:   # without the interpreter's teardown of every stage's modules (1 s that Snakemake waits for)
-        sys.stdout.flush()
-        os._exit(0)
 
 
 if __name__ == "__main__":

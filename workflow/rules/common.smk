@@ -8,7 +8,6 @@ from pathlib import Path
 from snakemake.exceptions import WorkflowError
 
 from stringcast.cli import stage_sections
-from stringcast.warm import start_server, stop_server
 from stringcast.core import (
     ConfigError,
     DataError,
@@ -51,20 +50,6 @@ shell.prefix(
     f'export STRINGCAST_CONFIG="{os.pathsep.join(map(os.path.abspath, CONFIG_FILES))}"; '
 )
 CLI = "stringcast"
-
-
-# Warm start (stringcast.warm): on a local run, the jobs fork from one process that has
-# imported every stage (about 1 s saved per job); a Slurm run's jobs start cold.
-onstart:
-    start_server(workflow.local_exec)
-
-
-onsuccess:
-    stop_server()
-
-
-onerror:
-    stop_server()
 
 
 try:
