@@ -75,6 +75,22 @@ def test_shots_in_the_top_third_only_are_flagged_and_the_principal_point_held(la
         assert "free_fit" in doc and "principal point" in text and "held" in text
 
 
+@pytest.mark.parametrize("shots", ["all", "top third"])
+def test_views_rejected_counts_every_view_dropped(lab_clip, shots):
+    """A view with false corners is dropped as an outlier; the count of rejected views says so, also
+    where a parameter is then held and the views refitted (it read 0 there)."""
+    frames, _, _, board, _, _ = lab_clip
+    views = select_calibration_views(frames[:20] if shots == "all" else _top_third(frames[:30]), board, shots)
+    rng = np.random.default_rng(0)
+    img = list(views.image_points)
+    img[1] = img[1] + rng.normal(0.0, 4.0, img[1].shape).astype(img[1].dtype)     # false corners, 4 px rms
+    bad = Views(views.object_points, tuple(img), views.image_size, views.found, views.names)
+    intr, doc, _ = judged_intrinsics(bad, cv2.CALIB_FIX_K3, ST)
+    assert intr.views_rejected >= 1 and views.names[1] not in intr.views.names
+    assert intr.views_rejected == len(views) - intr.n_views
+    assert doc["views_rejected"] == intr.views_rejected
+
+
 def test_nearly_fronto_parallel_shots_are_flagged_for_their_tilt(lab_clip):
     frames, _, tilts, board, _, _ = lab_clip
     flat = [frames[k] for k in np.argsort(tilts)[:6]]

@@ -31,6 +31,8 @@ and against the calibration views' median error.
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
 
@@ -68,7 +70,8 @@ def judged_intrinsics(views: Views, flags: int, st: CalibrationSettings, min_vie
     for flag, what, kinds in _STEPS:
         if fit.flags & flag or not any(k in problems for k in kinds):
             continue
-        trial = fit_views(free.views, fit.flags | flag, min_views)
+        trial = fit_views(free.views, fit.flags | flag, min_views)   # the views the free fit kept:
+        trial = replace(trial, views_rejected=free.views_rejected + trial.views_rejected)  # count its drops too
         if trial.rms_px > free.rms_px * (1 + st.hold_rms_tol):
             refused = what, trial.rms_px
             break
