@@ -39,6 +39,28 @@ def _write_motion(path, t, q):
     return path
 
 
+def test_a_motion_without_its_motion_json_is_refused_before_anything_moves(tmp_path, campaign, config, fake_lab,
+                                                                           settings):
+    t, q = _smooth_motion(campaign)
+    motion = _write_motion(tmp_path / "motion.csv", t, q)
+    motion.with_suffix(".json").unlink()
+    with pytest.raises(DataError, match=r"motion.json: missing: .*planning the next motion reads it"):
+        execute(motion, "virtual", tmp_path / "trial_1", campaign, settings.executor, config)
+    assert fake_lab == [] and not (tmp_path / "trial_1").exists()
+
+
+def test_the_command_line_says_what_it_played_and_where(tmp_path, campaign, config, fake_lab, capsys):
+    from stringcast.cli import main
+
+    t, q = _smooth_motion(campaign)
+    motion = _write_motion(tmp_path / "motion.csv", t, q)
+    (tmp_path / "campaign.yaml").write_text("string: 1\ntarget: 1\n")
+    code = main(["execute", str(motion), "--out", str(tmp_path / "trial_1"), "--campaign", str(tmp_path / "campaign.yaml")])
+    out = capsys.readouterr().out
+    assert code == 0 and len(fake_lab) == 1
+    assert f"executed {motion} on virtual: {len(fake_lab[0]['t'])} samples" in out and str(tmp_path / "trial_1") in out
+
+
 def test_plays_motion_with_pre_and_post_roll(tmp_path, campaign, config, fake_lab, settings):
     t, q = _smooth_motion(campaign)
     motion = _write_motion(tmp_path / "motion.csv", t, q)

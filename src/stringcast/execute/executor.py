@@ -72,7 +72,7 @@ def execute(motion_csv: Path, backend: str, out_dir: Path, campaign_yaml: Path |
 
     Args:
         motion_csv: ``t_s, q1_rad..qJ_rad`` from t = 0 at the controller rate
-            (its ``motion.json``, if beside it, is copied along).
+            (its ``motion.json``, which must be beside it, is copied along).
         backend: ``"virtual"`` or ``"ur-rtde"``.
         out_dir: the trial folder to create (``data/<campaign>/trial_<k>``).
         campaign_yaml: ``campaign.yaml`` (or an already resolved :class:`Campaign`).
@@ -89,7 +89,8 @@ def execute(motion_csv: Path, backend: str, out_dir: Path, campaign_yaml: Path |
     Raises:
         JointLimitError: the motion breaks a limit (before anything moves); for ``ur-rtde``
             also :class:`~stringcast.execute.ur_rtde.StartPostureError` (arm not at the start).
-        DataError: unreadable motion file, bad timing, or ``out_dir`` already holds a joints.csv.
+        DataError: unreadable motion file, bad timing, no ``motion.json`` beside it, or ``out_dir``
+            already holds a joints.csv.
         ConfigError: unknown backend; ``ur-rtde`` without robot_ip, without ur_rtde, or bad ``executor.ur``.
     """
     motion_csv, out_dir = Path(motion_csv), Path(out_dir)
@@ -102,6 +103,11 @@ def execute(motion_csv: Path, backend: str, out_dir: Path, campaign_yaml: Path |
     assert_within_limits(arm, q, 1.0 / arm.controller_rate, source=str(motion_csv))
     if (out_dir / "joints.csv").exists():
         raise DataError(f"{out_dir}: already holds a joints.csv; refusing to overwrite a recorded trial")
+    sidecar = motion_csv.with_suffix(".json")
+    if not sidecar.is_file():
+        raise DataError(f"{sidecar}: missing: the motion's description (written beside motion.csv by the planner) "
+                        "goes into the trial with it, and planning the next motion reads it; play a motion.csv "
+                        "the workflow planned, with its motion.json")
     t_cmd, q_cmd, t_move = build_command(q, arm.controller_rate, executor.pre_roll_s, executor.post_roll_s)
     where = ""
     if backend == "ur-rtde":
@@ -124,8 +130,6 @@ def execute(motion_csv: Path, backend: str, out_dir: Path, campaign_yaml: Path |
         out_dir.mkdir(parents=True, exist_ok=True)
         result = run_trial(t_cmd, q_cmd, campaign, config, out_dir, seed, t_move)
     _copy(motion_csv, out_dir / "motion.csv")
-    sidecar = motion_csv.with_suffix(".json")
-    if sidecar.exists():
-        _copy(sidecar, out_dir / "motion.json")
+    _copy(sidecar, out_dir / "motion.json")
     info.update(result or {})
     return info
