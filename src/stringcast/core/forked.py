@@ -5,20 +5,32 @@ read in any order, so a stage splits them into chunks and :func:`forked_map` han
 worker processes. The workers are forked after the stage has set everything up: they inherit
 its state (the tracker, the template, the memory-mapped frames) at no copying cost, and only the
 chunk's index goes out and its small result comes back. The results come back in the chunks'
-order, so a stage's output does not depend on the number of workers.
+order, so a stage's output does not depend on the number of workers. A worker ends with its stage,
+even one killed hard (:mod:`stringcast.core.lifeline`).
 """
 from __future__ import annotations
 
 import multiprocessing
+import os
 import sys
 from concurrent.futures import ProcessPoolExecutor
 from typing import Callable, Iterator, Sequence
+
+from .lifeline import die_with_parent
 
 _TASK: dict = {}   # the function and its chunks, set in the parent just before the workers are forked
 
 
 def _run_chunk(i: int):
     return _TASK["func"](_TASK["chunks"][i])
+
+
+def _worker_start(parent: int) -> None:
+    """A worker ends with its stage (:func:`~stringcast.core.lifeline.die_with_parent`), even one
+    killed hard; one whose stage is already gone ends now."""
+    die_with_parent()
+    if os.getppid() != parent:
+        os._exit(1)
 
 
 def forked_map(func: Callable, chunks: Sequence, workers: int) -> Iterator:
@@ -38,11 +50,25 @@ def forked_map(func: Callable, chunks: Sequence, workers: int) -> Iterator:
         raise RuntimeError("forked_map: already running (func may not call forked_map)")
     _TASK.update(func=func, chunks=chunks)
     try:
-        with ProcessPoolExecutor(max_workers=min(workers, len(chunks)),
-                                 mp_context=multiprocessing.get_context("fork")) as pool:
-            yield from pool.map(_run_chunk, range(len(chunks)))
+        with ProcessPoolExecutor(max_workers=min(workers, len(chunks)), mp_context=multiprocessing.get_context("fork"),
+                                 initializer=_worker_start, initargs=(os.getpid(),)) as pool:
+            try:
+                yield from pool.map(_run_chunk, range(len(chunks)))
+            except BaseException:   # an interrupt or a failed chunk: the others are not waited for
+                _terminate(pool)
+                raise
     finally:
         _TASK.clear()
+
+
+def _terminate(pool: ProcessPoolExecutor) -> None:
+    """End ``pool``'s workers now (Python 3.14's ``terminate_workers``; before it, each process)."""
+    pool.shutdown(wait=False, cancel_futures=True)
+    if hasattr(pool, "terminate_workers"):
+        pool.terminate_workers()
+        return
+    for proc in list((getattr(pool, "_processes", None) or {}).values()):
+        proc.terminate()
 
 
 def chunked(items: Sequence, size: int) -> list:
