@@ -100,17 +100,63 @@ def _run(command: str, args, *positional, **keywords):
     return func(*positional, **keywords, **_settings(func, args))
 
 
+class JobLog:
+    """Where a command's output goes: with ``--log FILE`` (the workflow's rules) everything the
+    command and the libraries under it print (file descriptors 1 and 2) goes to FILE, and the
+    terminal (the original standard error: Snakemake's) gets only :meth:`say`'s lines, the
+    command's verdict or error, one each; without it, the usual streams."""
+
+    def __init__(self, path: str | None = None):
+        self.path, self.terminal = path, None
+        if path:
+            Path(path).parent.mkdir(parents=True, exist_ok=True)
+            sys.stdout.flush()
+            sys.stderr.flush()
+            saved = os.dup(2)
+            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)
+            os.dup2(fd, 1)
+            os.dup2(fd, 2)
+            os.close(fd)
+            self.terminal = os.fdopen(saved, "w", buffering=1)
+
+    def say(self, line: str, error: bool = False) -> None:
+        """``line`` into the log (stdout; stderr for an ``error``) and, with a log file, on the terminal."""
+        print(line, file=sys.stderr if error else sys.stdout, flush=True)
+        if self.terminal is not None:
+            print(line + (f" (log: {self.path})" if error else ""), file=self.terminal, flush=True)
+
+
+_LOG = JobLog()
+
+
+def _verdict_line(stage: str, verdict, summary: str, out) -> None:
+    """The stage's one terminal line: ``<stage>: <status>: <first reason, or the summary> -> <out>``
+    (``verdict``: a :class:`~stringcast.core.Verdict` or its dict); the other reasons go to the log."""
+    status, reasons = (verdict.get("status", "ok"), list(verdict.get("reasons", []))) if isinstance(verdict, dict) \
+        else (verdict.status, list(verdict.reasons))
+    first = reasons[0] if reasons else summary
+    more = f" (+{len(reasons) - 1} more reasons in the log)" if len(reasons) > 1 else ""
+    _LOG.say(f"{stage}: {status}: {first}{more} -> {out}")
+    for reason in reasons[1:]:
+        print(f"  {status}: {reason}")
+
+
 def cmd_calib_views(args):
     campaign = _campaign(args)
     views = _run("calib-views", args, Path(args.calib_dir), campaign, Path(args.out))
-    print(f"calibration views: {len(views)} of the board's {views.found} in {args.calib_dir} -> {args.out}")
-    if args.out_intrinsics:
-        from stringcast.calibrate import write_campaign_intrinsics
+    summary = f"the board in {len(views)} of {views.found} views of {args.calib_dir}"
+    if not args.out_intrinsics:
+        _LOG.say(f"calibration views: {summary} -> {args.out}")
+        return
+    from stringcast.calibrate import write_campaign_intrinsics
+    from stringcast.core import read_json
 
-        intr = write_campaign_intrinsics(Path(args.out), campaign, Path(args.out_intrinsics),
-                                         **_settings(write_campaign_intrinsics, args))
-        print(f"intrinsics of the views: reprojection error {intr.rms_px:.3f} px over {intr.n_views} views "
-              f"-> {args.out_intrinsics}")
+    intr = write_campaign_intrinsics(Path(args.out), campaign, Path(args.out_intrinsics),
+                                     **_settings(write_campaign_intrinsics, args))
+    rejected = f", {intr.views_rejected} rejected" if intr.views_rejected else ""
+    print(f"calibration views: {summary} -> {args.out}")
+    _verdict_line("intrinsics", read_json(args.out_intrinsics)["verdict"],
+                  f"reprojection error {intr.rms_px:.3f} px over {intr.n_views} views{rejected}", args.out_intrinsics)
 
 
 def cmd_calibrate(args):
@@ -126,9 +172,7 @@ def cmd_calibrate(args):
                intrinsics_json=intrinsics)
     bc = (cal.board_check or {}).get("residual_mm")
     extra = "" if bc is None else f", board-to-robot check {bc:.1f} mm"
-    print(f"calibration: reprojection error {cal.reprojection_error_px:.3f} px{extra}, {cal.verdict.status} -> {args.out}")
-    for reason in cal.verdict.reasons:
-        print(f"  {cal.verdict.status}: {reason}")
+    _verdict_line("calibration", cal.verdict, f"reprojection error {cal.reprojection_error_px:.3f} px{extra}", args.out)
 
 
 def _frames(args) -> Path | None:
@@ -139,7 +183,7 @@ def cmd_decode(args):
     from stringcast.core import find_video
 
     video = find_video(Path(args.trial_dir))
-    print(f"decoded {video} once -> {_run('decode', args, video, Path(args.out))}")
+    _LOG.say(f"decode: {video} decoded once -> {_run('decode', args, video, Path(args.out))}")
 
 
 def cmd_sync(args):
@@ -147,8 +191,7 @@ def cmd_sync(args):
                _frames(args), int(args.workers))
     extra = "" if doc.get("time_residual_ms") is None else \
         f", time residual {doc['time_residual_ms']:.2f} ms, arm match residual {doc['residual_mm'] or float('nan'):.1f} mm"
-    print(f"sync: offset {doc['offset_s']:.6f} s ({doc['method']}{extra}), verdict {doc['verdict']['status']} "
-          f"-> {args.out}")
+    _verdict_line("sync", doc["verdict"], f"offset {doc['offset_s']:.6f} s ({doc['method']}{extra})", args.out)
 
 
 def cmd_sweep(args):
@@ -156,18 +199,24 @@ def cmd_sweep(args):
                       Path(args.out_geometry), Path(args.out_clock), _frames(args), int(args.workers))
     sw = geo.get("sweep", {})
     if sw.get("applied"):
-        print(f"sweep: {sw['rows_used']} link rows in {sw['frames']} frames; mapping moved up to {sw['moved_p95_mm']:.2f} mm "
-              f"(p95), known to {sw['uncertainty_p95_mm']:.2f} mm; clock {sw['clock_correction_ms']:+.2f} ms, known to "
-              f"{sw['clock_uncertainty_ms']:.2f} ms; verdicts {geo['verdict']['status']} / {clock['verdict']['status']} "
-              f"-> {args.out_geometry}, {args.out_clock}")
+        print(f"sweep: {sw['rows_used']} link rows in {sw['frames']} frames; mapping moved up to "
+              f"{sw['moved_p95_mm']:.2f} mm (p95)")
+        _verdict_line("sweep (mapping)", geo["verdict"], f"known to {sw['uncertainty_p95_mm']:.2f} mm (p95)",
+                      args.out_geometry)
+        _verdict_line("sweep (clock)", clock["verdict"], f"corrected by {sw['clock_correction_ms']:+.2f} ms, known to "
+                      f"{sw['clock_uncertainty_ms']:.2f} ms", args.out_clock)
     else:
-        print(f"sweep: not applied ({sw.get('reason')}) -> {args.out_geometry}, {args.out_clock}")
+        _verdict_line("sweep", geo["verdict"], f"not applied ({sw.get('reason')})", f"{args.out_geometry}, {args.out_clock}")
 
 
 def cmd_track(args):
+    from stringcast.core import read_json
+
     df = _run("track", args, Path(args.trial_dir), Path(args.calibration), Path(args.sync), _campaign(args),
               Path(args.out), Path(args.overlay) if args.overlay else None, _frames(args), int(args.workers))
-    print(f"tracking: {df['frame'].nunique()} frames, valid share {df['valid'].mean():.3f} -> {args.out}")
+    quality = read_json(Path(args.out).with_name("tracking.json"))
+    _verdict_line("tracking", quality.get("verdict") or {},
+                  f"{df['frame'].nunique()} frames, valid share {df['valid'].mean():.3f}", args.out)
 
 
 def _earlier(args) -> tuple:
@@ -182,27 +231,23 @@ def cmd_estimate(args):
     est = _run("estimate", args, Path(args.tracks), Path(args.joints), _campaign(args),
                Path(args.prev) if args.prev else None, int(args.trial), Path(args.out_params), Path(args.out_fit),
                _earlier(args))
-    print(f"estimation: E = {est.E_m * 1000:.2f} mm after {est.n_evaluations} evaluations -> {args.out_params}")
+    print(f"estimation: E = {est.E_m * 1000:.2f} mm after {est.n_evaluations} evaluations")
     cause = f" (likely cause: {est.likely_cause})" if est.likely_cause else ""
-    usable = {"ok": "", "warn": ": doubtful", "fail": ": the estimate is not usable"}[est.verdict.status]
-    print(f"fit verdict: {est.verdict.status}{cause}{usable}")
-    for reason in est.verdict.reasons:
-        print(f"  - {reason}")
+    usable = {"ok": "", "warn": ", doubtful", "fail": ", the estimate is not usable"}[est.verdict.status]
+    _verdict_line(f"fit{cause}{usable}", est.verdict, f"E = {est.E_m * 1000:.2f} mm", args.out_params)
 
 
 def cmd_predict(args):
     doc = _run("predict", args, Path(args.params), Path(args.tracks), Path(args.joints), _campaign(args), Path(args.out))
     figure = "no figure" if doc["median_mm"] is None else f"median {doc['median_mm']:.1f} mm, p95 {doc['p95_mm']:.1f} mm"
-    print(f"next-motion prediction: {figure} over {doc['valid_frames']} of {doc['frames']} frames, "
-          f"{doc['verdict']['status']} -> {args.out}")
-    for reason in doc["verdict"]["reasons"]:
-        print(f"  - {reason}")
+    _verdict_line("next-motion prediction", doc["verdict"],
+                  f"{figure} over {doc['valid_frames']} of {doc['frames']} frames", args.out)
 
 
 def cmd_plan_first(args):
     out = Path(args.out_dir)
     _run("plan-first", args, _campaign(args), out / "motion.csv", out / "motion.json", int(args.seed))
-    print(f"first motion -> {out / 'motion.csv'}")
+    _LOG.say(f"first motion -> {out / 'motion.csv'}")
 
 
 def cmd_plan(args):
@@ -210,32 +255,37 @@ def cmd_plan(args):
     _run("plan", args, Path(args.params), Path(args.played_motion), _campaign(args), out / "motion.csv",
          out / "motion.json", int(args.seed), Path(args.tracks) if args.tracks else None,
          Path(args.joints) if args.joints else None)
-    print(f"next motion -> {out / 'motion.csv'}")
     doc = json.loads((out / "motion.json").read_text())
-    if doc.get("planned_on_failed_fit"):
-        fit = doc.get("failed_fit") or {}
-        print(f"WARNING: planned on a failed fit (likely cause: {fit.get('likely_cause') or 'not named'}): the "
-              f"estimate in {args.params} is not usable, nor is this motion's predicted hit; check before playing it")
-        for reason in fit.get("reasons", []):
-            print(f"  - {reason}")
+    if not doc.get("planned_on_failed_fit"):
+        _LOG.say(f"next motion -> {out / 'motion.csv'}")
+        return
+    fit = doc.get("failed_fit") or {}
+    _LOG.say(f"next motion: WARNING: planned on a failed fit (likely cause: {fit.get('likely_cause') or 'not named'}): "
+             f"the estimate in {args.params} is not usable, nor is this motion's predicted hit; check before playing "
+             f"it -> {out / 'motion.csv'}")
+    for reason in fit.get("reasons", []):
+        print(f"  - {reason}")
 
 
 def cmd_report_trial(args):
     _run("report-trial", args, Path(args.data_dir), Path(args.results_dir), _campaign(args), Path(args.out))
-    print(f"trial report -> {args.out}")
+    _LOG.say(f"trial report -> {args.out}")
 
 
 def cmd_report_campaign(args):
     _run("report-campaign", args, Path(args.data_dir), Path(args.results_dir), _campaign(args), Path(args.out))
-    print(f"campaign report -> {args.out}")
+    _LOG.say(f"campaign report -> {args.out}")
 
 
 def cmd_execute(args):
     from stringcast.execute import execute
 
-    execute(Path(args.motion), args.backend, Path(args.out), Path(args.campaign), config=_config(args),
-            **_settings(execute, args), seed=int(args.seed), dry_run=bool(args.dry_run), robot_ip=args.robot_ip,
-            move_to_start=bool(args.move_to_start))
+    info = execute(Path(args.motion), args.backend, Path(args.out), Path(args.campaign), config=_config(args),
+                   **_settings(execute, args), seed=int(args.seed), dry_run=bool(args.dry_run),
+                   robot_ip=args.robot_ip, move_to_start=bool(args.move_to_start))
+    if not info.get("dry_run"):
+        _LOG.say(f"executed {args.motion} on {args.backend}: {info['samples']} samples, {info['duration_s']:.3f} s "
+                 f"(motion from {info['motion_start_s']:.3f} s) -> {args.out}")
 
 
 def cmd_calib_clip(args):
@@ -301,16 +351,37 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run one subcommand; its exit status."""
+    """Run one subcommand; its exit status: 0, 2 for an input error (one line naming the file), 1 for an
+    internal error (one line on the terminal, the traceback in the log), 130 when interrupted. A
+    workflow stage run by the workflow (``$STRINGCAST_WORKFLOW_PID``) ends with it
+    (:mod:`stringcast.core.lifeline`)."""
+    global _LOG
     argv = sys.argv[1:] if argv is None else list(argv)
     from stringcast.core import ConfigError, DataError, JointLimitError
+    from stringcast.core.lifeline import start_lifeline
 
     args = build_parser().parse_args(argv)
+    _LOG = JobLog(args.log)
+    if args.command in STAGES:
+        start_lifeline()
     try:
         args.func(args)
     except (DataError, ConfigError, JointLimitError) as exc:
-        print(f"stringcast {args.command}: error: {exc}", file=sys.stderr)
+        _LOG.say(f"stringcast {args.command}: error: {exc}", error=True)
         return 2
+    except KeyboardInterrupt:
+        _LOG.say(f"stringcast {args.command}: interrupted; nothing finished was written", error=True)
+        return 130
+    except Exception as exc:   # a bug: one line where the user looks, the traceback for the report
+        import traceback
+
+        traceback.print_exc()
+        where = "the traceback is in the log" if args.log else "the traceback is above"
+        _LOG.say(f"stringcast {args.command}: internal error: {type(exc).__name__}: {exc} ({where}; please report it)",
+                 error=True)
+        return 1
+    finally:
+        sys.stdout.flush()
     return 0
 
 

@@ -25,6 +25,9 @@ def build_parser(handlers: dict, description: str) -> argparse.ArgumentParser:
     p.add_argument("--config", action="append", default=None,
                    help="config YAML (default: config/config.yaml); given again, each file is merged over the ones "
                         "before it, as Snakemake merges --configfile over the Snakefile's configfile")
+    p.add_argument("--log", default=None,
+                   help="write everything the command prints to this file, and only its verdict or error line to "
+                        "the terminal (the workflow's rules: results/<campaign>/logs/<rule>_<k>.log)")
     sub = p.add_subparsers(dest="command", required=True, help="the stage or tool to run")
 
     def add(name, help_):
