@@ -148,3 +148,56 @@ def test_calibrate_refuses_campaign_intrinsics_without_their_views(tmp_path, cap
     err = capsys.readouterr().err
     assert code == 2 and "intrinsics.json: campaign intrinsics need the views" in err
     assert not (tmp_path / "calibration.json").exists()
+
+
+def test_a_job_log_takes_the_output_and_the_terminal_gets_the_error_line(tmp_path, capfd):
+    """With --log (the workflow's rules) the error line reaches the terminal as well, naming the log; the
+    streams are given back after the command."""
+    from stringcast.cli import main
+
+    log = tmp_path / "logs" / "calibrate_1.log"
+    code = main(["--log", str(log), "calibrate", "--trial-dir", str(tmp_path / "trial_1"), "--intrinsics",
+                 str(tmp_path / "intrinsics.json"), "--campaign", str(tmp_path / "campaign.yaml"),
+                 "--out", str(tmp_path / "calibration.json")])
+    out, err = capfd.readouterr()
+    assert code == 2 and out == ""
+    assert err.strip() == (f"stringcast calibrate: error: {tmp_path / 'intrinsics.json'}: campaign intrinsics need "
+                           f"the views they were fitted to (--calib-views or a --calib-dir folder) (log: {log})")
+    assert "campaign intrinsics need the views" in log.read_text()
+    print("streams back")
+    assert capfd.readouterr().out == "streams back\n"
+
+
+def test_an_internal_error_is_one_line_on_the_terminal_and_a_traceback_in_the_log(tmp_path, capfd, monkeypatch):
+    import stringcast.cli as cli
+
+    def broken(args):
+        raise ZeroDivisionError("a bug")
+
+    monkeypatch.setitem(cli.HANDLERS, "settings", broken)
+    log = tmp_path / "settings.log"
+    assert cli.main(["--log", str(log), "settings"]) == 1
+    _, err = capfd.readouterr()
+    assert err.strip() == (f"stringcast settings: internal error: ZeroDivisionError: a bug (the traceback is in the "
+                           f"log; please report it) (log: {log})")
+    assert "Traceback (most recent call last)" in log.read_text() and "Traceback" not in err
+
+
+def test_a_stage_prints_its_verdict_line_with_its_first_reason(capfd, tmp_path):
+    from stringcast.cli import JobLog, _verdict_line
+    from stringcast.core import Verdict
+
+    import stringcast.cli as cli
+
+    log = tmp_path / "x.log"
+    cli._LOG = JobLog(str(log))
+    try:
+        _verdict_line("sync", Verdict().add("warn", "first reason").add("ok", "second"), "offset 0.1 s", "sync.json")
+        _verdict_line("sync", Verdict(), "offset 0.1 s", "sync.json")
+    finally:
+        cli._LOG.close()
+        cli._LOG = JobLog()
+    _, err = capfd.readouterr()
+    assert err.splitlines() == ["sync: warn: first reason (+1 more reasons in the log) -> sync.json",
+                                "sync: ok: offset 0.1 s -> sync.json"]
+    assert "  warn: second" in log.read_text()

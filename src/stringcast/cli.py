@@ -107,17 +107,31 @@ class JobLog:
     command's verdict or error, one each; without it, the usual streams."""
 
     def __init__(self, path: str | None = None):
-        self.path, self.terminal = path, None
+        self.path, self.terminal, self._saved = path, None, ()
         if path:
             Path(path).parent.mkdir(parents=True, exist_ok=True)
             sys.stdout.flush()
             sys.stderr.flush()
-            saved = os.dup(2)
+            self._saved = (os.dup(1), os.dup(2))
             fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)
             os.dup2(fd, 1)
             os.dup2(fd, 2)
             os.close(fd)
-            self.terminal = os.fdopen(saved, "w", buffering=1)
+            self.terminal = os.fdopen(os.dup(self._saved[1]), "w", buffering=1)
+            self._streams = sys.stdout, sys.stderr      # Python's writers, on the same descriptors
+            sys.stdout, sys.stderr = (open(fd, "w", buffering=1, closefd=False) for fd in (1, 2))
+
+    def close(self) -> None:
+        """Give the standard streams back (a command run in-process, as by the tests)."""
+        if self._saved:
+            sys.stdout.flush()
+            sys.stderr.flush()
+            sys.stdout, sys.stderr = self._streams
+            for fd, saved in zip((1, 2), self._saved):
+                os.dup2(saved, fd)
+                os.close(saved)
+            self.terminal.close()
+            self._saved, self.terminal = (), None
 
     def say(self, line: str, error: bool = False) -> None:
         """``line`` into the log (stdout; stderr for an ``error``) and, with a log file, on the terminal."""
@@ -381,7 +395,7 @@ def main(argv: list[str] | None = None) -> int:
                  error=True)
         return 1
     finally:
-        sys.stdout.flush()
+        _LOG.close()
     return 0
 
 
