@@ -127,7 +127,8 @@ def test_stage_progress_prints_each_stage_start_and_end_from_snakemake_lines():
     p = StageProgress("campaign c, trial 1", out)
     lines = ["Building DAG of jobs...", "rule decode:", "    input: data/c/trial_1/video.mkv", "    jobid: 3",
              "rule calibrate:", "    jobid: 5", "Finished jobid: 5 (Rule: calibrate)", "1 of 3 steps (33%) done",
-             "Finished jobid: 3 (Rule: decode)", "2 of 3 steps (67%) done", "localrule all:", "    jobid: 0",
+             "Finished jobid: 3 (Rule: decode)", "2 of 3 steps (67%) done",
+             "sync: warn: the video's offset is uncertain -> results/c/trial_1/sync.json", "localrule all:", "    jobid: 0",
              "Finished jobid: 0 (Rule: all)", "3 of 3 steps (100%) done"]
     for line in lines:
         p.feed(line + "\n")
@@ -135,7 +136,8 @@ def test_stage_progress_prints_each_stage_start_and_end_from_snakemake_lines():
     assert shown[:2] == ["[campaign c, trial 1] decode ...", "[campaign c, trial 1] calibrate ..."]
     assert re.fullmatch(r"\[campaign c, trial 1\] calibrate done, \d+\.\d s \(1/3\)", shown[2])
     assert re.fullmatch(r"\[campaign c, trial 1\] decode done, \d+\.\d s \(2/3\)", shown[3])
-    assert len(shown) == 4 and p.tail[-1] == "3 of 3 steps (100%) done"
+    assert shown[4] == "[campaign c, trial 1]   sync: warn: the video's offset is uncertain -> results/c/trial_1/sync.json"
+    assert len(shown) == 5 and p.tail[-1] == "3 of 3 steps (100%) done"
 
 
 def test_calibrate_refuses_campaign_intrinsics_without_their_views(tmp_path, capsys):

@@ -40,6 +40,8 @@ _RULE = re.compile(r"^(?:local)?rule (\w+):")
 _JOBID = re.compile(r"^\s+jobid: (\d+)")
 _FINISHED = re.compile(r"Finished jobid: (\d+)")
 _STEPS = re.compile(r"(\d+) of (\d+) steps")
+_JOB_LINE = re.compile(r"^(?:[a-z][\w ()-]*: (?:ok|warn|fail): |stringcast [\w-]+: (?:error|internal error): )")
+"""A job's own line on the terminal: its verdict or its error (:class:`stringcast.cli.JobLog`)."""
 
 
 class StageProgress:
@@ -48,8 +50,8 @@ class StageProgress:
 
     Snakemake announces a job with ``rule sync:`` and ``jobid: 6``, and ends it with ``Finished
     jobid: 6 (...)`` and ``3 of 7 steps (43%) done``; this prints ``[label] sync ...`` and then
-    ``[label] sync done, 7.0 s (3/7)``. Stages side by side are timed each on its own. The
-    last 40 lines are kept for an error message."""
+    ``[label] sync done, 7.0 s (3/7)``; a job's own verdict or error line is passed on, indented.
+    Stages side by side are timed each on its own. The last 40 lines are kept for an error message."""
 
     def __init__(self, label: str, out=None):
         self.label, self.out = label, out or sys.stdout
@@ -69,6 +71,8 @@ class StageProgress:
             self.rule = None
         elif m := _FINISHED.search(line):
             self.done = m.group(1)
+        elif _JOB_LINE.match(line):
+            print(f"[{self.label}]   {line.rstrip()}", file=self.out, flush=True)
         elif (m := _STEPS.search(line)) and self.done in self.started:
             rule, t0 = self.started.pop(self.done)
             print(f"[{self.label}] {rule} done, {time.perf_counter() - t0:.1f} s ({m.group(1)}/{m.group(2)})",
