@@ -14,7 +14,7 @@ import pytest
 
 PKG = Path(__file__).resolve().parents[1] / "src" / "stringcast"
 # The stage subpackages and the loop around them (the paper's Fig. 2), lowest first.
-SUBPACKAGES = ("core", "video", "model", "calibrate", "sync", "track", "estimate", "plan",
+SUBPACKAGES = ("core", "video", "check", "model", "calibrate", "sync", "track", "estimate", "plan",
                "execute", "report", "lab")
 
 

@@ -1,6 +1,6 @@
 """The ``stringcast`` command line: one subcommand per stage (the Snakemake rules
-call these) plus ``execute`` (play a motion file on an arm) and ``campaign`` (the
-whole loop on the virtual lab).
+call these) plus ``check`` (every raw file of a campaign, before any decode), ``execute``
+(play a motion file on an arm) and ``campaign`` (the whole loop on the virtual lab).
 
 Errors in the input (:class:`~stringcast.core.files.DataError`,
 :class:`~stringcast.core.config.ConfigError`, :class:`~stringcast.core.arm.JointLimitError`)
@@ -325,6 +325,28 @@ def cmd_campaign(args):
                  root=Path(args.root))
 
 
+def check_summary(campaign_dir: str, problems: list, n_trials: int) -> str:
+    """``stringcast check``'s last line: the counts of errors and warnings, or ok."""
+    errors = sum(p.is_error for p in problems)
+    trials = f"{n_trials} trial{'s' if n_trials != 1 else ''}"
+    if not problems:
+        return f"check: {campaign_dir}: ok ({trials})"
+    return (f"check: {campaign_dir}: {errors} error{'s' if errors != 1 else ''}, {len(problems) - errors} "
+            f"warning{'s' if len(problems) - errors != 1 else ''} in {trials}")
+
+
+def cmd_check(args) -> int:
+    from stringcast.check import check_campaign, trial_dirs
+
+    config = _config(args)
+    problems = check_campaign(Path(args.campaign_dir), config)
+    for p in problems:
+        print(f"{'error' if p.is_error else 'warning'}: {p}")
+    n_trials = len(trial_dirs(args.campaign_dir)[1]) if Path(args.campaign_dir).is_dir() else 0
+    print(check_summary(str(args.campaign_dir), problems, n_trials))
+    return 2 if any(p.is_error for p in problems) else 0
+
+
 REFERENCE_MARK = "<!-- below: made by `stringcast settings --markdown`; tests/test_cli.py keeps it in step -->"
 
 
@@ -353,7 +375,7 @@ def cmd_settings(args):
 HANDLERS = {"decode": cmd_decode, "calib-views": cmd_calib_views, "calibrate": cmd_calibrate, "sync": cmd_sync, "sweep": cmd_sweep, "track": cmd_track,
             "estimate": cmd_estimate, "predict": cmd_predict, "plan-first": cmd_plan_first, "plan": cmd_plan,
             "report-trial": cmd_report_trial, "report-campaign": cmd_report_campaign, "execute": cmd_execute,
-            "calib-clip": cmd_calib_clip, "campaign": cmd_campaign, "settings": cmd_settings}
+            "calib-clip": cmd_calib_clip, "campaign": cmd_campaign, "settings": cmd_settings, "check": cmd_check}
 """Each subcommand's function."""
 
 
@@ -379,7 +401,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.command in STAGES:
         start_lifeline()
     try:
-        args.func(args)
+        code = args.func(args)
     except (DataError, ConfigError, JointLimitError) as exc:
         _LOG.say(f"stringcast {args.command}: error: {exc}", error=True)
         return 2
@@ -396,7 +418,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     finally:
         _LOG.close()
-    return 0
+    return code if isinstance(code, int) else 0
 
 
 if __name__ == "__main__":

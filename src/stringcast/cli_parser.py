@@ -186,6 +186,11 @@ def _add_planning_and_tools(add) -> None:
                     help="paper: the config as given (config/config.yaml: the paper's method); ours: "
                          "config/ours.yaml merged over it, after any --config")
 
+    sp = add("check", "check every raw file of a campaign before any decode (campaign.yaml, calib/, each "
+                      "trial's video header, video.yaml, joints.csv, motion.csv, motion.json): one line per "
+                      "problem, exit status 2 on any error")
+    sp.add_argument("campaign_dir", help="data/<campaign>: the campaign's folder (campaign.yaml, calib/, trial_<k>/)")
+
     sp = add("settings", "print the settings the stages would run with (the merged config over "
                                        "the defaults), as YAML")
     sp.add_argument("--markdown", action="store_true",

@@ -38,24 +38,43 @@ def _schema(name: str) -> dict:
     return json.loads(resources.files("stringcast.core").joinpath("schemas", name).read_text())
 
 
+def schema_problems(doc: Any, schema_name: str, definition: str | None = None) -> list[tuple[str, str]]:
+    """Every way ``doc`` breaks a packaged JSON schema, in document order.
+
+    Args:
+        doc: the parsed document.
+        schema_name: a file in ``stringcast/core/schemas/`` (``campaign.schema.json``, ...).
+        definition: check against the schema's ``$defs/<definition>`` instead of the whole schema
+            (``config.schema.json``'s ``string``, ``target``, ``setup``: a campaign's inline entries).
+
+    Returns:
+        ``[(where, message), ...]``: the JSON path of each error (``"(top level)"`` for the
+        document itself) and jsonschema's message; empty when ``doc`` conforms.
+    """
+    import jsonschema
+
+    schema = _schema(schema_name)
+    if definition is not None:
+        schema = {"$defs": schema["$defs"], "$ref": f"#/$defs/{definition}"}
+    validator = jsonschema.Draft202012Validator(schema)
+    errors = sorted(validator.iter_errors(doc), key=lambda e: list(e.absolute_path))
+    return [("/".join(str(p) for p in e.absolute_path) or "(top level)", e.message) for e in errors]
+
+
 def validate(doc: Any, schema_name: str, source: str | Path) -> None:
     """Validate ``doc`` against a packaged JSON schema.
 
     Raises:
-        ConfigError: naming ``source`` and the JSON path of the first error.
+        ConfigError: naming ``source`` and the JSON path of the first error (:func:`schema_problems`).
     """
-    import jsonschema
-
-    validator = jsonschema.Draft202012Validator(_schema(schema_name))
-    errors = sorted(validator.iter_errors(doc), key=lambda e: list(e.absolute_path))
-    if errors:
-        e = errors[0]
-        where = "/".join(str(p) for p in e.absolute_path) or "(top level)"
-        raise ConfigError(f"{source}: at '{where}': {e.message}")
+    problems = schema_problems(doc, schema_name)
+    if problems:
+        where, message = problems[0]
+        raise ConfigError(f"{source}: at '{where}': {message}")
 
 
 def load_yaml(path: str | Path) -> Any:
-    """Read a YAML file. Raises ConfigError naming the file if missing or malformed."""
+    """Read a YAML file. Raises ConfigError naming the file if missing, unreadable, not text or malformed."""
     path = Path(path)
     try:
         with open(path) as f:
@@ -64,6 +83,10 @@ def load_yaml(path: str | Path) -> Any:
         raise ConfigError(f"{path}: file not found") from exc
     except yaml.YAMLError as exc:
         raise ConfigError(f"{path}: not valid YAML: {exc}") from exc
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{path}: not a text file (not UTF-8: {exc.reason} at byte {exc.start})") from exc
+    except OSError as exc:
+        raise ConfigError(f"{path}: not readable: {exc.strerror or exc}") from exc
 
 
 def merge_config(into: dict, over: Mapping) -> dict:

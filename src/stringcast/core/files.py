@@ -89,6 +89,10 @@ def read_json(path: str | Path) -> Any:
         raise DataError(f"{path}: file not found") from exc
     except json.JSONDecodeError as exc:
         raise DataError(f"{path}: not valid JSON: {exc}") from exc
+    except UnicodeDecodeError as exc:
+        raise DataError(f"{path}: not a text file (not UTF-8: {exc.reason} at byte {exc.start})") from exc
+    except OSError as exc:
+        raise DataError(f"{path}: not readable: {exc.strerror or exc}") from exc
 
 
 def write_yaml(path: str | Path, doc: Any) -> None:

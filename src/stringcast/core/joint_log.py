@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .files import DataError, atomic_path
+from .files import DataError, atomic_path, read_json
 
 
 def _joint_columns(columns: list[str], path: Path) -> list[str]:
@@ -153,6 +153,48 @@ def read_joint_table(path: str | Path, kind: str = "joints.csv", *, n_joints: in
         i = int(np.argmax(dt <= 0))
         raise DataError(f"{path}: t_s is not strictly increasing at row {i + 3} ({t[i]} then {t[i + 1]})")
     return t, data[:, 1:]
+
+
+def check_motion_timing(t: np.ndarray, rate: float, source: str | Path) -> None:
+    """Check a motion file's clock: ``t`` (K,) s starts at 0 and steps by the controller period
+    1 / ``rate`` (Hz) within 1 us, as the executor plays it.
+
+    Raises:
+        DataError: naming ``source``, the start or the largest deviation from the period.
+    """
+    period = 1.0 / rate
+    if abs(t[0]) > 1e-9:
+        raise DataError(f"{source}: a motion file starts at t_s = 0, got {t[0]:.6g} s")
+    dev = np.max(np.abs(np.diff(t) - period))
+    if dev > 1e-6:
+        raise DataError(f"{source}: t_s must step by the controller period {period * 1000:.3f} ms "
+                        f"({rate:g} Hz); deviates by up to {dev * 1000:.3f} ms")
+
+
+def read_motion_sidecar(path: str | Path, n_joints: int) -> tuple[np.ndarray, float, np.ndarray]:
+    """Read a ``motion.json`` sidecar's motion (docs/data_contract.md): what the plan rule rebuilds the
+    played motion from.
+
+    Returns:
+        q0: (J,) rad, the initial posture; T: s, the motion time; control_points: (J, N) rad/s,
+        the Bezier heights V_1..V_N (eq. 1).
+
+    Raises:
+        DataError: a missing or unreadable file, a missing key, or values of the wrong shape for
+            an arm of ``n_joints`` joints (the file named).
+    """
+    path = Path(path)
+    doc = read_json(path)
+    try:
+        q0 = np.asarray(doc["q0_rad"], float)
+        T = float(doc["T_s"])
+        cp = np.asarray(doc["control_points_rad_s"], float)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise DataError(f"{path}: needs q0_rad, T_s and control_points_rad_s ({exc})") from exc
+    if q0.shape != (n_joints,) or cp.ndim != 2 or cp.shape[0] != n_joints or cp.shape[1] < 1 or not T > 0:
+        raise DataError(f"{path}: q0_rad must have {n_joints} values, control_points_rad_s be {n_joints} x N "
+                        "(N >= 1), T_s > 0")
+    return q0, T, cp
 
 
 def end_speed_shares(t_joints: np.ndarray, q_joints: np.ndarray, qd_max: np.ndarray,

@@ -8,6 +8,7 @@ Errors: :class:`~stringcast.core.config.ConfigError` naming the file and the key
 """
 from __future__ import annotations
 
+import difflib
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -111,16 +112,35 @@ class BoardSpec:
         if self.marker >= self.square:
             raise ConfigError("board: marker_mm must be smaller than square_mm")
 
+    @property
+    def n_markers(self) -> int:
+        """The markers on the board: one in every other square."""
+        return self.squares_x * self.squares_y // 2
+
     def make(self):
-        """The OpenCV ``cv2.aruco.CharucoBoard`` (sizes in m)."""
+        """The OpenCV ``cv2.aruco.CharucoBoard`` (sizes in m).
+
+        Raises:
+            ConfigError: a dictionary OpenCV does not know, or one with fewer markers than the
+                board needs (OpenCV would repeat ids; the board could not be identified).
+        """
         import cv2
 
         dic_id = getattr(cv2.aruco, self.dictionary, None)
-        if dic_id is None:
-            raise ConfigError(f"board: unknown ArUco dictionary {self.dictionary!r}")
+        if not isinstance(dic_id, int):
+            known = sorted(n for n in dir(cv2.aruco) if n.startswith("DICT_"))
+            close = difflib.get_close_matches(str(self.dictionary), known, n=3, cutoff=0.6)
+            raise ConfigError(f"board: unknown ArUco dictionary {self.dictionary!r} ("
+                              + (f"did you mean {' or '.join(close)}?" if close else f"OpenCV knows {', '.join(known)}")
+                              + ")")
+        dictionary = cv2.aruco.getPredefinedDictionary(dic_id)
+        size = int(dictionary.bytesList.shape[0])
+        if size < self.n_markers:
+            raise ConfigError(f"board: a {self.squares_x} x {self.squares_y} board has {self.n_markers} markers, but "
+                              f"{self.dictionary} holds only {size}: the printed board's dictionary is another "
+                              "(a larger one, e.g. _100 or _250)?")
         board = cv2.aruco.CharucoBoard(
-            (self.squares_x, self.squares_y), self.square, self.marker,
-            cv2.aruco.getPredefinedDictionary(dic_id),
+            (self.squares_x, self.squares_y), self.square, self.marker, dictionary,
         )
         board.setLegacyPattern(self.legacy_pattern)
         return board
@@ -282,6 +302,23 @@ def campaign_entries(doc: Mapping, config: Mapping, source: str | Path = "campai
     return out
 
 
+REACH_MARGIN = 0.05
+"""A target must lie beyond the grasp's reach by this, m (README: reach + 50 mm)."""
+
+
+def target_reach_problem(target: TargetSpec, arm: ArmSpec) -> str | None:
+    """What is wrong with a target the hanging string could reach without casting, or None.
+
+    The target's x must exceed the grasp's reach (:attr:`ArmSpec.reach`) + :data:`REACH_MARGIN`;
+    ``campaign.yaml``'s ``allow_reachable: true`` waives this (the caller's decision).
+    """
+    if target.x <= arm.reach + REACH_MARGIN:
+        return (f"target x = {target.x * 1000:.0f} mm is within the grasp's reach "
+                f"({arm.reach * 1000:.0f} mm) + {REACH_MARGIN * 1000:.0f} mm: the hanging string could touch it "
+                "without casting. Move the target or set allow_reachable: true.")
+    return None
+
+
 def resolve_campaign(doc: Mapping, config: Mapping, name: str = "campaign",
                      source: str | Path = "campaign.yaml") -> Campaign:
     """Turn a campaign mapping (``campaign.yaml``) into a :class:`Campaign`.
@@ -300,11 +337,9 @@ def resolve_campaign(doc: Mapping, config: Mapping, name: str = "campaign",
     arm = ArmSpec.from_config(arm_id, ad)
     su, sd = e["setup"]
     setup = SetupSpec.from_config(su or "inline", sd, config["cameras"])
-    if not doc.get("allow_reachable", False) and target.x <= arm.reach + 0.05:
-        raise ConfigError(
-            f"{source}: target x = {target.x * 1000:.0f} mm is within the grasp's reach "
-            f"({arm.reach * 1000:.0f} mm) + 50 mm: the hanging string could touch it without "
-            "casting. Move the target or set allow_reachable: true.")
+    problem = None if doc.get("allow_reachable", False) else target_reach_problem(target, arm)
+    if problem:
+        raise ConfigError(f"{source}: {problem}")
     return Campaign(name, string, target, arm, setup, sid, dict(config))
 
 

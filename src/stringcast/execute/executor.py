@@ -27,22 +27,11 @@ from typing import Mapping
 import numpy as np
 
 from stringcast.core import (Campaign, ConfigError, DataError, ExecutorSettings, assert_within_limits, atomic_path,
-                             load_campaign, read_joint_table)
+                             check_motion_timing, load_campaign, read_joint_table)
 from stringcast.lab import run_trial
 from .ur_rtde import UR_JOINTS, URSettings, play_ur
 
 BACKENDS = ("virtual", "ur-rtde")
-
-
-def check_timing(t: np.ndarray, rate: float, source: str) -> None:
-    """Raise DataError naming ``source`` unless t (K,) starts at 0 and steps by 1/rate (s)."""
-    period = 1.0 / rate
-    if abs(t[0]) > 1e-9:
-        raise DataError(f"{source}: a motion file starts at t_s = 0, got {t[0]:.6g} s")
-    dev = np.max(np.abs(np.diff(t) - period))
-    if dev > 1e-6:
-        raise DataError(f"{source}: t_s must step by the controller period {period * 1000:.3f} ms "
-                        f"({rate:g} Hz); deviates by up to {dev * 1000:.3f} ms")
 
 
 def _copy(src: Path, dst: Path) -> None:
@@ -99,7 +88,7 @@ def execute(motion_csv: Path, backend: str, out_dir: Path, campaign_yaml: Path |
     campaign = campaign_yaml if isinstance(campaign_yaml, Campaign) else load_campaign(campaign_yaml, config)
     arm = campaign.arm
     t, q = read_joint_table(motion_csv, "motion.csv", n_joints=arm.n_joints, arm_name=arm.name)
-    check_timing(t, arm.controller_rate, str(motion_csv))
+    check_motion_timing(t, arm.controller_rate, motion_csv)
     assert_within_limits(arm, q, 1.0 / arm.controller_rate, source=str(motion_csv))
     if (out_dir / "joints.csv").exists():
         raise DataError(f"{out_dir}: already holds a joints.csv; refusing to overwrite a recorded trial")

@@ -31,7 +31,7 @@ import numpy as np
 from scipy.special import comb
 
 from stringcast.core import (Campaign, ConfigError, DataError, MotionSettings, check_limits, forward_kinematics,
-                             read_joint_table, read_json)
+                             read_joint_table, read_json, read_motion_sidecar)
 
 
 @dataclass(frozen=True)
@@ -241,17 +241,9 @@ def sample_postures(campaign: Campaign, rng: np.random.Generator, count: int, ma
 # Motion files
 # ---------------------------------------------------------------------------
 def read_motion_json(path: Path, n_joints: int, rate: float) -> Motion:
-    """Rebuild the planned :class:`Motion` from a ``motion.json`` sidecar (q0, T, control points)."""
-    doc = read_json(path)
-    try:
-        q0 = np.asarray(doc["q0_rad"], float)
-        T = float(doc["T_s"])
-        cp = np.asarray(doc["control_points_rad_s"], float)
-    except (KeyError, TypeError, ValueError) as exc:
-        raise DataError(f"{path}: needs q0_rad, T_s and control_points_rad_s ({exc})") from exc
-    if q0.shape != (n_joints,) or cp.ndim != 2 or cp.shape[0] != n_joints or cp.shape[1] < 1 or not T > 0:
-        raise DataError(f"{path}: q0_rad must have {n_joints} values, control_points_rad_s be {n_joints} x N "
-                        "(N >= 1), T_s > 0")
+    """Rebuild the planned :class:`Motion` from a ``motion.json`` sidecar (q0, T, control points;
+    :func:`stringcast.core.read_motion_sidecar`, which raises DataError naming the file)."""
+    q0, T, cp = read_motion_sidecar(path, n_joints)
     dq, _ = joint_paths(cp, T, rate)
     t, T = time_grid(T, rate)
     return Motion(t=t, q=q0 + dq, T=T, control_points=cp, q0=q0)

@@ -7,7 +7,7 @@ from stringcast.core import lazy_exports
 
 if TYPE_CHECKING:
     from .base import FRAME_SUFFIXES
-    from .container import check_frame_count, dropped_frames, open_video
+    from .container import check_frame_count, dropped_frames, open_video, video_meta_problems
     from .decode_ahead import prefetch
     from .frame_cache import CachedVideo, open_trial_video, write_frame_cache
 
@@ -16,6 +16,7 @@ __getattr__, __dir__ = lazy_exports(__name__, {
     "check_frame_count": ".container",
     "dropped_frames": ".container",
     "open_video": ".container",
+    "video_meta_problems": ".container",
     "prefetch": ".decode_ahead",
     "CachedVideo": ".frame_cache",
     "open_trial_video": ".frame_cache",
@@ -23,4 +24,4 @@ __getattr__, __dir__ = lazy_exports(__name__, {
 })
 
 __all__ = ["FRAME_SUFFIXES", "CachedVideo", "check_frame_count", "dropped_frames", "open_trial_video", "open_video",
-           "prefetch", "write_frame_cache"]
+           "prefetch", "video_meta_problems", "write_frame_cache"]

@@ -57,6 +57,9 @@ class VideoReader:
 
     path: Path
     n_frames: int
+    count_slack: int | None = 0
+    """How many frames ``n_frames`` may be off (0: exact; see :func:`~stringcast.video.open_video`'s
+    ``count_frames``)."""
     fps: float | None
     width: int
     height: int

@@ -52,12 +52,14 @@ class ContainerReader(VideoReader):
 
     Matroska keeps times in ms, so above 1000 fps its announced frame count (duration x
     fps) and frame seeks are ambiguous: the count is then found by decoding the file once
-    at opening, and :meth:`read` never seeks. ``timestamps_s`` are the frames'
-    presentation times (``CAP_PROP_POS_MSEC``), recorded while iterating or, if asked
-    for before a full pass, by one decoding pass; None if they do not increase strictly.
+    at opening (unless ``count_frames`` is False: a header-only look, whose ``n_frames`` is then
+    the announced count, known to ``count_slack`` frames), and :meth:`read` never seeks.
+    ``timestamps_s`` are the frames' presentation times (``CAP_PROP_POS_MSEC``), recorded while
+    iterating or, if asked for before a full pass, by one decoding pass; None if they do not
+    increase strictly.
     """
 
-    def __init__(self, path: str | Path):
+    def __init__(self, path: str | Path, count_frames: bool = True):
         self.path = Path(path)
         if not self.path.is_file():
             raise DataError(f"{self.path}: file not found")
@@ -91,10 +93,14 @@ class ContainerReader(VideoReader):
         self._can_seek = self.fourcc in _INTRA_CODECS
         if self.path.suffix.lower() in _MS_CLOCK_SUFFIXES and self.fps is not None and self.fps > 1000.0:
             self._can_seek = False
-            count = -1  # duration (ms) x fps is not exact: count by decoding
-        if count <= 0:
+            # duration (ms) x fps is not exact: count by decoding, or take it as known to a ms of frames
+            self.count_slack = int(np.ceil(self.fps / 1000.0)) + 1
+            count = -1 if count_frames else count
+        if count <= 0 and count_frames:
             self._pts_ms = self._decode_pass()
-            count = len(self._pts_ms)
+            count, self.count_slack = len(self._pts_ms), 0
+        elif count <= 0:
+            count, self.count_slack = 0, None
         self.n_frames = count
         self._cap: cv2.VideoCapture | None = None
         self._pos = 0  # index of the frame the next _cap.read() returns
@@ -205,8 +211,36 @@ def dropped_frames(timestamps_s: np.ndarray, fps: float) -> list[tuple[int, int]
     return [(int(i), int(missing[i])) for i in np.flatnonzero(missing >= 1)]
 
 
+def video_meta_problems(reader: VideoReader, meta: dict) -> list[tuple[str, str, object, str]]:
+    """How a video disagrees with its ``video.yaml`` (``meta``, read by :func:`files.read_video_meta`).
+
+    A frame count the reader knows only to ``count_slack`` frames (a header-only look at a Matroska
+    file above 1000 fps) is compared within it; one it does not know (``count_slack`` None) is not.
+
+    Returns:
+        ``[(severity, key, value, what), ...]``: ``"error"`` for ``frames`` (and ``width_px`` /
+        ``height_px`` where given) that disagree with the video, ``"warn"`` for ``fps`` and
+        ``bit_depth``; ``value`` is the yaml's, ``what`` says what the video holds.
+    """
+    out: list[tuple[str, str, object, str]] = []
+    slack = getattr(reader, "count_slack", 0)
+    if slack is not None and abs(int(meta["frames"]) - reader.n_frames) > slack:
+        about = "" if slack == 0 else f" (announced, to {slack} frames)"
+        out.append(("error", "frames", meta["frames"], f"the video {reader.path} has {reader.n_frames} frames{about} "
+                                                        f"({reader.n_frames - int(meta['frames']):+d})"))
+    for key, got in (("width_px", reader.width), ("height_px", reader.height)):
+        if meta.get(key) is not None and int(meta[key]) != got:
+            out.append(("error", key, meta[key], f"the video {reader.path} is {reader.width}x{reader.height} px"))
+    if reader.fps is not None and abs(reader.fps - float(meta["fps"])) > 1e-3 * float(meta["fps"]):
+        out.append(("warn", "fps", meta["fps"], f"{reader.path} says {reader.fps:g}; using {meta['fps']}"))
+    if meta.get("bit_depth") is not None and int(meta["bit_depth"]) > reader.bit_depth:
+        out.append(("warn", "bit_depth", meta["bit_depth"], f"{reader.path} holds {reader.bit_depth}-bit frames"))
+    return out
+
+
 def check_frame_count(reader: VideoReader, meta: dict, video_yaml_path: str | Path) -> list[str]:
-    """Check a video against its ``video.yaml`` (read by :func:`files.read_video_meta`).
+    """Check a video against its ``video.yaml`` (read by :func:`files.read_video_meta`;
+    :func:`video_meta_problems`).
 
     Raises:
         DataError: ``frames`` (or ``width_px``/``height_px`` where given) disagree with
@@ -216,28 +250,26 @@ def check_frame_count(reader: VideoReader, meta: dict, video_yaml_path: str | Pa
         warnings: fps or ``bit_depth`` that disagree (the yaml is used for time).
     """
     src = f"{video_yaml_path}"
-    if int(meta["frames"]) != reader.n_frames:
-        raise DataError(f"{src}: frames: {meta['frames']}, but the video {reader.path} has {reader.n_frames} "
-                        f"frames ({reader.n_frames - int(meta['frames']):+d})")
-    for key, got in (("width_px", reader.width), ("height_px", reader.height)):
-        if meta.get(key) is not None and int(meta[key]) != got:
-            raise DataError(f"{src}: {key}: {meta[key]}, but the video {reader.path} is "
-                            f"{reader.width}x{reader.height} px")
-    warnings = []
-    if reader.fps is not None and abs(reader.fps - float(meta["fps"])) > 1e-3 * float(meta["fps"]):
-        warnings.append(f"{src}: fps {meta['fps']} but {reader.path} says {reader.fps:g}; using {meta['fps']}")
-    if meta.get("bit_depth") is not None and int(meta["bit_depth"]) > reader.bit_depth:
-        warnings.append(f"{src}: bit_depth {meta['bit_depth']} but {reader.path} holds {reader.bit_depth}-bit frames")
-    return warnings
+    problems = video_meta_problems(reader, meta)
+    for severity, key, value, what in problems:
+        if severity == "error":
+            raise DataError(f"{src}: {key}: {value}, but {what}")
+    return [f"{src}: {key} {value} but {what}" for severity, key, value, what in problems if severity == "warn"]
 
 
-def open_video(path: str | Path, fps: float | None = None) -> VideoReader:
+def open_video(path: str | Path, fps: float | None = None, count_frames: bool = True) -> VideoReader:
     """Open a video file or a folder of frames as a mono :class:`VideoReader`.
+
+    Opening reads the header and the first frame; only a container whose header does not give
+    its frame count exactly (Matroska above 1000 fps, or no count) is decoded once to count it.
 
     Args:
         path: a container OpenCV reads (mkv/avi/mp4/...), a folder of PNG/TIFF frames, a
             multi-page TIFF, or a Photron ``.cihx``/``.cih`` (or its ``.mraw``).
         fps: frame rate to report for a frame folder or TIFF stack (the others report their own).
+        count_frames: False: never decode to count a container's frames (a look at its header:
+            ``n_frames`` is then the announced count, known to the reader's ``count_slack``
+            frames, None where unknown; for :func:`video_meta_problems`, not for reading frames).
 
     Raises:
         DataError: missing, empty, unreadable or truncated source; a single image.
@@ -254,4 +286,4 @@ def open_video(path: str | Path, fps: float | None = None) -> VideoReader:
         return TiffStackReader(path, fps)
     if suffix in FRAME_SUFFIXES:
         raise DataError(f"{path}: a single image, not a video (put frames in a folder)")
-    return ContainerReader(path)
+    return ContainerReader(path, count_frames)
