@@ -32,3 +32,20 @@ rule all:
     default_target: True
     input:
         all_targets(),
+
+
+# A campaign whose raw files have errors is not built (workflow/rules/common.smk: checked);
+# this job runs after every other and fails, listing them, so the run ends non-zero.
+rule refused_campaigns:
+    input:
+        campaign_targets,
+    output:
+        REFUSED,
+    log:
+        "results/logs/refused_campaigns.log",
+    conda:
+        "workflow/envs/stringcast.yaml"
+    params:
+        report=refused_report,
+    shell:
+        "printf '%s\\n' {params.report} | tee {log} >&2; exit 1"

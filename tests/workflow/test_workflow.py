@@ -204,3 +204,122 @@ def test_a_configfile_that_changes_nothing_a_stage_reads_reruns_nothing(finished
     some.write_text(yaml.safe_dump({"motion": {"flight_window_s": 0.6}}))
     rules = planned_rules(snakemake(root, "-n", "--configfile", str(some)))
     assert {"plan", "plan_first"} <= rules and not rules & {"calibrate", "sync", "track"}
+
+
+def _job_processes(root: Path, log_name: str) -> list[int]:
+    """Pids of the processes running the workflow job that logs to ``log_name`` in project ``root``."""
+    pids = []
+    for proc in Path("/proc").iterdir():
+        if not proc.name.isdigit():
+            continue
+        try:
+            cmd = (proc / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+            cwd = os.readlink(proc / "cwd")
+        except OSError:
+            continue
+        if log_name in cmd and "stringcast" in cmd and cwd == str(root):
+            pids.append(int(proc.name))
+    return pids
+
+
+def _wait_for(pred, timeout_s: float = 180.0) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if pred():
+            return True
+        time.sleep(0.05)
+    return False
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_killing_the_workflow_ends_its_jobs(finished):
+    """kill -9 of Snakemake alone (not its process group): the running job and its workers end within
+    seconds, leave nothing that looks finished, and the next run makes the same estimate."""
+    root, _ = finished
+    res = root / "results" / "e2e" / "trial_1"
+    before = json.loads((res / "params.json").read_text())
+    (res / "params.json").unlink()
+    proc = subprocess.Popen([sys.executable, "-m", "snakemake", "--cores", "2", "--directory", str(root),
+                             str(res.relative_to(root) / "params.json")],
+                            cwd=root, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        assert _wait_for(lambda: _job_processes(root, "estimate_1.log")), "the estimate job did not start"
+        time.sleep(1.0)
+        jobs = _job_processes(root, "estimate_1.log")
+    finally:
+        proc.kill()
+        proc.wait()
+    assert _wait_for(lambda: not _job_processes(root, "estimate_1.log"), 20), "the job outlived its workflow"
+    assert not (res / "params.json").exists() and not list(res.glob(".params.json*"))
+    assert all(not Path(f"/proc/{pid}").exists() or "Z" in Path(f"/proc/{pid}/stat").read_text().split()[2]
+               for pid in jobs)
+    snakemake(root, "--unlock")
+    snakemake(root, str(res.relative_to(root) / "params.json"))
+    assert json.loads((res / "params.json").read_text())["E_mm"] == pytest.approx(before["E_mm"], rel=1e-9)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_two_runs_on_one_results_folder_lose_no_finished_output(finished):
+    """A second run that Snakemake's own lock lets in (here by --nolock, as when another run ended and
+    removed the locks) while the first remakes a trial's tracking is refused before any job, and every
+    finished output survives byte for byte; the first run's remade files are as before."""
+    root, _ = finished
+    res = root / "results" / "e2e"
+    target = str((res / "trial_1" / "params.json").relative_to(root))
+    snakemake(root, target)
+    finished_before = snapshot(res)
+    tracks = finished_before["trial_1/tracks.parquet"][2]
+    (res / "trial_1" / "tracks.parquet").unlink()
+    first = subprocess.Popen([sys.executable, "-m", "snakemake", "--cores", "1", "--directory", str(root), target],
+                             cwd=root, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        assert _wait_for(lambda: _job_processes(root, "track_1.log")), "the first run's tracking did not start"
+        during = snapshot(res)
+        second = subprocess.run([sys.executable, "-m", "snakemake", "--cores", "1", "--nolock", "--directory",
+                                 str(root), target], cwd=root, capture_output=True, text=True, timeout=300)
+        out = second.stdout + second.stderr
+        assert second.returncode != 0 and "results/e2e/trial_1 is being made by another snakemake run" in out, out
+        after_second = snapshot(res)
+        # the second run touched nothing: every file there before it is there, the same bytes
+        assert {k: v for k, v in after_second.items() if k in during and "logs/" not in k} == \
+            {k: v for k, v in during.items() if "logs/" not in k}
+    finally:
+        first_out = first.communicate(timeout=600)[0]
+    assert first.returncode == 0, first_out
+    end = snapshot(res)
+    assert end["trial_1/tracks.parquet"][2] == tracks
+    # every output finished before both runs is there, the same bytes (the ones remade: the same content)
+    for name, (_, _, digest) in finished_before.items():
+        if name.startswith(("trial_1/", "logs/", "benchmarks/")) and name != "trial_1/tracks.parquet":
+            continue
+        assert end[name][2] == digest, name
+
+
+@pytest.mark.slow
+def test_a_broken_campaign_is_refused_and_the_others_run(finished):
+    """A campaign.yaml typo in one campaign: a run of every campaign builds the others, lists the broken
+    one and ends non-zero; a target of another campaign runs; a target of the broken one names its problem."""
+    root, _ = finished
+    broken = root / "data" / "broken"
+    broken.mkdir()
+    (broken / "campaign.yaml").write_text("string: 1\ntarget: [1\n")
+    try:
+        done = snapshot(root / "results" / "e2e")
+        proc = subprocess.run([sys.executable, "-m", "snakemake", "--cores", "2", "--directory", str(root)], cwd=root,
+                              capture_output=True, text=True, timeout=600)
+        out = proc.stdout + proc.stderr
+        assert proc.returncode != 0, out
+        assert "data/broken was not built" in out and "data/broken/campaign.yaml" in out, out
+        assert "Traceback" not in out
+        assert snapshot(root / "results" / "e2e") == done
+        assert not (root / "results" / "broken").exists()
+        snakemake(root, "results/e2e/report.html")
+        proc = subprocess.run([sys.executable, "-m", "snakemake", "--cores", "1", "--directory", str(root),
+                               "results/broken/first_motion/motion.csv"], cwd=root, capture_output=True, text=True)
+        out = proc.stdout + proc.stderr
+        assert proc.returncode != 0 and "data/broken/campaign.yaml" in out and "none of its jobs is built" in out, out
+    finally:
+        (broken / "campaign.yaml").unlink()
+        broken.rmdir()

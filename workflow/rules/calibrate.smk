@@ -6,7 +6,7 @@
 rule calib_views:
     input:
         calib="data/{campaign}/calib",
-        campaign="data/{campaign}/campaign.yaml",
+        campaign=campaign_yaml,
     output:
         views="results/{campaign}/calib_views.npz",
         intrinsics="results/{campaign}/intrinsics.json",
@@ -21,8 +21,8 @@ rule calib_views:
         settings=stage_settings("calib-views"),
         lab=campaign_lab_entries,
     shell:
-        '{params.cli} calib-views --calib-dir "{input.calib}" --campaign "{input.campaign}" '
-        '--out "{output.views}" --out-intrinsics "{output.intrinsics}" > "{log}" 2>&1'
+        '{params.cli} --log "{log}" calib-views --calib-dir "{input.calib}" --campaign "{input.campaign}" '
+        '--out "{output.views}" --out-intrinsics "{output.intrinsics}"'
 
 
 rule calibrate:
@@ -30,7 +30,7 @@ rule calibrate:
         video=trial_video,
         meta="data/{campaign}/trial_{trial}/video.yaml",
         joints="data/{campaign}/trial_{trial}/joints.csv",
-        campaign="data/{campaign}/campaign.yaml",
+        campaign=campaign_yaml,
         calib=calib_input,
     output:
         "results/{campaign}/trial_{trial}/calibration.json",
@@ -46,5 +46,5 @@ rule calibrate:
         settings=stage_settings("calibrate"),
         lab=campaign_lab_entries,
     shell:
-        '{params.cli} calibrate --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
-        '{params.calib} --campaign "{input.campaign}" --out "{output}" > "{log}" 2>&1'
+        '{params.cli} --log "{log}" calibrate --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
+        '{params.calib} --campaign "{input.campaign}" --out "{output}"'

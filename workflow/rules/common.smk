@@ -2,21 +2,23 @@
 # No lambdas in rules: every input function is a named def here.
 import functools
 import os
+import shlex
 import sys
+import time
 from pathlib import Path
 
 from snakemake.exceptions import WorkflowError
 
+from stringcast.check import check_campaign
 from stringcast.cli import stage_sections
 from stringcast.core import (
     ConfigError,
-    DataError,
     campaign_entries,
-    check_joint_header,
-    load_campaign,
     load_yaml,
     settings_from_config,
 )
+from stringcast.core.lifeline import ENV_PID, workflow_stamp
+from stringcast.core.runlock import RunConflict, claim, newer_than
 
 
 wildcard_constraints:
@@ -45,11 +47,40 @@ CONFIG_FILES = [
     ),
     *map(str, workflow.config_settings.configfiles),
 ]
+# Each job's stringcast ends with this run, even one killed hard (stringcast.core.lifeline).
 shell.prefix(
     f'set -euo pipefail; export PATH="{Path(sys.executable).parent}:$PATH"; '
     f'export STRINGCAST_CONFIG="{os.pathsep.join(map(os.path.abspath, CONFIG_FILES))}"; '
+    f'export {ENV_PID}="{workflow_stamp()}"; '
 )
 CLI = "stringcast"
+PLANNED_AT = time.time()
+"""When this run began to plan its jobs (before it read any output's time)."""
+# The run that submits the jobs checks the raw files and claims the results folders; a job
+# that Slurm (or another executor) runs parses this file again and does neither.
+SUBMITTER = workflow.exec_mode.name == "DEFAULT"
+
+
+# Before its first job, this run claims the results folders its jobs write (one run at a time
+# on each: stringcast.core.runlock) and stops if another run has made any of its outputs since
+# it planned them: remaking them would delete a finished file.
+onstart:
+    claim_results_folders()
+
+
+def claim_results_folders():
+    jobs = list(workflow.dag.needrun_jobs())
+    folders = {os.path.dirname(str(job.output[0])) for job in jobs if job.output}
+    try:
+        claim(f for f in folders if f.startswith("results"))
+    except RunConflict as exc:
+        raise WorkflowError(f"stringcast: {exc}") from None
+    made = newer_than((str(f) for job in jobs for f in job.output), PLANNED_AT)
+    if made:
+        raise WorkflowError(
+            f"stringcast: another run made {made[0]} (and {len(made) - 1} more of this run's "
+            "outputs) while this one was planning; run again to take them as they are"
+        )
 
 
 try:
@@ -91,42 +122,49 @@ def campaigns():
     return sorted(p.parent.name for p in Path("data").glob("*/campaign.yaml"))
 
 
+@functools.cache
+def campaign_problems(campaign):
+    """Every error the check of data/<campaign>/'s raw files finds (stringcast.check,
+    `stringcast check data/<campaign>`), one line each; none in a job that Slurm runs (the
+    submitting run checked). Read once per campaign, before any job: a campaign with an error
+    is not built, and the other campaigns are."""
+    if not SUBMITTER:
+        return ()
+    return tuple(
+        str(p) for p in check_campaign(Path("data", campaign), config) if p.is_error
+    )
+
+
+def checked(campaign):
+    """Refuse a target of a campaign whose raw files have errors, naming each (before any job)."""
+    problems = campaign_problems(campaign)
+    if problems:
+        raise WorkflowError(
+            f"stringcast: data/{campaign} has {len(problems)} problem(s); none of its jobs is built:\n"
+            + "\n".join(f"  {p}" for p in problems)
+        )
+
+
+def campaign_yaml(wildcards):
+    """data/<campaign>/campaign.yaml, its campaign checked first (checked)."""
+    checked(wildcards.campaign)
+    return f"data/{wildcards.campaign}/campaign.yaml"
+
+
 def trials(campaign):
-    """Trial indices present under data/<campaign>/ (those with a joints.csv), each
-    joints.csv's header checked against the campaign's arm (check_joint_logs)."""
+    """Trial indices present under data/<campaign>/ (those with a joints.csv)."""
     ks = []
     for p in Path("data", campaign).glob("trial_*/joints.csv"):
         suffix = p.parent.name.split("_", 1)[1]
         if suffix.isdigit():
             ks.append(int(suffix))
-    check_joint_logs(campaign, sorted(ks))
     return sorted(ks)
 
 
-_CHECKED_JOINT_LOGS = set()
-
-
-def check_joint_logs(campaign, ks):
-    """Refuse, before any job runs, a trial whose joints.csv lacks one of the campaign's
-    arm's joint columns (or has more): each header's first line only, once per file."""
-    todo = [
-        Path("data", campaign, f"trial_{k}", "joints.csv")
-        for k in ks
-        if (campaign, k) not in _CHECKED_JOINT_LOGS
-    ]
-    if not todo:
-        return
-    try:
-        arm = load_campaign(Path("data", campaign, "campaign.yaml"), config).arm
-        for path in todo:
-            check_joint_header(path, arm.n_joints, arm.name)
-    except (ConfigError, DataError) as exc:
-        raise WorkflowError(f"stringcast: {exc}") from exc
-    _CHECKED_JOINT_LOGS.update((campaign, k) for k in ks)
-
-
 def trial_video(wildcards):
-    """The trial's video: a container file, a frame folder, or a Photron .cihx."""
+    """The trial's video: a container file, a frame folder, or a Photron .cihx (its campaign
+    checked first: checked)."""
+    checked(wildcards.campaign)
     d = Path("data", wildcards.campaign, f"trial_{wildcards.trial}")
     for name in VIDEO_NAMES:
         if (d / name).exists():
@@ -203,9 +241,46 @@ def trial_reports(wildcards):
 
 
 def all_targets():
-    """Every stage's product of every trial, so a deleted one is made again and what
-    depends on it reruns (Snakemake does not remake a missing file that no requested
-    output needs)."""
+    """Every stage's product of every trial of every campaign without an error in its raw files,
+    so a deleted one is made again and what depends on it reruns (Snakemake does not remake a
+    missing file that no requested output needs); and, where some campaign has one, REFUSED,
+    which fails last, listing them. The refused campaigns' problems are also printed now, so
+    that a dry run shows them."""
+    refused = refused_campaigns()
+    for c in refused:
+        print(
+            f"stringcast: data/{c} is not built, {len(campaign_problems(c))} problem(s):\n"
+            + "\n".join(f"  {p}" for p in campaign_problems(c)),
+            file=sys.stderr,
+        )
+    return campaign_targets() + ([REFUSED] if refused else [])
+
+
+REFUSED = "results/.refused_campaigns"
+"""The target of the refused_campaigns job, never made: the job fails, naming the refused campaigns."""
+
+
+def refused_campaigns():
+    """The campaigns under data/ whose raw files have errors (campaign_problems), by name."""
+    return [c for c in campaigns() if campaign_problems(c)]
+
+
+def refused_report(wildcards):
+    """The refused campaigns' problems, one shell-quoted line each (the refused_campaigns job's)."""
+    lines = []
+    for c in refused_campaigns():
+        lines.append(
+            f"stringcast: data/{c} was not built, {len(campaign_problems(c))} problem(s):"
+        )
+        lines += [f"  {p}" for p in campaign_problems(c)]
+    lines.append(
+        f"stringcast check data/<campaign> lists them again; the other campaigns were built"
+    )
+    return " ".join(map(shlex.quote, lines))
+
+
+def campaign_targets(wildcards=None):
+    """all_targets without REFUSED: every product of the campaigns that are built."""
     out = []
     stages = (
         "calibration.json",
@@ -218,6 +293,8 @@ def all_targets():
         "report.html",
     )
     for c in campaigns():
+        if campaign_problems(c):
+            continue
         out.append(f"results/{c}/first_motion/motion.csv")
         ks = trials(c)
         out += [f"results/{c}/trial_{k}/{name}" for k in ks for name in stages]

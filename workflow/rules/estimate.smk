@@ -12,7 +12,7 @@ rule estimate:
             stage=("geometry", "clock", "tracking"),
         ),
         joints="data/{campaign}/trial_{trial}/joints.csv",
-        campaign="data/{campaign}/campaign.yaml",
+        campaign=campaign_yaml,
         prev=previous_params,
     output:
         params="results/{campaign}/trial_{trial}/params.json",
@@ -31,10 +31,9 @@ rule estimate:
         settings=stage_settings("estimate"),
         lab=campaign_lab_entries,
     shell:
-        'NUMBA_NUM_THREADS={threads} {params.cli} estimate --tracks "{input.tracks}" '
+        'NUMBA_NUM_THREADS={threads} {params.cli} --log "{log}" estimate --tracks "{input.tracks}" '
         '--joints "{input.joints}" --campaign "{input.campaign}" {params.prev} {params.earlier} '
-        '--trial {wildcards.trial} --out-params "{output.params}" --out-fit "{output.fit}" '
-        '> "{log}" 2>&1'
+        '--trial {wildcards.trial} --out-params "{output.params}" --out-fit "{output.fit}"'
 
 
 # The next-motion prediction error (issue 27): trial k - 1's estimate driven by this trial's
@@ -46,7 +45,7 @@ rule predict:
         params=predicting_params,
         tracks="results/{campaign}/trial_{trial}/tracks.parquet",
         joints="data/{campaign}/trial_{trial}/joints.csv",
-        campaign="data/{campaign}/campaign.yaml",
+        campaign=campaign_yaml,
     output:
         "results/{campaign}/trial_{trial}/prediction.json",
     log:
@@ -60,5 +59,5 @@ rule predict:
         settings=stage_settings("predict"),
         lab=campaign_lab_entries,
     shell:
-        '{params.cli} predict --params "{input.params}" --tracks "{input.tracks}" --joints "{input.joints}" '
-        '--campaign "{input.campaign}" --out "{output}" > "{log}" 2>&1'
+        '{params.cli} --log "{log}" predict --params "{input.params}" --tracks "{input.tracks}" --joints "{input.joints}" '
+        '--campaign "{input.campaign}" --out "{output}"'

@@ -4,7 +4,7 @@
 
 rule plan_first:
     input:
-        campaign="data/{campaign}/campaign.yaml",
+        campaign=campaign_yaml,
     output:
         csv="results/{campaign}/first_motion/motion.csv",
         json="results/{campaign}/first_motion/motion.json",
@@ -20,8 +20,8 @@ rule plan_first:
         settings=stage_settings("plan-first"),
         lab=campaign_lab_entries,
     shell:
-        'NUMBA_NUM_THREADS={threads} {params.cli} plan-first --campaign "{input.campaign}" '
-        '--out-dir "results/{wildcards.campaign}/first_motion" > "{log}" 2>&1'
+        'NUMBA_NUM_THREADS={threads} {params.cli} --log "{log}" plan-first --campaign "{input.campaign}" '
+        '--out-dir "results/{wildcards.campaign}/first_motion"'
 
 
 rule plan:
@@ -30,7 +30,7 @@ rule plan:
         played="data/{campaign}/trial_{trial}/motion.json",
         tracks="results/{campaign}/trial_{trial}/tracks.parquet",
         joints="data/{campaign}/trial_{trial}/joints.csv",
-        campaign="data/{campaign}/campaign.yaml",
+        campaign=campaign_yaml,
     output:
         csv="results/{campaign}/trial_{trial}/motion.csv",
         json="results/{campaign}/trial_{trial}/motion.json",
@@ -46,6 +46,6 @@ rule plan:
         settings=stage_settings("plan"),
         lab=campaign_lab_entries,
     shell:
-        'NUMBA_NUM_THREADS={threads} {params.cli} plan --params "{input.params}" --played-motion "{input.played}" '
+        'NUMBA_NUM_THREADS={threads} {params.cli} --log "{log}" plan --params "{input.params}" --played-motion "{input.played}" '
         '--tracks "{input.tracks}" --joints "{input.joints}" --campaign "{input.campaign}" --seed {wildcards.trial} '
-        '--out-dir "results/{wildcards.campaign}/trial_{wildcards.trial}" > "{log}" 2>&1'
+        '--out-dir "results/{wildcards.campaign}/trial_{wildcards.trial}"'

@@ -12,7 +12,7 @@ rule report_trial:
         fit="results/{campaign}/trial_{trial}/fit.parquet",
         motion="results/{campaign}/trial_{trial}/motion.json",
         joints="data/{campaign}/trial_{trial}/joints.csv",
-        campaign="data/{campaign}/campaign.yaml",
+        campaign=campaign_yaml,
     output:
         report(
             "results/{campaign}/trial_{trial}/report.html",
@@ -30,15 +30,15 @@ rule report_trial:
         settings=stage_settings("report-trial"),
         lab=campaign_lab_entries,
     shell:
-        '{params.cli} report-trial --data-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
+        '{params.cli} --log "{log}" report-trial --data-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '--results-dir "results/{wildcards.campaign}/trial_{wildcards.trial}" '
-        '--campaign "{input.campaign}" --out "{output}" > "{log}" 2>&1'
+        '--campaign "{input.campaign}" --out "{output}"'
 
 
 rule report_campaign:
     input:
         trial_reports,
-        campaign="data/{campaign}/campaign.yaml",
+        campaign=campaign_yaml,
     output:
         report(
             "results/{campaign}/report.html",
@@ -56,6 +56,6 @@ rule report_campaign:
         settings=stage_settings("report-campaign"),
         lab=campaign_lab_entries,
     shell:
-        '{params.cli} report-campaign --data-dir "data/{wildcards.campaign}" '
+        '{params.cli} --log "{log}" report-campaign --data-dir "data/{wildcards.campaign}" '
         '--results-dir "results/{wildcards.campaign}" --campaign "{input.campaign}" '
-        '--out "{output}" > "{log}" 2>&1'
+        '--out "{output}"'

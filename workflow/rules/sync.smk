@@ -10,7 +10,7 @@ rule sync:
         meta="data/{campaign}/trial_{trial}/video.yaml",
         joints="data/{campaign}/trial_{trial}/joints.csv",
         calibration="results/{campaign}/trial_{trial}/calibration.json",
-        campaign="data/{campaign}/campaign.yaml",
+        campaign=campaign_yaml,
     output:
         "results/{campaign}/trial_{trial}/sync.json",
     log:
@@ -25,9 +25,9 @@ rule sync:
         settings=stage_settings("sync"),
         lab=campaign_lab_entries,
     shell:
-        '{params.cli} sync --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
+        '{params.cli} --log "{log}" sync --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '--calibration "{input.calibration}" --campaign "{input.campaign}" '
-        '--out "{output}" --frames "{input.frames}" --workers {threads} > "{log}" 2>&1'
+        '--out "{output}" --frames "{input.frames}" --workers {threads}'
 
 
 # The arm's sweep: the swing plane's mapping and the clock refined together by the arm's
@@ -42,7 +42,7 @@ rule sweep:
         joints="data/{campaign}/trial_{trial}/joints.csv",
         calibration="results/{campaign}/trial_{trial}/calibration.json",
         sync="results/{campaign}/trial_{trial}/sync.json",
-        campaign="data/{campaign}/campaign.yaml",
+        campaign=campaign_yaml,
     output:
         geometry="results/{campaign}/trial_{trial}/geometry.json",
         clock="results/{campaign}/trial_{trial}/clock.json",
@@ -58,6 +58,6 @@ rule sweep:
         settings=stage_settings("sweep"),
         lab=campaign_lab_entries,
     shell:
-        '{params.cli} sweep --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
+        '{params.cli} --log "{log}" sweep --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '--calibration "{input.calibration}" --sync "{input.sync}" --campaign "{input.campaign}" '
-        '--out-geometry "{output.geometry}" --out-clock "{output.clock}" --frames "{input.frames}" --workers {threads} > "{log}" 2>&1'
+        '--out-geometry "{output.geometry}" --out-clock "{output.clock}" --frames "{input.frames}" --workers {threads}'

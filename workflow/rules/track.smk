@@ -10,7 +10,7 @@ rule track:
         joints="data/{campaign}/trial_{trial}/joints.csv",
         calibration="results/{campaign}/trial_{trial}/geometry.json",
         sync="results/{campaign}/trial_{trial}/clock.json",
-        campaign="data/{campaign}/campaign.yaml",
+        campaign=campaign_yaml,
     output:
         tracks="results/{campaign}/trial_{trial}/tracks.parquet",
         quality="results/{campaign}/trial_{trial}/tracking.json",
@@ -31,7 +31,7 @@ rule track:
         settings=stage_settings("track"),
         lab=campaign_lab_entries,
     shell:
-        '{params.cli} track --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
+        '{params.cli} --log "{log}" track --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
         '--calibration "{input.calibration}" --sync "{input.sync}" '
         '--campaign "{input.campaign}" --out "{output.tracks}" --overlay "{output.overlay}" '
-        '--frames "{input.frames}" --workers {threads} > "{log}" 2>&1'
+        '--frames "{input.frames}" --workers {threads}'

@@ -20,5 +20,5 @@ rule decode:
         cli=CLI,
         settings=stage_settings("decode"),
     shell:
-        '{params.cli} decode --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
-        '--out "{output.frames}" > "{log}" 2>&1'
+        '{params.cli} --log "{log}" decode --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
+        '--out "{output.frames}"'
