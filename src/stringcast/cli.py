@@ -14,6 +14,8 @@ import os
 import sys
 from pathlib import Path
 
+from stringcast.core import JobLog
+
 
 CONFIG_ENV = "STRINGCAST_CONFIG"
 """Environment variable with the config files a job reads (``os.pathsep``-separated), set by
@@ -98,46 +100,6 @@ def _run(command: str, args, *positional, **keywords):
     """Run ``command``'s stage on ``positional`` (its own order), ``keywords`` and the settings it takes."""
     func = stage_entry(command)
     return func(*positional, **keywords, **_settings(func, args))
-
-
-class JobLog:
-    """Where a command's output goes: with ``--log FILE`` (the workflow's rules) everything the
-    command and the libraries under it print (file descriptors 1 and 2) goes to FILE, and the
-    terminal (the original standard error: Snakemake's) gets only :meth:`say`'s lines, the
-    command's verdict or error, one each; without it, the usual streams."""
-
-    def __init__(self, path: str | None = None):
-        self.path, self.terminal, self._saved = path, None, ()
-        if path:
-            Path(path).parent.mkdir(parents=True, exist_ok=True)
-            sys.stdout.flush()
-            sys.stderr.flush()
-            self._saved = (os.dup(1), os.dup(2))
-            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o666)
-            os.dup2(fd, 1)
-            os.dup2(fd, 2)
-            os.close(fd)
-            self.terminal = os.fdopen(os.dup(self._saved[1]), "w", buffering=1)
-            self._streams = sys.stdout, sys.stderr      # Python's writers, on the same descriptors
-            sys.stdout, sys.stderr = (open(fd, "w", buffering=1, closefd=False) for fd in (1, 2))
-
-    def close(self) -> None:
-        """Give the standard streams back (a command run in-process, as by the tests)."""
-        if self._saved:
-            sys.stdout.flush()
-            sys.stderr.flush()
-            sys.stdout, sys.stderr = self._streams
-            for fd, saved in zip((1, 2), self._saved):
-                os.dup2(saved, fd)
-                os.close(saved)
-            self.terminal.close()
-            self._saved, self.terminal = (), None
-
-    def say(self, line: str, error: bool = False) -> None:
-        """``line`` into the log (stdout; stderr for an ``error``) and, with a log file, on the terminal."""
-        print(line, file=sys.stderr if error else sys.stdout, flush=True)
-        if self.terminal is not None:
-            print(line + (f" (log: {self.path})" if error else ""), file=self.terminal, flush=True)
 
 
 _LOG = JobLog()
@@ -393,8 +355,7 @@ def main(argv: list[str] | None = None) -> int:
     (:mod:`stringcast.core.lifeline`)."""
     global _LOG
     argv = sys.argv[1:] if argv is None else list(argv)
-    from stringcast.core import ConfigError, DataError, JointLimitError
-    from stringcast.core.lifeline import start_lifeline
+    from stringcast.core import ConfigError, DataError, JointLimitError, start_lifeline
 
     args = build_parser().parse_args(argv)
     _LOG = JobLog(args.log)

@@ -10,7 +10,7 @@ import time
 import pytest
 
 from stringcast.core.lifeline import alive, process_start, workflow_stamp
-from stringcast.core.runlock import RunConflict, claim, newer_than, release
+from stringcast.core.runlock import RunConflict, claim_results as claim, outputs_newer_than as newer_than, release
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux: /proc and PR_SET_PDEATHSIG")
 
@@ -106,7 +106,7 @@ def test_a_job_ends_when_its_shell_is_killed(tmp_path):
 CLAIMER = textwrap.dedent("""
     import sys, time
     from pathlib import Path
-    from stringcast.core.runlock import claim
+    from stringcast.core.runlock import claim_results as claim
     claim(["results/c/trial_1"], Path(sys.argv[1]))
     print("claimed", flush=True)
     time.sleep(300)

@@ -17,8 +17,8 @@ from stringcast.core import (
     load_yaml,
     settings_from_config,
 )
-from stringcast.core.lifeline import ENV_PID, workflow_stamp
-from stringcast.core.runlock import RunConflict, claim, newer_than
+from stringcast.core.lifeline import ENV_PID
+from stringcast.core import RunConflict, claim_results, outputs_newer_than, workflow_stamp
 
 
 wildcard_constraints:
@@ -72,10 +72,10 @@ def claim_results_folders():
     jobs = list(workflow.dag.needrun_jobs())
     folders = {os.path.dirname(str(job.output[0])) for job in jobs if job.output}
     try:
-        claim(f for f in folders if f.startswith("results"))
+        claim_results(f for f in folders if f.startswith("results"))
     except RunConflict as exc:
         raise WorkflowError(f"stringcast: {exc}") from None
-    made = newer_than((str(f) for job in jobs for f in job.output), PLANNED_AT)
+    made = outputs_newer_than((str(f) for job in jobs for f in job.output), PLANNED_AT)
     if made:
         raise WorkflowError(
             f"stringcast: another run made {made[0]} (and {len(made) - 1} more of this run's "

@@ -38,7 +38,7 @@ def _lock_file(folder: str, lock_dir: Path) -> Path:
     return lock_dir / f"{name}.{digest}.lock"
 
 
-def claim(folders: Iterable[str], lock_dir: Path = LOCK_DIR) -> list[str]:
+def claim_results(folders: Iterable[str], lock_dir: Path = LOCK_DIR) -> list[str]:
     """Hold an exclusive lock on each of ``folders`` (paths relative to the working directory) for
     the rest of this process's life; the folders newly claimed, sorted.
 
@@ -78,7 +78,7 @@ def release(folders: Iterable[str] | None = None) -> None:
             os.close(fd)
 
 
-def newer_than(paths: Iterable[str], since: float) -> list[str]:
+def outputs_newer_than(paths: Iterable[str], since: float) -> list[str]:
     """Those of ``paths`` that exist and were modified after ``since`` (a ``time.time()``), sorted."""
     out = []
     for p in paths:
