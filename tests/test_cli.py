@@ -196,10 +196,15 @@ def test_a_stage_prints_its_verdict_line_with_its_first_reason(capfd, tmp_path):
     try:
         _verdict_line("sync", Verdict().add("warn", "first reason").add("ok", "second"), "offset 0.1 s", "sync.json")
         _verdict_line("sync", Verdict(), "offset 0.1 s", "sync.json")
+        _verdict_line("fit", Verdict().add("fail", "worse than the hand"), "E", "p.json", note="likely cause model")
     finally:
         cli._LOG.close()
         cli._LOG = JobLog()
     _, err = capfd.readouterr()
     assert err.splitlines() == ["sync: warn: first reason (+1 more reasons in the log) -> sync.json",
-                                "sync: ok: offset 0.1 s -> sync.json"]
+                                "sync: ok: offset 0.1 s -> sync.json",
+                                "fit: fail, likely cause model: worse than the hand -> p.json"]
+    from stringcast.campaign import _JOB_LINE
+
+    assert all(_JOB_LINE.match(line) for line in err.splitlines())
     assert "  warn: second" in log.read_text()

@@ -40,7 +40,7 @@ _RULE = re.compile(r"^(?:local)?rule (\w+):")
 _JOBID = re.compile(r"^\s+jobid: (\d+)")
 _FINISHED = re.compile(r"Finished jobid: (\d+)")
 _STEPS = re.compile(r"(\d+) of (\d+) steps")
-_JOB_LINE = re.compile(r"^(?:[a-z][\w ()-]*: (?:ok|warn|fail): |stringcast [\w-]+: (?:error|internal error): )")
+_JOB_LINE = re.compile(r"^(?:[a-z][\w ()-]*: (?:ok|warn|fail)[^:]*: |stringcast [\w-]+: (?:error|internal error): )")
 """A job's own line on the terminal: its verdict or its error (:class:`stringcast.cli.JobLog`)."""
 
 

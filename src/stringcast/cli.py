@@ -105,14 +105,15 @@ def _run(command: str, args, *positional, **keywords):
 _LOG = JobLog()
 
 
-def _verdict_line(stage: str, verdict, summary: str, out) -> None:
-    """The stage's one terminal line: ``<stage>: <status>: <first reason, or the summary> -> <out>``
-    (``verdict``: a :class:`~stringcast.core.Verdict` or its dict); the other reasons go to the log."""
+def _verdict_line(stage: str, verdict, summary: str, out, note: str = "") -> None:
+    """The stage's one terminal line: ``<stage>: <status>[, <note>]: <first reason, or the summary> -> <out>``
+    (``verdict``: a :class:`~stringcast.core.Verdict` or its dict; ``note``: what the status means, without
+    a colon); the other reasons go to the log."""
     status, reasons = (verdict.get("status", "ok"), list(verdict.get("reasons", []))) if isinstance(verdict, dict) \
         else (verdict.status, list(verdict.reasons))
     first = reasons[0] if reasons else summary
     more = f" (+{len(reasons) - 1} more reasons in the log)" if len(reasons) > 1 else ""
-    _LOG.say(f"{stage}: {status}: {first}{more} -> {out}")
+    _LOG.say(f"{stage}: {status}{', ' + note if note else ''}: {first}{more} -> {out}")
     for reason in reasons[1:]:
         print(f"  {status}: {reason}")
 
@@ -208,9 +209,10 @@ def cmd_estimate(args):
                Path(args.prev) if args.prev else None, int(args.trial), Path(args.out_params), Path(args.out_fit),
                _earlier(args))
     print(f"estimation: E = {est.E_m * 1000:.2f} mm after {est.n_evaluations} evaluations")
-    cause = f" (likely cause: {est.likely_cause})" if est.likely_cause else ""
-    usable = {"ok": "", "warn": ", doubtful", "fail": ", the estimate is not usable"}[est.verdict.status]
-    _verdict_line(f"fit{cause}{usable}", est.verdict, f"E = {est.E_m * 1000:.2f} mm", args.out_params)
+    usable = {"ok": "", "warn": "doubtful", "fail": "the estimate is not usable"}[est.verdict.status]
+    cause = f"likely cause {est.likely_cause}" if est.likely_cause else ""
+    _verdict_line("fit", est.verdict, f"E = {est.E_m * 1000:.2f} mm", args.out_params,
+                  note=", ".join(x for x in (usable, cause) if x))
 
 
 def cmd_predict(args):
