@@ -23,9 +23,11 @@ import re
 import shutil
 import subprocess
 import sys
+import tempfile
 import time
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Callable, Iterator, Sequence
 
 import numpy as np
 import pandas as pd
@@ -132,12 +134,22 @@ def _prepare_campaign(root: Path, name: str, string: str, target: str, seed: int
     timings: dict[str, float] = {}
     if not (data / "calib").is_dir():
         t0 = time.perf_counter()
-        tmp = data / ".calib.partial"
-        shutil.rmtree(tmp, ignore_errors=True)
-        write_calibration_clip(campaign, config, tmp, seed)
-        os.replace(tmp, data / "calib")
+        with folder_in_place(data / "calib") as tmp:
+            write_calibration_clip(campaign, config, tmp, seed)
         timings["lab_calibration_clip_s"] = time.perf_counter() - t0
     return data, camp_yaml, campaign, timings
+
+
+@contextmanager
+def folder_in_place(folder: Path) -> Iterator[Path]:
+    """A new folder of its own beside ``folder`` (a hidden, unique name) to fill; renamed onto ``folder`` when
+    the block ends, removed when it raises: the lab's trial appears whole or not at all."""
+    tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
+    try:
+        yield tmp
+        os.replace(tmp, folder)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
 
 
 def run_campaign(name: str, string: str, target: str, config_path: str | Path | list | None = None,
@@ -187,10 +199,8 @@ def run_campaign(name: str, string: str, target: str, config_path: str | Path | 
         trial = data / f"trial_{k}"
         if not (trial / "joints.csv").exists():
             t0 = time.perf_counter()
-            tmp = data / f".trial_{k}.partial"
-            shutil.rmtree(tmp, ignore_errors=True)
-            execute(motion, "virtual", tmp, camp_yaml, settings.executor, config, seed=seed * 1000 + k)
-            os.replace(tmp, trial)
+            with folder_in_place(trial) as tmp:
+                execute(motion, "virtual", tmp, camp_yaml, settings.executor, config, seed=seed * 1000 + k)
             timings[f"execute_{k}_s"] = time.perf_counter() - t0
         truth = json.loads((trial / "ground_truth.json").read_text())
         rows.append({"trial": k, "hit": bool(truth["hit"]),

@@ -23,7 +23,7 @@ def _video(path, n=9, seed=0):
 def test_cache_holds_the_videos_frames_times_and_attributes(tmp_path):
     frames = _video(tmp_path / "video.mkv")
     out = write_frame_cache(tmp_path / "video.mkv", tmp_path / "res" / "frames.npy")
-    assert out.exists() and not list((tmp_path / "res").glob(".*partial*"))
+    assert out.exists() and not list((tmp_path / "res").glob(".*"))      # no temporary file left
     assert np.load(out).shape == (9, 24, 32)           # a plain .npy any NumPy opens
     with open_video(tmp_path / "video.mkv") as v, open_trial_video(tmp_path / "video.mkv", out) as c:
         assert isinstance(c, CachedVideo)
@@ -64,6 +64,42 @@ def test_a_truncated_video_leaves_no_cache_nor_partial_file(tmp_path):
     with pytest.raises(DataError, match="cut.mkv.*truncated"):
         write_frame_cache(tmp_path / "cut.mkv", tmp_path / "res" / "frames.npy")
     assert list((tmp_path / "res").iterdir()) == []
+
+
+def test_two_decodes_of_one_trial_side_by_side_each_leave_a_whole_cache(tmp_path, monkeypatch):
+    """Two runs decoding the same trial at once (held together mid-decode by a barrier): both finish, and
+    the cache is whole; a shared temporary name had one rename the other's file away and fail."""
+    import threading
+
+    frames = _video(tmp_path / "video.mkv", n=6)
+    barrier = threading.Barrier(2, timeout=30)
+
+    reader = type(open_video(tmp_path / "video.mkv"))
+    frames_of = reader.__iter__
+
+    def iterate(self):
+        for k, frame in frames_of(self):
+            if k == 3:
+                barrier.wait()          # both decoders are half way through their files
+            yield k, frame
+
+    monkeypatch.setattr(reader, "__iter__", iterate)
+    out, errors = tmp_path / "res" / "frames.npy", []
+
+    def decode():
+        try:
+            write_frame_cache(tmp_path / "video.mkv", out)
+        except Exception as exc:   # noqa: BLE001 (the test reports what either decoder raised)
+            errors.append(exc)
+
+    threads = [threading.Thread(target=decode) for _ in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(60)
+    assert errors == []
+    assert np.array_equal(np.load(out), np.stack(frames)) and json.loads(out.with_suffix(".json").read_text())["frames"] == 6
+    assert sorted(p.name for p in out.parent.iterdir()) == ["frames.json", "frames.npy"]
 
 
 def test_decode_command_writes_the_cache_beside_its_sidecar(tmp_path, capsys):

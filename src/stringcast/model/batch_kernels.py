@@ -20,6 +20,8 @@ from pathlib import Path
 import numpy as np
 from numba import njit, prange
 
+from stringcast.core import write_text
+
 from . import kernels, lockstep
 from .lockstep import LANES, OK, PX, PY, ROW, VX, VY, W, any_ok, new_block, set_hand, step_block
 
@@ -309,8 +311,7 @@ def drop_stale_cache(dispatcher, sources, name: str = "batch_kernels") -> bool:
     for f in Path(folder).glob(f"{name}.*.nb[ic]"):
         f.unlink(missing_ok=True)
     try:
-        Path(folder).mkdir(parents=True, exist_ok=True)
-        stamp.write_text(digest)
+        write_text(stamp, digest)   # atomically: a job importing beside this one reads the old or the new stamp
     except OSError:
         pass
     return True

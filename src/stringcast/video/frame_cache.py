@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from stringcast.core import DataError
+from stringcast.core import DataError, atomic_path
 
 from .base import VideoReader
 from .container import open_video
@@ -46,8 +46,9 @@ def write_frame_cache(video_path: str | Path, frames_npy: str | Path, fps: float
 
     Args:
         video_path: any :func:`~stringcast.video.container.open_video` source.
-        frames_npy: the ``.npy`` file to write; written under a temporary name and renamed, so
-            an interrupted decode leaves no half cache.
+        frames_npy: the ``.npy`` file to write; written under a temporary name of its own and
+            renamed (the sidecar first), so an interrupted decode leaves no half cache and two
+            decodes of the same trial side by side each leave a whole one.
         fps: the frame rate for a source that has none (frame folders), as ``open_video``.
         progress: show a tqdm bar (default: when stderr is a terminal).
 
@@ -57,9 +58,8 @@ def write_frame_cache(video_path: str | Path, frames_npy: str | Path, fps: float
     from tqdm import tqdm
 
     video_path, frames_npy = Path(video_path), Path(frames_npy)
-    frames_npy.parent.mkdir(parents=True, exist_ok=True)
-    tmp = frames_npy.with_name(f".{frames_npy.name}.partial")
-    try:
+    # temporary names of their own (atomic_path): two runs decoding the same trial each rename a whole file
+    with atomic_path(frames_npy) as tmp, atomic_path(_sidecar(frames_npy)) as side_tmp:
         with open_video(video_path, fps=fps) as video, open(tmp, "wb") as fh:
             # the .npy header, then each frame's bytes as decoded: a plain sequential write (a memory
             # map took a page fault per 4 KiB written, a third of the decode's time)
@@ -76,13 +76,7 @@ def write_frame_cache(video_path: str | Path, frames_npy: str | Path, fps: float
             meta = {"source": _source_stamp(video_path), "fps": video.fps, "bit_depth": int(video.bit_depth),
                     "frames": int(video.n_frames), "width": int(video.width), "height": int(video.height),
                     "timestamps_s": None if stamps is None else [float(t) for t in stamps]}
-    except BaseException:
-        tmp.unlink(missing_ok=True)   # a truncated video or an interrupt leaves no gigabyte of partial frames
-        raise
-    side_tmp = _sidecar(tmp)
-    side_tmp.write_text(json.dumps(meta))
-    os.replace(side_tmp, _sidecar(frames_npy))
-    os.replace(tmp, frames_npy)
+        side_tmp.write_text(json.dumps(meta))
     return frames_npy
 
 
