@@ -4,7 +4,9 @@ whole loop on the virtual lab).
 
 Errors in the input (:class:`~stringcast.core.files.DataError`,
 :class:`~stringcast.core.config.ConfigError`, :class:`~stringcast.core.arm.JointLimitError`)
-print one line naming the file and the problem and exit with status 2.
+print one line naming the file and the problem and exit with status 2; any other exception prints
+one line (``stringcast <cmd>: internal error: <type>: <message>``) and where its full traceback was
+written, and exits with status 1.
 """
 from __future__ import annotations
 
@@ -303,8 +305,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run one subcommand; its exit status. A workflow stage runs in the run's warm server where
-    there is one (:mod:`stringcast.warm`), else here."""
+    """Run one subcommand; its exit status: 0, 2 for bad input (one line naming the file), or
+    :data:`INTERNAL_ERROR_STATUS` for any other exception (:func:`internal_error`: one line and where
+    its traceback went). A workflow stage runs in the run's warm server where there is one
+    (:mod:`stringcast.warm`), else here."""
     argv = sys.argv[1:] if argv is None else list(argv)
     code = warm.run_in_server(argv, wait_s=0.0 if argv[:1] and argv[0] in START_AT_ONCE else WARM_WAIT_S)
     if code is not None:
@@ -317,7 +321,42 @@ def main(argv: list[str] | None = None) -> int:
     except (DataError, ConfigError, JointLimitError) as exc:
         print(f"stringcast {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except Exception as exc:  # noqa: BLE001  (a defect, not bad input: one line, the traceback kept)
+        print(internal_error(args.command, exc), file=sys.stderr)
+        return INTERNAL_ERROR_STATUS
     return 0
+
+
+INTERNAL_ERROR_STATUS = 1
+"""The exit status of a subcommand that ended in an unexpected exception (a defect of stringcast,
+not of its input: bad input exits with 2)."""
+TRACEBACK_DIR_ENV = "STRINGCAST_TRACEBACK_DIR"
+"""Environment variable naming the folder an internal error's full traceback is written to
+(default: the system's temporary folder)."""
+
+
+def internal_error(command: str, exc: BaseException) -> str:
+    """The message for an unexpected exception ``exc`` in ``stringcast command``: its first line
+    ``stringcast <command>: internal error: <type>: <message>`` (the message's first line, at most
+    300 characters), its second where the full traceback was written (a file
+    ``stringcast-<command>-<time>-<pid>.traceback`` in ``$STRINGCAST_TRACEBACK_DIR`` or the
+    system's temporary folder) or, where it cannot be written, the traceback itself."""
+    import tempfile
+    import time
+    import traceback
+
+    text = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
+    first = (str(exc).strip().splitlines() or [""])[0]
+    first = first if len(first) <= 300 else first[:297] + "..."
+    head = f"stringcast {command}: internal error: {type(exc).__name__}: {first}"
+    folder = Path(os.environ.get(TRACEBACK_DIR_ENV) or tempfile.gettempdir())
+    path = folder / f"stringcast-{command}-{time.strftime('%Y%m%dT%H%M%S')}-{os.getpid()}.traceback"
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        path.write_text(f"stringcast {command}\n{text}")
+    except OSError:
+        return f"{head}\n  (the full traceback could not be written to {folder}; here it is)\n{text}"
+    return f"{head}\n  (unexpected: not an input error stringcast knows; the full traceback is in {path})"
 
 
 START_AT_ONCE = ("decode",)
