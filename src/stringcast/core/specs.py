@@ -253,6 +253,16 @@ class Campaign:
     string_id: str | None = None
     config: dict = field(default_factory=dict, repr=False, compare=False)
 
+    def string_setting(self, key: str) -> str:
+        """Where the string's ``key`` (``length_mm``, ``n_points``) is set, for a message:
+        ``strings.<id>.<key>`` in the config, or ``string.<key>`` of the campaign.yaml (inline)."""
+        return f"strings.{self.string_id}.{key}" if self.string_id else f"string.{key} in campaign.yaml"
+
+    def setup_setting(self, key: str) -> str:
+        """Where the set-up's ``key`` (``board.square_mm``, ``board.dictionary``, ...) is set, for a
+        message: ``setups.<name>.<key>`` in the config, or ``setup.<key>`` of the campaign.yaml (inline)."""
+        return f"setups.{self.setup.name}.{key}" if self.setup.name != "inline" else f"setup.{key} in campaign.yaml"
+
 
 def _lookup(table: Mapping, key, what: str, source) -> Mapping:
     k = str(key)
