@@ -37,10 +37,18 @@ _VIDEO_SUFFIXES = (".mkv", ".avi", ".mp4", ".mov")
 
 
 def _calib_reader(calib_dir: Path):
-    """The calibration views: the folder's images, or the one video inside it."""
-    if any(p.suffix.lower() in FRAME_SUFFIXES for p in calib_dir.iterdir()):
+    """The calibration views: the folder's images, or the one video inside it.
+
+    Raises:
+        DataError: no such folder, an unreadable one, or none of either in it (named)."""
+    try:
+        entries = sorted(calib_dir.iterdir())
+    except OSError as exc:
+        raise DataError(f"{calib_dir}: not a readable folder of calibration views (PNG/TIFF images or one video "
+                        f"of the ChArUco board): {exc.strerror or exc}") from exc
+    if any(p.suffix.lower() in FRAME_SUFFIXES for p in entries):
         return open_video(calib_dir)
-    vids = sorted(p for p in calib_dir.iterdir() if p.is_file() and p.suffix.lower() in _VIDEO_SUFFIXES)
+    vids = [p for p in entries if p.is_file() and p.suffix.lower() in _VIDEO_SUFFIXES]
     if not vids:
         raise DataError(f"{calib_dir}: no PNG/TIFF images or video of the calibration board")
     return open_video(vids[0])
