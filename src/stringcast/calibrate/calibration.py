@@ -58,8 +58,8 @@ MIN_PLANE_CORNERS = 8
 """ChArUco corners the plane homography needs."""
 
 
-def detect_plane_board(image: np.ndarray, board, source: str = "image", invert: bool | None = None
-                       ) -> tuple[np.ndarray, np.ndarray]:
+def detect_plane_board(image: np.ndarray, board, source: str = "image", invert: bool | None = None,
+                       campaign=None) -> tuple[np.ndarray, np.ndarray]:
     """The board's corners (N, 2) px and ids (N,) in a trial image (:func:`detect_charuco`).
 
     When fewer than half the board's corners are found, the image is searched again enlarged
@@ -67,7 +67,9 @@ def detect_plane_board(image: np.ndarray, board, source: str = "image", invert: 
     that finds more wins.
 
     Raises:
-        DataError: fewer than :data:`MIN_PLANE_CORNERS` corners, naming ``source``.
+        DataError: fewer than :data:`MIN_PLANE_CORNERS` corners, naming ``source``, and with no
+            corner at all what the image shows instead (:func:`~stringcast.calibrate.board_hint.board_hint`,
+            the settings named from ``campaign`` where given).
     """
     corners, ids = detect_charuco(image, board, invert)
     sx, sy = board.getChessboardSize()
@@ -76,8 +78,14 @@ def detect_plane_board(image: np.ndarray, board, source: str = "image", invert: 
         if len(enlarged[1]) > len(ids):
             corners, ids = enlarged
     if len(ids) < MIN_PLANE_CORNERS:
+        hint = ""
+        if len(ids) == 0:
+            from .board_hint import board_hint
+
+            hint = board_hint([image], board, *(() if campaign is None else (
+                campaign.setup.board.dictionary, campaign.setup_setting("board"))))
         raise DataError(f"{source}: {'no ChArUco board found' if len(ids) == 0 else f'only {len(ids)} board corners found'}"
-                        f" (the plane homography needs >= {MIN_PLANE_CORNERS})")
+                        f" (the plane homography needs >= {MIN_PLANE_CORNERS})" + (f": {hint}" if hint else ""))
     return corners, ids
 
 
@@ -187,7 +195,7 @@ def _intrinsics(calib_dir: Path, board, campaign, image: np.ndarray, detection, 
     """(Intrinsics, their measures, the board view's check or None, verdict) from calib/ (the views'
     own fit read from ``intrinsics_json`` if given) and the trial's board."""
     calib = Path(calib_dir)
-    views, where = read_calib_views(calib) if calib.is_file() else find_calib_views(calib, board, st)
+    views, where = read_calib_views(calib) if calib.is_file() else find_calib_views(calib, board, st, campaign)
     flags = camera_flags(campaign)
     size = (image.shape[1], image.shape[0])
     if tuple(views.image_size) != size:
@@ -217,7 +225,7 @@ def _run_calibration(trial_dir: Path, calib_dir, campaign, out_json, n_median: i
     with open_video(vpath) as video:
         img = median_frame(video, n_median)
     source = f"{vpath} (median of the first {n_median} frames)"
-    detection = detect_plane_board(img, board, source)
+    detection = detect_plane_board(img, board, source, campaign=campaign)
     intr, quality, check, verdict = None, None, None, Verdict()
     if calib_dir is not None:
         intr, quality, check, verdict = _intrinsics(Path(calib_dir), board, campaign, img, detection, source, st,
