@@ -48,6 +48,7 @@ from stringcast.video import open_video
 from .board_check import check_board_to_robot
 from .calib_views import camera_flags, find_calib_views, read_calib_views, read_campaign_intrinsics, single_threaded_opencv
 from .charuco import Intrinsics, calibrate_intrinsics, detect_charuco
+from .scale_check import arm_scale
 from .intrinsics import board_view_check, judged_intrinsics
 from .mapping import Calibration, apply_homography
 
@@ -264,6 +265,22 @@ def _board_check(trial_dir: Path, rest_image: np.ndarray, cal: Calibration, camp
     grey = rest_image if rest_image.ndim == 2 else cv2.cvtColor(rest_image, cv2.COLOR_BGR2GRAY)
     board = check_board_to_robot(grey.astype(np.float64), cal, campaign.arm, q[0], board_check)
     found = Verdict.from_dict(board.get("verdict"))
+    if board["residual_mm"] is None or board["residual_mm"] > board_check.warn_mm:
+        board["arm_scale"] = arm_scale(grey.astype(np.float64), cal, campaign.arm, q[0], board_check)
+        if board["arm_scale"] is not None:
+            verdict = verdict.add("warn", scale_reason(board["arm_scale"], campaign))
     for reason in found.reasons:
         verdict = verdict.add(found.status, f"board-to-robot check: {reason}")
     return board, verdict
+
+
+def scale_reason(found: dict, campaign) -> str:
+    """The verdict's reason for the arm seen at a scale (:func:`~stringcast.calibrate.scale_check.arm_scale`),
+    naming the board's square size (and what it would be)."""
+    k, b = found["scale"], campaign.setup.board
+    return (f"board-to-robot check: the still arm is seen scaled by {k:.3f} about the board's origin against its "
+            f"forward kinematics ({found['features']} of its features found there, {found['features_at_1']} where "
+            f"the forward kinematics put them; {found['residual_mm']:.1f} mm off at that scale): every length "
+            f"through the board is off by that factor; check {campaign.setup_setting('board.square_mm')} (and "
+            f"marker_mm, in the same ratio): the arm fits squares of {b.square * 1000 / k:.1f} mm, not "
+            f"{b.square * 1000:g}")
