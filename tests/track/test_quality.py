@@ -116,3 +116,17 @@ def test_points_misplaced_along_the_string_and_jitter_at_rest_warn():
 def test_mismatched_lengths_raise():
     with pytest.raises(ValueError, match="rows"):
         tracking_quality(_table(_swing()).iloc[:-1], np.zeros(F), L, N, np.ones(F, bool), np.zeros(F, bool), ST)
+
+
+def test_a_string_seen_at_another_length_is_put_down_to_a_scale_the_calibration_found():
+    """square_mm 50 for 60 (issue 51): the string runs past the region tracked, but the calibration has
+    seen the still arm at a scale of 0.833: the reason names that, not the string's length."""
+    past = np.zeros(F, bool)
+    past[25:] = True
+    t = np.arange(F) / 100.0
+    judged, rest = frames_judged(t, np.ones(F, bool), 0.221, 0.59)
+    note = "the calibration sees the still arm scaled by 0.833; check setups.default.board.square_mm"
+    doc = tracking_quality(_table(_swing()), np.full(F, np.nan), L, N, judged, rest, ST, past_roi=past,
+                           string_setting=lambda k: f"strings.7.{k}", scale_note=note)
+    assert "the image scale is off; " + note in doc["verdict"]["reasons"][0]
+    assert "strings.7" not in doc["verdict"]["reasons"][0]

@@ -169,7 +169,7 @@ def build_problem(tracks_df: pd.DataFrame, t_joints: np.ndarray, q_joints: np.nd
         t_motion_start=t_move)
 
 
-def upstream_causes(results_dir: str | Path, stages: tuple[str, ...] = ("tracking", "geometry", "clock")) -> str:
+def upstream_causes(results_dir: str | Path, stages: tuple[str, ...] = ("geometry", "clock", "tracking")) -> str:
     """The first reason of each earlier stage (``<stage>.json`` beside the tracks,
     :func:`~stringcast.core.trial_result`) whose verdict is not ok, joined for an error message
     (``""`` where none is, or a file cannot be read): why a problem could not be built, in the words

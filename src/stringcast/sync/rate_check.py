@@ -12,8 +12,9 @@ arm's template) matches the arm's forward kinematics at one instant of the joint
 best. Over :data:`N_FRAMES` frames spread over the video, those whose match peaks inside the
 motion (a frame at rest matches every still posture alike) give pairs (k, t_k); a robust line
 through them (Theil-Sen, ``scipy.stats.theilslopes``) has the slope 1 / (the frames' true rate). It is
-named where at least :data:`MIN_FRAMES` frames lie within :data:`MAX_SPREAD` pose steps of the
-line and the rate differs from ``fps`` by more than :data:`MIN_RATE_ERROR`. It runs only where the
+named where at least :data:`MIN_FRAMES` frames, and :data:`MIN_SHARE` of those matched, lie within
+:data:`MAX_SPREAD` pose steps of the line, spanning :data:`MIN_SPAN` of the motion, and the rate
+differs from ``fps`` by more than :data:`MIN_RATE_ERROR`. It runs only where the
 sync's verdict is not ok; the evidence is the arm's own motion, in s of the log.
 """
 from __future__ import annotations
@@ -29,7 +30,12 @@ N_FRAMES = 120
 POSE_STEP_S = 0.004
 """The joint log's motion is matched every this many s (a frame's time is refined by a parabola)."""
 MIN_FRAMES = 8
-"""Frames on the line a rate needs."""
+"""Frames on the line a rate needs ..."""
+MIN_SHARE = 0.6
+"""... and this share of the frames matched inside the motion (a calibration that puts the arm
+elsewhere matches frames to scattered instants: 44 of 104 on a line, square_mm 50 for 60) ..."""
+MIN_SPAN = 0.5
+"""... spanning this share of the motion's duration on the log's clock."""
 MAX_SPREAD = 3.0
 """A frame lies on the line within this many pose steps."""
 MIN_RATE_ERROR = 0.1
@@ -84,7 +90,9 @@ def clock_rate(video, calibration, arm, t_j: np.ndarray, q_j: np.ndarray, sync: 
         return None
     slope, icpt, _, _ = theilslopes(ts, ks)
     on = np.abs(ts - (icpt + slope * ks)) <= MAX_SPREAD * POSE_STEP_S
-    if on.sum() < MIN_FRAMES or not slope > 0:
+    t_on, t_off = motion_window(t_j, q_j)
+    if (on.sum() < max(MIN_FRAMES, MIN_SHARE * len(ks)) or not slope > 0
+            or float(np.ptp(ts[on])) < MIN_SPAN * (t_off - t_on)):
         return None
     slope, icpt, _, _ = theilslopes(ts[on], ks[on])
     rate = slope * fps

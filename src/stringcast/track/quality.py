@@ -55,7 +55,7 @@ def _p95(a: np.ndarray) -> float | None:
 
 def tracking_quality(tracks: pd.DataFrame, mismatch_m: np.ndarray, L: float, n: int, judged: np.ndarray,
                      rest: np.ndarray, st: TrackingSettings, past_roi: np.ndarray | None = None,
-                     off_image: np.ndarray | None = None, string_setting=None) -> dict:
+                     off_image: np.ndarray | None = None, string_setting=None, scale_note: str | None = None) -> dict:
     """The tracking's self-measures and verdict, for ``tracking.json``.
 
     Args:
@@ -70,6 +70,9 @@ def tracking_quality(tracks: pd.DataFrame, mismatch_m: np.ndarray, L: float, n: 
             the region tracked inside the image (:attr:`FrameTrack.past_roi`), or to the image's edge.
         string_setting: ``key -> str``, where the string's ``key`` is set
             (:meth:`~stringcast.core.specs.Campaign.string_setting`), for the reasons; None: the key.
+        scale_note: where the calibration found the image scale off (the still arm seen at a scale,
+            :func:`~stringcast.calibrate.scale_check.arm_scale`), what it said: a string seen at another
+            length is then put down to the scale, not to the string.
 
     Returns:
         ``{"valid_share", "judged_frames", "length_mismatch_mm": {"frames", "median", "spread_p95",
@@ -109,7 +112,7 @@ def tracking_quality(tracks: pd.DataFrame, mismatch_m: np.ndarray, L: float, n: 
            "past_roi_share": float(flags[0][use].mean()) if use.any() else None,
            "off_image_share": float(flags[1][use].mean()) if use.any() else None,
            "segment_excess_p95_mm": _p95(excess) if excess.size else None, "rest_jitter_p95_mm": jitter}
-    doc["verdict"] = tracking_verdict(doc, st, L, n, string_setting).as_dict()
+    doc["verdict"] = tracking_verdict(doc, st, L, n, string_setting, scale_note).as_dict()
     return doc
 
 
@@ -117,31 +120,36 @@ MIN_LENGTH_FRAMES = 5
 """Frames with a trusted free end the seen length's verdict needs."""
 
 
-def _not_this_string(doc: dict, st: TrackingSettings, L: float, n: int, setting) -> list[str]:
+def _not_this_string(doc: dict, st: TrackingSettings, L: float, n: int, setting, scale_note=None) -> list[str]:
     """The reasons, if any, why the string filmed is not the campaign's: its length seen from the
-    grasp to its free end, or the string running past the region tracked."""
+    grasp to its free end, or the string running past the region tracked (put down to the image
+    scale where the calibration found it off: ``scale_note``)."""
     out = []
     D = doc["length_mismatch_mm"]
     L_mm = L * 1000
     names = f"{setting('length_mm')} and {setting('n_points')}"
+    if scale_note:
+        check, verdict = scale_note, "the image scale is off"
+    else:
+        check = f"check {names} (or the image scale, if the calibration's verdict names it)"
+        verdict = "the string filmed is not the one configured"
     if D["frames"] >= MIN_LENGTH_FRAMES and abs(D["median"]) > st.verdict_length_share * L_mm:
         seen = L_mm - D["median"]
         out.append(f"tracking: the string is seen {seen:.0f} mm long from the grasp to its free end (median of "
                    f"{D['frames']} frames), but the campaign's string is {L_mm:.0f} mm with {n} points ({seen / L_mm:.2f} "
-                   f"times; > tracking.verdict_length_share {st.verdict_length_share:g} off): the string filmed is not "
-                   f"the one configured, and no point is trusted where the lengths disagree; check {names} (or the "
-                   "image scale, if the calibration's verdict names it)")
+                   f"times; > tracking.verdict_length_share {st.verdict_length_share:g} off): {verdict}, and no point "
+                   f"is trusted where the lengths disagree; {check}")
     roi = doc["past_roi_share"]
     if roi is not None and roi > st.verdict_past_roi_share:
         out.append(f"tracking: in {roi:.0%} of the frames judged the string runs on past "
                    f"{L_mm + st.roi_margin_mm:.0f} mm from the grasp (the campaign's {L_mm:.0f} mm string + "
-                   f"tracking.roi_margin_mm), out of the region tracked: the string filmed is longer than the one "
-                   f"configured; check {names} (or the image scale, if the calibration's verdict names it)")
+                   f"tracking.roi_margin_mm), out of the region tracked: "
+                   f"{verdict if scale_note else 'the string filmed is longer than the one configured'}; {check}")
     return out
 
 
 def tracking_verdict(doc: dict, st: TrackingSettings, L: float | None = None, n: int | None = None,
-                     string_setting=None) -> Verdict:
+                     string_setting=None, scale_note: str | None = None) -> Verdict:
     """Warn, naming the likely cause (and the setting, where one is: ``string_setting(key)``, as
     :func:`tracking_quality`), where :func:`tracking_quality`'s figures pass their limits; ``L`` (m)
     and ``n``: the campaign's string (None: its length is not judged)."""
@@ -151,12 +159,13 @@ def tracking_verdict(doc: dict, st: TrackingSettings, L: float | None = None, n:
     if share is None:
         return v.add("warn", "tracking: no frames to judge (no frame lies between the motion's start and the joint "
                              "log's end)")
-    other = [] if L is None else _not_this_string(doc, st, L, n, setting)
+    other = [] if L is None else _not_this_string(doc, st, L, n, setting, scale_note)
     for reason in other:
         v = v.add("warn", reason)
     if share < st.verdict_min_valid_share:
         off = doc.get("off_image_share") or 0.0
-        why = ("the string filmed is not the campaign's (above)" if other else
+        why = ("the image scale is off (above)" if other and scale_note else
+               "the string filmed is not the campaign's (above)" if other else
                f"the string runs out of the image in {off:.0%} of them (a point outside the image is never valid); "
                "frame the whole swing and the string after it" if off >= 0.2 else
                "the string is lost against the background, in blur or behind the arm; more light, a shorter "

@@ -82,6 +82,15 @@ def _joint_px(cal: Calibration, arm, q: np.ndarray) -> np.ndarray:
     return cal.robot_to_pixel(pts.reshape(-1, 2)).reshape(pts.shape)
 
 
+def _scale_note(cal: Calibration, campaign) -> str | None:
+    """What the calibration said where it saw the still arm at a scale (its board check's ``arm_scale``), or None."""
+    found = (cal.board_check or {}).get("arm_scale") if isinstance(cal.board_check, dict) else None
+    if not found:
+        return None
+    return (f"the calibration sees the still arm scaled by {float(found['scale']):.3f} against its forward kinematics; "
+            f"check {campaign.setup_setting('board.square_mm')}")
+
+
 def inside_image(cal: Calibration, xy: np.ndarray) -> np.ndarray:
     """Whether robot-frame points xy (..., 2) m lie in the image (:meth:`Calibration.robot_to_pixel`:
     within the pixels' area, -0.5 .. W - 0.5 and -0.5 .. H - 0.5): (...,) bool, False for NaN."""
@@ -193,7 +202,7 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
     write_parquet(out_parquet, df)
     write_json(Path(out_parquet).with_name("tracking.json"),
                tracking_quality(df, mismatch, campaign.string.length, n, judged, rest, st, past_roi, off_image,
-                                campaign.string_setting))
+                                campaign.string_setting, _scale_note(cal, campaign)))
     if overlay_png is not None:
         write_overlay(overlay_png, shown, t, scale, campaign.string.length)
     return df
