@@ -44,7 +44,8 @@ def tiny_lab_trial(tmp_path, config, bands=None, view_up_mm=0.0):
     by the wrist, with ``lab.string_bands`` = bands (None: a plain string); calibrated
     and synced (the config's settings, sync ``method: trigger``). ``view_up_mm``: the camera and
     the board moved up by this much (110 mm: the string's lower part leaves the image's bottom
-    edge). Returns (trial folder, results folder, campaign, config)."""
+    edge). Writes ``campaign.yaml`` and ``config.yaml`` (the campaign's, whole) in ``tmp_path`` for the
+    command line. Returns (trial folder, results folder, campaign, config)."""
     import copy
 
     lab = pytest.importorskip("stringcast.lab")
@@ -67,6 +68,9 @@ def tiny_lab_trial(tmp_path, config, bands=None, view_up_mm=0.0):
                                                  "marker_mm": 30.0, "dictionary": "DICT_4X4_50"},
                      "board_origin_mm": [g[0] + 60, g[1] - 80 + view_up_mm], "board_angle_deg": 0.0, "board_flip_y": True}}
     campaign = resolve_campaign(doc, cfg, "tiny")
+    from stringcast.core import write_yaml   # the campaign and its config as files, for the command line
+    write_yaml(tmp_path / "campaign.yaml", doc)
+    write_yaml(tmp_path / "config.yaml", {k: v for k, v in cfg.items() if k != "_path"})
     rate, T = 500.0, 0.16
     sw = 0.5 * (1 - np.cos(np.pi * np.arange(0, T, 1 / rate) / T))
     q = np.repeat(q0[None], len(sw), 0)

@@ -33,13 +33,14 @@ def _views(n=3, seed=0):
                                                    "setups.default.board.dictionary"),
     (BoardSpec(9, 6, 0.06, 0.045, "DICT_6X6_50"), "check setups.default.board.dictionary"),
     (BoardSpec(8, 6, 0.06, 0.045, "DICT_5X5_100"), "the board has more squares; check setups.default.board.squares_x"),
-    (BoardSpec(9, 6, 0.06, 0.045, "DICT_5X5_100", True), "legacy_pattern"),
-    (BoardSpec(6, 9, 0.06, 0.045, "DICT_5X5_100"), "squares_x and squares_y (their order too)"),
+    (BoardSpec(9, 6, 0.06, 0.045, "DICT_5X5_100", True), "setups.default.board.legacy_pattern"),
+    (BoardSpec(6, 9, 0.06, 0.045, "DICT_5X5_100"), "setups.default.board.squares_x and setups.default.board.squares_y "
+                                                   "(their order too)"),
 ])
 def test_no_board_found_says_what_the_views_show_instead(configured, says):
     with pytest.raises(DataError, match="found in 0 views") as err:
         select_calibration_views(_views(), configured.make(), "calib", dictionary=configured.dictionary,
-                                 setting="setups.default.board")
+                                 setting=lambda key: f"setups.default.board.{key}")
     assert says in str(err.value)
     with pytest.raises(DataError, match="no ChArUco board found") as err:
         detect_plane_board(_views(1)[0], configured.make(), "trial_1/video.mkv")

@@ -64,13 +64,18 @@ def _grey8(image: np.ndarray) -> np.ndarray:
     return img
 
 
-def board_hint(images: Iterable[np.ndarray], board, dictionary: str | None = None, setting: str = "board") -> str:
+def _board_key(key: str) -> str:
+    return f"board.{key}"
+
+
+def board_hint(images: Iterable[np.ndarray], board, dictionary: str | None = None, setting=_board_key) -> str:
     """What a few images where the board was not found show instead, for an error message ("" if nothing).
 
     Args:
         images: a few (H, W) grey images (any dtype) where no board was found.
         board: the configured ``cv2.aruco.CharucoBoard``. dictionary: its dictionary's name (for the
-            message). setting: where the board is configured (``setups.<s>.board``), named in the hint.
+            message). setting: ``key -> str``, where the board's ``key`` is configured
+            (``setups.<s>.board.<key>``: :meth:`~stringcast.core.specs.Campaign.setup_setting`), named in the hint.
 
     Returns:
         One sentence naming what was seen and the setting to check, or "".
@@ -85,11 +90,11 @@ def board_hint(images: Iterable[np.ndarray], board, dictionary: str | None = Non
         name = dictionary or "the configured dictionary"
         if int(own.max()) >= n_board:
             return (f"{len(own)} markers of {name} are seen, with ids up to {int(own.max())}, but a {sx} x {sy} board "
-                    f"has ids 0-{n_board - 1} only: the board has more squares; check {setting}.squares_x and "
-                    "squares_y")
+                    f"has ids 0-{n_board - 1} only: the board has more squares; check {setting('squares_x')} and "
+                    f"{setting('squares_y')}")
         return (f"{len(own)} markers of {name} are seen (ids {int(own.min())}-{int(own.max())}) but no chessboard "
                 f"corners between them: the layout differs from the configured {sx} x {sy} squares; check "
-                f"{setting}.squares_x and squares_y (their order too) and legacy_pattern")
+                f"{setting('squares_x')} and {setting('squares_y')} (their order too) and {setting('legacy_pattern')}")
     best, best_ids = None, np.zeros(0, int)
     for family in FAMILIES:
         ids = _markers(images[0], cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, family)))
@@ -104,7 +109,7 @@ def board_hint(images: Iterable[np.ndarray], board, dictionary: str | None = Non
     which = (f"{looks}, or a larger {family} dictionary" if looks != best and looks != family else looks)
     return (f"{len(best_ids)} ArUco markers of the {family} family are seen (ids {int(best_ids.min())}-"
             f"{int(best_ids.max())}), none of {dictionary or 'the configured dictionary'}: the board's dictionary looks "
-            f"like {which}; check {setting}.dictionary")
+            f"like {which}; check {setting('dictionary')}")
 
 
 __all__ = ["board_hint"]

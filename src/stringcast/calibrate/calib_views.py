@@ -83,7 +83,7 @@ def find_calib_views(calib_dir: str | Path, board, st: CalibrationSettings, camp
     reader = _calib_reader(Path(calib_dir))
     stride = max(1, math.ceil(reader.n_frames / st.max_candidate_frames))
     named = {} if campaign is None else {"dictionary": campaign.setup.board.dictionary,
-                                         "setting": campaign.setup_setting("board")}
+                                         "setting": lambda key: campaign.setup_setting(f"board.{key}")}
     views = select_calibration_views((f for i, f in reader if i % stride == 0), board, str(reader.path),
                                      max_views=st.max_views, **named)
     return views, str(reader.path)

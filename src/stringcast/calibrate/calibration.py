@@ -84,7 +84,7 @@ def detect_plane_board(image: np.ndarray, board, source: str = "image", invert: 
             from .board_hint import board_hint
 
             hint = board_hint([image], board, *(() if campaign is None else (
-                campaign.setup.board.dictionary, campaign.setup_setting("board"))))
+                campaign.setup.board.dictionary, lambda key: campaign.setup_setting(f"board.{key}"))))
         raise DataError(f"{source}: {'no ChArUco board found' if len(ids) == 0 else f'only {len(ids)} board corners found'}"
                         f" (the plane homography needs >= {MIN_PLANE_CORNERS})" + (f": {hint}" if hint else ""))
     return corners, ids

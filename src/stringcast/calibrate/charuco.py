@@ -201,7 +201,7 @@ few views are found."""
 
 def select_calibration_views(frames: Iterable[np.ndarray], board, source: str = "calibration frames",
                              invert: bool | None = None, min_views: int = 3, max_views: int = MAX_VIEWS, *,
-                             dictionary: str | None = None, setting: str = "board") -> Views:
+                             dictionary: str | None = None, setting=None) -> Views:
     """The board's corners in each frame where it shows, at most ``max_views`` views kept.
 
     Each frame: :func:`detect_charuco`, ``board.matchImagePoints``; a view needs
@@ -212,8 +212,8 @@ def select_calibration_views(frames: Iterable[np.ndarray], board, source: str = 
         frames: iterable of (H, W) grey images (all the same size), read once.
         board: ``cv2.aruco.CharucoBoard`` (sizes in m). source: named in errors.
         invert: board polarity (see :func:`detect_charuco`). min_views: the fewest usable views.
-        dictionary, setting: the board's dictionary name and where the board is configured
-            (``setups.<s>.board``), for the hint at what the frames show instead where too few views
+        dictionary, setting: the board's dictionary name and ``key -> str``, where the board's ``key`` is
+            configured (``setups.<s>.board.<key>``; None: ``board.<key>``), for the hint at what the frames show instead where too few views
             are found (:func:`~stringcast.calibrate.board_hint.board_hint`).
 
     Returns:
@@ -242,7 +242,8 @@ def select_calibration_views(frames: Iterable[np.ndarray], board, source: str = 
     if len(obj) < min_views:
         from .board_hint import board_hint
 
-        hint = board_hint(unseen, board, dictionary, setting) if len(obj) == 0 or unseen else ""
+        hint = board_hint(unseen, board, dictionary, *(() if setting is None else (setting,))) \
+            if len(obj) == 0 or unseen else ""
         raise DataError(f"{source}: the ChArUco board was found in {len(obj)} views with >= {MIN_VIEW_CORNERS} "
                         f"corners; camera calibration needs at least {min_views}" + (f": {hint}" if hint else ""))
     pick = select_views(pose_descriptors(obj, img, board, size), np.array([len(o) for o in obj]), max_views)

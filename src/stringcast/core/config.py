@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import copy
 import json
+import math
 from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -41,6 +42,9 @@ def _schema(name: str) -> dict:
 def validate(doc: Any, schema_name: str, source: str | Path) -> None:
     """Validate ``doc`` against a packaged JSON schema.
 
+    A number that is not finite (YAML's ``.nan``, ``.inf``; JSON Schema's ``number`` takes them) is
+    an error too: no setting, length or position is one.
+
     Raises:
         ConfigError: naming ``source`` and the JSON path of the first error.
     """
@@ -52,6 +56,22 @@ def validate(doc: Any, schema_name: str, source: str | Path) -> None:
         e = errors[0]
         where = "/".join(str(p) for p in e.absolute_path) or "(top level)"
         raise ConfigError(f"{source}: at '{where}': {e.message}")
+    bad = _not_finite(doc)
+    if bad is not None:
+        raise ConfigError(f"{source}: at '{bad[0] or '(top level)'}': {bad[1]} is not a finite number")
+
+
+def _not_finite(doc: Any, where: str = "") -> tuple[str, float] | None:
+    """(the path, the value) of the first float in ``doc`` (nested mappings and lists) that is NaN or
+    infinite, or None."""
+    if isinstance(doc, float):
+        return None if math.isfinite(doc) else (where, doc)
+    items = doc.items() if isinstance(doc, Mapping) else enumerate(doc) if isinstance(doc, (list, tuple)) else ()
+    for k, v in items:
+        found = _not_finite(v, f"{where}/{k}" if where else str(k))
+        if found is not None:
+            return found
+    return None
 
 
 def load_yaml(path: str | Path) -> Any:

@@ -108,8 +108,11 @@ class BoardSpec:
     legacy_pattern: bool = False
 
     def __post_init__(self):
-        if self.marker >= self.square:
-            raise ConfigError("board: marker_mm must be smaller than square_mm")
+        if self.squares_x < 2 or self.squares_y < 2:
+            raise ConfigError(f"board: squares_x and squares_y must be >= 2 (a ChArUco board has corners between "
+                              f"squares), got {self.squares_x} x {self.squares_y}")
+        if not 0 < self.marker < self.square:
+            raise ConfigError("board: marker_mm must be positive and smaller than square_mm")
 
     def make(self):
         """The OpenCV ``cv2.aruco.CharucoBoard`` (sizes in m)."""

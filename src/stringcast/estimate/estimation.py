@@ -219,7 +219,7 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign,
     t_j, q_j = read_joint_table(joints_csv, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
     problem_settings = dict(model=model, evaluation=evaluation, estimation=estimation, tracking=tracking)
     problem = build_problem_explained(tracks, t_j, q_j, campaign, tracks_parquet, **problem_settings)
-    prev = read_json(prev_params_json) if prev_params_json else None
+    prev = read_json(prev_params_json, mapping=True) if prev_params_json else None
     chi0 = start_chi(prev, campaign.string, model, motion, str(prev_params_json))
     k = max(1, int(trial_index))
     seed = int(estimation.seed) + k

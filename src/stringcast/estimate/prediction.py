@@ -129,7 +129,7 @@ def run_prediction(params_json: Path, tracks_parquet: Path, joints_csv: Path, ca
         DataError: unreadable or inconsistent inputs (named), or no tracked tip in the window.
     """
     n = campaign.string.n_points
-    coeffs, mu = planned_parameters(n, read_json(params_json), str(params_json))
+    coeffs, mu = planned_parameters(n, read_json(params_json, mapping=True), str(params_json))
     t_j, q_j = read_joint_table(joints_csv, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
     # every frame the log covers (the fit's compare_after_motion_s does not apply); E's w is not used
     compare_all = dataclasses.replace(EstimationSettings(), compare_after_motion_s=None)

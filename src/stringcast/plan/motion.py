@@ -240,18 +240,23 @@ def sample_postures(campaign: Campaign, rng: np.random.Generator, count: int, ma
 # ---------------------------------------------------------------------------
 # Motion files
 # ---------------------------------------------------------------------------
+MAX_MOTION_S = 600.0
+"""The longest motion a motion.json may describe, s (a cast takes seconds; more is a corrupt file)."""
+
+
 def read_motion_json(path: Path, n_joints: int, rate: float) -> Motion:
     """Rebuild the planned :class:`Motion` from a ``motion.json`` sidecar (q0, T, control points)."""
-    doc = read_json(path)
+    doc = read_json(path, mapping=True)
     try:
         q0 = np.asarray(doc["q0_rad"], float)
         T = float(doc["T_s"])
         cp = np.asarray(doc["control_points_rad_s"], float)
     except (KeyError, TypeError, ValueError) as exc:
         raise DataError(f"{path}: needs q0_rad, T_s and control_points_rad_s ({exc})") from exc
-    if q0.shape != (n_joints,) or cp.ndim != 2 or cp.shape[0] != n_joints or cp.shape[1] < 1 or not T > 0:
+    if (q0.shape != (n_joints,) or cp.ndim != 2 or cp.shape[0] != n_joints or cp.shape[1] < 1
+            or not 0 < T <= MAX_MOTION_S or not (np.all(np.isfinite(q0)) and np.all(np.isfinite(cp)))):
         raise DataError(f"{path}: q0_rad must have {n_joints} values, control_points_rad_s be {n_joints} x N "
-                        "(N >= 1), T_s > 0")
+                        f"(N >= 1), all finite, and 0 < T_s <= {MAX_MOTION_S:g} s")
     dq, _ = joint_paths(cp, T, rate)
     t, T = time_grid(T, rate)
     return Motion(t=t, q=q0 + dq, T=T, control_points=cp, q0=q0)
@@ -271,8 +276,12 @@ def read_motion(csv: Path, json: Path | None = None) -> Motion:
     json = Path(json) if json else Path(csv).with_suffix(".json")
     cp, q0, T = np.zeros((q.shape[1], 0)), q[0], float(t[-1])
     if json.exists():
-        doc = read_json(json)
-        cp = np.asarray(doc.get("control_points_rad_s", cp), float).reshape(q.shape[1], -1)
-        q0 = np.asarray(doc.get("q0_rad", q0), float)
-        T = float(doc.get("T_s", T))
+        doc = read_json(json, mapping=True)
+        try:
+            cp = np.asarray(doc.get("control_points_rad_s", cp), float).reshape(q.shape[1], -1)
+            q0 = np.asarray(doc.get("q0_rad", q0), float)
+            T = float(doc.get("T_s", T))
+        except (TypeError, ValueError) as exc:
+            raise DataError(f"{json}: control_points_rad_s must be {q.shape[1]} x N, q0_rad {q.shape[1]} values and "
+                            f"T_s a number ({exc})") from exc
     return Motion(t=t, q=q, T=T, control_points=cp, q0=q0)

@@ -190,7 +190,9 @@ def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaig
     t_j, q_j = read_joint_table(joints_csv, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
     if sync.method == "trigger":
         doc.update(_trigger_doc(meta, video_yaml), verdict=Verdict())
-        warns = []
+        with open_trial_video(find_video(trial_dir), None if frames_npy is None else Path(frames_npy),
+                              fps=doc["fps"]) as video:   # the frame count every later stage's times rest on
+            warns = check_frame_count(video, meta, video_yaml)
     else:
         est_doc, warns = _video_doc(trial_dir, calibration_json, campaign, meta, video_yaml, t_j, q_j, sync,
                                     board_check, None if frames_npy is None else Path(frames_npy), workers)

@@ -134,7 +134,7 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
     trial_dir = Path(trial_dir)
     st = tracking
     cal = Calibration.from_json(calibration_json)
-    sync = read_json(sync_json)
+    sync = read_json(sync_json, mapping=True)
     t_j, q_j = read_joint_table(trial_dir / "joints.csv", n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
     arm, n = campaign.arm, campaign.string.n_points
     vpath = find_video(trial_dir)
