@@ -46,6 +46,7 @@ from stringcast.core import (BoardCheckSettings, CalibrationSettings, DataError,
 from stringcast.video import open_video
 
 from .board_check import check_board_to_robot
+from .board_hint import board_hint
 from .calib_views import camera_flags, find_calib_views, read_calib_views, read_campaign_intrinsics, single_threaded_opencv
 from .charuco import Intrinsics, calibrate_intrinsics, detect_charuco
 from .scale_check import arm_scale
@@ -81,8 +82,6 @@ def detect_plane_board(image: np.ndarray, board, source: str = "image", invert: 
     if len(ids) < MIN_PLANE_CORNERS:
         hint = ""
         if len(ids) == 0:
-            from .board_hint import board_hint
-
             hint = board_hint([image], board, *(() if campaign is None else (
                 campaign.setup.board.dictionary, lambda key: campaign.setup_setting(f"board.{key}"))))
         raise DataError(f"{source}: {'no ChArUco board found' if len(ids) == 0 else f'only {len(ids)} board corners found'}"

@@ -24,6 +24,7 @@ import cv2
 import numpy as np
 
 from stringcast.core import DataError
+from .board_hint import board_hint
 
 MIN_VIEW_CORNERS = 6
 """ChArUco corners a calibration view needs to be used."""
@@ -240,8 +241,6 @@ def select_calibration_views(frames: Iterable[np.ndarray], board, source: str = 
         img.append(i.astype(np.float32))
         names.append(f"frame {k}")
     if len(obj) < min_views:
-        from .board_hint import board_hint
-
         hint = board_hint(unseen, board, dictionary, *(() if setting is None else (setting,))) \
             if len(obj) == 0 or unseen else ""
         raise DataError(f"{source}: the ChArUco board was found in {len(obj)} views with >= {MIN_VIEW_CORNERS} "

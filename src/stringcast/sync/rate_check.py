@@ -11,7 +11,7 @@ frame (the sync's strips across its segments, :mod:`stringcast.sync.arm_match`, 
 arm's template) matches the arm's forward kinematics at one instant of the joint log's motion
 best. Over :data:`N_FRAMES` frames spread over the video, those whose match peaks inside the
 motion (a frame at rest matches every still posture alike) give pairs (k, t_k); a robust line
-through them (Theil-Sen, ``scipy.stats.theilslopes``) has the slope 1 / (the frames' true rate). It is
+through them (Theil-Sen: the median of the pairwise slopes, :func:`theil_sen`) has the slope 1 / (the frames' true rate). It is
 named where at least :data:`MIN_FRAMES` frames, and :data:`MIN_SHARE` of those matched, lie within
 :data:`MAX_SPREAD` pose steps of the line, spanning :data:`MIN_SPAN` of the motion, and the rate
 differs from ``fps`` by more than :data:`MIN_RATE_ERROR`. It runs only where the
@@ -20,9 +20,9 @@ sync's verdict is not ok; the evidence is the arm's own motion, in s of the log.
 from __future__ import annotations
 
 import numpy as np
-from scipy.stats import theilslopes
 
 from . import arm_match as sync_arm
+from .video_offset import _rest_and_board, _segments_in_view
 from stringcast.core import BoardCheckSettings, SyncSettings, joints_at, motion_window
 
 N_FRAMES = 120
@@ -51,8 +51,6 @@ def frames_seen_at(video, calibration, arm, t_j: np.ndarray, q_j: np.ndarray, sy
     Raises:
         DataError: no arm segment in view, or the log never moves (as the sync's own search).
     """
-    from .video_offset import _rest_and_board, _segments_in_view
-
     hw = sync_arm.segment_half_widths(arm, sync.strip_margin_mm / 1000)
     n_u, n_v, sig = int(sync.strip_samples), int(sync.strip_width_samples), float(sync.smooth_px)
     hw, segments = _segments_in_view(video, calibration, arm, q_j[0], hw, n_u, n_v)
@@ -76,6 +74,21 @@ def frames_seen_at(video, calibration, arm, t_j: np.ndarray, q_j: np.ndarray, sy
     return np.asarray(ks, int), np.asarray(ts, float)
 
 
+def theil_sen(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """The Theil-Sen line through points (x (N,), y (N,)): the median of the slopes between every two
+    points with different x, and the median of y - slope x as the intercept (Sen 1968). Robust to
+    nearly half the points off the line; NaN slope with fewer than two distinct x. (SciPy's
+    ``theilslopes`` loads ``scipy.optimize``, which the sync stage does not otherwise need.)"""
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    i, j = np.triu_indices(len(x), 1)
+    dx = x[j] - x[i]
+    ok = dx != 0
+    if not ok.any():
+        return float("nan"), float("nan")
+    slope = float(np.median((y[j] - y[i])[ok] / dx[ok]))
+    return slope, float(np.median(y - slope * x))
+
+
 def clock_rate(video, calibration, arm, t_j: np.ndarray, q_j: np.ndarray, sync: SyncSettings,
                board_check: BoardCheckSettings, fps: float) -> dict | None:
     """The frames' rate as the arm's motion shows it, where it differs from ``fps`` (module doc):
@@ -88,13 +101,13 @@ def clock_rate(video, calibration, arm, t_j: np.ndarray, q_j: np.ndarray, sync: 
     ks, ts = frames_seen_at(video, calibration, arm, t_j, q_j, sync, board_check)
     if len(ks) < MIN_FRAMES:
         return None
-    slope, icpt, _, _ = theilslopes(ts, ks)
+    slope, icpt = theil_sen(ks, ts)
     on = np.abs(ts - (icpt + slope * ks)) <= MAX_SPREAD * POSE_STEP_S
     t_on, t_off = motion_window(t_j, q_j)
     if (on.sum() < max(MIN_FRAMES, MIN_SHARE * len(ks)) or not slope > 0
             or float(np.ptp(ts[on])) < MIN_SPAN * (t_off - t_on)):
         return None
-    slope, icpt, _, _ = theilslopes(ts[on], ks[on])
+    slope, icpt = theil_sen(ks[on], ts[on])
     rate = slope * fps
     if not slope > 0 or abs(rate - 1) <= MIN_RATE_ERROR:
         return None
