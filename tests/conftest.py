@@ -39,11 +39,13 @@ def small_camera_config(config: dict, name: str) -> dict:
     return cfg
 
 
-def tiny_lab_trial(tmp_path, config, bands=None):
+def tiny_lab_trial(tmp_path, config, bands=None, view_up_mm=0.0):
     """A 0.35 s lab clip (320 x 240 px, 1.3 mm per px, 87 frames) of a 150 mm string of 5 points swung
     by the wrist, with ``lab.string_bands`` = bands (None: a plain string); calibrated
-    and synced (the config's settings, sync ``method: trigger``). Returns (trial folder, results
-    folder, campaign, config)."""
+    and synced (the config's settings, sync ``method: trigger``). ``view_up_mm``: the camera and
+    the board moved up by this much (110 mm: the string's lower part leaves the image's bottom
+    edge). Writes ``campaign.yaml`` and ``config.yaml`` (the campaign's, whole) in ``tmp_path`` for the
+    command line. Returns (trial folder, results folder, campaign, config)."""
     import copy
 
     lab = pytest.importorskip("stringcast.lab")
@@ -59,13 +61,16 @@ def tiny_lab_trial(tmp_path, config, bands=None):
     cfg["lab"] = dict(cfg.get("lab", {}), links_per_point=2, settle_s=0.1, trigger_error_s=0.0)
     if bands:
         cfg["lab"]["string_bands"] = bands
-    cfg["lab"]["camera"] = dict(cfg["lab"].get("camera", {}), focal_px=1900.0, center_mm=[g[0] + 60, g[1] - 90])
+    cfg["lab"]["camera"] = dict(cfg["lab"].get("camera", {}), focal_px=1900.0, center_mm=[g[0] + 60, g[1] - 90 + view_up_mm])
     doc = {"string": {"length_mm": 150.0, "n_points": 5, "weights": [], "stiff_sections": []},
            "target": {"x_mm": g[0] + 150, "y_mm": g[1] + 10, "radius_mm": 20.0}, "allow_reachable": True,
            "setup": {"camera": "tiny", "board": {"squares_x": 5, "squares_y": 4, "square_mm": 40.0,
                                                  "marker_mm": 30.0, "dictionary": "DICT_4X4_50"},
-                     "board_origin_mm": [g[0] + 60, g[1] - 80], "board_angle_deg": 0.0, "board_flip_y": True}}
+                     "board_origin_mm": [g[0] + 60, g[1] - 80 + view_up_mm], "board_angle_deg": 0.0, "board_flip_y": True}}
     campaign = resolve_campaign(doc, cfg, "tiny")
+    from stringcast.core import write_yaml   # the campaign and its config as files, for the command line
+    write_yaml(tmp_path / "campaign.yaml", doc)
+    write_yaml(tmp_path / "config.yaml", {k: v for k, v in cfg.items() if k != "_path"})
     rate, T = 500.0, 0.16
     sw = 0.5 * (1 - np.cos(np.pi * np.arange(0, T, 1 / rate) / T))
     q = np.repeat(q0[None], len(sw), 0)

@@ -180,8 +180,8 @@ def test_an_internal_error_is_one_line_on_the_terminal_and_a_traceback_in_the_lo
     log = tmp_path / "settings.log"
     assert cli.main(["--log", str(log), "settings"]) == 1
     _, err = capfd.readouterr()
-    assert err.strip() == (f"stringcast settings: internal error: ZeroDivisionError: a bug (the traceback is in the "
-                           f"log; please report it) (log: {log})")
+    assert err.strip() == (f"stringcast settings: internal error: ZeroDivisionError: a bug\n  (unexpected: not an input "
+                           f"error stringcast knows; the traceback is in the log) (log: {log})")
     assert "Traceback (most recent call last)" in log.read_text() and "Traceback" not in err
 
 

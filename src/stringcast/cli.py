@@ -4,7 +4,9 @@ call these) plus ``check`` (every raw file of a campaign, before any decode), ``
 
 Errors in the input (:class:`~stringcast.core.files.DataError`,
 :class:`~stringcast.core.config.ConfigError`, :class:`~stringcast.core.arm.JointLimitError`)
-print one line naming the file and the problem and exit with status 2.
+print one line naming the file and the problem and exit with status 2; any other exception prints
+one line (``stringcast <cmd>: internal error: <type>: <message>``) and where its full traceback was
+written, and exits with status 1.
 """
 from __future__ import annotations
 
@@ -14,7 +16,7 @@ import os
 import sys
 from pathlib import Path
 
-from stringcast.core import JobLog
+from stringcast.core import INTERNAL_ERROR_STATUS, TRACEBACK_DIR_ENV, JobLog, internal_error  # noqa: F401
 
 
 CONFIG_ENV = "STRINGCAST_CONFIG"
@@ -351,10 +353,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run one subcommand; its exit status: 0, 2 for an input error (one line naming the file), 1 for an
-    internal error (one line on the terminal, the traceback in the log), 130 when interrupted. A
-    workflow stage run by the workflow (``$STRINGCAST_WORKFLOW_PID``) ends with it
-    (:mod:`stringcast.core.lifeline`)."""
+    """Run one subcommand; its exit status: 0, 2 for an input error (one line naming the file),
+    :data:`INTERNAL_ERROR_STATUS` for any other exception (:func:`internal_error`: one line, and the
+    traceback in the log or a file it names), 130 when interrupted. A workflow stage run by the
+    workflow (``$STRINGCAST_WORKFLOW_PID``) ends with it (:mod:`stringcast.core.lifeline`)."""
     global _LOG
     argv = sys.argv[1:] if argv is None else list(argv)
     from stringcast.core import ConfigError, DataError, JointLimitError, start_lifeline
@@ -371,14 +373,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         _LOG.say(f"stringcast {args.command}: interrupted; nothing finished was written", error=True)
         return 130
-    except Exception as exc:   # a bug: one line where the user looks, the traceback for the report
-        import traceback
-
-        traceback.print_exc()
-        where = "the traceback is in the log" if args.log else "the traceback is above"
-        _LOG.say(f"stringcast {args.command}: internal error: {type(exc).__name__}: {exc} ({where}; please report it)",
-                 error=True)
-        return 1
+    except Exception as exc:  # noqa: BLE001  (a defect, not bad input: one line, the traceback kept)
+        _LOG.say(internal_error(args.command, exc, in_log=bool(args.log)), error=True)
+        return INTERNAL_ERROR_STATUS
     finally:
         _LOG.close()
     return code if isinstance(code, int) else 0

@@ -462,3 +462,40 @@ def test_a_frame_smoothed_only_where_the_strips_are_gives_the_whole_frames_sampl
     assert np.isnan(sample_strips(smooth(frame[small[0]:small[1], small[2]:small[3]], 1.0), cal, arm, q, hw, 8, 11,
                                   segments, shift, small[:3:2], frame.shape)).any()
     assert np.array_equal(smoothed_strips(frame, 1.0, cal, arm, q, hw, 8, 11, segments, shift), whole)
+
+
+@pytest.mark.parametrize("factor", [0.5, 1.25, 200.0])
+def test_an_fps_off_by_a_factor_is_named_with_the_rate_the_arm_shows(lab_trial, settings, factor):
+    """fps 100000 for a 500 fps video (issue 51) crashed tracking and nothing named fps. The arm seen in
+    each frame matches the joint log at one instant; those instants run at the video's true rate, which
+    the verdict's first reason names, with video.yaml."""
+    from stringcast.video import write_frame_cache
+
+    root, trial, campaign, _, _ = lab_trial
+    frames = root / "frames.npy"
+    if not frames.exists():
+        write_frame_cache(trial / "video.mkv", frames)
+    meta = (trial / "video.yaml").read_text()
+    (trial / "video.yaml").write_text(yaml.safe_dump(dict(yaml.safe_load(meta), fps=FPS * factor)))
+    try:
+        with warnings.catch_warnings(record=True):
+            warnings.simplefilter("always")
+            doc = run_sync(trial, root / "calibration.json", campaign, None, frames, 2, **_kw(settings))
+    finally:
+        (trial / "video.yaml").write_text(meta)
+    first = doc["verdict"]["reasons"][0]
+    assert doc["verdict"]["status"] != "ok" and "check fps in" in first and "video.yaml" in first
+    assert float(first.split("motion at ")[1].split(" frames per s")[0]) == pytest.approx(FPS, rel=0.02)
+
+
+def test_the_right_fps_names_no_rate(lab_trial, settings):
+    from stringcast.calibrate import Calibration
+    from stringcast.core import read_joint_table
+    from stringcast.sync.rate_check import clock_rate
+    from stringcast.video import open_video
+
+    root, trial, campaign, _, _ = lab_trial
+    t_j, q_j = read_joint_table(trial / "joints.csv")
+    with open_video(trial / "video.mkv") as video:
+        assert clock_rate(video, Calibration.from_json(root / "calibration.json"), campaign.arm, t_j, q_j,
+                          _kw(settings)["sync"], settings.board_check, FPS) is None

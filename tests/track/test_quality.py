@@ -29,11 +29,12 @@ def _table(xy, valid=None):
                          "x_m": xy[..., 0].ravel(), "y_m": xy[..., 1].ravel(), "valid": valid.ravel()})
 
 
-def _judge(xy, valid=None, mismatch=None):
+def _judge(xy, valid=None, mismatch=None, **flags):
     t = np.arange(F) / 100.0
-    moving, rest = frames_judged(t, np.ones(F, bool), 0.2 + 0.021, 0.59, settle_s=0.0)
+    judged, rest = frames_judged(t, np.ones(F, bool), 0.2 + 0.021, 0.59)
     D = np.full(F, 0.0005) if mismatch is None else mismatch
-    return tracking_quality(_table(xy, valid), D, L, N, moving, rest, ST)
+    return tracking_quality(_table(xy, valid), D, L, N, judged, rest, ST, string_setting=lambda k: f"strings.7.{k}",
+                            **flags)
 
 
 def test_a_clean_track_is_ok():
@@ -49,7 +50,49 @@ def test_lost_points_warn():
     valid[20:, 5:] = False                                           # the outer half lost in motion
     doc = _judge(_swing(), valid)
     assert doc["valid_share"] == pytest.approx(0.4, abs=0.01)
-    assert doc["verdict"]["status"] == "warn" and "tracked in the moving frames" in doc["verdict"]["reasons"][0]
+    assert doc["verdict"]["status"] == "warn" and "tracked in the 37 frames judged" in doc["verdict"]["reasons"][0]
+    assert "lost against the background" in doc["verdict"]["reasons"][0]
+
+
+def test_every_frame_the_fit_compares_is_judged():
+    """The fit compares every frame to the joint log's end, not only the motion and 0.1 s after it
+    (another lab's footage: the string left the image after the arm stopped, and tracking said ok). A
+    track lost in the frames after the motion warns; where the string runs out of the image, that is
+    the cause named."""
+    t = np.arange(F) / 100.0
+    judged, rest = frames_judged(t, np.ones(F, bool), 0.221, 0.59)
+    assert judged[23:].all() and not judged[:23].any() and rest[:21].all() and not rest[21:].any()
+    valid = np.ones((F, N + 1), bool)
+    valid[40:, 1:] = False                                           # lost from 0.4 s on, the motion long over
+    doc = _judge(_swing(), valid)
+    assert doc["judged_frames"] == 37 and doc["valid_share"] == pytest.approx(17 / 37)
+    assert doc["verdict"]["status"] == "warn"
+    off = np.zeros(F, bool)
+    off[40:] = True                                                  # ... because it ran out of the image
+    doc = _judge(_swing(), valid, off_image=off)
+    assert doc["off_image_share"] == pytest.approx(20 / 37) and "runs out of the image" in doc["verdict"]["reasons"][0]
+
+
+def test_a_string_of_another_length_names_the_campaigns_string():
+    """A 5000 mm string configured for the 300 mm one filmed (issue 51): the string is seen 300 mm
+    from the grasp to its free end, and no point is trusted. The verdict says what it saw and names
+    the string's length_mm and n_points, not the light; a string seen past the region tracked (L +
+    roi_margin_mm from the grasp) does too. A 21 mm bias (7 %, a clay weight) is reported, not judged."""
+    valid = np.zeros((F, N + 1), bool)
+    valid[:, 0] = True
+    doc = _judge(_swing(), valid, mismatch=np.full(F, -0.15))       # seen 450 mm for L = 300 mm
+    reasons = doc["verdict"]["reasons"]
+    assert "seen 450 mm long" in reasons[0] and "strings.7.length_mm and strings.7.n_points" in reasons[0]
+    assert "not the campaign's" in reasons[1] and "more light" not in " ".join(reasons)
+    past = np.zeros(F, bool)
+    past[25:] = True
+    doc = _judge(_swing(), past_roi=past)
+    assert doc["past_roi_share"] > 0.9 and "runs on past 420 mm" in doc["verdict"]["reasons"][0]
+    assert "strings.7.length_mm" in doc["verdict"]["reasons"][0]
+    assert _judge(_swing(), mismatch=np.full(F, 0.021))["verdict"]["status"] == "ok"
+    few = np.full(F, np.nan)
+    few[30:33] = -0.15                                               # 3 frames: too few to judge
+    assert _judge(_swing(), mismatch=few)["verdict"]["status"] == "ok"
 
 
 def test_the_seen_length_is_reported_not_judged():
@@ -73,3 +116,17 @@ def test_points_misplaced_along_the_string_and_jitter_at_rest_warn():
 def test_mismatched_lengths_raise():
     with pytest.raises(ValueError, match="rows"):
         tracking_quality(_table(_swing()).iloc[:-1], np.zeros(F), L, N, np.ones(F, bool), np.zeros(F, bool), ST)
+
+
+def test_a_string_seen_at_another_length_is_put_down_to_a_scale_the_calibration_found():
+    """square_mm 50 for 60 (issue 51): the string runs past the region tracked, but the calibration has
+    seen the still arm at a scale of 0.833: the reason names that, not the string's length."""
+    past = np.zeros(F, bool)
+    past[25:] = True
+    t = np.arange(F) / 100.0
+    judged, rest = frames_judged(t, np.ones(F, bool), 0.221, 0.59)
+    note = "the calibration sees the still arm scaled by 0.833; check setups.default.board.square_mm"
+    doc = tracking_quality(_table(_swing()), np.full(F, np.nan), L, N, judged, rest, ST, past_roi=past,
+                           string_setting=lambda k: f"strings.7.{k}", scale_note=note)
+    assert "the image scale is off; " + note in doc["verdict"]["reasons"][0]
+    assert "strings.7" not in doc["verdict"]["reasons"][0]

@@ -248,7 +248,16 @@ def test_tracking_on_a_tiny_lab_render(tmp_path, config, settings, monkeypatch):
     assert pts["valid"].mean() > 0.7, pts["valid"].mean()
     # measured 0.88 / 1.91 mm at 1.3 mm per px; the margin absorbs changes to the lab's renderer
     assert np.median(e) < 1.5 and np.percentile(e, 95) < 4.0, (np.median(e), np.percentile(e, 95))
-    assert read_json(res / "tracking.json")["verdict"]["status"] == "ok"   # within the goals: no false alarm
+    quality = read_json(res / "tracking.json")
+    assert quality["verdict"]["status"] == "ok"   # within the goals: no false alarm
+    from stringcast.core import motion_window, read_joint_table
+    t_j, q_j = read_joint_table(trial / "joints.csv")
+    t = df.groupby("frame")["t_s"].first().to_numpy()
+    # judged: every frame from the motion's start to the log's end, which the fit compares (not only the motion)
+    assert quality["judged_frames"] == int(np.sum((t >= motion_window(t_j, q_j)[0]) & (t <= t_j[-1])))
+    # no valid point outside the image
+    uv = cal.robot_to_pixel(pts.loc[pts["valid"], ["x_m", "y_m"]].to_numpy())
+    assert np.all((uv >= -0.5) & (uv <= np.array(cal.image_size) - 0.5))
 
     # the video decoded once and tracked by two worker processes: the same table and overlay
     from stringcast.track import parallel
@@ -261,6 +270,24 @@ def test_tracking_on_a_tiny_lab_render(tmp_path, config, settings, monkeypatch):
                        res / "overlay_2.png", frames, 2, tracking=settings.tracking)
     pd.testing.assert_frame_equal(par, df)
     assert (res / "overlay_2.png").read_bytes() == (res / "overlay.png").read_bytes()
+
+
+def test_a_string_leaving_the_image_gives_no_valid_point_outside_it(tmp_path, config, settings):
+    """The camera 110 mm higher: the string's lower part leaves the image's bottom edge. A point outside
+    the image is never valid (the refined centreline past the edge gave two, 0.1-0.5 px out; another
+    lab's footage had 257 after the arm stopped), and the verdict names the string running out of the
+    image where points are lost to it."""
+    trial, res, campaign, _ = tiny_lab_trial(tmp_path, config, view_up_mm=110.0)
+    df = run_tracking(trial, res / "calibration.json", res / "sync.json", campaign, res / "tracks.parquet",
+                      tracking=settings.tracking)
+    cal = Calibration.from_json(res / "calibration.json")
+    pts = df[(df["point"] > 0) & df["valid"]]
+    uv = cal.robot_to_pixel(pts[["x_m", "y_m"]].to_numpy())
+    assert len(pts) > 100 and np.all((uv >= -0.5) & (uv <= np.array(cal.image_size) - 0.5))
+    assert df.loc[~df["valid"], "x_m"].isna().all()
+    quality = read_json(res / "tracking.json")
+    assert quality["off_image_share"] > 0.5
+    assert any("runs out of the image" in r for r in quality["verdict"]["reasons"])
 
 
 @pytest.mark.parametrize("end", ["plain", "ball", "small ball", "sleeve"])
@@ -648,3 +675,43 @@ def test_an_end_over_the_board_is_the_tip_only_where_the_length_agrees(campaign,
     tracker.board = None                                      # without the board: the end taken as the tip
     blind = tracker.track(frame, poses)
     assert np.nanmax(np.hypot(*(blind.positions - true).T)[blind.valid]) > 0.02
+
+
+def test_a_string_running_past_the_region_tracked_is_cut_there_not_ended(campaign):
+    """A string seen farther from the grasp than L + roi_margin_mm (a square size configured 50 mm for
+    60 mm, issue 51) ran along the region's edge: its walk's end there passed for a free end, and the
+    sub-pixel refinement moved vertices past the edge, where ``string_continues`` indexed the contrast
+    out of bounds (IndexError). The region's edge cuts the walk as the image's does: no free end, no
+    length taken from it, the frame flagged ``past_roi``, no vertex read outside the region."""
+    from stringcast.track.frame_tracker import FrameTracker
+
+    S = 400
+    cal = Calibration(_calibration().H_pixel_to_robot, (S, S), None, None, 0.1, 40)
+    bg = np.full((S, S), 120, np.float32)
+    frame = bg.copy()
+    cv2.line(frame, (150, 10), (150, 221), 70.0, 4)        # down from the grasp, then along the region's
+    cv2.line(frame, (150, 221), (380, 221), 70.0, 4)       # lower edge (rows 0-220: R = 210 px from row 10)
+    frame = cv2.GaussianBlur(frame, (0, 0), 1.2) + np.random.default_rng(1).normal(0, 2.0, bg.shape).astype(np.float32)
+    poses = np.array([[[150.0, -400.0], [150.0, -250.0], [150.0, -120.0], [150.0, -40.0], [150.0, 10.0]]] * 3)
+    tracker = FrameTracker(bg, (4.0, 0.0), cal, campaign, TrackingSettings())
+    ft = tracker.track(frame, poses)
+    assert ft.past_roi and not ft.off_image and np.isnan(ft.length_mismatch_m)
+    assert ft.path_px[:, 0].max() <= 360.5 and ft.path_px[:, 1].max() <= 220.5   # inside the region tracked
+    n = len(ft.valid)
+    i = np.flatnonzero(ft.valid) + 1
+    true = ORIGIN + M_PER_PX * np.column_stack([np.full(len(i), 150.0), -(10.0 + 150.0 * i / n)])
+    assert len(i) == n and np.abs(ft.positions - true).max() < 0.004   # the points down from the grasp
+
+
+def test_string_end_tests_never_index_outside_the_contrast_image():
+    """A refined centreline may lie past the edge of the image it was found in (issue 51:
+    ``index 346 is out of bounds for axis 0 with size 346``): the end tests read the edge's pixels."""
+    from stringcast.track.ends import clean_end, string_continues
+
+    a = np.zeros((50, 60), np.float32)
+    a[40:, 20:24] = 30.0
+    walk = np.column_stack([np.linspace(40.0, 49.6, 12), np.full(12, 22.0)])     # its last vertex rounds to row 50
+    assert string_continues(a, walk, None, np.array([1.0, 0.0]), 3.0, 0.4) in (True, False)
+    skel = np.zeros((50, 60), bool)
+    assert clean_end(np.vstack([walk, [[50.2, 22.0]]]), skel, np.array([0, 0]), a, np.full_like(a, 100.0),
+                     TrackingSettings(), 5.0) in (True, False)

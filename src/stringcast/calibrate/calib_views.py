@@ -37,10 +37,18 @@ _VIDEO_SUFFIXES = (".mkv", ".avi", ".mp4", ".mov")
 
 
 def _calib_reader(calib_dir: Path):
-    """The calibration views: the folder's images, or the one video inside it."""
-    if any(p.suffix.lower() in FRAME_SUFFIXES for p in calib_dir.iterdir()):
+    """The calibration views: the folder's images, or the one video inside it.
+
+    Raises:
+        DataError: no such folder, an unreadable one, or none of either in it (named)."""
+    try:
+        entries = sorted(calib_dir.iterdir())
+    except OSError as exc:
+        raise DataError(f"{calib_dir}: not a readable folder of calibration views (PNG/TIFF images or one video "
+                        f"of the ChArUco board): {exc.strerror or exc}") from exc
+    if any(p.suffix.lower() in FRAME_SUFFIXES for p in entries):
         return open_video(calib_dir)
-    vids = sorted(p for p in calib_dir.iterdir() if p.is_file() and p.suffix.lower() in _VIDEO_SUFFIXES)
+    vids = [p for p in entries if p.is_file() and p.suffix.lower() in _VIDEO_SUFFIXES]
     if not vids:
         raise DataError(f"{calib_dir}: no PNG/TIFF images or video of the calibration board")
     return open_video(vids[0])
@@ -63,18 +71,21 @@ def single_threaded_opencv():
         cv2.setNumThreads(n)
 
 
-def find_calib_views(calib_dir: str | Path, board, st: CalibrationSettings) -> tuple[Views, str]:
+def find_calib_views(calib_dir: str | Path, board, st: CalibrationSettings, campaign=None) -> tuple[Views, str]:
     """The board's views in ``calib_dir`` (:func:`~stringcast.calibrate.charuco.select_calibration_views`
     on every ``ceil(frames / max_candidate_frames)``-th frame, at most ``max_views`` kept) and the
-    source's name for messages.
+    source's name for messages. ``campaign``: names the board's settings in the hint where too few views
+    are found (:func:`~stringcast.calibrate.board_hint.board_hint`).
 
     Raises:
         DataError: no images or video in the folder, or too few views of the board (named).
     """
     reader = _calib_reader(Path(calib_dir))
     stride = max(1, math.ceil(reader.n_frames / st.max_candidate_frames))
+    named = {} if campaign is None else {"dictionary": campaign.setup.board.dictionary,
+                                         "setting": lambda key: campaign.setup_setting(f"board.{key}")}
     views = select_calibration_views((f for i, f in reader if i % stride == 0), board, str(reader.path),
-                                     max_views=st.max_views)
+                                     max_views=st.max_views, **named)
     return views, str(reader.path)
 
 
@@ -87,7 +98,7 @@ def write_calib_views(calib_dir: str | Path, campaign, out: str | Path, *,
         DataError: as :func:`find_calib_views`.
     """
     with single_threaded_opencv():   # as a trial's calibration detects
-        views, source = find_calib_views(calib_dir, campaign.setup.board.make(), calibration)
+        views, source = find_calib_views(calib_dir, campaign.setup.board.make(), calibration, campaign)
     arrays = {f"object_points_{k}": np.asarray(o, np.float32) for k, o in enumerate(views.object_points)}
     arrays.update({f"image_points_{k}": np.asarray(i, np.float32) for k, i in enumerate(views.image_points)})
     meta = {"image_size": [int(x) for x in views.image_size], "found": int(views.found),

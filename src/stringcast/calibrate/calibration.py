@@ -46,8 +46,10 @@ from stringcast.core import (BoardCheckSettings, CalibrationSettings, DataError,
 from stringcast.video import open_video
 
 from .board_check import check_board_to_robot
+from .board_hint import board_hint
 from .calib_views import camera_flags, find_calib_views, read_calib_views, read_campaign_intrinsics, single_threaded_opencv
 from .charuco import Intrinsics, calibrate_intrinsics, detect_charuco
+from .scale_check import arm_scale
 from .intrinsics import board_view_check, judged_intrinsics
 from .mapping import Calibration, apply_homography
 
@@ -58,8 +60,8 @@ MIN_PLANE_CORNERS = 8
 """ChArUco corners the plane homography needs."""
 
 
-def detect_plane_board(image: np.ndarray, board, source: str = "image", invert: bool | None = None
-                       ) -> tuple[np.ndarray, np.ndarray]:
+def detect_plane_board(image: np.ndarray, board, source: str = "image", invert: bool | None = None,
+                       campaign=None) -> tuple[np.ndarray, np.ndarray]:
     """The board's corners (N, 2) px and ids (N,) in a trial image (:func:`detect_charuco`).
 
     When fewer than half the board's corners are found, the image is searched again enlarged
@@ -67,7 +69,9 @@ def detect_plane_board(image: np.ndarray, board, source: str = "image", invert: 
     that finds more wins.
 
     Raises:
-        DataError: fewer than :data:`MIN_PLANE_CORNERS` corners, naming ``source``.
+        DataError: fewer than :data:`MIN_PLANE_CORNERS` corners, naming ``source``, and with no
+            corner at all what the image shows instead (:func:`~stringcast.calibrate.board_hint.board_hint`,
+            the settings named from ``campaign`` where given).
     """
     corners, ids = detect_charuco(image, board, invert)
     sx, sy = board.getChessboardSize()
@@ -76,8 +80,12 @@ def detect_plane_board(image: np.ndarray, board, source: str = "image", invert: 
         if len(enlarged[1]) > len(ids):
             corners, ids = enlarged
     if len(ids) < MIN_PLANE_CORNERS:
+        hint = ""
+        if len(ids) == 0:
+            hint = board_hint([image], board, *(() if campaign is None else (
+                campaign.setup.board.dictionary, lambda key: campaign.setup_setting(f"board.{key}"))))
         raise DataError(f"{source}: {'no ChArUco board found' if len(ids) == 0 else f'only {len(ids)} board corners found'}"
-                        f" (the plane homography needs >= {MIN_PLANE_CORNERS})")
+                        f" (the plane homography needs >= {MIN_PLANE_CORNERS})" + (f": {hint}" if hint else ""))
     return corners, ids
 
 
@@ -187,7 +195,7 @@ def _intrinsics(calib_dir: Path, board, campaign, image: np.ndarray, detection, 
     """(Intrinsics, their measures, the board view's check or None, verdict) from calib/ (the views'
     own fit read from ``intrinsics_json`` if given) and the trial's board."""
     calib = Path(calib_dir)
-    views, where = read_calib_views(calib) if calib.is_file() else find_calib_views(calib, board, st)
+    views, where = read_calib_views(calib) if calib.is_file() else find_calib_views(calib, board, st, campaign)
     flags = camera_flags(campaign)
     size = (image.shape[1], image.shape[0])
     if tuple(views.image_size) != size:
@@ -217,7 +225,7 @@ def _run_calibration(trial_dir: Path, calib_dir, campaign, out_json, n_median: i
     with open_video(vpath) as video:
         img = median_frame(video, n_median)
     source = f"{vpath} (median of the first {n_median} frames)"
-    detection = detect_plane_board(img, board, source)
+    detection = detect_plane_board(img, board, source, campaign=campaign)
     intr, quality, check, verdict = None, None, None, Verdict()
     if calib_dir is not None:
         intr, quality, check, verdict = _intrinsics(Path(calib_dir), board, campaign, img, detection, source, st,
@@ -256,6 +264,22 @@ def _board_check(trial_dir: Path, rest_image: np.ndarray, cal: Calibration, camp
     grey = rest_image if rest_image.ndim == 2 else cv2.cvtColor(rest_image, cv2.COLOR_BGR2GRAY)
     board = check_board_to_robot(grey.astype(np.float64), cal, campaign.arm, q[0], board_check)
     found = Verdict.from_dict(board.get("verdict"))
+    if board["residual_mm"] is None or board["residual_mm"] > board_check.warn_mm:
+        board["arm_scale"] = arm_scale(grey.astype(np.float64), cal, campaign.arm, q[0], board_check)
+        if board["arm_scale"] is not None:
+            verdict = verdict.add("warn", scale_reason(board["arm_scale"], campaign))
     for reason in found.reasons:
         verdict = verdict.add(found.status, f"board-to-robot check: {reason}")
     return board, verdict
+
+
+def scale_reason(found: dict, campaign) -> str:
+    """The verdict's reason for the arm seen at a scale (:func:`~stringcast.calibrate.scale_check.arm_scale`),
+    naming the board's square size (and what it would be)."""
+    k, b = found["scale"], campaign.setup.board
+    return (f"board-to-robot check: the still arm is seen scaled by {k:.3f} about the board's origin against its "
+            f"forward kinematics ({found['features']} of its features found there, {found['features_at_1']} where "
+            f"the forward kinematics put them; {found['residual_mm']:.1f} mm off at that scale): every length "
+            f"through the board is off by that factor; check {campaign.setup_setting('board.square_mm')} (and "
+            f"marker_mm, in the same ratio): the arm fits squares of {b.square * 1000 / k:.1f} mm, not "
+            f"{b.square * 1000:g}")

@@ -24,6 +24,7 @@ import cv2
 import numpy as np
 
 from stringcast.core import DataError
+from .board_hint import board_hint
 
 MIN_VIEW_CORNERS = 6
 """ChArUco corners a calibration view needs to be used."""
@@ -194,8 +195,14 @@ class Intrinsics:
             raise ValueError(f"Intrinsics: K must be (3, 3) and dist (5,), got {np.shape(self.K)}, {np.shape(self.dist)}")
 
 
+HINT_FRAMES = (0, 10, 20)
+"""The frames (counting those given) kept for :func:`~stringcast.calibrate.board_hint.board_hint` where too
+few views are found."""
+
+
 def select_calibration_views(frames: Iterable[np.ndarray], board, source: str = "calibration frames",
-                             invert: bool | None = None, min_views: int = 3, max_views: int = MAX_VIEWS) -> Views:
+                             invert: bool | None = None, min_views: int = 3, max_views: int = MAX_VIEWS, *,
+                             dictionary: str | None = None, setting=None) -> Views:
     """The board's corners in each frame where it shows, at most ``max_views`` views kept.
 
     Each frame: :func:`detect_charuco`, ``board.matchImagePoints``; a view needs
@@ -206,14 +213,17 @@ def select_calibration_views(frames: Iterable[np.ndarray], board, source: str = 
         frames: iterable of (H, W) grey images (all the same size), read once.
         board: ``cv2.aruco.CharucoBoard`` (sizes in m). source: named in errors.
         invert: board polarity (see :func:`detect_charuco`). min_views: the fewest usable views.
+        dictionary, setting: the board's dictionary name and ``key -> str``, where the board's ``key`` is
+            configured (``setups.<s>.board.<key>``; None: ``board.<key>``), for the hint at what the frames show instead where too few views
+            are found (:func:`~stringcast.calibrate.board_hint.board_hint`).
 
     Returns:
         :class:`Views`, named by frame (``frame k``, k counting the frames given).
 
     Raises:
-        DataError: fewer than ``min_views`` usable views, or frames of different sizes.
+        DataError: fewer than ``min_views`` usable views (with the hint), or frames of different sizes.
     """
-    obj, img, names, size = [], [], [], None
+    obj, img, names, size, unseen = [], [], [], None, []
     for k, frame in enumerate(frames):
         if size is None:
             size = (frame.shape[1], frame.shape[0])
@@ -221,6 +231,8 @@ def select_calibration_views(frames: Iterable[np.ndarray], board, source: str = 
             raise DataError(f"{source}: frame {k} is {frame.shape[1]}x{frame.shape[0]}, the first was {size[0]}x{size[1]}")
         corners, ids = detect_charuco(frame, board, invert)
         if len(ids) < MIN_VIEW_CORNERS:
+            if k in HINT_FRAMES:
+                unseen.append(frame)
             continue
         o, i = board.matchImagePoints(corners.astype(np.float32).reshape(-1, 1, 2), ids.reshape(-1, 1))
         if o is None or len(o) < MIN_VIEW_CORNERS or board.checkCharucoCornersCollinear(ids.reshape(-1, 1)):
@@ -229,8 +241,10 @@ def select_calibration_views(frames: Iterable[np.ndarray], board, source: str = 
         img.append(i.astype(np.float32))
         names.append(f"frame {k}")
     if len(obj) < min_views:
+        hint = board_hint(unseen, board, dictionary, *(() if setting is None else (setting,))) \
+            if len(obj) == 0 or unseen else ""
         raise DataError(f"{source}: the ChArUco board was found in {len(obj)} views with >= {MIN_VIEW_CORNERS} "
-                        f"corners; camera calibration needs at least {min_views}")
+                        f"corners; camera calibration needs at least {min_views}" + (f": {hint}" if hint else ""))
     pick = select_views(pose_descriptors(obj, img, board, size), np.array([len(o) for o in obj]), max_views)
     return Views(tuple(obj[k] for k in pick), tuple(img[k] for k in pick), (int(size[0]), int(size[1])),
                  len(obj), tuple(names[k] for k in pick))

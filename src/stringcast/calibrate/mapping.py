@@ -70,8 +70,14 @@ class Calibration:
             raise ValueError("Calibration: K and dist go together (both or neither)")
         if self.K is not None and (np.shape(self.K) != (3, 3) or np.shape(self.dist) != (5,)):
             raise ValueError("Calibration: K must be (3, 3) and dist (5,)")
-        if self.board_to_robot is not None and np.shape(self.board_to_robot) != (3, 3):
-            raise ValueError("Calibration: board_to_robot must be (3, 3)")
+        if self.K is not None and not (np.all(np.isfinite(self.K)) and np.all(np.isfinite(self.dist))
+                                       and self.K[0][0] > 0 and self.K[1][1] > 0):
+            raise ValueError("Calibration: K and dist must be finite, with positive focal lengths")
+        if self.board_to_robot is not None and (np.shape(self.board_to_robot) != (3, 3)
+                                                or not np.all(np.isfinite(self.board_to_robot))):
+            raise ValueError("Calibration: board_to_robot must be a finite (3, 3)")
+        if len(self.image_size) != 2 or min(self.image_size) < 1:
+            raise ValueError(f"Calibration: image_size must be (width, height) >= 1 px, got {self.image_size}")
         object.__setattr__(self, "H_pixel_to_robot", H)
         object.__setattr__(self, "_H_inv", np.linalg.inv(H))
 
@@ -139,7 +145,7 @@ class Calibration:
     @classmethod
     def from_json(cls, path: str | Path) -> "Calibration":
         """Read ``calibration.json``. Raises DataError naming the file if keys are missing or wrong."""
-        d = read_json(path)
+        d = read_json(path, mapping=True)
         try:
             arr = (lambda k: None if d.get(k) is None else np.asarray(d[k], float))
             return cls(H_pixel_to_robot=np.asarray(d["H_pixel_to_robot"], float),
@@ -151,7 +157,7 @@ class Calibration:
                        intrinsics_views_found=d.get("intrinsics_views_found"), board_check=d.get("board_check"),
                        intrinsics_quality=d.get("intrinsics"), board_view=d.get("board_view"),
                        verdict=Verdict.from_dict(d.get("verdict")))
-        except (KeyError, TypeError, ValueError) as exc:
+        except (KeyError, TypeError, ValueError, AttributeError, np.linalg.LinAlgError) as exc:
             raise DataError(f"{path}: not a valid calibration file: {exc!r}") from exc
 
 

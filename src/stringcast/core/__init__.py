@@ -18,7 +18,7 @@ from .settings import (MODES, POLARITIES, SECTION_CLASSES, BoardCheckSettings, C
                        Settings, SweepSettings, SyncSettings, TrackingSettings, settings_from_config)
 from .verdict import STATUSES, Verdict, worst
 from .forked import chunked, forked_map
-from .joblog import JobLog
+from .joblog import INTERNAL_ERROR_STATUS, TRACEBACK_DIR_ENV, JobLog, internal_error
 from .lifeline import start_lifeline, workflow_stamp
 from .runlock import RunConflict, claim_results, outputs_newer_than
 from .lazy import lazy_exports
@@ -41,7 +41,7 @@ __all__ = [
     "SyncSettings",
     "TrackingSettings",
     "STATUSES", "Verdict", "worst",
-    "chunked", "forked_map", "lazy_exports", "JobLog", "start_lifeline", "workflow_stamp", "RunConflict",
+    "chunked", "forked_map", "lazy_exports", "INTERNAL_ERROR_STATUS", "TRACEBACK_DIR_ENV", "JobLog", "internal_error", "start_lifeline", "workflow_stamp", "RunConflict",
     "claim_results", "outputs_newer_than",
     "markdown_table", "sections_read", "sections_read_from_source", "settings_digest", "settings_from_config",
     "stage_kwargs",

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import copy
 import json
+import math
 from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -49,7 +50,9 @@ def schema_problems(doc: Any, schema_name: str, definition: str | None = None) -
 
     Returns:
         ``[(where, message), ...]``: the JSON path of each error (``"(top level)"`` for the
-        document itself) and jsonschema's message; empty when ``doc`` conforms.
+        document itself) and jsonschema's message, or, where the schema holds, the first number
+        that is not finite (YAML's ``.nan``, ``.inf``: JSON Schema's ``number`` takes them, and no
+        setting, length or position is one); empty when ``doc`` conforms.
     """
     import jsonschema
 
@@ -58,11 +61,16 @@ def schema_problems(doc: Any, schema_name: str, definition: str | None = None) -
         schema = {"$defs": schema["$defs"], "$ref": f"#/$defs/{definition}"}
     validator = jsonschema.Draft202012Validator(schema)
     errors = sorted(validator.iter_errors(doc), key=lambda e: list(e.absolute_path))
-    return [("/".join(str(p) for p in e.absolute_path) or "(top level)", e.message) for e in errors]
+    out = [("/".join(str(p) for p in e.absolute_path) or "(top level)", e.message) for e in errors]
+    bad = None if out else _not_finite(doc)
+    return out + ([(bad[0] or "(top level)", f"{bad[1]} is not a finite number")] if bad else [])
 
 
 def validate(doc: Any, schema_name: str, source: str | Path) -> None:
     """Validate ``doc`` against a packaged JSON schema.
+
+    A number that is not finite (YAML's ``.nan``, ``.inf``; JSON Schema's ``number`` takes them) is
+    an error too: no setting, length or position is one.
 
     Raises:
         ConfigError: naming ``source`` and the JSON path of the first error (:func:`schema_problems`).
@@ -71,6 +79,19 @@ def validate(doc: Any, schema_name: str, source: str | Path) -> None:
     if problems:
         where, message = problems[0]
         raise ConfigError(f"{source}: at '{where}': {message}")
+
+
+def _not_finite(doc: Any, where: str = "") -> tuple[str, float] | None:
+    """(the path, the value) of the first float in ``doc`` (nested mappings and lists) that is NaN or
+    infinite, or None."""
+    if isinstance(doc, float):
+        return None if math.isfinite(doc) else (where, doc)
+    items = doc.items() if isinstance(doc, Mapping) else enumerate(doc) if isinstance(doc, (list, tuple)) else ()
+    for k, v in items:
+        found = _not_finite(v, f"{where}/{k}" if where else str(k))
+        if found is not None:
+            return found
+    return None
 
 
 def load_yaml(path: str | Path) -> Any:

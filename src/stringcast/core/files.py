@@ -81,10 +81,15 @@ def write_json(path: str | Path, doc: Any) -> None:
     write_text(path, json.dumps(_jsonable(doc), indent=2) + "\n")
 
 
-def read_json(path: str | Path) -> Any:
+def read_json(path: str | Path, mapping: bool = False) -> Any:
+    """A JSON file's content; with ``mapping``, it must be a JSON object (a dict).
+
+    Raises:
+        DataError: the file is missing, unreadable, not JSON, or (``mapping``) not an object (named).
+    """
     path = Path(path)
     try:
-        return json.loads(path.read_text())
+        doc = json.loads(path.read_text())
     except FileNotFoundError as exc:
         raise DataError(f"{path}: file not found") from exc
     except json.JSONDecodeError as exc:
@@ -93,6 +98,9 @@ def read_json(path: str | Path) -> Any:
         raise DataError(f"{path}: not a text file (not UTF-8: {exc.reason} at byte {exc.start})") from exc
     except OSError as exc:
         raise DataError(f"{path}: not readable: {exc.strerror or exc}") from exc
+    if mapping and not isinstance(doc, dict):
+        raise DataError(f"{path}: expected a JSON object (keys and values), got a {type(doc).__name__}")
+    return doc
 
 
 def write_yaml(path: str | Path, doc: Any) -> None:
@@ -182,6 +190,22 @@ def find_video(trial_dir: str | Path) -> Path:
     return cands[0]
 
 
+def _numbers(column, name: str, source) -> np.ndarray:
+    """A table column as float64 (N,); DataError naming ``source`` and the column where it is not numeric."""
+    try:
+        return np.asarray(column, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise DataError(f"{source}: column {name} must hold numbers ({exc})") from exc
+
+
+def _whole(column, name: str, source) -> np.ndarray:
+    """A table column of whole numbers as int64 (N,); DataError where a value is not one."""
+    v = _numbers(column, name, source)
+    if not np.all(np.isfinite(v)) or np.any(v != np.round(v)):
+        raise DataError(f"{source}: column {name} must hold whole numbers")
+    return v.astype(np.int64)
+
+
 def tracks_arrays(tracks, n: int, source="tracks") -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Long ``tracks.parquet`` table (a DataFrame, or a mapping of column arrays as
     :func:`read_parquet_columns` gives) -> frames (F,), t (F,) s, xy (F, n+1, 2) m (NaN if
@@ -191,17 +215,22 @@ def tracks_arrays(tracks, n: int, source="tracks") -> tuple[np.ndarray, np.ndarr
         raise DataError(f"{source}: missing columns {missing}")
     if len(tracks["frame"]) == 0:
         raise DataError(f"{source}: no rows")
-    pts = np.asarray(tracks["point"], dtype=np.int64)
+    pts = _whole(tracks["point"], "point", source)
     if pts.min() < 0 or pts.max() > n:
         raise DataError(f"{source}: point ids must be 0..{n} for this string (n = {n}), got {pts.min()}..{pts.max()}")
-    frames, fi = np.unique(np.asarray(tracks["frame"], dtype=np.int64), return_inverse=True)
+    frames, fi = np.unique(_whole(tracks["frame"], "frame", source), return_inverse=True)
+    if len(np.unique(fi * (n + 1) + pts)) != len(pts):
+        raise DataError(f"{source}: a (frame, point) pair appears more than once")
     t = np.full(len(frames), np.nan)
-    t[fi] = np.asarray(tracks["t_s"], dtype=float)
+    t[fi] = _numbers(tracks["t_s"], "t_s", source)
     xy = np.full((len(frames), n + 1, 2), np.nan)
-    xy[fi, pts, 0] = np.asarray(tracks["x_m"], dtype=float)
-    xy[fi, pts, 1] = np.asarray(tracks["y_m"], dtype=float)
+    xy[fi, pts, 0] = _numbers(tracks["x_m"], "x_m", source)
+    xy[fi, pts, 1] = _numbers(tracks["y_m"], "y_m", source)
     valid = np.zeros((len(frames), n + 1), bool)
-    valid[fi, pts] = np.asarray(tracks["valid"], dtype=bool)
+    flags = np.asarray(tracks["valid"])
+    if flags.dtype != bool and not (np.issubdtype(flags.dtype, np.integer) and np.all((flags == 0) | (flags == 1))):
+        raise DataError(f"{source}: column valid must hold true/false, got {flags.dtype} values such as {flags[0]!r}")
+    valid[fi, pts] = flags.astype(bool)
     valid &= np.all(np.isfinite(xy), axis=-1)
     if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
         raise DataError(f"{source}: frame times t_s must be finite and increase with the frame number")

@@ -51,3 +51,39 @@ class JobLog:
         print(line, file=sys.stderr if error else sys.stdout, flush=True)
         if self.terminal is not None:
             print(line + (f" (log: {self.path})" if error else ""), file=self.terminal, flush=True)
+
+
+INTERNAL_ERROR_STATUS = 1
+"""The exit status of a subcommand that ended in an unexpected exception (a defect of stringcast,
+not of its input: bad input exits with 2)."""
+TRACEBACK_DIR_ENV = "STRINGCAST_TRACEBACK_DIR"
+"""Environment variable naming the folder an internal error's full traceback is written to
+(default: the system's temporary folder)."""
+
+
+def internal_error(command: str, exc: BaseException, in_log: bool = False) -> str:
+    """The message for an unexpected exception ``exc`` in ``stringcast command``: its first line
+    ``stringcast <command>: internal error: <type>: <message>`` (the message's first line, at most
+    300 characters), its second where the full traceback was written: the command's log
+    (``in_log``: standard error is the log, :class:`~stringcast.core.JobLog`), else a file
+    ``stringcast-<command>-<time>-<pid>.traceback`` in ``$STRINGCAST_TRACEBACK_DIR`` or the
+    system's temporary folder, or, where it cannot be written, the traceback itself."""
+    import tempfile
+    import time
+    import traceback
+
+    text = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
+    first = (str(exc).strip().splitlines() or [""])[0]
+    first = first if len(first) <= 300 else first[:297] + "..."
+    head = f"stringcast {command}: internal error: {type(exc).__name__}: {first}"
+    if in_log:
+        print(text, file=sys.stderr, flush=True)
+        return f"{head}\n  (unexpected: not an input error stringcast knows; the traceback is in the log)"
+    folder = Path(os.environ.get(TRACEBACK_DIR_ENV) or tempfile.gettempdir())
+    path = folder / f"stringcast-{command}-{time.strftime('%Y%m%dT%H%M%S')}-{os.getpid()}.traceback"
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        path.write_text(f"stringcast {command}\n{text}")
+    except OSError:
+        return f"{head}\n  (the full traceback could not be written to {folder}; here it is)\n{text}"
+    return f"{head}\n  (unexpected: not an input error stringcast knows; the full traceback is in {path})"

@@ -184,17 +184,22 @@ def read_motion_sidecar(path: str | Path, n_joints: int) -> tuple[np.ndarray, fl
             an arm of ``n_joints`` joints (the file named).
     """
     path = Path(path)
-    doc = read_json(path)
+    doc = read_json(path, mapping=True)
     try:
         q0 = np.asarray(doc["q0_rad"], float)
         T = float(doc["T_s"])
         cp = np.asarray(doc["control_points_rad_s"], float)
     except (KeyError, TypeError, ValueError) as exc:
         raise DataError(f"{path}: needs q0_rad, T_s and control_points_rad_s ({exc})") from exc
-    if q0.shape != (n_joints,) or cp.ndim != 2 or cp.shape[0] != n_joints or cp.shape[1] < 1 or not T > 0:
+    if (q0.shape != (n_joints,) or cp.ndim != 2 or cp.shape[0] != n_joints or cp.shape[1] < 1
+            or not 0 < T <= MAX_MOTION_S or not (np.all(np.isfinite(q0)) and np.all(np.isfinite(cp)))):
         raise DataError(f"{path}: q0_rad must have {n_joints} values, control_points_rad_s be {n_joints} x N "
-                        "(N >= 1), T_s > 0")
+                        f"(N >= 1), all finite, and 0 < T_s <= {MAX_MOTION_S:g} s")
     return q0, T, cp
+
+
+MAX_MOTION_S = 600.0
+"""The longest motion a motion.json may describe, s (a cast takes seconds; more is a corrupt file)."""
 
 
 def end_speed_shares(t_joints: np.ndarray, q_joints: np.ndarray, qd_max: np.ndarray,

@@ -109,8 +109,11 @@ class BoardSpec:
     legacy_pattern: bool = False
 
     def __post_init__(self):
-        if self.marker >= self.square:
-            raise ConfigError("board: marker_mm must be smaller than square_mm")
+        if self.squares_x < 2 or self.squares_y < 2:
+            raise ConfigError(f"board: squares_x and squares_y must be >= 2 (a ChArUco board has corners between "
+                              f"squares), got {self.squares_x} x {self.squares_y}")
+        if not 0 < self.marker < self.square:
+            raise ConfigError("board: marker_mm must be positive and smaller than square_mm")
 
     @property
     def n_markers(self) -> int:
@@ -272,6 +275,16 @@ class Campaign:
     setup: SetupSpec
     string_id: str | None = None
     config: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def string_setting(self, key: str) -> str:
+        """Where the string's ``key`` (``length_mm``, ``n_points``) is set, for a message:
+        ``strings.<id>.<key>`` in the config, or ``string.<key>`` of the campaign.yaml (inline)."""
+        return f"strings.{self.string_id}.{key}" if self.string_id else f"string.{key} in campaign.yaml"
+
+    def setup_setting(self, key: str) -> str:
+        """Where the set-up's ``key`` (``board.square_mm``, ``board.dictionary``, ...) is set, for a
+        message: ``setups.<name>.<key>`` in the config, or ``setup.<key>`` of the campaign.yaml (inline)."""
+        return f"setups.{self.setup.name}.{key}" if self.setup.name != "inline" else f"setup.{key} in campaign.yaml"
 
 
 def _lookup(table: Mapping, key, what: str, source) -> Mapping:

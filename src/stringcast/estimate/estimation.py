@@ -51,8 +51,8 @@ from stringcast.model import decode, start_chi
 from .diagnostics import best_k, checked, diagnostics
 from .fitcheck import fit_figures
 from .optimizers import OPTIMIZERS, Recorder
-from .problem import (EstimationProblem, build_problem, make_joint_objective, make_objective, point_errors,
-                      simulate_fit)
+from .problem import (EstimationProblem, build_problem, build_problem_explained, make_joint_objective, make_objective,
+                      point_errors, simulate_fit)
 from .verdict import fit_verdict
 
 UPSTREAM = ("geometry", "clock", "tracking")
@@ -218,16 +218,16 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign,
     tracks = read_parquet(tracks_parquet, TRACK_COLUMNS)
     t_j, q_j = read_joint_table(joints_csv, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
     problem_settings = dict(model=model, evaluation=evaluation, estimation=estimation, tracking=tracking)
-    problem = build_problem(tracks, t_j, q_j, campaign, **problem_settings, source=str(tracks_parquet))
-    prev = read_json(prev_params_json) if prev_params_json else None
+    problem = build_problem_explained(tracks, t_j, q_j, campaign, tracks_parquet, **problem_settings)
+    prev = read_json(prev_params_json, mapping=True) if prev_params_json else None
     chi0 = start_chi(prev, campaign.string, model, motion, str(prev_params_json))
     k = max(1, int(trial_index))
     seed = int(estimation.seed) + k
     earlier_problems = []
     for tr, jo in earlier:
         t_e, q_e = read_joint_table(jo, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
-        earlier_problems.append(build_problem(read_parquet(tr, TRACK_COLUMNS), t_e, q_e, campaign,
-                                              **problem_settings, source=str(tr)))
+        earlier_problems.append(build_problem_explained(read_parquet(tr, TRACK_COLUMNS), t_e, q_e, campaign, tr,
+                                                        **problem_settings))
     est = estimate(problem, model, estimation, chi0, k, seed, earlier=tuple(earlier_problems))
     E_trials = [float(make_objective(p, model)(est.chi[None])[0]) * 1000 for p in (*earlier_problems, problem)]
     if upstream is None:

@@ -35,7 +35,7 @@ from stringcast.core import (PARAM_NAMES, TRACK_COLUMNS, Campaign, DataError, Es
                              EvaluationSettings, ModelSettings, MotionSettings, TrackingSettings, Verdict,
                              motion_window, read_joint_table, read_json, read_parquet, write_json)
 from stringcast.model import planned_parameters, simulate_batch
-from .problem import EstimationProblem, build_problem
+from .problem import EstimationProblem, build_problem_explained
 
 MIN_VALID_FRAMES = 5
 """Fewer frames with a tracked tip in the window than this: the error is not judged (warn)."""
@@ -129,13 +129,13 @@ def run_prediction(params_json: Path, tracks_parquet: Path, joints_csv: Path, ca
         DataError: unreadable or inconsistent inputs (named), or no tracked tip in the window.
     """
     n = campaign.string.n_points
-    coeffs, mu = planned_parameters(n, read_json(params_json), str(params_json))
+    coeffs, mu = planned_parameters(n, read_json(params_json, mapping=True), str(params_json))
     t_j, q_j = read_joint_table(joints_csv, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
     # every frame the log covers (the fit's compare_after_motion_s does not apply); E's w is not used
     compare_all = dataclasses.replace(EstimationSettings(), compare_after_motion_s=None)
-    problem = build_problem(read_parquet(tracks_parquet, TRACK_COLUMNS), t_j, q_j, campaign, model=model,
-                            evaluation=EvaluationSettings(), estimation=compare_all, tracking=tracking,
-                            source=str(tracks_parquet))
+    problem = build_problem_explained(read_parquet(tracks_parquet, TRACK_COLUMNS), t_j, q_j, campaign, tracks_parquet,
+                                      model=model, evaluation=EvaluationSettings(), estimation=compare_all,
+                                      tracking=tracking)
     try:
         t_end = motion_window(t_j, q_j)[1] + float(motion.flight_window_s)
         figures = tip_prediction_error(problem, coeffs, mu, campaign.target.xy, t_end)

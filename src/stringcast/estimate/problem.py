@@ -20,14 +20,16 @@ option) up to that long after the arm stops (:func:`stringcast.core.arm.motion_w
 """
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
 import pandas as pd
 
 from stringcast.core import (Campaign, DataError, EstimationSettings, EvaluationSettings, ModelSettings,
-                             TrackingSettings, hand_pose, motion_start, motion_window, tracks_arrays)
+                             TrackingSettings, hand_pose, motion_start, motion_window, tracks_arrays, trial_result)
 from stringcast.model import decode
 from stringcast.model import fill_rest_pose, folded_points
 from stringcast.model import relax_batch, simulate_batch
@@ -165,6 +167,34 @@ def build_problem(tracks_df: pd.DataFrame, t_joints: np.ndarray, q_joints: np.nd
         w=float(evaluation.w), fallback_points=fallback, folded_points=folded,
         settle_s=float(estimation.rest_settle_s or 0.0),
         t_motion_start=t_move)
+
+
+def upstream_causes(results_dir: str | Path, stages: tuple[str, ...] = ("geometry", "clock", "tracking")) -> str:
+    """The first reason of each earlier stage (``<stage>.json`` beside the tracks,
+    :func:`~stringcast.core.trial_result`) whose verdict is not ok, joined for an error message
+    (``""`` where none is, or a file cannot be read): why a problem could not be built, in the words
+    of the stage that saw it (a string of another length than the campaign's: tracking's)."""
+    said = []
+    for stage in stages:
+        _, path = trial_result(results_dir, stage)
+        try:
+            verdict = json.loads(Path(path).read_text()).get("verdict") or {}
+        except (OSError, ValueError, AttributeError):
+            continue
+        reasons = verdict.get("reasons") if isinstance(verdict, dict) else None
+        if isinstance(verdict, dict) and verdict.get("status") in ("warn", "fail") and reasons:
+            said.append(str(reasons[0]) if str(reasons[0]).startswith(f"{stage}:") else f"{stage}: {reasons[0]}")
+    return "; the earlier stages said: " + "; ".join(said) if said else ""
+
+
+def build_problem_explained(tracks_df: pd.DataFrame, t_joints: np.ndarray, q_joints: np.ndarray,
+                            campaign: Campaign, source: str | Path, **settings) -> EstimationProblem:
+    """:func:`build_problem` on ``source`` (a tracks.parquet), whose DataError carries the earlier stages'
+    reasons (:func:`upstream_causes`) where they say why no problem could be built."""
+    try:
+        return build_problem(tracks_df, t_joints, q_joints, campaign, **settings, source=str(source))
+    except DataError as exc:
+        raise DataError(f"{exc}{upstream_causes(Path(source).parent)}") from exc
 
 
 def _simulate(problem: EstimationProblem, coeffs: np.ndarray, mu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

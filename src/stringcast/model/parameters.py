@@ -101,8 +101,9 @@ def planned_parameters(n_points: int, params: Mapping, source: str = "params.jso
         mu = np.asarray(params["mu"], float)
     except (KeyError, TypeError, ValueError) as exc:
         raise DataError(f"{source}: needs 'coefficients' ({', '.join(PARAM_NAMES)}) and 'mu' ({exc})") from exc
-    if mu.shape != (n_points,) or not np.all(np.isfinite(coeffs)) or not np.all(mu > 0):
-        raise DataError(f"{source}: mu must hold {n_points} positive values and coefficients be finite")
+    if mu.shape != (n_points,) or not np.all(np.isfinite(coeffs) & (coeffs > 0)) or not np.all(np.isfinite(mu) & (mu > 0)):
+        raise DataError(f"{source}: mu must hold {n_points} positive values and the coefficients be positive and "
+                        "finite (as Table 2's ranges)")
     return coeffs, mu
 
 
@@ -123,8 +124,10 @@ def ensemble_parameters(n_points: int, params: Mapping, source: str = "params.js
     except (KeyError, TypeError, ValueError, IndexError) as exc:
         raise DataError(f"{source}: the robust planner needs 'top' (entries with 'coefficients' and "
                         f"'mu_groups') and 'mass_groups' ({exc!r})") from exc
-    if len(top) < 1 or mu.shape != (len(top), n_points) or not np.all(np.isfinite(coeffs)) or not np.all(mu > 0):
-        raise DataError(f"{source}: 'top' must hold >= 1 set of finite coefficients and {n_points} positive masses")
+    if (len(top) < 1 or mu.shape != (len(top), n_points) or not np.all(np.isfinite(coeffs) & (coeffs > 0))
+            or not np.all(np.isfinite(mu) & (mu > 0))):
+        raise DataError(f"{source}: 'top' must hold >= 1 set of positive, finite coefficients and {n_points} "
+                        "positive masses")
     return coeffs, mu
 
 

@@ -263,8 +263,12 @@ def read_motion(csv: Path, json: Path | None = None) -> Motion:
     json = Path(json) if json else Path(csv).with_suffix(".json")
     cp, q0, T = np.zeros((q.shape[1], 0)), q[0], float(t[-1])
     if json.exists():
-        doc = read_json(json)
-        cp = np.asarray(doc.get("control_points_rad_s", cp), float).reshape(q.shape[1], -1)
-        q0 = np.asarray(doc.get("q0_rad", q0), float)
-        T = float(doc.get("T_s", T))
+        doc = read_json(json, mapping=True)
+        try:
+            cp = np.asarray(doc.get("control_points_rad_s", cp), float).reshape(q.shape[1], -1)
+            q0 = np.asarray(doc.get("q0_rad", q0), float)
+            T = float(doc.get("T_s", T))
+        except (TypeError, ValueError) as exc:
+            raise DataError(f"{json}: control_points_rad_s must be {q.shape[1]} x N, q0_rad {q.shape[1]} values and "
+                            f"T_s a number ({exc})") from exc
     return Motion(t=t, q=q, T=T, control_points=cp, q0=q0)

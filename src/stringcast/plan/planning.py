@@ -356,7 +356,7 @@ def run_plan(params_json: Path, played_motion_json: Path, campaign: Campaign, ou
             unreadable tracks or a joint log that is not the played motion.
         ConfigError: residual correction without the trial's files.
     """
-    params = read_json(params_json)
+    params = read_json(params_json, mapping=True)
     failed_fit = params.get("verdict") if (params.get("verdict") or {}).get("status") == "fail" else None
     coeffs, mu = planned_parameters(n_points=campaign.string.n_points, params=params, source=str(params_json))
     previous = read_motion_json(played_motion_json, campaign.arm.n_joints, campaign.arm.controller_rate)
@@ -377,7 +377,7 @@ def run_plan(params_json: Path, played_motion_json: Path, campaign: Campaign, ou
     if replan_mm > 0 and miss * 1000 > replan_mm:
         why = f"the tracked tip missed by {miss * 1000:.0f} mm (> replan_miss_mm {replan_mm:.0f})"
         wide = float(motion.replan_perturb_rad_s)
-        if wide > 0 and read_json(played_motion_json).get("origin") == "wide_perturbation":
+        if wide > 0 and read_json(played_motion_json, mapping=True).get("origin") == "wide_perturbation":
             wide, why = 0.0, why + " after a wide perturbation"
         result = _replan(campaign, model, motion, coeffs, mu, seed, previous, ensemble, observed, why, wide)
     else:

@@ -27,7 +27,7 @@ import pandas as pd
 
 from stringcast import __version__
 from stringcast.calibrate import Calibration
-from stringcast.core import (PARAM_NAMES, TRACK_COLUMNS, Campaign, ModelSettings, MotionSettings, Settings,
+from stringcast.core import (PARAM_NAMES, TRACK_COLUMNS, Campaign, DataError, ModelSettings, MotionSettings, Settings,
                              Verdict, find_video, hand_pose, model_ranges, motion_start, read_joint_table, read_json,
                              read_parquet, tracks_arrays, trial_result, worst, write_text)
 from . import figures as figs
@@ -91,12 +91,25 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, ou
     Raises:
         DataError: a required result file is missing or malformed (named).
     """
+    try:
+        _write_trial_report(Path(data_dir), Path(results_dir), campaign, Path(out), settings)
+    except MALFORMED as exc:
+        raise DataError(f"{results_dir}: a result file the trial report reads is malformed "
+                        f"({type(exc).__name__}: {exc})") from exc
+
+
+MALFORMED = (KeyError, TypeError, ValueError, IndexError, AttributeError)
+"""What a result file of the wrong shape raises as the reports read it (a DataError for the user)."""
+
+
+def _write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, out: Path, settings: Settings) -> None:
+    """:func:`write_trial_report`'s work."""
     n = campaign.string.n_points
-    params = read_json(results_dir / "params.json")
+    params = read_json(results_dir / "params.json", mapping=True)
     calib_stage, calib_json = trial_result(results_dir, "geometry")  # the sweep's, when the trial has one
     sync_stage, sync_json = trial_result(results_dir, "clock")
-    calib, sync = read_json(calib_json), read_json(sync_json)
-    nxt = read_json(results_dir / "motion.json")
+    calib, sync = read_json(calib_json, mapping=True), read_json(sync_json, mapping=True)
+    nxt = read_json(results_dir / "motion.json", mapping=True)
     tracks = read_parquet(results_dir / "tracks.parquet", TRACK_COLUMNS)
     fit = read_parquet(results_dir / "fit.parquet")
     t_j, q_j = read_joint_table(data_dir / "joints.csv", n_joints=campaign.arm.n_joints,
@@ -291,7 +304,20 @@ def write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign,
 
     ``settings``: every stage's: the page names the method they make (:mod:`.provenance`) and
     reads the flight window (``motion``).
+
+    Raises:
+        DataError: a result file that is missing or malformed (named).
     """
+    try:
+        _write_campaign_report(Path(data_dir), Path(results_dir), campaign, Path(out), settings)
+    except MALFORMED as exc:
+        raise DataError(f"{results_dir}: a result file the campaign report reads is malformed "
+                        f"({type(exc).__name__}: {exc})") from exc
+
+
+def _write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign, out: Path,
+                           settings: Settings) -> None:
+    """:func:`write_campaign_report`'s work."""
     motion = settings.motion
     rows, tips = [], {}
     n = campaign.string.n_points
@@ -300,7 +326,7 @@ def write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign,
         dd, rd = data_dir / f"trial_{k}", results_dir / f"trial_{k}"
         if not (rd / "params.json").exists():
             continue
-        params = read_json(rd / "params.json")
+        params = read_json(rd / "params.json", mapping=True)
         tracks = read_parquet(rd / "tracks.parquet")
         t0, t1, played = _motion_window(dd, motion, campaign.arm)
         t, xy, valid = _tracked(tracks, n)

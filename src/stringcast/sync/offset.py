@@ -54,6 +54,7 @@ from pathlib import Path
 import numpy as np
 
 from .confidence import choose_offset
+from .rate_check import clock_rate, rate_reason
 from .video_offset import estimate_offset
 from stringcast.calibrate import Calibration
 from stringcast.core import (
@@ -106,18 +107,25 @@ def _video_doc(trial_dir: Path, calibration_json, campaign, meta: dict, video_ya
     trigger = meta.get("trigger_time_s")
     cal = Calibration.from_json(calibration_json)
     est, failure = None, None
-    with open_trial_video(find_video(trial_dir), frames_npy, fps=float(meta["fps"])) as video:
+    fps = float(meta["fps"])
+    with open_trial_video(find_video(trial_dir), frames_npy, fps=fps) as video:
         warns = check_frame_count(video, meta, video_yaml)
+        video.fps = fps   # video.yaml's, which every later stage's frame times use (a container's own is warned of)
         try:
             est = estimate_offset(video, cal, campaign.arm, t_j, q_j, sync, board_check, trigger, workers)
         except DataError as exc:
             if trigger is None:
-                raise
+                raise DataError(f"{exc}{_rate_cause(video, cal, campaign, t_j, q_j, sync, board_check, video_yaml)}"
+                                ) from exc
             failure = str(exc)
         # the file's own frame times, where a full pass (the decode, or the coarse search) has read them already
         stamps = video.timestamps_s if frames_npy is not None or (est is not None and est["coarse_offset_s"]
                                                                    is not None) else None
-    choice = choose_offset(est, failure, trigger, sync)
+        choice = choose_offset(est, failure, trigger, sync)
+        if not choice["verdict"].ok:   # the arm nowhere where the log puts it: the frames' rate may be off
+            cause = _rate_cause(video, cal, campaign, t_j, q_j, sync, board_check, video_yaml)
+            if cause:
+                choice["verdict"] = Verdict(choice["verdict"].status, (cause.removeprefix(": "), *choice["verdict"].reasons))
     doc = {k: v for k, v in (est or {}).items() if k != "evidence"}
     doc.update(offset_s=choice["offset_s"], chosen=choice["chosen"], candidates=choice["candidates"],
                verdict=choice["verdict"], residual_mm=choice["candidates"][choice["chosen"]]["residual_mm"],
@@ -138,6 +146,17 @@ def _video_doc(trial_dir: Path, calibration_json, campaign, meta: dict, video_ya
     if doc["dropped_frames"]:
         warns.append(f"{len(doc['dropped_frames'])} dropped frame(s) by the file's timestamps")
     return doc, warns
+
+
+def _rate_cause(video, cal, campaign, t_j, q_j, sync: SyncSettings, board_check: BoardCheckSettings,
+                video_yaml: Path) -> str:
+    """``": <reason>"`` where the frames run at another rate than video.yaml's fps says
+    (:func:`~stringcast.sync.rate_check.clock_rate`), else ``""``."""
+    try:
+        found = clock_rate(video, cal, campaign.arm, t_j, q_j, sync, board_check, float(video.fps))
+    except DataError:
+        return ""
+    return "" if found is None else ": " + rate_reason(found, float(video.fps), video_yaml)
 
 
 def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaign, out_json: str | Path | None = None,
@@ -171,7 +190,9 @@ def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaig
     t_j, q_j = read_joint_table(joints_csv, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
     if sync.method == "trigger":
         doc.update(_trigger_doc(meta, video_yaml), verdict=Verdict())
-        warns = []
+        with open_trial_video(find_video(trial_dir), None if frames_npy is None else Path(frames_npy),
+                              fps=doc["fps"]) as video:   # the frame count every later stage's times rest on
+            warns = check_frame_count(video, meta, video_yaml)
     else:
         est_doc, warns = _video_doc(trial_dir, calibration_json, campaign, meta, video_yaml, t_j, q_j, sync,
                                     board_check, None if frames_npy is None else Path(frames_npy), workers)

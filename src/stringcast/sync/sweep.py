@@ -148,7 +148,7 @@ def run_sweep(trial_dir: str | Path, calibration_json: str | Path, sync_json: st
             is in the image (the files named).
     """
     trial_dir = Path(trial_dir)
-    calibration, sync_doc = Calibration.from_json(calibration_json), read_json(sync_json)
+    calibration, sync_doc = Calibration.from_json(calibration_json), read_json(sync_json, mapping=True)
     t_j, q_j = read_joint_table(trial_dir / "joints.csv", n_joints=campaign.arm.n_joints)
     t_frames = frame_times(sync_doc)
     if sweep.frames == 0 or calibration.K is None or not calibration.corner_ids:

@@ -37,6 +37,15 @@ def _fwhm_across_many(absdiff: np.ndarray, P: np.ndarray, T: np.ndarray) -> np.n
     return 0.25 * np.count_nonzero(v > lo + 0.5 * (hi - lo), axis=1).astype(float)
 
 
+def _at_pixels(image: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """``image`` (H, W) at the pixels of path points pts (M, 2) (row, col), rounded down (round them
+    first for the nearest pixel) and clipped into the image: (M,). A refined centreline may lie up
+    to its refinement's half width past the edge of the region it was found in (a string that goes
+    on past the ROI); those vertices read the edge's pixels, never an index out of bounds."""
+    ij = np.clip(np.asarray(pts).astype(int), 0, np.array(image.shape[:2]) - 1)
+    return image[ij[:, 0], ij[:, 1]]
+
+
 def _end_tangent(pts: np.ndarray, cum: np.ndarray, n_tangent: float):
     """Unit tangent (2,) of a path (M, 2) at its end, over its last ``n_tangent`` px of arc
     ``cum`` (M,); None where those vertices coincide."""
@@ -75,8 +84,7 @@ def string_continues(absdiff: np.ndarray, pts: np.ndarray, edge: float | None, t
     own = pts[np.hypot(*(pts - pts[-1]).T) <= d[-1] + width_px]   # the walk's vertices a sample can be near
     near = np.min(np.hypot(ray[..., None, 0] - own[:, 0], ray[..., None, 1] - own[:, 1]), axis=-1)
     v[near < width_px] = 0.0   # the string's own walked stretch (a tip curled back onto it) goes on nowhere
-    ij = np.round(pts).astype(int)
-    along = float(np.median(absdiff[ij[:, 0], ij[:, 1]]))
+    along = float(np.median(_at_pixels(absdiff, np.round(pts))))
     return bool(along > 0 and float(np.max(v.mean(axis=1))) >= share * along)
 
 
@@ -254,8 +262,7 @@ def clean_end(pts: np.ndarray, skel: np.ndarray, skel_at: np.ndarray, absd: np.n
     core = np.unique(lab[max(r - 2 - r0, 0):r + 3 - r0, max(c - 2 - c0, 0):c + 3 - c0])
     if np.any(stats[core[core > 0], cv2.CC_STAT_AREA] >= st.branch_min_px):
         return False
-    ij = pts.astype(int)
-    v = absd[ij[:, 0], ij[:, 1]]
+    v = _at_pixels(absd, pts)
     t = pts[-1] - pts[max(len(pts) - 7, 0)]
     t = t / max(float(np.hypot(*t)), 1e-9)
     ray = pts[-1] + np.arange(-4.0, 5.0)[:, None] * t  # behind and past the end

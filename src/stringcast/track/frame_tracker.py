@@ -35,12 +35,19 @@ class FrameTrack:
     """One frame's result: positions (n, 2) m of points 1..n (NaN where invalid), valid (n,),
     the centreline in image px (M, 2) (x, y), grasp first (empty if none was found), and
     ``length_mismatch_m``: L minus the centreline's length from the grasp to a trusted free end
-    (the tip), m, NaN without one or with the string's start hidden (:mod:`stringcast.track.quality` reads it)."""
+    (the tip), m, NaN without one or with the string's start hidden (also where the mismatch is
+    too large to anchor any point: a string longer or shorter than the campaign's); ``past_roi``:
+    the walk from the grasp was cut by the region of interest's edge inside the image, i.e. the
+    string was seen farther than L + ``roi_margin_mm`` from the grasp; ``off_image``: that walk was
+    cut by the image's edge (the string runs out of the image). :mod:`stringcast.track.quality`
+    reads the last three."""
 
     positions: np.ndarray
     valid: np.ndarray
     path_px: np.ndarray
     length_mismatch_m: float = math.nan
+    past_roi: bool = False
+    off_image: bool = False
 
     def __post_init__(self):
         n = len(self.valid)
@@ -60,24 +67,46 @@ def _events_px(pts: np.ndarray, bridged: np.ndarray, ambiguous: np.ndarray) -> t
 
 
 def end_cut(end, arm: np.ndarray, origin, image_shape, width_px: float) -> bool:
-    """Whether a skeleton walk's end may be cut by the arm or the image's edge, not the string's own.
+    """Whether a skeleton walk's end may be cut by the arm, the image's edge or the region of
+    interest's edge, not the string's own.
 
     The skeleton stops about half a string's width short of the foreground's end, and the
-    foreground stops at the guarded arm mask or the image's edge; blur and fading take up to
-    another half width and a few px. An end within ``width_px + 4`` px of either is therefore
+    foreground stops at the guarded arm mask, the image's edge and the ROI's edge (the ROI
+    clips the frame to L + ``roi_margin_mm`` around the grasp; a string seen past it, where the
+    image scale or the grasp's place is wrong, goes on beyond it); blur and fading take up to
+    another half width and a few px. An end within ``width_px + 4`` px of any of them is therefore
     taken as cut (ends of generalization seed 11 cut by a joint disc lay 4.6-6.7 px from it at a
-    3.8 px width; seed 2's free tip 12.9 px from a disc at 5.5 px must stay free).
+    3.8 px width; seed 2's free tip 12.9 px from a disc at 5.5 px must stay free; a square size
+    configured 50 instead of 60 mm put walks' ends on the ROI's edge, taken for free ends).
 
     Args:
-        end: (row, col) of the end in the ROI, px. arm: (h, w) bool guarded arm mask of the ROI.
-        origin: (row, col) of the ROI in the image. image_shape: (H, W). width_px: the string's
-            width in the foreground, px.
+        end: (row, col) of the end in the ROI, px. arm: (h, w) bool guarded arm mask of the ROI
+            (its shape is the ROI's). origin: (row, col) of the ROI in the image. image_shape:
+            (H, W). width_px: the string's width in the foreground, px.
     """
+    return edge_cut(end, arm.shape, origin, image_shape, width_px) or near_arm(end, arm, math.ceil(width_px) + 4)
+
+
+def edge_cut(end, roi_shape, origin, image_shape, width_px: float) -> bool:
+    """Whether an end (row, col) in the ROI lies within ``width_px + 4`` px of the image's edge or
+    the ROI's (``roi_shape`` (h, w) at ``origin`` (row, col) in an image of ``image_shape`` (H, W)):
+    the foreground stops there, so the string may go on (:func:`end_cut`)."""
     r = math.ceil(width_px) + 4
     row, col = end[0] + origin[0], end[1] + origin[1]
     if not (r <= row < image_shape[0] - r and r <= col < image_shape[1] - r):
         return True
-    return near_arm(end, arm, r)
+    return not (r <= end[0] < roi_shape[0] - r and r <= end[1] < roi_shape[1] - r)
+
+
+def seen_segments(px: np.ndarray, origin_xy, roi_shape) -> np.ndarray:
+    """(M - 1,) bool: the segments of a path px (M, 2) (x, y) image px whose both vertices lie in
+    the region of interest (``origin_xy`` (x0, y0), ``roi_shape`` (h, w): pixel centres 0 .. w - 1,
+    their areas to -0.5 .. w - 0.5), i.e. where the frame was looked at. A vertex outside it (the
+    hidden head from a grasp outside the image, a centreline refined or extended past the edge)
+    was not seen, and no point on its segments is valid."""
+    x, y = px[:, 0] - origin_xy[0], px[:, 1] - origin_xy[1]
+    inside = (x >= -0.5) & (x <= roi_shape[1] - 0.5) & (y >= -0.5) & (y <= roi_shape[0] - 0.5)
+    return inside[:-1] & inside[1:]
 
 
 class FrameTracker:
@@ -103,13 +132,16 @@ class FrameTracker:
         frame period, the middle one at the frame's time (its last row is the grasp)."""
         st, cal, n = self.st, self.cal, self.n
         gpx = poses_px[len(poses_px) // 2][-1]
-        scale = float(cal.m_per_px(gpx[None])[0])  # m per px near the grasp
+        scale = float(cal.m_per_px(gpx[None])[0]) if np.all(np.isfinite(gpx)) else math.nan  # m per px near the grasp
+        def none(path=None, mismatch=math.nan, cuts=(False, False)):  # no points (NaN), with the centreline found
+            return FrameTrack(np.full((n, 2), np.nan), np.zeros(n, bool), np.zeros((0, 2)) if path is None else path,
+                              mismatch, *cuts)
+        if not (math.isfinite(scale) and scale > 0):
+            return none()   # the grasp maps to no place in the image (a mapping that degenerates there)
         R = (self.L + st.roi_margin_mm / 1000) / scale
         H, W = frame.shape
-        x0, y0 = int(max(0, gpx[0] - R)), int(max(0, gpx[1] - R))
-        x1, y1 = int(min(W, gpx[0] + R + 1)), int(min(H, gpx[1] + R + 1))
-        def none(path=None):  # no points (NaN), with the centreline found (if any)
-            return FrameTrack(np.full((n, 2), np.nan), np.zeros(n, bool), np.zeros((0, 2)) if path is None else path)
+        x0, y0 = int(np.clip(gpx[0] - R, 0, W)), int(np.clip(gpx[1] - R, 0, H))
+        x1, y1 = int(np.clip(gpx[0] + R + 1, 0, W)), int(np.clip(gpx[1] + R + 1, 0, H))
         if x1 - x0 < 8 or y1 - y0 < 8:
             return none()
         arm = draw_arm_mask((y1 - y0, x1 - x0), poses_px, self.arm, st, scale, (x0, y0))
@@ -128,6 +160,8 @@ class FrameTracker:
             return self._with_beyond(none(), absd, arm, np.zeros((0, 2)), cal.pixel_to_robot(gpx[None]), scale, (y0, x0))
         pts, bridged, branch, fold = found
         end = pts[-1].astype(int)
+        off_image = bool(edge_cut(end + [y0, x0], (H, W), (0, 0), (H, W), self._width))
+        cuts = (bool(edge_cut(end, arm.shape, (y0, x0), (H, W), self._width)) and not off_image, off_image)
         free_end = bool(not end_cut(end, arm, (y0, x0), (H, W), self._width) and np.hypot(*(end - g)) > 2 * rho
                         and clean_end(pts, self._skel, self._skel_at, absd, self._bg, st,
                                       st.end_touch_mm / 1000 / scale))
@@ -140,7 +174,7 @@ class FrameTracker:
         pts, obs = decimate_path(pts, ~bridged[1:], st.arc_step_px, sub=4)
         head = hidden_arc(g, pts)  # grasp -> first visible vertex, under the gripper's mask
         px = np.vstack([head, pts])[:, ::-1] + [x0, y0]  # (x, y) image px, grasp first
-        obs = np.concatenate([np.full(len(head), not hidden_start), obs])
+        obs = np.concatenate([np.full(len(head), not hidden_start), obs]) & seen_segments(px, (x0, y0), arm.shape)
         xy = cal.pixel_to_robot(px)
         s_poly = arc_length(xy)
         L_head = float(s_poly[len(head)])
@@ -168,9 +202,9 @@ class FrameTracker:
             if free_end:
                 hi = min(hi, float(s_poly[-1]))
         elif behind:  # the grasp's side holds no point: only the stretch beyond the arm may
-            return self._with_beyond(none(px), absd, arm, walked, xy, scale, (y0, x0))
-        else:
-            return none(px)
+            return self._with_beyond(none(px, cuts=cuts), absd, arm, walked, xy, scale, (y0, x0))
+        else:  # no anchor: with a free end, a string seen longer or shorter than L (its mismatch kept)
+            return none(px, D if free_end and not hidden_start else math.nan, cuts)
         s_t = self.s_targets - shift  # the targets' polyline arc
         if split is not None:  # model arc -> polyline arc: knots at the head's end and at the free end
             end = self.L - st.tip_shortfall_mm / 1000 - split[2]
@@ -183,7 +217,7 @@ class FrameTracker:
             pos, valid = band_points(frame, px, obs & (np.arange(len(obs)) >= len(head)), s_poly, s_t, trusted,
                                      free_end, path_contrast(absd, pts), cal, st)
         pos[~valid] = np.nan
-        done = FrameTrack(pos, valid, px, D if free_end and not hidden_start else math.nan)
+        done = FrameTrack(pos, valid, px, D if free_end and not hidden_start else math.nan, *cuts)
         return self._with_beyond(done, absd, arm, walked, xy, scale, (y0, x0)) if behind else done
 
     def _with_beyond(self, done: FrameTrack, absd, arm, walked, xy, scale: float, origin) -> FrameTrack:
@@ -198,6 +232,8 @@ class FrameTracker:
             self.L / n / scale)
         if found is None or over_board(self.board, found[0][-1, ::-1] + origin[::-1], self._width + 4):
             return done  # no stretch, or its end over the board (a square may hide the rest)
+        if edge_cut(found[0][-1], arm.shape, origin, self.bg.shape, self._width):
+            return done  # its end by the image's or the ROI's edge: the string may go on past it
         pts, bridged, amb = found
         pts, bridged, amb, free_end = self._refine(absd, pts, bridged, amb, np.zeros(len(pts), bool), True)
         if not free_end:
@@ -206,6 +242,7 @@ class FrameTracker:
         ev_px = np.r_[0.0, ev_px]  # the rim the stretch comes out of is an ambiguity too
         pts, obs = decimate_path(pts, ~bridged[1:], st.arc_step_px, sub=4)
         px = pts[:, ::-1] + [origin[1], origin[0]]  # (x, y) image px, from the arm's rim to the tip
+        obs = obs & seen_segments(px, (origin[1], origin[0]), arm.shape)
         far = self.cal.pixel_to_robot(px)
         s_poly = arc_length(far)
         last = float(np.max(np.interp(ev_px, np.linspace(0.0, cum_px[-1], len(pts)), s_poly)))
@@ -218,7 +255,7 @@ class FrameTracker:
         valid &= (s_t >= last) & ~done.valid
         positions = np.where(valid[:, None], pos, done.positions)
         path = np.vstack([done.path_px, px]) if len(done.path_px) else px
-        return FrameTrack(positions, valid | done.valid, path, math.nan)
+        return FrameTrack(positions, valid | done.valid, path, math.nan, done.past_roi, done.off_image)
 
     def _anchor_tol(self, scale: float) -> float:
         """How far (m) a walk's length may miss L and its free end still be the tip: ``anchor_tol_mm``,

@@ -3,19 +3,29 @@
 Tracking has no ground truth to compare with, but a string has properties the tracker does
 not impose, and their violation measures its error (:func:`tracking_quality`):
 
-* **Valid share**: the share of the string's points 1..n tracked in the moving frames (the
-  motion's window). The points lost are the fast, blurred ones the fit is judged by.
+* **Valid share**: the share of the string's points 1..n tracked in the frames judged: every
+  frame a later stage compares, from the motion's start to the joint log's end (the fit, eqs.
+  4-6, and the next trial's prediction compare every frame the log covers; the planner's
+  residual the tip up to the flight window after the arm stops). The points lost are the fast,
+  blurred ones the fit is judged by, and the ones that leave the image after the motion (a
+  point outside the image is never valid).
 * **Length mismatch** D = L - the centreline's length from the grasp to a trusted free end
   (the tip), in the frames where the string is seen from the fingers to its end
   (:class:`~stringcast.track.frame_tracker.FrameTrack`). The tracker shares D among the head,
   the arc and the end, so it is not in the points' spacing; it is the error of the measured
   length itself: its median, a bias (the image scale, or L, or a tip lost against the wall),
-  and its spread (p95 of |D - median|). Both are reported, not judged: a drawn setup whose
-  points were within 0.43 mm median / 0.85 mm p95 of the truth measured its string 21 mm
-  short at the median frame (a clay weight half-way, string type 3), and the free end's
-  extension varies by several mm on tracks whose points are within 3 mm.
+  and its spread (p95 of |D - median|). Both are reported; only a median beyond
+  ``verdict_length_share`` of L is judged: a drawn setup whose points were within 0.43 mm
+  median / 0.85 mm p95 of the truth measured its string 21 mm short at the median frame (a
+  clay weight half-way, string type 3; 7 % of it), and the free end's extension varies by
+  several mm on tracks whose points are within 3 mm; a string of another length than the
+  campaign's (a 5000 mm string configured for a 300 mm one) is not the string filmed, and
+  then no point is trusted.
+* **Past the region of interest**: the share of the frames judged whose walk from the grasp
+  runs to the edge of the region tracked (L + ``roi_margin_mm`` around the grasp) inside the
+  image: string seen farther from the grasp than the campaign's string reaches.
 * **Segment excess**: a chord between consecutive points cannot be longer than the arc
-  between them (L / n) by more than the string stretches; the p95 over the moving frames of
+  between them (L / n) by more than the string stretches; the p95 over the frames judged of
   max(0, chord - L / n), mm.
 * **Rest jitter**: the string hangs still before the motion; the p95 over the points of each
   point's standard deviation over those frames, mm: the tracker's noise where the truth is
@@ -24,8 +34,9 @@ not impose, and their violation measures its error (:func:`tracking_quality`):
 The verdict (:class:`~stringcast.core.TrackingSettings`, ``verdict_*``) compares them with the
 error the rest of the pipeline can bear (the tracking goals: median 1 mm, p95 3 mm), in mm of
 the string and shares of its points, not with any camera: warn when the valid share is under
-``verdict_min_valid_share``, or the segment excess or the rest jitter exceed their limits;
-each reason names the likely cause. ``fail`` is left to the fit (:mod:`stringcast.estimate`),
+``verdict_min_valid_share``, the seen length or the region's edge says the string is not the
+campaign's, or the segment excess or the rest jitter exceed their limits; each reason names the
+likely cause (and the setting, where one is). ``fail`` is left to the fit (:mod:`stringcast.estimate`),
 which sees whether the tracked path can be explained at all.
 """
 from __future__ import annotations
@@ -42,8 +53,9 @@ def _p95(a: np.ndarray) -> float | None:
     return float(np.percentile(a, 95)) if a.size else None
 
 
-def tracking_quality(tracks: pd.DataFrame, mismatch_m: np.ndarray, L: float, n: int, moving: np.ndarray,
-                     rest: np.ndarray, st: TrackingSettings) -> dict:
+def tracking_quality(tracks: pd.DataFrame, mismatch_m: np.ndarray, L: float, n: int, judged: np.ndarray,
+                     rest: np.ndarray, st: TrackingSettings, past_roi: np.ndarray | None = None,
+                     off_image: np.ndarray | None = None, string_setting=None, scale_note: str | None = None) -> dict:
     """The tracking's self-measures and verdict, for ``tracking.json``.
 
     Args:
@@ -51,32 +63,40 @@ def tracking_quality(tracks: pd.DataFrame, mismatch_m: np.ndarray, L: float, n: 
         mismatch_m: (F,) per frame L minus the measured length to a trusted free end, m (NaN
             where none; :attr:`FrameTrack.length_mismatch_m`).
         L: the string's length, m. n: its mass points.
-        moving: (F,) bool, the frames of the motion's window (judged).
+        judged: (F,) bool, the frames a later stage compares (:func:`frames_judged`).
         rest: (F,) bool, the still frames before the motion (rest jitter).
         st: :class:`~stringcast.core.TrackingSettings` (the ``verdict_*`` limits).
+        past_roi, off_image: (F,) bool or None: the frame's walk from the grasp ran to the edge of
+            the region tracked inside the image (:attr:`FrameTrack.past_roi`), or to the image's edge.
+        string_setting: ``key -> str``, where the string's ``key`` is set
+            (:meth:`~stringcast.core.specs.Campaign.string_setting`), for the reasons; None: the key.
+        scale_note: where the calibration found the image scale off (the still arm seen at a scale,
+            :func:`~stringcast.calibrate.scale_check.arm_scale`), what it said: a string seen at another
+            length is then put down to the scale, not to the string.
 
     Returns:
-        ``{"valid_share", "moving_frames", "length_mismatch_mm": {"frames", "median",
-        "spread_p95", "abs_p95"}, "segment_excess_p95_mm", "rest_jitter_p95_mm", "verdict"}``
-        (a figure without data is None).
+        ``{"valid_share", "judged_frames", "length_mismatch_mm": {"frames", "median", "spread_p95",
+        "abs_p95"}, "past_roi_share", "off_image_share", "segment_excess_p95_mm", "rest_jitter_p95_mm",
+        "verdict"}`` (a figure without data is None).
 
     Raises:
         ValueError: the table does not hold (n + 1) points for every frame, or mismatched lengths.
     """
-    F = len(moving)
-    if len(tracks) != F * (n + 1) or len(mismatch_m) != F or len(rest) != F:
+    F = len(judged)
+    flags = [np.zeros(F, bool) if f is None else np.asarray(f, bool) for f in (past_roi, off_image)]
+    if len(tracks) != F * (n + 1) or len(mismatch_m) != F or len(rest) != F or any(len(f) != F for f in flags):
         raise ValueError(f"tracking_quality: {len(tracks)} rows for {F} frames x {n + 1} points, "
                          f"{len(mismatch_m)} mismatches, {len(rest)} rest flags")
     t = tracks.sort_values(["frame", "point"])
     xy = t[["x_m", "y_m"]].to_numpy(float).reshape(F, n + 1, 2)
     ok = t["valid"].to_numpy(bool).reshape(F, n + 1)
-    mov = np.asarray(moving, bool)
-    share = float(ok[mov, 1:].mean()) if mov.any() else None
-    D = np.asarray(mismatch_m, float)[mov] * 1000
+    use = np.asarray(judged, bool)
+    share = float(ok[use, 1:].mean()) if use.any() else None
+    D = np.asarray(mismatch_m, float)[use] * 1000
     D = D[np.isfinite(D)]
     med = float(np.median(D)) if D.size else None
-    chord = np.linalg.norm(np.diff(xy[mov], axis=1), axis=2) * 1000
-    both = ok[mov, 1:] & ok[mov, :-1]
+    chord = np.linalg.norm(np.diff(xy[use], axis=1), axis=2) * 1000
+    both = ok[use, 1:] & ok[use, :-1]
     excess = np.maximum(chord[both] - L / n * 1000, 0.0)
     still = np.asarray(rest, bool)
     jitter = None
@@ -86,24 +106,73 @@ def tracking_quality(tracks: pd.DataFrame, mismatch_m: np.ndarray, L: float, n: 
         if seen.any():
             at_rest = np.where(oks[:, seen, None], xs[:, seen], np.nan)
             jitter = _p95(np.sqrt(np.nanvar(at_rest, axis=0).sum(axis=1)) * 1000)
-    doc = {"valid_share": share, "moving_frames": int(mov.sum()),
+    doc = {"valid_share": share, "judged_frames": int(use.sum()),
            "length_mismatch_mm": {"frames": int(D.size), "median": med,
                                   "spread_p95": _p95(np.abs(D - med)) if D.size else None, "abs_p95": _p95(np.abs(D))},
+           "past_roi_share": float(flags[0][use].mean()) if use.any() else None,
+           "off_image_share": float(flags[1][use].mean()) if use.any() else None,
            "segment_excess_p95_mm": _p95(excess) if excess.size else None, "rest_jitter_p95_mm": jitter}
-    doc["verdict"] = tracking_verdict(doc, st).as_dict()
+    doc["verdict"] = tracking_verdict(doc, st, L, n, string_setting, scale_note).as_dict()
     return doc
 
 
-def tracking_verdict(doc: dict, st: TrackingSettings) -> Verdict:
-    """Warn, naming the likely cause, where :func:`tracking_quality`'s figures pass their limits."""
+MIN_LENGTH_FRAMES = 5
+"""Frames with a trusted free end the seen length's verdict needs."""
+
+
+def _not_this_string(doc: dict, st: TrackingSettings, L: float, n: int, setting, scale_note=None) -> list[str]:
+    """The reasons, if any, why the string filmed is not the campaign's: its length seen from the
+    grasp to its free end, or the string running past the region tracked (put down to the image
+    scale where the calibration found it off: ``scale_note``)."""
+    out = []
+    D = doc["length_mismatch_mm"]
+    L_mm = L * 1000
+    names = f"{setting('length_mm')} and {setting('n_points')}"
+    if scale_note:
+        check, verdict = scale_note, "the image scale is off"
+    else:
+        check = f"check {names} (or the image scale, if the calibration's verdict names it)"
+        verdict = "the string filmed is not the one configured"
+    if D["frames"] >= MIN_LENGTH_FRAMES and abs(D["median"]) > st.verdict_length_share * L_mm:
+        seen = L_mm - D["median"]
+        out.append(f"tracking: the string is seen {seen:.0f} mm long from the grasp to its free end (median of "
+                   f"{D['frames']} frames), but the campaign's string is {L_mm:.0f} mm with {n} points ({seen / L_mm:.2f} "
+                   f"times; > tracking.verdict_length_share {st.verdict_length_share:g} off): {verdict}, and no point "
+                   f"is trusted where the lengths disagree; {check}")
+    roi = doc["past_roi_share"]
+    if roi is not None and roi > st.verdict_past_roi_share:
+        out.append(f"tracking: in {roi:.0%} of the frames judged the string runs on past "
+                   f"{L_mm + st.roi_margin_mm:.0f} mm from the grasp (the campaign's {L_mm:.0f} mm string + "
+                   f"tracking.roi_margin_mm), out of the region tracked: "
+                   f"{verdict if scale_note else 'the string filmed is longer than the one configured'}; {check}")
+    return out
+
+
+def tracking_verdict(doc: dict, st: TrackingSettings, L: float | None = None, n: int | None = None,
+                     string_setting=None, scale_note: str | None = None) -> Verdict:
+    """Warn, naming the likely cause (and the setting, where one is: ``string_setting(key)``, as
+    :func:`tracking_quality`), where :func:`tracking_quality`'s figures pass their limits; ``L`` (m)
+    and ``n``: the campaign's string (None: its length is not judged)."""
+    setting = string_setting or (lambda key: f"the string's {key}")
     v = Verdict()
     share = doc["valid_share"]
     if share is None:
-        return v.add("warn", "tracking: no moving frames to judge (the motion's window holds no frames)")
+        return v.add("warn", "tracking: no frames to judge (no frame lies between the motion's start and the joint "
+                             "log's end)")
+    other = [] if L is None else _not_this_string(doc, st, L, n, setting, scale_note)
+    for reason in other:
+        v = v.add("warn", reason)
     if share < st.verdict_min_valid_share:
-        v = v.add("warn", f"tracking: only {share:.0%} of the string's points were tracked in the moving frames "
-                          f"(< {st.verdict_min_valid_share:.0%}): the string is lost against the background, "
-                          "in blur or behind the arm; more light, a shorter exposure or a plainer wall helps")
+        off = doc.get("off_image_share") or 0.0
+        why = ("the image scale is off (above)" if other and scale_note else
+               "the string filmed is not the campaign's (above)" if other else
+               f"the string runs out of the image in {off:.0%} of them (a point outside the image is never valid); "
+               "frame the whole swing and the string after it" if off >= 0.2 else
+               "the string is lost against the background, in blur or behind the arm; more light, a shorter "
+               "exposure or a plainer wall helps")
+        v = v.add("warn", f"tracking: only {share:.0%} of the string's points were tracked in the "
+                          f"{doc.get('judged_frames', 0)} frames judged (the motion's start to the joint log's end, "
+                          f"which the fit compares; < {st.verdict_min_valid_share:.0%}): {why}")
     ex = doc["segment_excess_p95_mm"]
     if ex is not None and ex > st.verdict_segment_excess_mm:
         v = v.add("warn", f"tracking: consecutive points lie up to {ex:.1f} mm (p95) farther apart than the string "
@@ -116,14 +185,16 @@ def tracking_verdict(doc: dict, st: TrackingSettings) -> Verdict:
     return v
 
 
-def frames_judged(t: np.ndarray, in_log: np.ndarray, t_start: float, t_end: float, settle_s: float = 0.1
-                  ) -> tuple[np.ndarray, np.ndarray]:
-    """(moving, rest) frame masks (F,): the motion's window plus ``settle_s``, and the frames
-    before the motion (by more than 20 ms) that the joint log covers or takes as still."""
+def frames_judged(t: np.ndarray, in_log: np.ndarray, t_start: float, t_last: float) -> tuple[np.ndarray, np.ndarray]:
+    """(judged, rest) frame masks (F,) of frame times t (F,) s: judged, the frames a later stage compares,
+    from the motion's start ``t_start`` to ``t_last`` (the joint log's last sample: the fit and the
+    prediction compare every frame up to it, the planner's residual the tip up to the flight window
+    after the motion) that the joint log covers (``in_log``, tracked); rest, the frames before the
+    motion (by more than 20 ms), whose jitter is judged and whose points give the fit's rest state."""
     t = np.asarray(t, float)
-    moving = (t >= t_start) & (t <= t_end + settle_s) & np.asarray(in_log, bool)
+    judged = (t >= t_start) & (t <= t_last) & np.asarray(in_log, bool)
     rest = t < t_start - 0.02
-    return moving, rest
+    return judged, rest
 
 
 __all__ = ["frames_judged", "tracking_quality", "tracking_verdict"]

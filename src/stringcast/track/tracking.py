@@ -43,9 +43,14 @@ Settings: tracking settings (:class:`~stringcast.core.TrackingSettings`).
    grasp, valid before the first ambiguity. Where the walk stops at the arm (the string passes behind a link), the one
    stretch that comes out from behind it and ends free (:mod:`stringcast.track.beyond_arm`) adds
    its points, anchored at the tip in the same way. Invalid points keep NaN positions: never a guess.
-6. **Verdict** (:mod:`stringcast.track.quality`, ``tracking.json``): the valid share,
-   consecutive points farther apart than the string between them and the hanging string's
-   jitter, judged (warn with the likely cause); the measured length against L, reported.
+   A point outside the image is never valid: a stretch of the path with a vertex outside the
+   region tracked holds none (:func:`~stringcast.track.frame_tracker.seen_segments`), and every
+   point is checked against the image once more before ``tracks.parquet`` is written.
+6. **Verdict** (:mod:`stringcast.track.quality`, ``tracking.json``), over every frame a later stage
+   compares (the motion's start to the joint log's end): the valid share, consecutive points
+   farther apart than the string between them and the hanging string's jitter, judged (warn
+   with the likely cause); the measured length against L, reported, and judged where it says
+   the string filmed is not the campaign's.
 7. **Markers** (``mode: markers``, :mod:`stringcast.track.markers`): strings with a band at each mass
    point; a point's position is its band's centre on the centreline, valid where step 5 trusts
    the order along the path and the band is found whole and unambiguous.
@@ -77,6 +82,30 @@ def _joint_px(cal: Calibration, arm, q: np.ndarray) -> np.ndarray:
     return cal.robot_to_pixel(pts.reshape(-1, 2)).reshape(pts.shape)
 
 
+def _scale_note(cal: Calibration, campaign) -> str | None:
+    """What the calibration said where it saw the still arm at a scale (its board check's ``arm_scale``), or None."""
+    found = (cal.board_check or {}).get("arm_scale") if isinstance(cal.board_check, dict) else None
+    if not found:
+        return None
+    return (f"the calibration sees the still arm scaled by {float(found['scale']):.3f} against its forward kinematics; "
+            f"check {campaign.setup_setting('board.square_mm')}")
+
+
+def inside_image(cal: Calibration, xy: np.ndarray) -> np.ndarray:
+    """Whether robot-frame points xy (..., 2) m lie in the image (:meth:`Calibration.robot_to_pixel`:
+    within the pixels' area, -0.5 .. W - 0.5 and -0.5 .. H - 0.5): (...,) bool, False for NaN."""
+    xy = np.asarray(xy, float)
+    flat = xy.reshape(-1, 2)
+    fin = np.all(np.isfinite(flat), axis=1)
+    uv = np.full(flat.shape, np.nan)
+    if fin.any():
+        uv[fin] = cal.robot_to_pixel(flat[fin])
+    w, h = cal.image_size
+    with np.errstate(invalid="ignore"):
+        inside = (uv[:, 0] >= -0.5) & (uv[:, 0] <= w - 0.5) & (uv[:, 1] >= -0.5) & (uv[:, 1] <= h - 0.5)
+    return inside.reshape(xy.shape[:-1])
+
+
 def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, overlay_png=None, frames_npy=None,
                  workers: int = 1, *, tracking: TrackingSettings) -> pd.DataFrame:
     """Track the string in one trial; write ``tracks.parquet``, ``tracking.json`` beside it (the
@@ -105,7 +134,7 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
     trial_dir = Path(trial_dir)
     st = tracking
     cal = Calibration.from_json(calibration_json)
-    sync = read_json(sync_json)
+    sync = read_json(sync_json, mapping=True)
     t_j, q_j = read_joint_table(trial_dir / "joints.csv", n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
     arm, n = campaign.arm, campaign.string.n_points
     vpath = find_video(trial_dir)
@@ -133,7 +162,7 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
     early = win if span is None else win[t[win] <= t[win[0]] + span]
     bwin = early if len(early) >= 9 else win
     samples = background_samples(bwin, int(st.background_samples), int(st.background_bursts))
-    moving, rest = frames_judged(t, in_log, t_start, t_end)   # the frames tracking.json judges
+    judged, rest = frames_judged(t, in_log, t_start, hi)   # the frames tracking.json judges: all the later stages use
     pre = np.nonzero(rest)[0][-int(st.rest_frames):]
     frames = None if isinstance(video, CachedVideo) else prefetch(video, int(st.prefetch_frames))
     second = video if frames is None else open_trial_video(vpath, frames_npy)  # decoding: the main pass runs ahead
@@ -149,6 +178,7 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
     xy = np.full((F, n + 1, 2), np.nan)
     valid = np.zeros((F, n + 1), bool)
     mismatch = np.full(F, np.nan)
+    past_roi, off_image = np.zeros(F, bool), np.zeros(F, bool)
     xy[:, 0] = forward_kinematics(arm, joints_at(t, t_j, q_j))[:, -1]  # point 0: the grasp
     valid[:, 0] = in_log
     xy[~in_log, 0] = np.nan
@@ -156,9 +186,12 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
     shown = []
     for k, ft, frame in track_frames(tracker, video, frames, jpx, np.flatnonzero(in_log), shows, workers):
         xy[k, 1:], valid[k, 1:], mismatch[k] = ft.positions, ft.valid, ft.length_mismatch_m
+        past_roi[k], off_image[k] = ft.past_roi, ft.off_image
         if frame is not None:
             shown.append((k, frame, ft.path_px, cal.robot_to_pixel(np.nan_to_num(xy[k])), valid[k].copy()))
     video.close()
+    valid[:, 1:] &= inside_image(cal, xy[:, 1:])   # a point outside the image is never valid (nor its position)
+    xy[:, 1:][~valid[:, 1:]] = np.nan
     df = pd.DataFrame({
         "frame": np.repeat(np.arange(F), n + 1).astype(np.int64),
         "t_s": np.repeat(t, n + 1),
@@ -168,7 +201,8 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
     })
     write_parquet(out_parquet, df)
     write_json(Path(out_parquet).with_name("tracking.json"),
-               tracking_quality(df, mismatch, campaign.string.length, n, moving, rest, st))
+               tracking_quality(df, mismatch, campaign.string.length, n, judged, rest, st, past_roi, off_image,
+                                campaign.string_setting, _scale_note(cal, campaign)))
     if overlay_png is not None:
         write_overlay(overlay_png, shown, t, scale, campaign.string.length)
     return df

@@ -100,7 +100,7 @@ class CachedVideo(VideoReader):
             missing = {"source", "frames", "fps", "bit_depth", "timestamps_s"} - set(meta)
             if missing:
                 raise ValueError(f"{_sidecar(frames_npy).name} lacks {', '.join(sorted(missing))}")
-        except (OSError, ValueError, TypeError) as exc:
+        except (OSError, ValueError, TypeError, EOFError) as exc:   # np.load of an empty file: EOFError
             raise DataError(f"{frames_npy}: not a readable frame cache ({exc}); delete it to decode the video "
                             "again") from exc
         if meta.get("source") != _source_stamp(self.path):
