@@ -31,7 +31,7 @@ include: "workflow/rules/report.smk"
 rule all:
     default_target: True
     input:
-        all_targets(),
+        all_targets,
 
 
 # A campaign whose raw files have errors is not built (workflow/rules/common.smk: checked);

@@ -101,8 +101,10 @@ def test_state_files_feed_only_the_estimate_and_plan_rules(config, tmp_path):
     write_yaml(data / "campaign.yaml", {"string": 1, "target": 1, "setup": "default", "seed": 0})
     cfg = load_yaml(root / "config" / "config.yaml")
     campaign = load_campaign(data / "campaign.yaml", cfg)
-    _trial(campaign, data / "trial_1", frames=300, fps=250.0)
-    write_json(data / "trial_1" / "motion.json", {})
+    t_j, q = _trial(campaign, data / "trial_1", frames=300, fps=250.0)
+    write_joint_table(data / "trial_1" / "motion.csv", t_j, np.repeat(q[:1], len(t_j), 0))   # a played (still) motion
+    write_json(data / "trial_1" / "motion.json", {"q0_rad": list(q[0]), "T_s": float(t_j[-1]),
+                                                  "control_points_rad_s": [[0.0]] * 3})
     res = root / "results" / "c" / "trial_1"
     rec = synthesize_trial(1, data / "trial_1", res, campaign, MODEL, 0, settings_from_config(cfg).tracking)
     assert not rec["reused"] and rec["sync_error_ms"] in MODEL.sync_errors_ms

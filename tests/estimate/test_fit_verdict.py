@@ -97,8 +97,9 @@ def test_cli_prints_the_verdict_after_E(trial, settings, campaign, tmp_path, cap
                    "--out-params", str(tmp_path / "params.json"), "--out-fit", str(tmp_path / "fit.parquet")])
     lines = capsys.readouterr().out.splitlines()
     assert rc == 0 and lines[0].startswith("estimation: E = ")
-    assert lines[1] == "fit verdict: fail (likely cause: clock): the estimate is not usable"
-    assert lines[2].startswith("  - shifting the frames' times by -30.0 ms")
+    assert lines[1].startswith("fit: fail, the estimate is not usable, likely cause clock: shifting the frames' times "
+                               "by -30.0 ms")
+    assert lines[1].endswith(f"-> {tmp_path / 'params.json'}")
 
 
 FIG = {"length_mm": 300.0, "valid_share": 0.9, "error_median_mm": 30.0, "error_share": 0.1, "skill": 0.7,

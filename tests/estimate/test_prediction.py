@@ -108,7 +108,7 @@ def test_predict_command(config, campaign, next_trial, tmp_path, capsys):
     rc = main(["--config", str(config["_path"]), "predict", "--params", str(params), "--tracks",
                str(d / "tracks.parquet"), "--joints", str(d / "joints.csv"), "--campaign", str(camp), "--out",
                str(tmp_path / "p.json")])
-    assert rc == 0 and "next-motion prediction: median" in capsys.readouterr().out
+    assert rc == 0 and "next-motion prediction: ok: median" in capsys.readouterr().out
     assert pd.notna(json.loads((tmp_path / "p.json").read_text())["median_mm"])
 
 

@@ -18,7 +18,12 @@ from stringcast.core import (
     settings_from_config,
 )
 from stringcast.core.lifeline import ENV_PID
-from stringcast.core import RunConflict, claim_results, outputs_newer_than, workflow_stamp
+from stringcast.core import (
+    RunConflict,
+    claim_results,
+    outputs_newer_than,
+    workflow_stamp,
+)
 
 
 wildcard_constraints:
@@ -122,16 +127,37 @@ def campaigns():
     return sorted(p.parent.name for p in Path("data").glob("*/campaign.yaml"))
 
 
-@functools.cache
 def campaign_problems(campaign):
     """Every error the check of data/<campaign>/'s raw files finds (stringcast.check,
     `stringcast check data/<campaign>`), one line each; none in a job that Slurm runs (the
     submitting run checked). Read once per campaign, before any job: a campaign with an error
-    is not built, and the other campaigns are."""
+    is not built, and the other campaigns are. A run whose --allowed-rules leave out every
+    stage that reads the video (VIDEO_RULES: the loop benchmark's state mode) is not refused
+    for the video, video.yaml or calib/, which it does not read."""
+    allowed = workflow.dag_settings.allowed_rules if workflow.dag_settings else ()
+    return _campaign_problems(campaign, not allowed or bool(set(allowed) & VIDEO_RULES))
+
+
+VIDEO_RULES = {
+    "decode",
+    "calib_views",
+    "calibrate",
+    "sync",
+    "sweep",
+    "track",
+    "report_trial",
+}
+"""The rules that read a trial's video, video.yaml or calib/."""
+
+
+@functools.cache
+def _campaign_problems(campaign, video):
     if not SUBMITTER:
         return ()
     return tuple(
-        str(p) for p in check_campaign(Path("data", campaign), config) if p.is_error
+        str(p)
+        for p in check_campaign(Path("data", campaign), config, video=video)
+        if p.is_error
     )
 
 
@@ -240,7 +266,7 @@ def trial_reports(wildcards):
     ]
 
 
-def all_targets():
+def all_targets(wildcards=None):
     """Every stage's product of every trial of every campaign without an error in its raw files,
     so a deleted one is made again and what depends on it reruns (Snakemake does not remake a
     missing file that no requested output needs); and, where some campaign has one, REFUSED,

@@ -60,8 +60,9 @@ def _sync(config: Mapping) -> SyncSettings:
         return SyncSettings()
 
 
-def trial_findings(trial_dir: Path, arm: ArmSpec | None, sync: SyncSettings) -> list[Problem]:
-    """One trial's files against the campaign's ``arm`` (None: the checks that need none)."""
+def trial_findings(trial_dir: Path, arm: ArmSpec | None, sync: SyncSettings, video: bool = True) -> list[Problem]:
+    """One trial's files against the campaign's ``arm`` (None: the checks that need none); its video and
+    ``video.yaml`` too unless ``video`` is False."""
     out = []
     joints = trial_dir / "joints.csv"
     if not joints.is_file():
@@ -71,8 +72,10 @@ def trial_findings(trial_dir: Path, arm: ArmSpec | None, sync: SyncSettings) -> 
                                      "this folder, or move the folder out)", severity="warn")]
         out.append(problem(joints, "file not found: the workflow picks up trials by their joints.csv, so it skips "
                                    "this one (copy the joint log in)", severity="warn"))
-    found, meta = guarded_with(trial_dir, video_findings, trial_dir)
-    out += found
+    meta = None
+    if video:
+        found, meta = guarded_with(trial_dir, video_findings, trial_dir)
+        out += found
     if joints.is_file():
         out += guarded(joints, joints_findings, joints, arm, meta, sync)
     out += guarded(trial_dir, motion_findings, trial_dir, arm)
@@ -97,7 +100,7 @@ def check_trial(trial_dir: str | Path, campaign: Campaign | None, config: Mappin
     return guarded(trial_dir, trial_findings, trial_dir, None if campaign is None else campaign.arm, _sync(config))
 
 
-def check_campaign(campaign_dir: str | Path, config: Mapping) -> list[Problem]:
+def check_campaign(campaign_dir: str | Path, config: Mapping, video: bool = True) -> list[Problem]:
     """Check every raw file of a campaign before any decode, by the stages' own readers where they
     have one. Reads headers only (a video's header and first frame; joint logs, YAML and JSON whole;
     ``calib/``'s images whole): seconds for a campaign of ten trials with 1 GB videos. Writes nothing,
@@ -127,6 +130,9 @@ def check_campaign(campaign_dir: str | Path, config: Mapping) -> list[Problem]:
     Args:
         campaign_dir: ``data/<campaign>`` (or its ``campaign.yaml``).
         config: the merged config (:func:`~stringcast.core.load_config`).
+        video: also check what only the video stages read (each trial's video and ``video.yaml``,
+            ``calib/``); False for a run whose rules read none of them (the workflow run with
+            ``--allowed-rules`` that leave out decode ... track, as the loop benchmark's state mode).
 
     Returns:
         Every problem found, in the order campaign.yaml, calib/, the folders, each trial's
@@ -139,10 +145,11 @@ def check_campaign(campaign_dir: str | Path, config: Mapping) -> list[Problem]:
     if not d.is_dir():
         return [problem(d, "not a folder: a campaign is data/<campaign>/ with campaign.yaml and trial_<k>/ folders")]
     out, campaign, arm = check_campaign_yaml(d / "campaign.yaml", config, d.name)
-    out += guarded(d / "calib", calib_findings, d / "calib")
+    if video:
+        out += guarded(d / "calib", calib_findings, d / "calib")
     found, trials = guarded_with(d, trial_dirs, d, default=[])
     out += found
     sync = _sync(config)
     for t in trials:
-        out += guarded(t, trial_findings, t, arm, sync)
+        out += guarded(t, trial_findings, t, arm, sync, video)
     return out
