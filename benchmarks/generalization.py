@@ -33,7 +33,13 @@ setup (``complete: false`` until the last), so a run can be stopped and ``--resu
 ``--quick``: 3 setups.
 
 Run: ``python -m benchmarks.generalization [--setups 24] [--first 0] [--work DIR] [--jobs 2]
-[--until film|...|estimate] [--from calibrate|sync|sweep|track|estimate|figures] [--resume] [--quick]``.
+[--until film|...|estimate] [--from calibrate|sync|sweep|track|estimate|figures] [--resume] [--quick]
+[--results NAME]``.
+
+The stated uncertainties (sync's, the clock's, the mapping's) are held to the truth per setup:
+the JSON's ``coverage`` gives per quantity the share of setups whose true error lies within the
+stated interval, and ``sync_decisions`` how often the trigger kept or overruled was the nearer
+candidate (:mod:`benchmarks.certainty`; ``generalization_coverage.png``).
 """
 from __future__ import annotations
 
@@ -138,6 +144,8 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str 
     from stringcast.sync import run_sync, run_sweep
     from stringcast.track import run_tracking
 
+    from benchmarks.certainty import sweep_figures, sync_figures
+
     setup = draw_setup(seed)
     cfg = apply_setup(config, setup)
     settings = settings_from_config(cfg)
@@ -148,6 +156,8 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str 
     try:   # a stage that refuses, or the lab failing to film, is a result: its message is the verdict
         t0 = time.perf_counter()
         # without ground_truth.json (the lab writes it last) a run was stopped while filming; film.json says which string
+        if start != "film" and not (_filmed(trial, string_type) and (calib / "ground_truth.json").exists()):
+            raise FileNotFoundError(f"{d}: not filmed (or still filming), and --from {start} films nothing")
         if not _filmed(trial, string_type):
             shutil.rmtree(trial, ignore_errors=True)
             run_first_plan(campaign, d / "motion.csv", d / "motion.json", seed=seed, **stage_kwargs(run_first_plan, settings))
@@ -177,6 +187,7 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str 
                     run_sync(trial, out / "calibration.json", campaign, out / "sync.json", **stage_kwargs(run_sync, settings)))
         row["sync_error_ms"] = (sync_doc["offset_s"] - truth["trigger_time_s"]) * 1000
         row["sync_verdict"] = _verdict(sync_doc)
+        row.update(sync_figures(sync_doc, truth["trigger_time_s"], settings.sync.evidence_k))
         if until == "sync":
             return row
         geo, clock = ((read_json(out / "geometry.json"), read_json(out / "clock.json"))
@@ -192,6 +203,8 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str 
         row["sync_error_ms"] = (clock["offset_s"] - truth["trigger_time_s"]) * 1000
         row["sync_verdict"] = _verdict(clock)
         row["sweep"] = geo.get("sweep")
+        row.update(sweep_figures(geo, clock, truth["trigger_time_s"], truth["camera"], out / "calibration.json",
+                                 out / "geometry.json", campaign, trial / "joints.csv"))
         if until == "sweep":
             return row
         tracks = (pd.read_parquet(out / "tracks.parquet") if _kept("track", start, out / "tracking.json") else
@@ -266,7 +279,10 @@ def _judge(row: dict, width_px: int) -> dict:
 
 
 def summarise(rows: list[dict], complete: bool, quick: bool) -> dict:
-    """The benchmark's JSON from the per-setup rows."""
+    """The benchmark's JSON from the per-setup rows (``coverage``, ``sync_decisions``:
+    :mod:`benchmarks.certainty`)."""
+    from benchmarks.certainty import PAIRS_BEFORE, coverage, overrule_confusion
+
     kept = [r for r in rows if not r["flagged"]]
     errors = np.concatenate([r["tracking_errors_mm"] for r in kept if "tracking_errors_mm" in r] or [np.zeros(0)])
     shares = [r["valid_share"] for r in kept if r.get("valid_share") is not None]
@@ -280,6 +296,9 @@ def summarise(rows: list[dict], complete: bool, quick: bool) -> dict:
             "valid_share": float(np.mean(shares)) if shares else None,
             "valid_share_moving": float(np.mean(moving)) if moving else None,
             "sync_error_ms_max": float(max(syncs)) if syncs else None, "silent_limits": SILENT,
+            "coverage": coverage(rows), "coverage_goal": 0.9, "sync_decisions": overrule_confusion(rows),
+            "coverage_before": coverage(rows, PAIRS_BEFORE),
+            "sync_decisions_before": overrule_confusion(rows, "before_sync_chosen"),
             "per_setup": per_setup}
 
 
@@ -308,12 +327,12 @@ def figure(rows: list[dict], path: Path) -> None:
     plt.close(fig)
 
 
-def _resumed(work: Path, seeds: list[int], until: str) -> dict[int, dict]:
+def _resumed(work: Path, seeds: list[int], until: str, results: str = "results") -> dict[int, dict]:
     """The rows of ``seeds`` that the last JSON holds for the same ``work`` and ``until`` (their
     tracking errors read back from each setup's files), by seed."""
     from stringcast.campaign import tracking_errors
 
-    path = BENCH_DIR / "generalization.json"
+    path = BENCH_DIR / f"{bench_name(results)}.json"
     if not path.exists():
         return {}
     doc = json.loads(path.read_text())
@@ -322,19 +341,25 @@ def _resumed(work: Path, seeds: list[int], until: str) -> dict[int, dict]:
     rows = {}
     for r in doc.get("per_setup", []):
         d = work / f"setup_{r['seed']}"
-        if r["seed"] not in seeds or "error" in r or not (d / "results" / "tracks.parquet").exists():
+        if r["seed"] not in seeds or "error" in r or not (d / results / "tracks.parquet").exists():
             continue
         r = {k: v for k, v in r.items() if k not in ("flagged", "beyond_limits", "silent_failure")}
-        if "valid_share_moving" not in r and (d / "results" / "tracking.json").exists():   # rows of older runs
-            r["valid_share_moving"] = json.loads((d / "results" / "tracking.json").read_text()).get("valid_share")
-        r["tracking_errors_mm"] = tracking_errors(pd.read_parquet(d / "results" / "tracks.parquet"),
+        if "valid_share_moving" not in r and (d / results / "tracking.json").exists():   # rows of older runs
+            r["valid_share_moving"] = json.loads((d / results / "tracking.json").read_text()).get("valid_share")
+        r["tracking_errors_mm"] = tracking_errors(pd.read_parquet(d / results / "tracks.parquet"),
                                                   pd.read_parquet(d / "trial_1" / "ground_truth.parquet"))[0]
         rows[r["seed"]] = r
     return rows
 
 
+def bench_name(results: str = "results") -> str:
+    """The JSON's (and figure's) name: ``generalization``, or ``generalization_<results>`` for a run whose
+    stages write into another folder of each setup (two runs on one ``--work`` side by side)."""
+    return "generalization" if results == "results" else f"generalization_{results}"
+
+
 def run(quick: bool = False, setups: int = 24, first: int = 0, work: Path | None = None, jobs: int = 1,
-        until: str = "estimate", resume: bool = False, start: str = "film") -> dict:
+        until: str = "estimate", resume: bool = False, start: str = "film", results: str = "results") -> dict:
     """Run the benchmark (``benchmarks.run``'s interface); returns the JSON it wrote last.
 
     ``jobs`` setups run side by side (processes); the JSON is rewritten as each one ends, its
@@ -342,7 +367,9 @@ def run(quick: bool = False, setups: int = 24, first: int = 0, work: Path | None
     only fills ``work``; the JSON then holds no figures). ``resume``: the setups that the last
     JSON (same ``work`` and ``until``) holds without an error are taken from it, not rerun. ``start``:
     the stages before it read their outputs from ``work`` where there (a tracking change measured
-    on the same calibrations and syncs)."""
+    on the same calibrations and syncs). ``results``: the folder of each setup the stages write into
+    (and read from), and the JSON's name (:func:`bench_name`)."""
+    from benchmarks import certainty
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     from stringcast.core import load_config
@@ -351,11 +378,11 @@ def run(quick: bool = False, setups: int = 24, first: int = 0, work: Path | None
     config = load_config()
     work = work or Path(tempfile.mkdtemp(prefix="stringcast_generalization_"))
     seeds = list(range(first, first + n))
-    done = _resumed(work, seeds, until) if resume else {}
+    done = _resumed(work, seeds, until, results) if resume else {}
     rows, doc = [], {}
     with ProcessPoolExecutor(max_workers=max(1, jobs)) as pool:
-        futures = [pool.submit(run_setup, seed, string_type(seed), config, work, until, start) for seed in seeds
-                   if seed not in done]
+        futures = [pool.submit(run_setup, seed, string_type(seed), config, work, until, start, results)
+                   for seed in seeds if seed not in done]
         for k, fut in enumerate(itertools.chain(done.values(), as_completed(futures))):   # lazily: each as it ends
             row = fut if isinstance(fut, dict) else fut.result()
             row.update(_judge(row, row["draw"]["width_px"]))
@@ -364,12 +391,16 @@ def run(quick: bool = False, setups: int = 24, first: int = 0, work: Path | None
             print(f"setup {row['seed']}: " + ", ".join(f"{key} {row.get(key)}" for key in (
                 "film_seconds", "calibration_verdict", "fx_error_pct", "principal_point_error_px", "plane_error_median_mm",
                 "plane_error_max_mm", "sync_verdict",
-                "sync_error_ms", "tracking_median_mm", "tracking_p95_mm", "valid_share", "E_mm", "fit_verdict",
+                "sync_error_ms", "sync_chosen", "sync_offset_error_ms", "sync_stated_ms", "sync_video_error_ms",
+                "sync_video_stated_ms", "sync_trigger_error_ms", "clock_error_ms", "clock_stated_ms",
+                "mapping_error_p95_mm", "mapping_stated_mm", "tracking_median_mm", "tracking_p95_mm", "valid_share",
+                "E_mm", "fit_verdict",
                 "error") if key in row), flush=True)
             doc = summarise(rows, k == n - 1, quick)
-            doc["until"], doc["work"], doc["start"] = until, str(work), start
-            write("generalization", doc)
-            figure(rows, BENCH_DIR / "generalization.png")
+            doc["until"], doc["work"], doc["start"], doc["results"] = until, str(work), start, results
+            write(bench_name(results), doc)
+            figure(rows, BENCH_DIR / f"{bench_name(results)}.png")
+            certainty.figure(rows, BENCH_DIR / f"{bench_name(results)}_coverage.png")
     return doc
 
 
@@ -384,8 +415,10 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--resume", action="store_true", help="take the setups the last JSON holds (same --work) from it")
     p.add_argument("--from", dest="start", choices=STAGES, default="film",
                    help="read the outputs of the stages before this one from --work where they are there")
+    p.add_argument("--results", default="results",
+                   help="each setup's folder the stages write into (another name: a run beside the default one)")
     args = p.parse_args(argv)
-    run(args.quick, args.setups, args.first, args.work, args.jobs, args.until, args.resume, args.start)
+    run(args.quick, args.setups, args.first, args.work, args.jobs, args.until, args.resume, args.start, args.results)
 
 
 if __name__ == "__main__":
