@@ -24,12 +24,15 @@ the last one where the arm is still at that end of the log: the arm is taken as 
 there, in the log's first (last) posture (:func:`stringcast.core.check_joint_coverage`); a
 log whose end shows the arm moving misses part of the motion and is refused.
 
-``sync.json`` holds: offset_s, fps, frames, method, chosen (``trigger`` or ``video``),
+``sync.json`` holds: offset_s, uncertainty_ms (a bound on its error, :func:`~stringcast.sync.confidence.choose_offset`;
+null where not determined), fps, frames, method, chosen (``trigger`` or ``video``),
 candidates (``trigger``: offset_s, residual_mm, minus_video_ms, excess_mm (its residual
 minus the video's), excess_standard_error_mm, excess_p (the share of block resamples of
-the frames in which the trigger fits as well), excess_p_needed, resamples, block_frames; ``video``: offset_s,
+the frames in which the trigger fits as well), excess_p_needed, resamples, block_frames,
+beyond_video_uncertainty; ``video``: offset_s,
 residual_mm, time_residual_ms, standard_error_ms, frames_used, segments_used, ambiguous,
-second_peak_s, block_frames, residual_px, arm_width_px, uncertainty_px; or ``error`` when
+second_peak_s, block_frames, residual_px, arm_width_px, uncertainty_px, systematic_ms,
+mapping_error_mm, speed_eff_m_s, uncertainty_ms; or ``error`` when
 the video gave no estimate), verdict (:class:`~stringcast.core.Verdict`), joint_log
 (starts_after_video_s, ends_before_video_s, extended, first_speed_share,
 last_speed_share), residual_mm (at the chosen offset: robust spread, over the agreeing
@@ -80,7 +83,8 @@ def _trigger_doc(meta: dict, video_yaml: Path) -> dict:
     if trig is None:
         raise DataError(f"{video_yaml}: no trigger_time_s, and config sync.method is 'trigger'; give the "
                         "controller-clock time of frame 0, or use sync.method: video")
-    return {"offset_s": float(trig), "method": METHOD_TRIGGER, "residual_mm": None, "chosen": "trigger",
+    return {"offset_s": float(trig), "uncertainty_ms": None, "method": METHOD_TRIGGER, "residual_mm": None,
+            "chosen": "trigger",
             "candidates": {"trigger": {"offset_s": float(trig), "residual_mm": None}},
             "note": "offset taken from the recording's trigger time, not estimated from the video"}
 
@@ -119,7 +123,8 @@ def _video_doc(trial_dir: Path, calibration_json, campaign, meta: dict, video_ya
                                                                    is not None) else None
     choice = choose_offset(est, failure, trigger, sync)
     doc = {k: v for k, v in (est or {}).items() if k != "evidence"}
-    doc.update(offset_s=choice["offset_s"], chosen=choice["chosen"], candidates=choice["candidates"],
+    doc.update(offset_s=choice["offset_s"], uncertainty_ms=choice["uncertainty_ms"], chosen=choice["chosen"],
+               candidates=choice["candidates"],
                verdict=choice["verdict"], residual_mm=choice["candidates"][choice["chosen"]]["residual_mm"],
                method=METHOD_VIDEO if choice["chosen"] == "video" else METHOD_CHECKED if est else METHOD_TRIGGER)
     doc["note"] = {"video": "offset estimated from the video" + (
