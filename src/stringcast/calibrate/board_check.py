@@ -46,6 +46,19 @@ the arm (about 1-2 mm with intrinsics; lens distortion uncorrected, 10-20 mm).
 The result carries a verdict: ``warn`` when |d| exceeds ``warn_mm``, and ``warn`` "not
 checked: <why>" when the features found do not determine d (an unchecked board pose is a
 risk the user should know of, not silence).
+
+**Which cause** (issue 51): a wrong board pose moves every point of the plane alike (a rigid
+shift or turn of the frame); an error of the intrinsics leaves the board's own corners right (the
+homography is fitted to them) and grows with the distance from the board, so a weak calibration
+set alone puts an arm far from the board many millimetres off (the issue's field footage: 6-36 mm
+with a right board pose). Where the calibration knows its intrinsics' uncertainty, the caller
+passes ``spread`` (:func:`stringcast.calibrate.intrinsics_spread.mapping_covariance` at the rest
+arm's link midpoints): the covariance Sigma of where the mapping puts the arm, from the
+intrinsics alone, plus the check's own noise (fit_rms^2 / features). An offset inside its 99 %
+ellipse (d^T Sigma^-1 d <= :data:`EXPLAINED_CHI2`, chi-square with 2 degrees of freedom) is what
+those intrinsics may do there: the warning names the weak intrinsics and says to recalibrate
+before touching the board pose; outside it, the board pose (``likely_cause`` ``intrinsics`` or
+``board_pose``; ``intrinsics_sd_mm``: Sigma's standard deviation along d).
 """
 from __future__ import annotations
 
@@ -59,6 +72,9 @@ from stringcast.core import BoardCheckSettings, Verdict, forward_kinematics
 from .link_profiles import _consensus, _refine, _sample, link_consensus, link_profiles
 
 METHOD = "rest image: link/gripper edge pairs across their FK axes, joint-disc rims, the gripper's end"
+EXPLAINED_CHI2 = 9.21
+"""The 99 % point of chi-square with 2 degrees of freedom: an offset d with d^T Sigma^-1 d at most this
+lies inside the 99 % ellipse of what the intrinsics' uncertainty Sigma moves the arm by (module doc)."""
 MIN_SINGULAR = 0.3
 """The features' unit directions must give a 2 x 2 system whose smaller singular value reaches
 this (a second direction at least ~17 deg from the first, one feature each)."""
@@ -205,7 +221,7 @@ def _end_offset(image, calibration, arm, q_rest, st: BoardCheckSettings) -> tupl
 
 
 def check_board_to_robot(rest_image: np.ndarray, calibration, arm, q_rest: np.ndarray,
-                         board_check: BoardCheckSettings) -> dict:
+                         board_check: BoardCheckSettings, spread=None) -> dict:
     """Translation between where the still arm is seen and where config's board pose + the FK put it.
 
     Args:
@@ -215,13 +231,17 @@ def check_board_to_robot(rest_image: np.ndarray, calibration, arm, q_rest: np.nd
         arm: :class:`~stringcast.core.specs.ArmSpec`, with its outline (``link_widths``,
             ``joint_radii``, ``gripper_widths``). q_rest: (J,) rad, ``joints.csv``'s first row.
         board_check: board-check settings (:class:`~stringcast.core.BoardCheckSettings`).
+        spread: ``(N, 2) m -> (N, 2, 2) m^2 or None``, the covariance of where the mapping puts
+            plane points from the intrinsics' uncertainty (module doc, "Which cause"), or None.
 
     Returns:
         ``{"residual_mm": |d| or None, "dx_mm", "dy_mm" (seen minus FK, robot frame),
         "method", "n_used" (features used), "segment_offsets_mm", "disc_offsets_mm",
-        "string_offset_mm", "end_offset_mm", "fit_rms_mm", "warn_mm", "verdict"}``;
-        residual_mm None when the features found do not determine d (verdict ``warn``,
-        "not checked: <why>", also in ``method``); verdict ``warn`` when |d| > ``warn_mm``.
+        "string_offset_mm", "end_offset_mm", "fit_rms_mm", "warn_mm", "intrinsics_sd_mm",
+        "intrinsics_chi2", "likely_cause", "verdict"}``; residual_mm None when the features found
+        do not determine d (verdict ``warn``, "not checked: <why>", also in ``method``); verdict
+        ``warn`` when |d| > ``warn_mm``, naming the likely cause (``intrinsics`` where they explain d,
+        else ``board_pose``; None within ``warn_mm``).
 
     Raises:
         ValueError: rest_image not 2-D, or q_rest not (J,).
@@ -268,13 +288,51 @@ def check_board_to_robot(rest_image: np.ndarray, calibration, arm, q_rest: np.nd
     d, r = _huber_lstsq(A, y)
     doc.update(dx_mm=float(d[0] * 1000), dy_mm=float(d[1] * 1000), residual_mm=float(math.hypot(*d) * 1000),
                fit_rms_mm=float(np.sqrt(np.mean(r ** 2)) * 1000))
+    pts = forward_kinematics(arm, q_rest)
+    cov = None if spread is None else spread(0.5 * (pts[:-1] + pts[1:]))
+    doc.update(_cause(d, cov, float(np.sqrt(np.mean(r ** 2))), len(y), doc["residual_mm"] > st.warn_mm))
     verdict = Verdict()
     if doc["residual_mm"] > st.warn_mm:
-        verdict = verdict.add("warn", f"the still arm is seen {doc['residual_mm']:.1f} mm (dx {doc['dx_mm']:+.1f}, dy "
-                                      f"{doc['dy_mm']:+.1f} mm) from where the configured board pose puts it "
-                                      f"(> {st.warn_mm:g} mm): check setups.*.board_origin_mm / board_angle_deg")
+        seen = (f"the still arm is seen {doc['residual_mm']:.1f} mm (dx {doc['dx_mm']:+.1f}, dy {doc['dy_mm']:+.1f} mm) "
+                f"from where the configured board pose puts it (> {st.warn_mm:g} mm)")
+        sd = doc["intrinsics_sd_mm"]
+        if doc["likely_cause"] == "intrinsics":
+            verdict = verdict.add("warn", f"{seen}: the calibration's intrinsics are too weak to place the arm so far "
+                                          f"from the board (their own uncertainty carried there: "
+                                          f"{_mm_or_undetermined(sd)} along the offset, 1 sd), so they, not the board "
+                                          "pose, may explain it; recalibrate with shots that cover the image where "
+                                          "the arm is, before changing setups.*.board_origin_mm")
+        else:
+            known = "" if sd is None else (f" (the intrinsics' own uncertainty carried to the arm is only {sd:.1f} mm "
+                                           "along it, 1 sd)")
+            verdict = verdict.add("warn", f"{seen}{known}: check setups.*.board_origin_mm / board_angle_deg")
     doc["verdict"] = verdict.as_dict()
     return doc
+
+
+def _mm_or_undetermined(sd: float | None) -> str:
+    return "not determined" if sd is None or not np.isfinite(sd) else f"{sd:.1f} mm"
+
+
+def _cause(d: np.ndarray, cov, rms_m: float, n: int, off: bool) -> dict:
+    """``intrinsics_sd_mm`` (the intrinsics' spread at the arm along d, 1 sd; inf where not determined),
+    ``intrinsics_chi2`` (d^T Sigma^-1 d) and ``likely_cause`` (module doc, "Which cause"; None when not
+    ``off``)."""
+    out = {"intrinsics_sd_mm": None, "intrinsics_chi2": None, "likely_cause": None}
+    if cov is None:
+        out["likely_cause"] = "board_pose" if off else None
+        return out
+    cov = np.asarray(cov, float)
+    if not np.all(np.isfinite(cov)):
+        out.update(intrinsics_sd_mm=None, likely_cause="intrinsics" if off else None)
+        return out
+    S = cov.reshape(-1, 2, 2).mean(axis=0) + np.eye(2) * rms_m ** 2 / max(n, 1)
+    u = d / max(float(np.hypot(*d)), 1e-12)
+    chi2 = float(d @ np.linalg.solve(S + np.eye(2) * 1e-12, d))
+    out.update(intrinsics_sd_mm=float(np.sqrt(max(u @ S @ u, 0.0)) * 1000), intrinsics_chi2=chi2)
+    if off:
+        out["likely_cause"] = "intrinsics" if chi2 <= EXPLAINED_CHI2 else "board_pose"
+    return out
 
 
 def _weakest(rows: list) -> float:

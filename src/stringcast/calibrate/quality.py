@@ -242,6 +242,7 @@ def assess(intr: Intrinsics, st: CalibrationSettings) -> tuple[dict, dict[str, t
            "std_used": dict(zip(INTRINSIC_NAMES, map(float, sd))),
            "principal_point_sd_share": list(pp), "fx_sd_share": fx_sd,
            "distortion_sd_px": d_sd, "distortion_sd_share": d_sd / half_diag,
+           "covariance": C.tolist() if np.all(np.isfinite(C)) else None,
            "per_view_rms_px": dict(zip(intr.views.names, intr.per_view_rms_px)),
            "coverage": cov, "tilt": tilt}
     problems: dict[str, tuple[str, str, float]] = {}
