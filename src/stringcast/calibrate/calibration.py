@@ -49,7 +49,7 @@ from .board_check import check_board_to_robot
 from .calib_views import camera_flags, find_calib_views, read_calib_views, read_campaign_intrinsics, single_threaded_opencv
 from .charuco import Intrinsics, calibrate_intrinsics, detect_charuco
 from .intrinsics import board_view_check, judged_intrinsics
-from .intrinsics_spread import mapping_covariance
+from .intrinsics_spread import mapping_modes
 from .mapping import Calibration, apply_homography
 
 __all__ = ["Calibration", "Intrinsics", "calibrate_intrinsics", "detect_charuco", "median_frame", "plane_homography",
@@ -248,9 +248,9 @@ def _run_calibration(trial_dir: Path, calib_dir, campaign, out_json, n_median: i
 
 
 def _intrinsics_spread(img, board, board_to_robot, cal: Calibration, quality: dict | None, detection, source: str):
-    """``points -> (N, 2, 2) m^2``: the covariance of where ``cal`` maps plane points from its intrinsics'
-    uncertainty (:func:`~stringcast.calibrate.intrinsics_spread.mapping_covariance`, the homography
-    refitted to the trial's board under each change); None without intrinsics or their covariance."""
+    """``points -> (N, 2, M) m``: the modes of how the intrinsics' uncertainty moves where ``cal`` maps plane
+    points (:func:`~stringcast.calibrate.intrinsics_spread.mapping_modes`, the homography refitted to the
+    trial's board under each change); None without intrinsics or their covariance."""
     if cal.K is None or not quality or quality.get("covariance") is None:
         return None
     free = quality.get("free_fit") if quality.get("held") else None
@@ -262,7 +262,16 @@ def _intrinsics_spread(img, board, board_to_robot, cal: Calibration, quality: di
         return plane_homography(img, board, board_to_robot, Intrinsics(K, dist, 0.0, 0, size), source,
                                 detection=detection)
 
-    return lambda points: mapping_covariance(points, cal, quality["covariance"], refit, free)
+    return lambda points: mapping_modes(points, cal, quality["covariance"], refit, free)
+
+
+def _weak_intrinsics(verdict: Verdict) -> str | None:
+    """Why the calibration found its intrinsics undetermined, in a clause, where its verdict so far has an
+    intrinsics warning (parameters held, deviations over their limits, poor coverage, the trial's board
+    off them), or None: where it has, their stated deviations are no bound on their error."""
+    if any(r.startswith("intrinsics: ") for r in verdict.reasons):
+        return "the calibration's intrinsics warning: the views do not determine them well"
+    return None
 
 
 def _board_check(trial_dir: Path, rest_image: np.ndarray, cal: Calibration, campaign, board_check: BoardCheckSettings,
@@ -275,7 +284,8 @@ def _board_check(trial_dir: Path, rest_image: np.ndarray, cal: Calibration, camp
         return None, verdict.add("warn", f"{joints} missing: the board-to-robot transform was not checked against the arm")
     _, q = read_joint_table(joints, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
     grey = rest_image if rest_image.ndim == 2 else cv2.cvtColor(rest_image, cv2.COLOR_BGR2GRAY)
-    board = check_board_to_robot(grey.astype(np.float64), cal, campaign.arm, q[0], board_check, spread)
+    board = check_board_to_robot(grey.astype(np.float64), cal, campaign.arm, q[0], board_check, spread,
+                                 _weak_intrinsics(verdict))
     found = Verdict.from_dict(board.get("verdict"))
     for reason in found.reasons:
         verdict = verdict.add(found.status, f"board-to-robot check: {reason}")

@@ -7,7 +7,7 @@ carried along, growing with the distance from the board: a weak calibration set 
 field footage: the still arm seen 6-36 mm from where a right board pose put it) moves the arm
 seen far from the board by many millimetres, while a wrong board pose moves every point alike.
 
-:func:`mapping_covariance` propagates the intrinsics' covariance (the calibration's
+:func:`mapping_modes` propagates the intrinsics' covariance (the calibration's
 ``intrinsics.covariance``: the jackknife over the views with OpenCV's deviations as a floor,
 :func:`stringcast.calibrate.quality.assess`) to points of the plane, to first order: each
 parameter is moved by one standard deviation either way, the homography refitted to the trial's
@@ -38,10 +38,12 @@ def _with(K: np.ndarray, dist: np.ndarray, i: int, step: float) -> tuple[np.ndar
     return K, d
 
 
-def mapping_covariance(points: np.ndarray, calibration, covariance, refit: Callable, free: dict | None = None
-                       ) -> np.ndarray | None:
-    """(N, 2, 2) m^2: the covariance of where ``calibration`` maps the swing-plane ``points`` (N, 2) m,
-    from the intrinsics' uncertainty (module doc).
+def mapping_modes(points: np.ndarray, calibration, covariance, refit: Callable, free: dict | None = None
+                  ) -> np.ndarray | None:
+    """(N, 2, M) m: the modes of how the intrinsics' uncertainty moves where ``calibration`` maps the
+    swing-plane ``points`` (N, 2) m (module doc): the mapped points move by G xi with xi standard normal
+    (M,), so their covariance is G G^T (:func:`mapping_covariance`), and that of any linear function of
+    them (the board check's translation) follows.
 
     Args:
         points: (N, 2) m, robot-frame points of the swing plane (seen at ``calibration.robot_to_pixel``).
@@ -49,11 +51,12 @@ def mapping_covariance(points: np.ndarray, calibration, covariance, refit: Calla
         covariance: (9, 9) of :data:`NAMES` for its intrinsics (rows of held ones 0), or None.
         refit: ``(K, dist) -> Calibration``: the mapping with the homography refitted to the trial's
             board under those intrinsics (:func:`~stringcast.calibrate.calibration.plane_homography`).
-        free: where parameters were held, the free fit's ``{"K", "dist", "covariance"}``, else None.
+        free: where parameters were held, the free fit's ``{"K", "dist", "covariance"}``, else None: its
+            distance from the held fit is one more mode, of weight 1.
 
     Returns:
-        The covariances, or None without a finite covariance (the intrinsics' uncertainty not
-        determined) or without intrinsics.
+        The modes, or None without a finite covariance (the intrinsics' uncertainty not determined)
+        or without intrinsics.
     """
     base = free if free is not None else {"K": calibration.K, "dist": calibration.dist, "covariance": covariance}
     C = None if base.get("covariance") is None else np.asarray(base["covariance"], float)
@@ -67,8 +70,15 @@ def mapping_covariance(points: np.ndarray, calibration, covariance, refit: Calla
     for i in np.nonzero(sd > 0)[0]:
         hi, lo = (refit(*_with(base["K"], base["dist"], i, s * sd[i])).pixel_to_robot(u) for s in (1, -1))
         J[:, :, i] = (hi - lo) / (2 * sd[i])
-    cov = np.einsum("nai,ij,nbj->nab", J, C, J)
+    lam, V = np.linalg.eigh(0.5 * (C + C.T))
+    G = J @ (V * np.sqrt(np.maximum(lam, 0.0)))                     # C = (V sqrt(lam)) (V sqrt(lam))^T
     if free is not None:   # the held fit's distance from the free fit, a known part of its error
         delta = refit(np.asarray(free["K"], float), np.asarray(free["dist"], float)).pixel_to_robot(u) - at
-        cov = cov + np.einsum("na,nb->nab", delta, delta)
-    return cov
+        G = np.concatenate([G, delta[:, :, None]], axis=2)
+    return G
+
+
+def mapping_covariance(*args, **kwargs) -> np.ndarray | None:
+    """(N, 2, 2) m^2: the covariance of each mapped point, G G^T of :func:`mapping_modes` (same arguments)."""
+    G = mapping_modes(*args, **kwargs)
+    return None if G is None else np.einsum("nam,nbm->nab", G, G)

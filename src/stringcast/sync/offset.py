@@ -137,9 +137,10 @@ def _video_doc(trial_dir: Path, calibration_json, campaign, meta: dict, video_ya
     doc["dropped_frames"] = None if stamps is None else [list(g) for g in dropped_frames(stamps, float(meta["fps"]))]
     bc = doc.get("board_check")
     if bc is not None and bc["residual_mm"] is not None and bc["residual_mm"] > sync.board_check_warn_mm:
+        what = ("the calibration's intrinsics (weak; their error grows from the board to the arm), then the board "
+                "pose in config" if bc.get("likely_cause") == "intrinsics" else "the board pose in config")
         warns.append(f"the still arm is seen {bc['residual_mm']:.1f} mm from where the forward kinematics and "
-                     f"the board-to-robot transform put it (> {sync.board_check_warn_mm} mm): check the "
-                     "board pose in config")
+                     f"the board-to-robot transform put it (> {sync.board_check_warn_mm} mm): check {what}")
     if doc["dropped_frames"]:
         warns.append(f"{len(doc['dropped_frames'])} dropped frame(s) by the file's timestamps")
     return doc, warns
