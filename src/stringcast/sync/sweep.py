@@ -225,6 +225,12 @@ def speed_eff(rows: np.ndarray) -> float | None:
     return float(np.sum(v ** 2) / np.sum(v)) if np.sum(v) > 0 else None
 
 
+def _amount(value: float, limit: float, unit: str) -> str:
+    """``value`` with its unit, or "not determined" where it is not finite or exceeds ``limit``: an uncertainty
+    larger than what it is about (the region where the string can be, the clip's duration) says nothing more."""
+    return f"{value:.2f} {unit}" if np.isfinite(value) and value <= limit else "not determined"
+
+
 def _refined_docs(calibration, sync_doc, fit, rows, points, corners, sweep):
     """The refined geometry and clock documents, judged where the string can be (``points`` (N, 2) m)."""
     refined, total = fit["calibration"], fit["dt_s"]
@@ -238,6 +244,8 @@ def _refined_docs(calibration, sync_doc, fit, rows, points, corners, sweep):
     clock_se_ms = fit["dt_standard_error_s"] * 1000
     clock_uncert_ms = max(2 * clock_se_ms, halves_s * 1000) + lens_ms
     v_eff = speed_eff(rows)
+    span_mm = float(np.max(np.ptp(points, axis=0))) * 1000 if len(points) else 0.0
+    clip_ms = float(sync_doc["frames"]) / float(sync_doc["fps"]) * 1000
     block = {"applied": True, "frames": int(len(np.unique(rows[:, 0]))), "rows": int(len(rows)), "rows_used": fit["rows"],
              "sigma_rows_mm": fit["sigma_rows_mm"], "rms_before_mm": fit["rms_before_mm"],
              "rms_after_mm": fit["rms_after_mm"], "reach_points": int(len(points)),
@@ -263,10 +271,12 @@ def _refined_docs(calibration, sync_doc, fit, rows, points, corners, sweep):
             f"{what}, but it hangs on the lens model there: refitting k1 ({lens['k1_change']:+.4f}) and the principal "
             f"point ({lens['principal_point_change_px'][0]:+.1f}, {lens['principal_point_change_px'][1]:+.1f} px) moves it "
             f"by {lens['disagreement_p95_mm']:.2f} mm (p95) beyond the arm's reach, and it is known there only to "
-            f"{uncert_mm:.2f} mm (> sweep.tolerance_mm {sweep.tolerance_mm:g}): the calibration's intrinsics look off; "
+            f"{_amount(uncert_mm, span_mm, 'mm')} (> sweep.tolerance_mm {sweep.tolerance_mm:g}): the calibration's "
+            "intrinsics look off; "
             "recalibrate with shots that cover the image"))
     else:
-        gv = calibration.verdict.add("warn", f"{what}, but it is known there only to {uncert_mm:.2f} mm "
+        gv = calibration.verdict.add("warn", f"{what}, but it is known there only to "
+                                             f"{_amount(uncert_mm, span_mm, 'mm')} "
                                              f"(> sweep.tolerance_mm {sweep.tolerance_mm:g}): the arm does not reach "
                                              f"far enough, or its rows disagree; add calibration shots there")
     geo = replace(refined, verdict=gv, warnings=() if gv.ok else gv.reasons).to_dict()
@@ -280,7 +290,8 @@ def _refined_docs(calibration, sync_doc, fit, rows, points, corners, sweep):
         why = ("it hangs on the lens model (the fits with and without k1 and the principal point differ by "
                f"{lens_ms:.2f} ms): the calibration's intrinsics look off; recalibrate with shots that cover the image"
                if lens_ms >= clock_uncert_ms - lens_ms else "the arm's rows disagree on the clock")
-        cv = sv.add("warn", f"{cwhat}, but known only to {clock_uncert_ms:.2f} ms (> sweep.clock_tolerance_ms "
+        cv = sv.add("warn", f"{cwhat}, but known only to {_amount(clock_uncert_ms, clip_ms, 'ms')} "
+                            f"(> sweep.clock_tolerance_ms "
                             f"{sweep.clock_tolerance_ms:g}): {why}")
     clock = dict(sync_doc, offset_s=float(sync_doc["offset_s"]) + total, offset_before_sweep_s=sync_doc["offset_s"],
                  sweep=block, verdict=cv.as_dict())
