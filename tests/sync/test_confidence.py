@@ -103,3 +103,17 @@ def test_a_mapping_error_at_the_arm_bounds_what_the_video_can_overrule(board_mm,
         assert choice["uncertainty_ms"] == pytest.approx(4.0 + video["uncertainty_ms"], rel=1e-3)
     else:
         assert "overruled" in note and choice["uncertainty_ms"] == video["uncertainty_ms"]
+
+
+def test_a_board_pose_shift_the_strips_follow_is_no_systematic_error():
+    """The board check found the still arm 20 mm off as one rigid shift, beyond what the intrinsics explain (its
+    cause: the board pose): the strips follow that shift, so only the features' scatter about it (0.4 mm) bounds
+    the mapping's error at the arm, not the 20 mm; a trigger 4 ms off is overruled then."""
+    st = SyncSettings()
+    ev = _evidence(jitter_ms=0.05)
+    bc = {"residual_mm": 20.0, "fit_rms_mm": 0.4, "likely_cause": "board_pose"}
+    choice = choose_offset({**_est(ev), "board_check": bc}, None, TAU + 0.004, st)
+    assert choice["candidates"]["video"]["mapping_error_mm"] == pytest.approx(0.4)
+    assert choice["chosen"] == "video"
+    weak = choose_offset({**_est(ev), "board_check": {**bc, "likely_cause": "intrinsics"}}, None, TAU + 0.004, st)
+    assert weak["candidates"]["video"]["mapping_error_mm"] == pytest.approx(20.0) and weak["chosen"] == "trigger"

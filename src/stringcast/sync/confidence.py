@@ -24,7 +24,10 @@ correlated frames then counts as one piece of evidence, as it should.
   peak by at most E sum v / sum v^2 = E / v_eff. E is the board check's |d| (the mapping's error at
   the still arm; the strips are moved by d, which takes off only the part of the error that is
   the same everywhere, and an error of the intrinsics is not: it changes over the region the arm
-  sweeps by as much as it is), or, without a board check, the arm-match residual. The video's
+  sweeps by as much as it is), or, where the check found d to be the board pose's (a rigid shift
+  beyond what the intrinsics explain, its ``likely_cause``), which the shift takes off, the
+  features' own scatter about that shift (``fit_rms_mm``); without a board check, the arm-match
+  residual. The video's
   **uncertainty** is then ``evidence_k`` standard errors plus that bound, and the video overrules a
   trigger time only when the trigger lies outside it too (:func:`choose_offset`).
 * :func:`video_quality`: the video estimate's own standard error (the same bootstrap of the
@@ -168,13 +171,14 @@ def systematic_ms(evidence, est: dict) -> tuple[float | None, float | None, floa
 
     Args:
         evidence: :class:`~stringcast.sync.video_offset.VideoEvidence` (the agreeing segments' speeds).
-        est: the estimate's dict: ``board_check`` (its ``residual_mm`` |d|) and ``residual_mm``.
+        est: the estimate's dict: ``board_check`` (its ``residual_mm`` |d|, ``likely_cause``, ``fit_rms_mm``)
+            and ``residual_mm``.
     """
     _, a, ok, _ = _equations(evidence)
     v = np.abs(a[ok])
     v_eff = float(np.sum(v ** 2) / np.sum(v)) if v.size and np.sum(v) > 0 else None
     bc = est.get("board_check") or {}
-    E = bc.get("residual_mm")
+    E = bc.get("fit_rms_mm") if bc.get("likely_cause") == "board_pose" else bc.get("residual_mm")
     if E is None or not np.isfinite(E):
         E = est.get("residual_mm")
     if v_eff is None or E is None or not np.isfinite(E):
