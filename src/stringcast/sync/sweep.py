@@ -25,15 +25,19 @@ segments). Otherwise it warns with the reason, and where the sweep cannot run (n
 intrinsics, too few rows) both files pass the inputs through with their verdicts and say so.
 
 **Uncertainty** (``uncertainty_p95_mm``, ``clock_uncertainty_ms``; what the verdicts quote as
-"known to", issue 51): the fit's statistical part, the larger of twice its standard error (the
+"known to", issue 51): two independent parts, added in quadrature (root sum of squares, as
+independent errors add). The fit's statistical part: the larger of twice its standard error (the
 covariance with the rows clustered by frame, :func:`stringcast.calibrate.refine.refine_mapping`:
-one frame's rows share its errors) and the distance between the even and the odd frames fitted
-apart, plus what hangs on the lens model: the distance (mapping) and the clocks' difference
-between the fits with and without k1 and the principal point (below). The two add: the first is
-the noise of the rows, the second an error of the model the rows cannot average out. Recorded
-beside them, not judged: the first and second halves of the frames (in time) fitted apart
-(``clock_split_ms``), and the bound a mapping error of ``uncertainty_p95_mm`` everywhere puts on
-the clock through the rows' speeds (``clock_mapping_bound_ms``, :func:`speed_eff`).
+one frame's rows share its errors; twice, for about 95 %) and the distance between the even and
+the odd frames fitted apart (one draw of twice the full fit's spread); for the clock also the
+difference between the first and the second half of the frames in time (errors of the mapping
+shared by neighbouring frames, which the arm's path carries into the clock and the even/odd split
+cannot see). And what hangs on the lens model: the distance (mapping) and the clocks' difference
+between the fits with and without k1 and the principal point (below), an error of the model the
+rows cannot average out. Recorded beside them, not judged: the bound a mapping error of
+``uncertainty_p95_mm`` everywhere would put on the clock through the rows' speeds
+(``clock_mapping_bound_ms``, :func:`speed_eff`: a worst case, many times the clock's true error
+on the generalization setups).
 
 With ``sweep.fit_lens`` (the default) the fit frees k1 and the principal point too, under
 Gaussian priors of ``sweep.k1_prior`` and ``sweep.principal_point_prior`` x the image width: a
@@ -208,8 +212,7 @@ def _lens(calibration, fit, rows, corners, sweep, points) -> dict | None:
 def _time_split(calibration, rows, corners, sweep) -> float:
     """|clock of the first half of the frames (in time) - clock of the second half|, ms: each half sees the
     arm in other places at other speeds, so an error of the mapping that the fit cannot take, common to
-    the frames near in time (unlike the even/odd split's), shows as their difference. Recorded, not
-    judged (issue 51's benchmark compares it with the truth)."""
+    the frames near in time (unlike the even/odd split's), shows as their difference."""
     frames = np.unique(rows[:, 0])
     cut = frames[len(frames) // 2]
     dts = [refine_mapping(calibration, rows[m], corners, **lens_fit(calibration, sweep))["dt_s"]
@@ -240,9 +243,10 @@ def _refined_docs(calibration, sync_doc, fit, rows, points, corners, sweep):
     moved = np.linalg.norm(refined.pixel_to_robot(calibration.robot_to_pixel(points)) - points, axis=1)
     lens_m = 0.0 if lens is None else lens["disagreement_p95_mm"] / 1000
     lens_ms = 0.0 if lens is None else lens["clock_disagreement_ms"]
-    uncert_mm = (max(2 * float(np.percentile(se, 95)), halves_m) + lens_m) * 1000
+    uncert_mm = float(np.hypot(max(2 * float(np.percentile(se, 95)), halves_m), lens_m)) * 1000
     clock_se_ms = fit["dt_standard_error_s"] * 1000
-    clock_uncert_ms = max(2 * clock_se_ms, halves_s * 1000) + lens_ms
+    split_ms = _time_split(calibration, rows, corners, sweep)
+    clock_uncert_ms = float(np.hypot(max(2 * clock_se_ms, halves_s * 1000, split_ms), lens_ms))
     v_eff = speed_eff(rows)
     span_mm = float(np.max(np.ptp(points, axis=0))) * 1000 if len(points) else 0.0
     clip_ms = float(sync_doc["frames"]) / float(sync_doc["fps"]) * 1000
@@ -256,7 +260,7 @@ def _refined_docs(calibration, sync_doc, fit, rows, points, corners, sweep):
              "halves_p95_mm": halves_m * 1000, "clock_correction_ms": total * 1000,
              "clock_standard_error_ms": clock_se_ms, "clock_halves_ms": halves_s * 1000,
              "clock_standard_error_iid_ms": fit["dt_standard_error_iid_s"] * 1000,
-             "clock_split_ms": _time_split(calibration, rows, corners, sweep), "speed_eff_m_s": v_eff,
+             "clock_split_ms": split_ms, "speed_eff_m_s": v_eff,
              "clock_mapping_bound_ms": None if v_eff is None else uncert_mm / v_eff,
              "clock_uncertainty_ms": clock_uncert_ms, "lens": lens}
     what = (f"the arm's sweep ({block['rows_used']} link rows in {block['frames']} frames, {fit['rms_before_mm']:.2f} -> "
@@ -266,7 +270,7 @@ def _refined_docs(calibration, sync_doc, fit, rows, points, corners, sweep):
         gv = Verdict("ok", (f"{what}; known there to {uncert_mm:.2f} mm",
                             *(f"calibration ({calibration.verdict.status}, now measured by the sweep): {r}"
                               for r in calibration.verdict.reasons)))
-    elif lens is not None and lens["disagreement_p95_mm"] >= uncert_mm - lens["disagreement_p95_mm"]:   # it dominates
+    elif lens is not None and lens["disagreement_p95_mm"] >= uncert_mm / np.sqrt(2):   # the larger part
         gv = calibration.verdict.add("warn", (
             f"{what}, but it hangs on the lens model there: refitting k1 ({lens['k1_change']:+.4f}) and the principal "
             f"point ({lens['principal_point_change_px'][0]:+.1f}, {lens['principal_point_change_px'][1]:+.1f} px) moves it "
@@ -289,7 +293,7 @@ def _refined_docs(calibration, sync_doc, fit, rows, points, corners, sweep):
     else:
         why = ("it hangs on the lens model (the fits with and without k1 and the principal point differ by "
                f"{lens_ms:.2f} ms): the calibration's intrinsics look off; recalibrate with shots that cover the image"
-               if lens_ms >= clock_uncert_ms - lens_ms else "the arm's rows disagree on the clock")
+               if lens_ms >= clock_uncert_ms / np.sqrt(2) else "the arm's rows disagree on the clock")
         cv = sv.add("warn", f"{cwhat}, but known only to {_amount(clock_uncert_ms, clip_ms, 'ms')} "
                             f"(> sweep.clock_tolerance_ms "
                             f"{sweep.clock_tolerance_ms:g}): {why}")
