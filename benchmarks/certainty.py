@@ -1,4 +1,7 @@
-"""The generalization benchmark's check of the stated uncertainties against the lab's truth (issue 51).
+"""The generalization benchmark's errors against the lab's truth, and its check of the stated uncertainties (issue 51).
+
+:func:`calibration_errors`, :func:`mapping_error` and :func:`plane_errors` measure the calibration
+and the pixel -> swing-plane mapping against the draw's true camera.
 
 Each stage that states how well it knows a figure is held to it, per setup, where the truth is
 known (``ground_truth.json``, read here by the benchmark only). The **stated interval** of each
@@ -30,6 +33,47 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+
+
+def calibration_errors(cal: dict, setup) -> tuple[float | None, float | None]:
+    """(fx error %, principal-point error px) of the calibration against the draw's true camera."""
+    K = cal.get("K")
+    if K is None:
+        return None, None
+    K = np.asarray(K, float)
+    cx0 = setup.width_px / 2 - 0.5 + setup.principal_offset_px[0]
+    cy0 = setup.height_px / 2 - 0.5 + setup.principal_offset_px[1]
+    fx_err = (K[0, 0] - setup.focal_px) / setup.focal_px * 100
+    return float(fx_err), float(np.hypot(K[0, 2] - cx0, K[1, 2] - cy0))
+
+
+def swing_grid(n: int = 13) -> np.ndarray:
+    """(n * n, 2) m: a grid over the lab's swing region (robot frame)."""
+    from stringcast.lab.view import SWING_REGION_M
+
+    (x0, x1), (y0, y1) = SWING_REGION_M
+    return np.stack(np.meshgrid(np.linspace(x0, x1, n), np.linspace(y0, y1, n)), -1).reshape(-1, 2)
+
+
+def mapping_error(cal, camera: dict, points: np.ndarray) -> np.ndarray:
+    """(N, 2) m: where the calibration ``cal`` maps the pixels at which the lab's true ``camera``
+    (``ground_truth.json``'s, read by the benchmarks only) sees the swing-plane ``points`` (N, 2) m,
+    less those points."""
+    import cv2
+
+    uv = cv2.projectPoints(np.c_[points, np.zeros(len(points))], *(np.asarray(camera[k], float) for k in (
+        "rvec", "tvec", "K", "dist")))[0].reshape(-1, 2)
+    return cal.pixel_to_robot(uv) - points
+
+
+def plane_errors(calibration_json: Path, camera: dict) -> tuple[float, float]:
+    """(median, max) mm of the calibration's pixel -> swing-plane mapping over the swing region,
+    at the pixels where the lab's true camera sees a 13 x 13 grid of the region's points."""
+    from stringcast.calibrate import Calibration
+
+    e = np.linalg.norm(mapping_error(Calibration.from_json(calibration_json), camera, swing_grid()), axis=1) * 1000
+    return float(np.median(e)), float(np.max(e))
+
 
 QUANTITIES = ("sync", "sync_video", "clock", "mapping")
 """The quantities whose stated uncertainty the benchmark checks (module doc)."""
@@ -97,7 +141,6 @@ def _sync_before(sync_doc: dict, truth_s: float, evidence_k: float, se: float | 
 def sweep_figures(geo_doc: dict, clock_doc: dict, truth_s: float, truth_camera: dict, calibration_json: Path,
                   geometry_json: Path, campaign, joints_csv: Path) -> dict:
     """The sweep's stated clock and mapping uncertainties and their true errors (module doc)."""
-    from benchmarks.generalization import mapping_error
     from stringcast.calibrate import Calibration
     from stringcast.core import read_joint_table
     from stringcast.sync.sweep import reach_points

@@ -57,6 +57,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from benchmarks.certainty import calibration_errors as _calibration_errors, plane_errors as _plane_errors
 from benchmarks.common import BENCH_DIR, header, write
 
 SILENT = {"tracking_p95_mm": 5.0, "sync_error_ms": 1.0, "principal_point_share": 0.02, "fx_share": 0.02}
@@ -84,49 +85,9 @@ def _verdict(doc: dict | None) -> str:
     return str(((doc or {}).get("verdict") or {}).get("status", "ok"))
 
 
-def _calibration_errors(cal: dict, setup) -> tuple[float | None, float | None]:
-    """(fx error %, principal-point error px) of the calibration against the draw's true camera."""
-    K = cal.get("K")
-    if K is None:
-        return None, None
-    K = np.asarray(K, float)
-    cx0 = setup.width_px / 2 - 0.5 + setup.principal_offset_px[0]
-    cy0 = setup.height_px / 2 - 0.5 + setup.principal_offset_px[1]
-    fx_err = (K[0, 0] - setup.focal_px) / setup.focal_px * 100
-    return float(fx_err), float(np.hypot(K[0, 2] - cx0, K[1, 2] - cy0))
-
-
 STAGES = ("film", "calibrate", "sync", "sweep", "track", "estimate", "figures")
 """The steps of one setup, in order; ``--until`` stops after one of them (``figures``: as ``estimate``),
 ``--from figures`` reads every stage's outputs where they are there and only measures them."""
-
-
-def swing_grid(n: int = 13) -> np.ndarray:
-    """(n * n, 2) m: a grid over the lab's swing region (robot frame)."""
-    from stringcast.lab.view import SWING_REGION_M
-
-    (x0, x1), (y0, y1) = SWING_REGION_M
-    return np.stack(np.meshgrid(np.linspace(x0, x1, n), np.linspace(y0, y1, n)), -1).reshape(-1, 2)
-
-
-def mapping_error(cal, camera: dict, points: np.ndarray) -> np.ndarray:
-    """(N, 2) m: where the calibration ``cal`` maps the pixels at which the lab's true ``camera``
-    (``ground_truth.json``'s, read by the benchmarks only) sees the swing-plane ``points`` (N, 2) m,
-    less those points."""
-    import cv2
-
-    uv = cv2.projectPoints(np.c_[points, np.zeros(len(points))], *(np.asarray(camera[k], float) for k in (
-        "rvec", "tvec", "K", "dist")))[0].reshape(-1, 2)
-    return cal.pixel_to_robot(uv) - points
-
-
-def _plane_errors(calibration_json: Path, camera: dict) -> tuple[float, float]:
-    """(median, max) mm of the calibration's pixel -> swing-plane mapping over the swing region,
-    at the pixels where the lab's true camera sees a 13 x 13 grid of the region's points."""
-    from stringcast.calibrate import Calibration
-
-    e = np.linalg.norm(mapping_error(Calibration.from_json(calibration_json), camera, swing_grid()), axis=1) * 1000
-    return float(np.median(e)), float(np.max(e))
 
 
 def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str = "estimate", start: str = "film",
