@@ -249,7 +249,8 @@ def _refined_docs(calibration, sync_doc, fit, rows, points, corners, sweep):
     clock_uncert_ms = float(np.hypot(max(2 * clock_se_ms, halves_s * 1000, split_ms), lens_ms))
     v_eff = speed_eff(rows)
     span_mm = float(np.max(np.ptp(points, axis=0))) * 1000 if len(points) else 0.0
-    clip_ms = float(sync_doc["frames"]) / float(sync_doc["fps"]) * 1000
+    clip_ms = (float(sync_doc["frames"]) / float(sync_doc["fps"]) * 1000 if sync_doc.get("frames") and
+               sync_doc.get("fps") else np.inf)
     block = {"applied": True, "frames": int(len(np.unique(rows[:, 0]))), "rows": int(len(rows)), "rows_used": fit["rows"],
              "sigma_rows_mm": fit["sigma_rows_mm"], "rms_before_mm": fit["rms_before_mm"],
              "rms_after_mm": fit["rms_after_mm"], "reach_points": int(len(points)),
