@@ -319,7 +319,7 @@ def choose_offset(est: dict | None, failure: str | None, trigger_s: float | None
         return {"chosen": "video", "offset_s": video_s, "uncertainty_ms": u, "candidates": cands, "verdict": v}
     if fits_better:
         v = v.add("ok", f"video.yaml's trigger time {trigger_s:.5f} s is kept: the arm matches the frames better at "
-                        f"the video's offset {video_s:.5f} s ({gap_ms:+.2f} ms; {cmp['video_mm']:.2f} against "
+                        f"the video's offset {video_s:.5f} s ({gap_ms:+.2f} ms; residual {cmp['video_mm']:.2f} against "
                         f"{cmp['trigger_mm']:.2f} mm), but the trigger lies within the video's uncertainty "
                         f"{_uncertainty_words(fig, k)}")
     for r in reasons:
