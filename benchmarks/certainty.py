@@ -216,30 +216,45 @@ def overrule_confusion(rows: list[dict], chosen_key: str = "sync_chosen") -> dic
 
 
 def figure(rows: list[dict], path: Path) -> None:
-    """Per quantity, each setup's |true error| against its stated uncertainty (log-log), the
-    diagonal the coverage limit: a point above it is a stated uncertainty the truth broke."""
+    """Per quantity, each setup's |true error| against its stated uncertainty (log-log): dots under the
+    rules of the code that ran (green inside, red outside), crosses under the rules before issue 51
+    (recomputed from the same run, where it records them); the diagonal is the coverage limit."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
 
     fig, axes = plt.subplots(1, len(PAIRS), figsize=(4 * len(PAIRS), 3.8))
-    cov = coverage(rows)
-    for ax, (q, (err_key, u_key)) in zip(axes, PAIRS.items()):
-        pts = np.array([(r[u_key], abs(r[err_key])) for r in rows if r.get(u_key) is not None
-                        and r.get(err_key) is not None], float).reshape(-1, 2)
-        if len(pts):
+    cov, old = coverage(rows), coverage(rows, PAIRS_BEFORE)
+    for ax, q in zip(axes, PAIRS):
+        drawn = []
+        for (err_key, u_key), style in ((PAIRS_BEFORE[q], "before"), (PAIRS[q], "after")):
+            pts = np.array([(r[u_key], abs(r[err_key])) for r in rows if r.get(u_key) is not None
+                            and r.get(err_key) is not None], float).reshape(-1, 2)
+            if not len(pts):
+                continue
             pts = np.maximum(pts, 1e-3)
-            ax.scatter(pts[:, 0], pts[:, 1], c=np.where(pts[:, 1] <= pts[:, 0], "tab:green", "tab:red"), s=18)
-            lo, hi = pts.min() / 2, pts.max() * 2
+            drawn.append(pts)
+            inside = pts[:, 1] <= pts[:, 0]
+            if style == "before":
+                ax.scatter(pts[:, 0], pts[:, 1], marker="x", c=np.where(inside, "0.6", "tab:red"), s=16, lw=0.8)
+            else:
+                ax.scatter(pts[:, 0], pts[:, 1], c=np.where(inside, "tab:green", "tab:red"), s=18)
+        if drawn:
+            allp = np.concatenate(drawn)
+            lo, hi = allp.min() / 2, allp.max() * 2
             ax.plot([lo, hi], [lo, hi], "k--", lw=0.8)
             ax.set_xscale("log")
             ax.set_yscale("log")
-        c = cov[q]
-        share = "-" if c["share"] is None else f"{c['share']:.0%}"
-        ax.set_title(f"{q}: {c['covered']}/{c['stated']} covered ({share})", fontsize=9)
+            for axis in (ax.xaxis, ax.yaxis):
+                axis.set_minor_formatter(NullFormatter())
+        c, b = cov[q], old[q]
+        share = lambda x: "-" if x["share"] is None else f"{x['share']:.0%}"
+        ax.set_title(f"{q}: {c['covered']}/{c['stated']} covered ({share(c)}); before {b['covered']}/{b['stated']}",
+                     fontsize=9)
         unit = "mm" if q == "mapping" else "ms"
-        ax.set_xlabel(f"stated uncertainty ({unit})")
+        ax.set_xlabel(f"stated uncertainty ({unit}); x: before issue 51")
         ax.set_ylabel(f"|true error| ({unit})")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
