@@ -25,23 +25,20 @@ segments). Otherwise it warns with the reason, and where the sweep cannot run (n
 intrinsics, too few rows) both files pass the inputs through with their verdicts and say so.
 
 **Uncertainty** (``uncertainty_p95_mm``, ``clock_uncertainty_ms``; what the verdicts quote as
-"known to", issue 51): two parts, added (the lens model's error may lie either way of the fit's
-noise, and |a + b| <= |a| + |b| whatever their correlation; added in quadrature instead, the
-mapping's stated p95 fell short of the truth on 2 of 13 generalization setups, by 0.07-0.1 mm).
-The fit's statistical part: the larger of twice its standard error (the
-covariance with the rows clustered by frame, :func:`stringcast.calibrate.refine.refine_mapping`:
-one frame's rows share its errors; twice, for about 95 %) and the distance between the even and
-the odd frames fitted apart (one draw of twice the full fit's spread); for the clock also the
-difference between the first and the second half of the frames in time (errors of the mapping
-shared by neighbouring frames, which the arm's path carries into the clock and the even/odd split
-cannot see; for the mapping the time split is recorded, ``split_p95_mm``, not used: each half's arm
-covers only part of the region, and their extrapolations part by far more than the whole fit's
-error). And what hangs on the lens model: the distance (mapping) and the clocks' difference
-between the fits with and without k1 and the principal point (below), an error of the model the
-rows cannot average out. Recorded beside them, not judged: the bound a mapping error of
-``uncertainty_p95_mm`` everywhere would put on the clock through the rows' speeds
-(``clock_mapping_bound_ms``, :func:`speed_eff`: a worst case, many times the clock's true error
-on the generalization setups).
+"known to", issue 51): two independent parts added in quadrature. The fit's statistical part is
+twice its standard error (about 95 %), from the covariance with the rows clustered by frame
+(:func:`stringcast.calibrate.refine.refine_mapping`: one frame's rows share its errors, which
+the Gauss-Newton covariance missed and the even/odd split, one draw of the same figure, stood in
+for; the split is kept as ``halves_*``, not used); for the clock, the larger of that and the
+difference between the first and the second half of the frames in time (an error of the mapping
+shared by neighbouring frames, which the arm's path carries into the clock). The other part is
+what hangs on the lens model: the distance (mapping) and the clocks' difference between the fits
+with and without k1 and the principal point (below), an error of the model the rows cannot
+average out. Recorded beside them, not used: the mapping's time split (``split_p95_mm``: each
+half's arm covers part of the region, and their extrapolations part by far more than the whole
+fit's error), and the bound a mapping error of ``uncertainty_p95_mm`` everywhere would put on the
+clock through the rows' speeds (``clock_mapping_bound_ms``, :func:`speed_eff`: a worst case, many
+times the clock's true error on the generalization setups).
 
 With ``sweep.fit_lens`` (the default) the fit frees k1 and the principal point too, under
 Gaussian priors of ``sweep.k1_prior`` and ``sweep.principal_point_prior`` x the image width: a
@@ -251,11 +248,11 @@ def _refined_docs(calibration, sync_doc, fit, rows, points, corners, sweep):
     moved = np.linalg.norm(refined.pixel_to_robot(calibration.robot_to_pixel(points)) - points, axis=1)
     lens_m = 0.0 if lens is None else lens["disagreement_p95_mm"] / 1000
     lens_ms = 0.0 if lens is None else lens["clock_disagreement_ms"]
-    uncert_mm = (max(2 * float(np.percentile(se, 95)), halves_m) + lens_m) * 1000
+    uncert_mm = float(np.hypot(2 * float(np.percentile(se, 95)), lens_m)) * 1000
     clock_se_ms = fit["dt_standard_error_s"] * 1000
     split_m, split_s = _time_split(calibration, rows, corners, sweep, points)
     split_ms = split_s * 1000
-    clock_uncert_ms = max(2 * clock_se_ms, halves_s * 1000, split_ms) + lens_ms
+    clock_uncert_ms = float(np.hypot(max(2 * clock_se_ms, split_ms), lens_ms))
     v_eff = speed_eff(rows)
     span_mm = float(np.max(np.ptp(points, axis=0))) * 1000 if len(points) else 0.0
     clip_ms = (float(sync_doc["frames"]) / float(sync_doc["fps"]) * 1000 if sync_doc.get("frames") and
@@ -280,7 +277,7 @@ def _refined_docs(calibration, sync_doc, fit, rows, points, corners, sweep):
         gv = Verdict("ok", (f"{what}; known there to {uncert_mm:.2f} mm",
                             *(f"calibration ({calibration.verdict.status}, now measured by the sweep): {r}"
                               for r in calibration.verdict.reasons)))
-    elif lens is not None and lens["disagreement_p95_mm"] >= uncert_mm / 2:   # the larger part
+    elif lens is not None and lens["disagreement_p95_mm"] >= uncert_mm / np.sqrt(2):   # the larger part
         gv = calibration.verdict.add("warn", (
             f"{what}, but it hangs on the lens model there: refitting k1 ({lens['k1_change']:+.4f}) and the principal "
             f"point ({lens['principal_point_change_px'][0]:+.1f}, {lens['principal_point_change_px'][1]:+.1f} px) moves it "
@@ -303,7 +300,7 @@ def _refined_docs(calibration, sync_doc, fit, rows, points, corners, sweep):
     else:
         why = ("it hangs on the lens model (the fits with and without k1 and the principal point differ by "
                f"{lens_ms:.2f} ms): the calibration's intrinsics look off; recalibrate with shots that cover the image"
-               if lens_ms >= clock_uncert_ms / 2 else "the arm's rows disagree on the clock")
+               if lens_ms >= clock_uncert_ms / np.sqrt(2) else "the arm's rows disagree on the clock")
         cv = sv.add("warn", f"{cwhat}, but known only to {_amount(clock_uncert_ms, clip_ms, 'ms')} "
                             f"(> sweep.clock_tolerance_ms "
                             f"{sweep.clock_tolerance_ms:g}): {why}")
