@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.common import header, write
-from benchmarks.generalization import mapping_error, swing_grid
+from benchmarks.certainty import mapping_error, swing_grid
 
 
 def run_setup(seed: int, string_type: int, config: dict, work: Path, n_frames: int) -> dict:

@@ -33,7 +33,13 @@ setup (``complete: false`` until the last), so a run can be stopped and ``--resu
 ``--quick``: 3 setups.
 
 Run: ``python -m benchmarks.generalization [--setups 24] [--first 0] [--work DIR] [--jobs 2]
-[--until film|...|estimate] [--from calibrate|sync|sweep|track|estimate|figures] [--resume] [--quick]``.
+[--until film|...|estimate] [--from calibrate|sync|sweep|track|estimate|figures] [--resume] [--quick]
+[--results NAME]``.
+
+The stated uncertainties (sync's, the clock's, the mapping's) are held to the truth per setup:
+the JSON's ``coverage`` gives per quantity the share of setups whose true error lies within the
+stated interval, and ``sync_decisions`` how often the trigger kept or overruled was the nearer
+candidate (:mod:`benchmarks.certainty`; ``generalization_coverage.png``).
 """
 from __future__ import annotations
 
@@ -51,6 +57,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from benchmarks.certainty import calibration_errors as _calibration_errors, plane_errors as _plane_errors
 from benchmarks.common import BENCH_DIR, header, write
 
 SILENT = {"tracking_p95_mm": 5.0, "sync_error_ms": 1.0, "principal_point_share": 0.02, "fx_share": 0.02}
@@ -78,49 +85,9 @@ def _verdict(doc: dict | None) -> str:
     return str(((doc or {}).get("verdict") or {}).get("status", "ok"))
 
 
-def _calibration_errors(cal: dict, setup) -> tuple[float | None, float | None]:
-    """(fx error %, principal-point error px) of the calibration against the draw's true camera."""
-    K = cal.get("K")
-    if K is None:
-        return None, None
-    K = np.asarray(K, float)
-    cx0 = setup.width_px / 2 - 0.5 + setup.principal_offset_px[0]
-    cy0 = setup.height_px / 2 - 0.5 + setup.principal_offset_px[1]
-    fx_err = (K[0, 0] - setup.focal_px) / setup.focal_px * 100
-    return float(fx_err), float(np.hypot(K[0, 2] - cx0, K[1, 2] - cy0))
-
-
 STAGES = ("film", "calibrate", "sync", "sweep", "track", "estimate", "figures")
 """The steps of one setup, in order; ``--until`` stops after one of them (``figures``: as ``estimate``),
 ``--from figures`` reads every stage's outputs where they are there and only measures them."""
-
-
-def swing_grid(n: int = 13) -> np.ndarray:
-    """(n * n, 2) m: a grid over the lab's swing region (robot frame)."""
-    from stringcast.lab.view import SWING_REGION_M
-
-    (x0, x1), (y0, y1) = SWING_REGION_M
-    return np.stack(np.meshgrid(np.linspace(x0, x1, n), np.linspace(y0, y1, n)), -1).reshape(-1, 2)
-
-
-def mapping_error(cal, camera: dict, points: np.ndarray) -> np.ndarray:
-    """(N, 2) m: where the calibration ``cal`` maps the pixels at which the lab's true ``camera``
-    (``ground_truth.json``'s, read by the benchmarks only) sees the swing-plane ``points`` (N, 2) m,
-    less those points."""
-    import cv2
-
-    uv = cv2.projectPoints(np.c_[points, np.zeros(len(points))], *(np.asarray(camera[k], float) for k in (
-        "rvec", "tvec", "K", "dist")))[0].reshape(-1, 2)
-    return cal.pixel_to_robot(uv) - points
-
-
-def _plane_errors(calibration_json: Path, camera: dict) -> tuple[float, float]:
-    """(median, max) mm of the calibration's pixel -> swing-plane mapping over the swing region,
-    at the pixels where the lab's true camera sees a 13 x 13 grid of the region's points."""
-    from stringcast.calibrate import Calibration
-
-    e = np.linalg.norm(mapping_error(Calibration.from_json(calibration_json), camera, swing_grid()), axis=1) * 1000
-    return float(np.median(e)), float(np.max(e))
 
 
 def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str = "estimate", start: str = "film",
@@ -138,6 +105,8 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str 
     from stringcast.sync import run_sync, run_sweep
     from stringcast.track import run_tracking
 
+    from benchmarks.certainty import sweep_figures, sync_figures
+
     setup = draw_setup(seed)
     cfg = apply_setup(config, setup)
     settings = settings_from_config(cfg)
@@ -148,6 +117,8 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str 
     try:   # a stage that refuses, or the lab failing to film, is a result: its message is the verdict
         t0 = time.perf_counter()
         # without ground_truth.json (the lab writes it last) a run was stopped while filming; film.json says which string
+        if start != "film" and not (_filmed(trial, string_type) and (calib / "ground_truth.json").exists()):
+            raise FileNotFoundError(f"{d}: not filmed (or still filming), and --from {start} films nothing")
         if not _filmed(trial, string_type):
             shutil.rmtree(trial, ignore_errors=True)
             run_first_plan(campaign, d / "motion.csv", d / "motion.json", seed=seed, **stage_kwargs(run_first_plan, settings))
@@ -177,6 +148,7 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str 
                     run_sync(trial, out / "calibration.json", campaign, out / "sync.json", **stage_kwargs(run_sync, settings)))
         row["sync_error_ms"] = (sync_doc["offset_s"] - truth["trigger_time_s"]) * 1000
         row["sync_verdict"] = _verdict(sync_doc)
+        row.update(sync_figures(sync_doc, truth["trigger_time_s"], settings.sync.evidence_k))
         if until == "sync":
             return row
         geo, clock = ((read_json(out / "geometry.json"), read_json(out / "clock.json"))
@@ -192,6 +164,8 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str 
         row["sync_error_ms"] = (clock["offset_s"] - truth["trigger_time_s"]) * 1000
         row["sync_verdict"] = _verdict(clock)
         row["sweep"] = geo.get("sweep")
+        row.update(sweep_figures(geo, clock, truth["trigger_time_s"], truth["camera"], out / "calibration.json",
+                                 out / "geometry.json", campaign, trial / "joints.csv"))
         if until == "sweep":
             return row
         tracks = (pd.read_parquet(out / "tracks.parquet") if _kept("track", start, out / "tracking.json") else
@@ -266,7 +240,10 @@ def _judge(row: dict, width_px: int) -> dict:
 
 
 def summarise(rows: list[dict], complete: bool, quick: bool) -> dict:
-    """The benchmark's JSON from the per-setup rows."""
+    """The benchmark's JSON from the per-setup rows (``coverage``, ``sync_decisions``:
+    :mod:`benchmarks.certainty`)."""
+    from benchmarks.certainty import PAIRS_BEFORE, coverage, overrule_confusion
+
     kept = [r for r in rows if not r["flagged"]]
     errors = np.concatenate([r["tracking_errors_mm"] for r in kept if "tracking_errors_mm" in r] or [np.zeros(0)])
     shares = [r["valid_share"] for r in kept if r.get("valid_share") is not None]
@@ -280,6 +257,9 @@ def summarise(rows: list[dict], complete: bool, quick: bool) -> dict:
             "valid_share": float(np.mean(shares)) if shares else None,
             "valid_share_moving": float(np.mean(moving)) if moving else None,
             "sync_error_ms_max": float(max(syncs)) if syncs else None, "silent_limits": SILENT,
+            "coverage": coverage(rows), "coverage_goal": 0.9, "sync_decisions": overrule_confusion(rows),
+            "coverage_before": coverage(rows, PAIRS_BEFORE),
+            "sync_decisions_before": overrule_confusion(rows, "before_sync_chosen"),
             "per_setup": per_setup}
 
 
@@ -308,12 +288,12 @@ def figure(rows: list[dict], path: Path) -> None:
     plt.close(fig)
 
 
-def _resumed(work: Path, seeds: list[int], until: str) -> dict[int, dict]:
+def _resumed(work: Path, seeds: list[int], until: str, results: str = "results") -> dict[int, dict]:
     """The rows of ``seeds`` that the last JSON holds for the same ``work`` and ``until`` (their
     tracking errors read back from each setup's files), by seed."""
     from stringcast.campaign import tracking_errors
 
-    path = BENCH_DIR / "generalization.json"
+    path = BENCH_DIR / f"{bench_name(results)}.json"
     if not path.exists():
         return {}
     doc = json.loads(path.read_text())
@@ -322,19 +302,25 @@ def _resumed(work: Path, seeds: list[int], until: str) -> dict[int, dict]:
     rows = {}
     for r in doc.get("per_setup", []):
         d = work / f"setup_{r['seed']}"
-        if r["seed"] not in seeds or "error" in r or not (d / "results" / "tracks.parquet").exists():
+        if r["seed"] not in seeds or "error" in r or not (d / results / "tracks.parquet").exists():
             continue
         r = {k: v for k, v in r.items() if k not in ("flagged", "beyond_limits", "silent_failure")}
-        if "valid_share_moving" not in r and (d / "results" / "tracking.json").exists():   # rows of older runs
-            r["valid_share_moving"] = json.loads((d / "results" / "tracking.json").read_text()).get("valid_share")
-        r["tracking_errors_mm"] = tracking_errors(pd.read_parquet(d / "results" / "tracks.parquet"),
+        if "valid_share_moving" not in r and (d / results / "tracking.json").exists():   # rows of older runs
+            r["valid_share_moving"] = json.loads((d / results / "tracking.json").read_text()).get("valid_share")
+        r["tracking_errors_mm"] = tracking_errors(pd.read_parquet(d / results / "tracks.parquet"),
                                                   pd.read_parquet(d / "trial_1" / "ground_truth.parquet"))[0]
         rows[r["seed"]] = r
     return rows
 
 
+def bench_name(results: str = "results") -> str:
+    """The JSON's (and figure's) name: ``generalization``, or ``generalization_<results>`` for a run whose
+    stages write into another folder of each setup (two runs on one ``--work`` side by side)."""
+    return "generalization" if results == "results" else f"generalization_{results}"
+
+
 def run(quick: bool = False, setups: int = 24, first: int = 0, work: Path | None = None, jobs: int = 1,
-        until: str = "estimate", resume: bool = False, start: str = "film") -> dict:
+        until: str = "estimate", resume: bool = False, start: str = "film", results: str = "results") -> dict:
     """Run the benchmark (``benchmarks.run``'s interface); returns the JSON it wrote last.
 
     ``jobs`` setups run side by side (processes); the JSON is rewritten as each one ends, its
@@ -342,7 +328,9 @@ def run(quick: bool = False, setups: int = 24, first: int = 0, work: Path | None
     only fills ``work``; the JSON then holds no figures). ``resume``: the setups that the last
     JSON (same ``work`` and ``until``) holds without an error are taken from it, not rerun. ``start``:
     the stages before it read their outputs from ``work`` where there (a tracking change measured
-    on the same calibrations and syncs)."""
+    on the same calibrations and syncs). ``results``: the folder of each setup the stages write into
+    (and read from), and the JSON's name (:func:`bench_name`)."""
+    from benchmarks import certainty
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     from stringcast.core import load_config
@@ -351,11 +339,11 @@ def run(quick: bool = False, setups: int = 24, first: int = 0, work: Path | None
     config = load_config()
     work = work or Path(tempfile.mkdtemp(prefix="stringcast_generalization_"))
     seeds = list(range(first, first + n))
-    done = _resumed(work, seeds, until) if resume else {}
+    done = _resumed(work, seeds, until, results) if resume else {}
     rows, doc = [], {}
     with ProcessPoolExecutor(max_workers=max(1, jobs)) as pool:
-        futures = [pool.submit(run_setup, seed, string_type(seed), config, work, until, start) for seed in seeds
-                   if seed not in done]
+        futures = [pool.submit(run_setup, seed, string_type(seed), config, work, until, start, results)
+                   for seed in seeds if seed not in done]
         for k, fut in enumerate(itertools.chain(done.values(), as_completed(futures))):   # lazily: each as it ends
             row = fut if isinstance(fut, dict) else fut.result()
             row.update(_judge(row, row["draw"]["width_px"]))
@@ -364,12 +352,16 @@ def run(quick: bool = False, setups: int = 24, first: int = 0, work: Path | None
             print(f"setup {row['seed']}: " + ", ".join(f"{key} {row.get(key)}" for key in (
                 "film_seconds", "calibration_verdict", "fx_error_pct", "principal_point_error_px", "plane_error_median_mm",
                 "plane_error_max_mm", "sync_verdict",
-                "sync_error_ms", "tracking_median_mm", "tracking_p95_mm", "valid_share", "E_mm", "fit_verdict",
+                "sync_error_ms", "sync_chosen", "sync_offset_error_ms", "sync_stated_ms", "sync_video_error_ms",
+                "sync_video_stated_ms", "sync_trigger_error_ms", "clock_error_ms", "clock_stated_ms",
+                "mapping_error_p95_mm", "mapping_stated_mm", "tracking_median_mm", "tracking_p95_mm", "valid_share",
+                "E_mm", "fit_verdict",
                 "error") if key in row), flush=True)
             doc = summarise(rows, k == n - 1, quick)
-            doc["until"], doc["work"], doc["start"] = until, str(work), start
-            write("generalization", doc)
-            figure(rows, BENCH_DIR / "generalization.png")
+            doc["until"], doc["work"], doc["start"], doc["results"] = until, str(work), start, results
+            write(bench_name(results), doc)
+            figure(rows, BENCH_DIR / f"{bench_name(results)}.png")
+            certainty.figure(rows, BENCH_DIR / f"{bench_name(results)}_coverage.png")
     return doc
 
 
@@ -384,8 +376,10 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--resume", action="store_true", help="take the setups the last JSON holds (same --work) from it")
     p.add_argument("--from", dest="start", choices=STAGES, default="film",
                    help="read the outputs of the stages before this one from --work where they are there")
+    p.add_argument("--results", default="results",
+                   help="each setup's folder the stages write into (another name: a run beside the default one)")
     args = p.parse_args(argv)
-    run(args.quick, args.setups, args.first, args.work, args.jobs, args.until, args.resume, args.start)
+    run(args.quick, args.setups, args.first, args.work, args.jobs, args.until, args.resume, args.start, args.results)
 
 
 if __name__ == "__main__":

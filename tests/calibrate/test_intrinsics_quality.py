@@ -219,3 +219,19 @@ def test_calibration_json_carries_the_judgement(lab_clip, still_trial, tmp_path,
     assert any("cover" in r for r in doc["verdict"]["reasons"])
     none = run_calibration(still_trial, None, campaign, tmp_path / "none.json", **st)
     assert none.verdict.status == "warn" and any("homography only" in r for r in none.verdict.reasons)
+
+
+def test_an_uncertainty_larger_than_what_it_is_about_reads_not_determined(lab_clip, monkeypatch):
+    """Views that do not determine the camera at all (a jackknife refit that wanders off) gave reasons such as
+    'uncertain by 1.4e6 px' (issue 51): an uncertainty past the image's size says only that the parameter is not
+    determined, and the reason says so; the same views with their own spread quote numbers."""
+    from stringcast.calibrate import quality
+
+    frames, _, _, board, _, _ = lab_clip
+    intr = fit_views(select_calibration_views(frames[:8], board, "few"), cv2.CALIB_FIX_K3)
+    wild = np.diag([1e12, 1e12, 2e12, 2e12, 1e6, 1e6, 1e6, 1e6, 0.0])
+    monkeypatch.setattr(quality, "jackknife_covariance", lambda *a, **k: wild)
+    doc, problems = quality.assess(intr, ST)
+    for kind in ("principal_point", "fx", "distortion"):
+        assert "not determined" in problems[kind][0] and "e+" not in problems[kind][0], problems[kind][0]
+    assert doc["covariance"] is not None and np.allclose(np.diag(doc["covariance"]), np.diag(wild))

@@ -6,10 +6,10 @@ import pytest
 import yaml
 
 from stringcast import cli
-from stringcast.core import ConfigError, DataError, EstimationSettings, PARAM_NAMES, read_json, write_json
+from stringcast.core import ConfigError, DataError, EstimationSettings, PARAM_NAMES, Verdict, read_json, write_json
 from stringcast.core.files import read_parquet, write_parquet
 from stringcast.estimate import estimation as es
-from stringcast.estimate.verdict import fit_verdict
+from stringcast.estimate.verdict import fit_verdict, sweep_bounds
 from stringcast.model import parameters as prm
 from tests.conftest import ROOT
 from tests.estimate.test_estimation import CHI_TRUE, _stage_settings, make_trial
@@ -146,3 +146,52 @@ def test_verdict_thresholds_are_checked():
     with pytest.raises(ConfigError, match="verdict_skill"):
         EstimationSettings(verdict_skill=(0.2, 0.4))
     assert dataclasses.replace(EstimationSettings(), verdict_shift_gain=(0.8, 0.4)).verdict_shift_gain == (0.8, 0.4)
+
+
+OK = Verdict()
+PINNED = {"mapping_uncertainty_mm": 0.4, "clock_uncertainty_ms": 0.1}
+"""The sweep's bounds on a well pinned trial (the issue's field footage: within 0.4 mm at the string)."""
+GEOMETRY_LOOK = {"error_share": 0.3, "error_median_mm": 90.0, "skill": -0.2, "null_error_median_mm": 75.0,
+                 "rest_error_mm": 60.0, "bias_mm": [50.0, 10.0], "offset_gain": 0.6, "speed_median_mm_s": 800.0}
+"""A fit worse than the rigidly carried string, already off at rest and in one direction: the figures that
+name geometry when nothing else is known."""
+
+
+@pytest.mark.parametrize("upstream, sweep, change, cause", [
+    ({"geometry": OK, "clock": OK, "tracking": OK}, None, {}, "geometry"),            # no sweep: as before
+    ({"geometry": OK, "clock": OK, "tracking": OK}, PINNED, {}, "model"),
+    ({"geometry": OK, "clock": OK}, PINNED, {}, "model"),                             # no tracking.json: ok
+    # the mapping known only to 30 mm (a third of the error): it may be the cause
+    ({"geometry": OK, "clock": OK, "tracking": OK}, {**PINNED, "mapping_uncertainty_mm": 30.0}, {}, "geometry"),
+    # the clock known to 30 ms (24 mm at the string's speed, more than a quarter of the error), with no sign
+    # of a clock fault: the geometry is ruled out all the same, and nothing else stands out
+    ({"geometry": OK, "clock": OK, "tracking": OK}, {**PINNED, "clock_uncertainty_ms": 30.0}, {}, "model"),
+    ({"geometry": Verdict("warn", ("known only to 3 mm",)), "clock": OK, "tracking": OK}, PINNED, {}, "geometry"),
+    ({"geometry": OK, "clock": OK, "tracking": Verdict("warn", ("p95 49 mm",))}, PINNED, {}, "tracking"),
+    ({"geometry": OK, "clock": OK, "tracking": OK}, PINNED, {"valid_share": 0.3}, "tracking"),
+])
+def test_a_fit_the_sweep_pinned_is_the_models(upstream, sweep, change, cause):
+    """Where the arm's sweep pinned the mapping and the clock (their verdicts ok, their stated
+    uncertainties at most a quarter of the fit's error) and tracking is ok, a fit worse than a rigidly
+    carried string is the model's, whatever its offset and its error at rest look like (issue 51: the
+    field footage said geometry in 20 of 33 such trials); it says recalibrating will not help. Without
+    the sweep's bounds, with a loose one, or with an earlier stage warning, the old evidence decides, less
+    the evidence of a cause the sweep alone ruled out."""
+    v, c = fit_verdict({**FIG, **GEOMETRY_LOOK, **change}, 90.0, EstimationSettings(), upstream, sweep)
+    assert v.status == "fail" and c == cause, v.reasons
+    why = next(r for r in v.reasons if r.startswith("likely cause: "))
+    if c == "model" and sweep["clock_uncertainty_ms"] > 1:
+        assert "pinned the mapping to 0.40 mm)" in why and "offset" not in why
+    elif c == "model":
+        assert "pinned the mapping to 0.40 mm and the clock to 0.10 ms" in why
+        assert "recalibrating will not help" in why and "carried rigidly" in why
+
+
+def test_sweep_bounds_are_read_from_geometry_and_clock(tmp_path):
+    """params.json's verdict reads the bounds from the sweep's files: only where the sweep ran."""
+    write_json(tmp_path / "geometry.json", {"sweep": {"applied": True, "uncertainty_p95_mm": 0.3}})
+    write_json(tmp_path / "clock.json", {"sweep": {"applied": False, "reason": "switched off"}})
+    got = es.read_sweep_bounds({"geometry": tmp_path / "geometry.json", "clock": tmp_path / "clock.json",
+                                "tracking": tmp_path / "missing.json"})
+    assert got == {"mapping_uncertainty_mm": 0.3, "clock_uncertainty_ms": None}
+    assert sweep_bounds(None, None) == {"mapping_uncertainty_mm": None, "clock_uncertainty_ms": None}

@@ -77,3 +77,43 @@ def test_verdicts_of_the_choice():
     kept = choose_offset(_est(few), None, TAU, st)  # too few frames to confirm the trigger: kept, but a warn
     assert kept["chosen"] == "trigger" and kept["verdict"].status == "warn"
     assert "cannot confirm" in kept["verdict"].reasons[0] and "min_frames" in kept["verdict"].reasons[0]
+
+
+@pytest.mark.parametrize("board_mm, chosen", [(10.0, "trigger"), (0.5, "video")])
+def test_a_mapping_error_at_the_arm_bounds_what_the_video_can_overrule(board_mm, chosen):
+    """Frames that agree to 0.05 ms make the resampling test sure of any gap (issue 51: "as well in 0 of 4000
+    block resamples"), but an error of the mapping where the arm is, common to every frame, is not in them: a
+    still arm seen 10 mm off (the board check) moves a segment crossing itself at 0.5 m/s by up to 20 ms. A
+    trigger 4 ms from the video's offset is kept then, with a note saying why, and overruled where the arm is
+    seen 0.5 mm off (1 ms); the chosen offset's uncertainty holds the systematic bound."""
+    st = SyncSettings()
+    ev = _evidence(jitter_ms=0.05)
+    est = {**_est(ev), "board_check": {"residual_mm": board_mm}}
+    choice = choose_offset(est, None, TAU + 0.004, st)
+    video, trig = choice["candidates"]["video"], choice["candidates"]["trigger"]
+    assert trig["excess_p"] < trig["excess_p_needed"]          # the frames alone are sure
+    assert video["speed_eff_m_s"] == pytest.approx(0.5)
+    assert video["systematic_ms"] == pytest.approx(board_mm / 0.5)
+    assert video["uncertainty_ms"] == pytest.approx(board_mm / 0.5 + 3 * video["standard_error_ms"])
+    assert choice["chosen"] == chosen and choice["verdict"].ok
+    note = choice["verdict"].reasons[0]
+    assert "of 4000 block resamples" not in note and "no resampling of the frames sees" in note
+    if chosen == "trigger":
+        assert "is kept" in note and trig["beyond_video_uncertainty"] is False
+        assert choice["uncertainty_ms"] == pytest.approx(4.0 + video["uncertainty_ms"], rel=1e-3)
+    else:
+        assert "overruled" in note and choice["uncertainty_ms"] == video["uncertainty_ms"]
+
+
+def test_a_board_pose_shift_the_strips_follow_is_no_systematic_error():
+    """The board check found the still arm 20 mm off as one rigid shift, beyond what the intrinsics explain (its
+    cause: the board pose): the strips follow that shift, so only the features' scatter about it (0.4 mm) bounds
+    the mapping's error at the arm, not the 20 mm; a trigger 4 ms off is overruled then."""
+    st = SyncSettings()
+    ev = _evidence(jitter_ms=0.05)
+    bc = {"residual_mm": 20.0, "fit_rms_mm": 0.4, "likely_cause": "board_pose"}
+    choice = choose_offset({**_est(ev), "board_check": bc}, None, TAU + 0.004, st)
+    assert choice["candidates"]["video"]["mapping_error_mm"] == pytest.approx(0.4)
+    assert choice["chosen"] == "video"
+    weak = choose_offset({**_est(ev), "board_check": {**bc, "likely_cause": "intrinsics"}}, None, TAU + 0.004, st)
+    assert weak["candidates"]["video"]["mapping_error_mm"] == pytest.approx(20.0) and weak["chosen"] == "trigger"

@@ -46,6 +46,25 @@ the arm (about 1-2 mm with intrinsics; lens distortion uncorrected, 10-20 mm).
 The result carries a verdict: ``warn`` when |d| exceeds ``warn_mm``, and ``warn`` "not
 checked: <why>" when the features found do not determine d (an unchecked board pose is a
 risk the user should know of, not silence).
+
+**Which cause** (issue 51): a wrong board pose moves every point of the plane alike (a rigid
+shift or turn of the frame); an error of the intrinsics leaves the board's own corners right (the
+homography is fitted to them) and grows with the distance from the board, so a weak calibration
+set alone puts an arm far from the board many millimetres off (the issue's field footage: 6-36 mm
+with a right board pose). Where the calibration knows its intrinsics' uncertainty, the caller
+passes ``spread`` (:func:`stringcast.calibrate.intrinsics_spread.mapping_modes`): how the
+intrinsics' uncertainty moves the mapping at each feature's place on the rest arm, read as the
+features read it (their normals' share) and fitted as d is: the covariance Sigma of d from the
+intrinsics alone, plus the check's own noise (fit_rms^2 / features). An offset inside its 99 %
+ellipse (d^T Sigma^-1 d <= :data:`EXPLAINED_CHI2`, chi-square with 2 degrees of freedom) is what
+those intrinsics may do there: the warning names the weak intrinsics and says to recalibrate
+before touching the board pose. Outside it, the board pose, unless the calibration found its own
+intrinsics undetermined (``weak_intrinsics``: parameters held, deviations over their limits): a
+weak set's stated deviations are what it gets wrong (issue 25: 4-13 times too small), so they do
+not rule its error out; the warning then names the intrinsics first and the board pose as what to
+check if the offset stays after recalibrating (the issue's field footage: principal point held,
+the arm 23 mm off, 5 sd of the stated spread, with a right board pose). ``likely_cause``:
+``intrinsics`` or ``board_pose``; ``intrinsics_sd_mm``: Sigma's standard deviation along d.
 """
 from __future__ import annotations
 
@@ -59,23 +78,27 @@ from stringcast.core import BoardCheckSettings, Verdict, forward_kinematics
 from .link_profiles import _consensus, _refine, _sample, link_consensus, link_profiles
 
 METHOD = "rest image: link/gripper edge pairs across their FK axes, joint-disc rims, the gripper's end"
+EXPLAINED_CHI2 = 9.21
+"""The 99 % point of chi-square with 2 degrees of freedom: an offset d with d^T Sigma^-1 d at most this
+lies inside the 99 % ellipse of what the intrinsics' uncertainty Sigma moves the arm by (module doc)."""
 MIN_SINGULAR = 0.3
 """The features' unit directions must give a 2 x 2 system whose smaller singular value reaches
 this (a second direction at least ~17 deg from the first, one feature each)."""
 
 
-def _segment_offsets(image, calibration, arm, q_rest, st: BoardCheckSettings) -> list[tuple[np.ndarray, float, float]]:
-    """[(normal (2,), offset m, spread m)] for each link/gripper whose edges were found."""
+def _segment_offsets(image, calibration, arm, q_rest, st: BoardCheckSettings) -> list[tuple]:
+    """[(normal (2,), offset m, spread m, the segment's midpoint (2,) m)] for each link/gripper whose
+    edges were found."""
     out = []
-    for _, _, nrm, _, centres, tried in link_profiles(image, calibration, arm, q_rest, st):
+    for a, b, nrm, _, centres, tried in link_profiles(image, calibration, arm, q_rest, st):
         c = link_consensus(centres, tried, st)
         if c is not None:
-            out.append((nrm, *c))
+            out.append((nrm, *c, 0.5 * (np.asarray(a, float) + np.asarray(b, float))))
     return out
 
 
-def _disc_offsets(image, calibration, arm, q_rest, st: BoardCheckSettings) -> list[np.ndarray]:
-    """[(2,) centre offset m] of the joint discs (base excluded) whose rim was found.
+def _disc_offsets(image, calibration, arm, q_rest, st: BoardCheckSettings) -> list[tuple[np.ndarray, np.ndarray]]:
+    """[(the disc's FK centre (2,) m, its offset (2,) m)] of the joint discs (base excluded) whose rim was found.
 
     Rays from the FK joint centre at ``disc_rays`` angles; on each, the strongest edge
     between 0.3 outline radii (the arm's ``joint_radii``) and the radius + ``disc_reach_mm``
@@ -103,7 +126,7 @@ def _disc_offsets(image, calibration, arm, q_rest, st: BoardCheckSettings) -> li
             if np.hypot(*c) < 0.001:
                 break
         if ok:
-            out.append(centre)
+            out.append((pts[j], centre))
     return out
 
 
@@ -205,7 +228,7 @@ def _end_offset(image, calibration, arm, q_rest, st: BoardCheckSettings) -> tupl
 
 
 def check_board_to_robot(rest_image: np.ndarray, calibration, arm, q_rest: np.ndarray,
-                         board_check: BoardCheckSettings) -> dict:
+                         board_check: BoardCheckSettings, spread=None, weak_intrinsics: str | None = None) -> dict:
     """Translation between where the still arm is seen and where config's board pose + the FK put it.
 
     Args:
@@ -215,13 +238,19 @@ def check_board_to_robot(rest_image: np.ndarray, calibration, arm, q_rest: np.nd
         arm: :class:`~stringcast.core.specs.ArmSpec`, with its outline (``link_widths``,
             ``joint_radii``, ``gripper_widths``). q_rest: (J,) rad, ``joints.csv``'s first row.
         board_check: board-check settings (:class:`~stringcast.core.BoardCheckSettings`).
+        spread: ``(N, 2) m -> (N, 2, M) m or None``, the modes of how the intrinsics' uncertainty
+            moves where the mapping puts plane points (module doc, "Which cause";
+            :func:`~stringcast.calibrate.intrinsics_spread.mapping_modes`), or None.
+        weak_intrinsics: why the calibration found its intrinsics undetermined (a clause), or None.
 
     Returns:
         ``{"residual_mm": |d| or None, "dx_mm", "dy_mm" (seen minus FK, robot frame),
         "method", "n_used" (features used), "segment_offsets_mm", "disc_offsets_mm",
-        "string_offset_mm", "end_offset_mm", "fit_rms_mm", "warn_mm", "verdict"}``;
-        residual_mm None when the features found do not determine d (verdict ``warn``,
-        "not checked: <why>", also in ``method``); verdict ``warn`` when |d| > ``warn_mm``.
+        "string_offset_mm", "end_offset_mm", "fit_rms_mm", "warn_mm", "intrinsics_sd_mm",
+        "intrinsics_chi2", "likely_cause", "verdict"}``; residual_mm None when the features found
+        do not determine d (verdict ``warn``, "not checked: <why>", also in ``method``); verdict
+        ``warn`` when |d| > ``warn_mm``, naming the likely cause (``intrinsics`` where they explain d,
+        else ``board_pose``; None within ``warn_mm``).
 
     Raises:
         ValueError: rest_image not 2-D, or q_rest not (J,).
@@ -235,26 +264,31 @@ def check_board_to_robot(rest_image: np.ndarray, calibration, arm, q_rest: np.nd
         raise ValueError(f"check_board_to_robot: q_rest must be ({arm.n_joints},), got {q_rest.shape}")
     st = board_check
     segs = _segment_offsets(img, calibration, arm, q_rest, st)
-    rows = [n for n, _, _ in segs]
-    rhs = [o for _, o, _ in segs]
+    rows = [n for n, _, _, _ in segs]
+    rhs = [o for _, o, _, _ in segs]
+    where = [m for _, _, _, m in segs]     # each equation's place on the arm, for the intrinsics' spread
+    grasp = forward_kinematics(arm, q_rest)[-1]
     discs: list = []
     if st.use_discs:
-        for c in _disc_offsets(img, calibration, arm, q_rest, st):
+        for p, c in _disc_offsets(img, calibration, arm, q_rest, st):
             rows += [np.array([1.0, 0.0]), np.array([0.0, 1.0])]
             rhs += [float(c[0]), float(c[1])]
+            where += [p, p]
             discs.append([float(c[0] * 1000), float(c[1] * 1000)])
     x_str = _string_offset(img, calibration, arm, q_rest, st) if st.use_string else None
     if x_str is not None:
         rows.append(np.array([1.0, 0.0]))
         rhs.append(x_str)
+        where.append(grasp)
     end = None
     if st.use_end and _weakest(rows) < MIN_SINGULAR:
         end = _end_offset(img, calibration, arm, q_rest, st)
         if end is not None:
             rows.append(end[0])
             rhs.append(end[1])
+            where.append(grasp)
     doc = {"method": METHOD, "n_used": len(segs) + len(discs) + (x_str is not None) + (end is not None),
-           "warn_mm": float(st.warn_mm), "segment_offsets_mm": [float(o * 1000) for _, o, _ in segs],
+           "warn_mm": float(st.warn_mm), "segment_offsets_mm": [float(o * 1000) for _, o, _, _ in segs],
            "disc_offsets_mm": discs, "string_offset_mm": None if x_str is None else float(x_str * 1000),
            "end_offset_mm": None if end is None else float(end[1] * 1000),
            "end_uncertainty_mm": None if end is None else float(arm.gripper_mask_extend * 500),
@@ -268,13 +302,71 @@ def check_board_to_robot(rest_image: np.ndarray, calibration, arm, q_rest: np.nd
     d, r = _huber_lstsq(A, y)
     doc.update(dx_mm=float(d[0] * 1000), dy_mm=float(d[1] * 1000), residual_mm=float(math.hypot(*d) * 1000),
                fit_rms_mm=float(np.sqrt(np.mean(r ** 2)) * 1000))
+    cov = None if spread is None else _translation_covariance(A, np.asarray(where, float), spread)
+    doc.update(_cause(d, cov, float(np.sqrt(np.mean(r ** 2))), len(y), doc["residual_mm"] > st.warn_mm,
+                      weak_intrinsics is not None))
     verdict = Verdict()
     if doc["residual_mm"] > st.warn_mm:
-        verdict = verdict.add("warn", f"the still arm is seen {doc['residual_mm']:.1f} mm (dx {doc['dx_mm']:+.1f}, dy "
-                                      f"{doc['dy_mm']:+.1f} mm) from where the configured board pose puts it "
-                                      f"(> {st.warn_mm:g} mm): check setups.*.board_origin_mm / board_angle_deg")
+        seen = (f"the still arm is seen {doc['residual_mm']:.1f} mm (dx {doc['dx_mm']:+.1f}, dy {doc['dy_mm']:+.1f} mm) "
+                f"from where the configured board pose puts it (> {st.warn_mm:g} mm)")
+        sd = doc["intrinsics_sd_mm"]
+        if doc["likely_cause"] == "intrinsics" and (doc["intrinsics_chi2"] or 0.0) <= EXPLAINED_CHI2:
+            verdict = verdict.add("warn", f"{seen}: the calibration's intrinsics are too weak to place the arm so far "
+                                          f"from the board (their own uncertainty carried there: "
+                                          f"{_mm_or_undetermined(sd)} along the offset, 1 sd), so they, not the board "
+                                          "pose, may explain it; recalibrate with shots that cover the image where "
+                                          "the arm is, before changing setups.*.board_origin_mm")
+        elif doc["likely_cause"] == "intrinsics":
+            verdict = verdict.add("warn", f"{seen}: likely the calibration's weak intrinsics ({weak_intrinsics}), whose "
+                                          "error grows from the board to the arm and is not ruled out by their stated "
+                                          f"uncertainty ({_mm_or_undetermined(sd)} along the offset, 1 sd: a weak set's "
+                                          "deviations understate its error); recalibrate with shots that cover the "
+                                          "image where the arm is, and check setups.*.board_origin_mm / "
+                                          "board_angle_deg only if the offset stays")
+        else:
+            chi2 = doc["intrinsics_chi2"]
+            known = "" if chi2 is None else (f" ({math.sqrt(chi2):.1f} standard deviations of what the intrinsics' "
+                                             "own uncertainty moves the arm by: more than they explain)")
+            verdict = verdict.add("warn", f"{seen}{known}: check setups.*.board_origin_mm / board_angle_deg")
     doc["verdict"] = verdict.as_dict()
     return doc
+
+
+def _mm_or_undetermined(sd: float | None) -> str:
+    return "not determined" if sd is None or not np.isfinite(sd) else f"{sd:.1f} mm"
+
+
+def _translation_covariance(A: np.ndarray, where: np.ndarray, spread) -> np.ndarray | None:
+    """(2, 2) m^2: the covariance of the translation d that the features (rows A (F, 2), at ``where`` (F, 2) m)
+    give when the mapping moves by the intrinsics' modes ``spread(where)`` (F, 2, M) m: each feature reads
+    its normal's share of the move at its place, d their least-squares translation. None without modes."""
+    G = spread(where)
+    if G is None:
+        return None
+    Y = np.einsum("fa,fam->fm", A, G)                  # each feature's offset per mode
+    D = np.linalg.pinv(A) @ Y                         # (2, M): the translation per mode
+    return D @ D.T
+
+
+def _cause(d: np.ndarray, cov, rms_m: float, n: int, off: bool, weak: bool = False) -> dict:
+    """``intrinsics_sd_mm`` (the intrinsics' spread at the arm along d, 1 sd; None where not determined),
+    ``intrinsics_chi2`` (d^T Sigma^-1 d) and ``likely_cause`` (module doc, "Which cause"; None when not
+    ``off``; ``weak``: the calibration found its intrinsics undetermined)."""
+    out = {"intrinsics_sd_mm": None, "intrinsics_chi2": None, "likely_cause": None}
+    if cov is None:
+        out["likely_cause"] = ("intrinsics" if weak else "board_pose") if off else None
+        return out
+    cov = np.asarray(cov, float)
+    if not np.all(np.isfinite(cov)):
+        out.update(intrinsics_sd_mm=None, likely_cause="intrinsics" if off else None)
+        return out
+    S = cov + np.eye(2) * rms_m ** 2 / max(n, 1)
+    u = d / max(float(np.hypot(*d)), 1e-12)
+    chi2 = float(d @ np.linalg.solve(S + np.eye(2) * 1e-12, d))
+    out.update(intrinsics_sd_mm=float(np.sqrt(max(u @ S @ u, 0.0)) * 1000), intrinsics_chi2=chi2)
+    if off:
+        out["likely_cause"] = "intrinsics" if chi2 <= EXPLAINED_CHI2 or weak else "board_pose"
+    return out
 
 
 def _weakest(rows: list) -> float:
@@ -289,7 +381,7 @@ def _why_not(segs: list, arm, st: BoardCheckSettings) -> str:
         return (f"no arm segment showed a pair of edges of its configured width ({st.width_range[0]:g}-"
                 f"{st.width_range[1]:g} x arms.*.link_widths_mm / gripper_widths_mm) where the forward kinematics "
                 "put it; check the arm's outline in the config, and that the first frames show the arm at rest")
-    ang = np.degrees(np.arctan2([n[1] for n, _, _ in segs], [n[0] for n, _, _ in segs]))
+    ang = np.degrees(np.arctan2([n[1] for n, _, _, _ in segs], [n[0] for n, _, _, _ in segs]))
     spread = float(np.ptp((ang - ang[0] + 90) % 180 - 90))
     return (f"the edges of {len(segs)} of {n_seg} arm segments were found (the others lie outside the image, "
             f"behind clutter or are too short), all within {spread:.0f} deg of one "

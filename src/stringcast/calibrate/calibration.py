@@ -51,6 +51,7 @@ from .calib_views import camera_flags, find_calib_views, read_calib_views, read_
 from .charuco import Intrinsics, calibrate_intrinsics, detect_charuco
 from .scale_check import arm_scale
 from .intrinsics import board_view_check, judged_intrinsics
+from .intrinsics_spread import mapping_modes
 from .mapping import Calibration, apply_homography
 
 __all__ = ["Calibration", "Intrinsics", "calibrate_intrinsics", "detect_charuco", "median_frame", "plane_homography",
@@ -241,7 +242,8 @@ def _run_calibration(trial_dir: Path, calib_dir, campaign, out_json, n_median: i
     if cal.n_corners < 0.5 * n_all:
         verdict = verdict.add("warn", f"only {cal.n_corners} of {n_all} board corners used: the board is partly "
                                       "hidden; clear the view of the board")
-    board_doc, verdict = _board_check(trial_dir, img, cal, campaign, board_check, verdict)
+    spread = _intrinsics_spread(img, board, setup.board_to_robot, cal, quality, detection, source)
+    board_doc, verdict = _board_check(trial_dir, img, cal, campaign, board_check, verdict, spread)
     warnings = list(verdict.reasons)
     if intr is not None and intr.views_rejected:
         warnings.append(f"intrinsics: {intr.views_rejected} calibration views rejected (reprojection outliers)")
@@ -253,16 +255,45 @@ def _run_calibration(trial_dir: Path, calib_dir, campaign, out_json, n_median: i
     return cal
 
 
+def _intrinsics_spread(img, board, board_to_robot, cal: Calibration, quality: dict | None, detection, source: str):
+    """``points -> (N, 2, M) m``: the modes of how the intrinsics' uncertainty moves where ``cal`` maps plane
+    points (:func:`~stringcast.calibrate.intrinsics_spread.mapping_modes`, the homography refitted to the
+    trial's board under each change); None without intrinsics or their covariance."""
+    if cal.K is None or not quality or quality.get("covariance") is None:
+        return None
+    free = quality.get("free_fit") if quality.get("held") else None
+    if free is not None and free.get("covariance") is None:
+        return None
+    size = tuple(cal.image_size)
+
+    def refit(K, dist):
+        return plane_homography(img, board, board_to_robot, Intrinsics(K, dist, 0.0, 0, size), source,
+                                detection=detection)
+
+    return lambda points: mapping_modes(points, cal, quality["covariance"], refit, free)
+
+
+def _weak_intrinsics(verdict: Verdict) -> str | None:
+    """Why the calibration found its intrinsics undetermined, in a clause, where its verdict so far has an
+    intrinsics warning (parameters held, deviations over their limits, poor coverage, the trial's board
+    off them), or None: where it has, their stated deviations are no bound on their error."""
+    if any(r.startswith("intrinsics: ") for r in verdict.reasons):
+        return "the calibration's intrinsics warning: the views do not determine them well"
+    return None
+
+
 def _board_check(trial_dir: Path, rest_image: np.ndarray, cal: Calibration, campaign, board_check: BoardCheckSettings,
-                 verdict: Verdict) -> tuple[dict | None, Verdict]:
+                 verdict: Verdict, spread=None) -> tuple[dict | None, Verdict]:
     """The board-to-robot check at the joint log's first (rest) posture (None without a
-    joints.csv), and the verdict with what it found."""
+    joints.csv), with the intrinsics' ``spread`` to tell their error from the board pose's
+    (:func:`~stringcast.calibrate.board_check.check_board_to_robot`), and the verdict with what it found."""
     joints = trial_dir / "joints.csv"
     if not joints.exists():
         return None, verdict.add("warn", f"{joints} missing: the board-to-robot transform was not checked against the arm")
     _, q = read_joint_table(joints, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
     grey = rest_image if rest_image.ndim == 2 else cv2.cvtColor(rest_image, cv2.COLOR_BGR2GRAY)
-    board = check_board_to_robot(grey.astype(np.float64), cal, campaign.arm, q[0], board_check)
+    board = check_board_to_robot(grey.astype(np.float64), cal, campaign.arm, q[0], board_check, spread,
+                                 _weak_intrinsics(verdict))
     found = Verdict.from_dict(board.get("verdict"))
     if board["residual_mm"] is None or board["residual_mm"] > board_check.warn_mm:
         board["arm_scale"] = arm_scale(grey.astype(np.float64), cal, campaign.arm, q[0], board_check)

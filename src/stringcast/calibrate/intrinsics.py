@@ -61,11 +61,12 @@ def judged_intrinsics(views: Views, flags: int, st: CalibrationSettings, min_vie
         st: :class:`~stringcast.core.CalibrationSettings`.
 
     Returns:
-        (the intrinsics used, their measures for ``calibration.json`` (``held``, and
-        ``free_fit`` with the unheld fit's K, dist, rms when something was held), the verdict).
+        (the intrinsics used, their measures for ``calibration.json`` (``held``, ``covariance``, and
+        ``free_fit`` with the unheld fit's K, dist, rms and covariance when something was held), the verdict).
     """
     free = fit_views(views, flags, min_views)
     doc, problems = assess(free, st)
+    free_covariance = doc["covariance"]
     found, fit, held, refused = dict(problems), free, [], None
     for flag, what, kinds in _STEPS:
         if fit.flags & flag or not any(k in problems for k in kinds):
@@ -81,7 +82,8 @@ def judged_intrinsics(views: Views, flags: int, st: CalibrationSettings, min_vie
     advice = "; ".join(_unique(v[1] for v in found.values()))
     verdict = Verdict()
     if held:
-        doc["free_fit"] = {"K": free.K.tolist(), "dist": free.dist.tolist(), "rms_px": free.rms_px}
+        doc["free_fit"] = {"K": free.K.tolist(), "dist": free.dist.tolist(), "rms_px": free.rms_px,
+                           "covariance": free_covariance}
         verdict = verdict.add("warn", f"intrinsics: {' and '.join(held)} held, as the calibration views do not "
                                       f"determine them ({why}); {advice}")
     over = {k: v for k, v in problems.items() if k not in ("coverage", "tilt")}

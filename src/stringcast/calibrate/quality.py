@@ -28,7 +28,9 @@ than the errors (issue 25). So a fit is judged three ways (:func:`assess`):
   from the distance nor place the principal point (Zhang 2000, Sturm & Maybank 1999).
 
 Every limit is a share of the image (or of fx), so it holds for any resolution; the
-standard deviations come from the data's own residuals.
+standard deviations come from the data's own residuals. A deviation larger than what it is about
+(a principal point uncertain by more than the image, fx by more than itself, the distortion by
+more than the half-diagonal) is quoted as "not determined", not as a number (issue 51: "1.4e6 px").
 """
 from __future__ import annotations
 
@@ -242,6 +244,7 @@ def assess(intr: Intrinsics, st: CalibrationSettings) -> tuple[dict, dict[str, t
            "std_used": dict(zip(INTRINSIC_NAMES, map(float, sd))),
            "principal_point_sd_share": list(pp), "fx_sd_share": fx_sd,
            "distortion_sd_px": d_sd, "distortion_sd_share": d_sd / half_diag,
+           "covariance": C.tolist() if np.all(np.isfinite(C)) else None,
            "per_view_rms_px": dict(zip(intr.views.names, intr.per_view_rms_px)),
            "coverage": cov, "tilt": tilt}
     problems: dict[str, tuple[str, str, float]] = {}
@@ -260,15 +263,18 @@ def assess(intr: Intrinsics, st: CalibrationSettings) -> tuple[dict, dict[str, t
                             f"< {lo:g}; tilts {tilt['min_deg']:.0f}-{tilt['max_deg']:.0f} deg)", tilt_advice,
                             lo / max(tilt["variety_deg"], 1e-9))
     if "cx" not in doc["held"] and max(pp) > st.max_principal_point_sd:
-        problems["principal_point"] = (f"the principal point is uncertain by {sd[2]:.1f} / {sd[3]:.1f} px "
-                                       f"({max(pp):.1%} of the image, standard deviations, jackknife over the views)", tilt_advice,
-                                       max(pp) / st.max_principal_point_sd)
+        what = ("not determined (uncertain by more than the image's size)" if not max(pp) <= 1 else
+                f"uncertain by {sd[2]:.1f} / {sd[3]:.1f} px ({max(pp):.1%} of the image, standard deviations, "
+                "jackknife over the views)")
+        problems["principal_point"] = (f"the principal point is {what}", tilt_advice, max(pp) / st.max_principal_point_sd)
     if fx_sd > st.max_fx_sd:
-        problems["fx"] = (f"fx is uncertain by {fx_sd:.1%} (standard deviation, jackknife over the views)", tilt_advice,
-                          fx_sd / st.max_fx_sd)
+        what = ("not determined (uncertain by more than itself)" if not fx_sd <= 1 else
+                f"uncertain by {fx_sd:.1%} (standard deviation, jackknife over the views)")
+        problems["fx"] = (f"fx is {what}", tilt_advice, fx_sd / st.max_fx_sd)
     if d_sd / half_diag > st.max_distortion_sd:
-        problems["distortion"] = (f"the lens distortion at the image's corners is uncertain by {d_sd:.1f} px "
-                                  f"({d_sd / half_diag:.2%} of the half-diagonal)",
+        what = ("not determined (uncertain by more than the half-diagonal)" if not d_sd <= half_diag else
+                f"uncertain by {d_sd:.1f} px ({d_sd / half_diag:.2%} of the half-diagonal)")
+        problems["distortion"] = (f"the lens distortion at the image's corners is {what}",
                                   "add shots with the board near the image's corners",
                                   d_sd / half_diag / st.max_distortion_sd)
     return doc, problems

@@ -53,7 +53,7 @@ from .fitcheck import fit_figures
 from .optimizers import OPTIMIZERS, Recorder
 from .problem import (EstimationProblem, build_problem, build_problem_explained, make_joint_objective, make_objective,
                       point_errors, simulate_fit)
-from .verdict import fit_verdict
+from .verdict import fit_verdict, sweep_bounds
 
 UPSTREAM = ("geometry", "clock", "tracking")
 """The earlier stages whose ``<stage>.json`` verdicts the fit's verdict carries (beside tracks.parquet):
@@ -234,7 +234,7 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign,
         upstream = dict(trial_result(Path(tracks_parquet).parent, stage) for stage in UPSTREAM)
     sim = simulate_fit(problem, model, est.chi)
     figures, verdict, cause = judge_fit(problem, sim, campaign.string.length, motion_window(t_j, q_j)[1],
-                                        E_trials[-1], estimation, read_verdicts(upstream))
+                                        E_trials[-1], estimation, read_verdicts(upstream), read_sweep_bounds(upstream))
     est = replace(est, verdict=verdict, likely_cause=cause)
 
     _, mu_groups_all = decode(est.top_chi, model, np.arange(problem.n_groups))
@@ -266,12 +266,26 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign,
 
 
 def judge_fit(problem: EstimationProblem, sim: tuple[np.ndarray, bool], length_m: float, t_stop: float, E_mm: float,
-              estimation: EstimationSettings, upstream: Mapping[str, Verdict]) -> tuple[dict, Verdict, str]:
+              estimation: EstimationSettings, upstream: Mapping[str, Verdict],
+              sweep: Mapping | None = None) -> tuple[dict, Verdict, str]:
     """The fit's figures (:func:`~stringcast.estimate.fitcheck.fit_figures`), verdict and likely cause
-    (:func:`~stringcast.estimate.verdict.fit_verdict`) for :func:`simulate_fit`'s ``sim`` (NaN if it blew up)."""
+    (:func:`~stringcast.estimate.verdict.fit_verdict`, with the sweep's bounds ``sweep``) for
+    :func:`simulate_fit`'s ``sim`` (NaN if it blew up)."""
     pos = sim[0] if sim[1] else np.full_like(sim[0], np.nan)
     figures = fit_figures(problem, pos, length_m, t_stop)
-    return (figures, *fit_verdict(figures, E_mm, estimation, upstream))
+    return (figures, *fit_verdict(figures, E_mm, estimation, upstream, sweep))
+
+
+def read_sweep_bounds(paths: Mapping[str, Path]) -> dict:
+    """The sweep's stated bounds on the geometry and the clock (:func:`~stringcast.estimate.verdict.sweep_bounds`)
+    from the ``"geometry"`` and ``"clock"`` files of ``paths`` (a missing file: None); malformed JSON is
+    :func:`read_verdicts`' error."""
+    docs = {}
+    for stage in ("geometry", "clock"):
+        path = paths.get(stage)
+        doc = read_json(Path(path)) if path is not None and Path(path).exists() else None
+        docs[stage] = doc if isinstance(doc, dict) else None
+    return sweep_bounds(docs["geometry"], docs["clock"])
 
 
 def read_verdicts(paths: Mapping[str, Path]) -> dict[str, Verdict]:

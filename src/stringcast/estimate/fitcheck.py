@@ -32,6 +32,9 @@ Figures (``None`` where the frames to compute one are missing):
   times, makes tracked and simulated points agree best (the median error over the moving
   entries, searched over whole frame periods up to a quarter of the motion), and the error
   there over the error at no shift (1: no shift helps).
+* ``speed_median_mm_s``: the model's point speed, median over the valid moving entries: what a
+  clock error of dt moves a point by is dt times it (the fit's verdict weighs the clock's stated
+  uncertainty with it).
 * ``speed_correlation``: the rank correlation, over the moving frames, of the frame's median
   error with the model's median point speed: a clock error makes the error follow the speed.
 * ``bias_share``: |mean residual vector| / mean residual length over the moving entries: 1
@@ -172,14 +175,19 @@ def _time_figures(problem: EstimationProblem, sim: np.ndarray, d: np.ndarray, va
     ft = problem.frame_t
     rows = np.nonzero(moving)[0]
     out = {"best_shift_ms": None, "best_shift_frames": None, "shift_gain": None, "speed_correlation": None,
-           "bias_share": None, "bias_mm": None, "offset_gain": None, "early_error_mm": None, "late_error_mm": None}
+           "bias_share": None, "bias_mm": None, "offset_gain": None, "early_error_mm": None, "late_error_mm": None,
+           "speed_median_mm_s": None}
     if len(rows) < MIN_FRAMES or not va[rows].any():
         return out
     quarter = max(1, int(round(0.25 * max(t_stop - problem.t_motion_start, period) / period)))
     s, e_s, e_0 = best_shift(problem.tracked, va, np.nan_to_num(sim), rows, quarter)
     if np.isfinite(e_0) and e_0 > 0:
         out.update(best_shift_ms=s * period * 1000, best_shift_frames=s, shift_gain=e_s / e_0)
-    speed = np.median(np.linalg.norm(np.gradient(sim, ft, axis=0), axis=-1), axis=1)      # (F,)
+    point_speed = np.linalg.norm(np.gradient(sim, ft, axis=0), axis=-1)                  # (F, n)
+    mv = va & moving[:, None] & np.isfinite(point_speed)
+    if mv.any():
+        out["speed_median_mm_s"] = float(np.median(point_speed[mv]) * 1000)
+    speed = np.median(point_speed, axis=1)                                               # (F,)
     seen = rows[va[rows].any(axis=1)]
     per_frame = np.array([np.median(d[k][va[k]]) for k in seen])
     ok = np.isfinite(speed[seen])

@@ -61,6 +61,19 @@ that explains more wins; ties go in the order geometry, clock, tracking, model.
   model can, and that evidence is the model's; calibration's verdict.
 * clock: the time shift above (at the gain that warns); sync's verdict.
 * tracking: the valid share above; tracking's verdict.
+* **pinned** (overrules the above): when the arm's sweep pinned the geometry and the clock
+  (``geometry.json`` and ``clock.json`` ok, their stated uncertainties ``uncertainty_p95_mm`` and
+  ``clock_uncertainty_ms`` given, :func:`sweep_bounds`) and tracking is ok, an error the sweep
+  bounds cannot be the cause of a larger one: a mapping known to u mm moves a tracked point by at
+  most u, a clock known to c ms by at most c times the string's speed (``speed_median_mm_s``). One
+  at most ``PINNED_SHARE`` (1/4) of the fit's median error would leave at least 3/4 of it if taken
+  off: it is not the likely cause, and its evidence counts for nothing. When both are, and tracking
+  is ok (its verdict, the fit's valid share), the cause is the model, whatever a constant offset or
+  the error at rest suggests (a model that starts from the wrong rest shape or hangs the string
+  wrongly also errs at rest and in one direction). The reason says so, with the skill against the
+  rigidly carried string where the fit is worse than it, and that recalibrating will not help
+  (the issue's field footage: "geometry" in 20 of 33 trials whose sweep-refined mapping was within
+  0.4 mm at the string).
 * model: the early third of the moving frames fits (error at most ``EARLY_RATIO`` = 0.5 of the
   late third's): the model follows the motion and loses the string later; the error at rest
   where the string folds within a segment (above: of ours' fits in the loop runs of stops 45-47,
@@ -98,6 +111,11 @@ UPSTREAM_CAUSE = {"calibration": "geometry", "geometry": "geometry", "sync": "cl
                   "tracking": "tracking"}
 CAUSE_WORDS = {"geometry": "geometry (the camera calibration or board pose)", "clock": "the clock (sync)",
                "tracking": "tracking", "model": "the model (it could not follow this motion)"}
+PINNED_SHARE = 0.25
+"""The sweep pinned an error source when its bound is at most this share of the fit's median error:
+taking it off would leave at least 3/4 of the error (module doc, "pinned")."""
+MODEL_ADVICE = ("recalibrating will not help; look at the model instead: widen model.ranges, fit more trials "
+                "together (estimation.joint_trials), or plan a gentler motion")
 
 
 def _get(fig: Mapping, key: str) -> float | None:
@@ -199,25 +217,81 @@ def _evidence(fig: Mapping, est: EstimationSettings, upstream: Mapping[str, Verd
     return ev
 
 
-def likely_cause(fig: Mapping, est: EstimationSettings, upstream: Mapping[str, Verdict]) -> tuple[str, str]:
-    """(cause, the evidence in words) of module doc's "Likely cause"; ``model`` with no evidence."""
+def sweep_bounds(geometry: Mapping | None, clock: Mapping | None) -> dict:
+    """The bounds the arm's sweep states on the geometry and the clock, from ``geometry.json`` and
+    ``clock.json`` (their ``"sweep"`` blocks): ``{"mapping_uncertainty_mm", "clock_uncertainty_ms"}``,
+    each None where the sweep did not run (no block, ``applied`` false) or states none."""
+    def get(doc, key):
+        block = (doc or {}).get("sweep") or {}
+        v = block.get(key) if block.get("applied") else None
+        return None if v is None or not np.isfinite(v) else float(v)
+    return {"mapping_uncertainty_mm": get(geometry, "uncertainty_p95_mm"),
+            "clock_uncertainty_ms": get(clock, "clock_uncertainty_ms")}
+
+
+def _pinned(fig: Mapping, upstream: Mapping[str, Verdict], sweep: Mapping | None) -> dict[str, str]:
+    """The causes the sweep rules out (module doc, "pinned"): ``{"geometry" | "clock": how, in words}``
+    for each whose verdict is ok and whose bound is at most ``PINNED_SHARE`` of the fit's median error."""
+    err, speed = _get(fig, "error_median_mm"), _get(fig, "speed_median_mm_s")
+    if err is None or err <= 0:
+        return {}
+    u_map, u_clock = ((sweep or {}).get(k) for k in ("mapping_uncertainty_mm", "clock_uncertainty_ms"))
+    out = {}
+    if u_map is not None and "geometry" in upstream and upstream["geometry"].ok and u_map <= PINNED_SHARE * err:
+        out["geometry"] = f"the mapping to {u_map:.2f} mm"
+    if (u_clock is not None and speed is not None and "clock" in upstream and upstream["clock"].ok
+            and u_clock * speed / 1000 <= PINNED_SHARE * err):
+        out["clock"] = f"the clock to {u_clock:.2f} ms ({u_clock * speed / 1000:.1f} mm at the string's median speed)"
+    return out
+
+
+def _model_pinned(fig: Mapping, est: EstimationSettings, upstream: Mapping[str, Verdict], pinned: dict) -> str | None:
+    """The evidence that the model is the cause because the sweep pinned the geometry and the clock and
+    tracking is ok (its verdict and the fit's valid share), in words; None where not."""
+    valid = _get(fig, "valid_share")
+    if len(pinned) < 2 or ("tracking" in upstream and not upstream["tracking"].ok) or (
+            valid is not None and valid < est.verdict_min_valid_share):
+        return None
+    err, skill = _get(fig, "error_median_mm"), _get(fig, "skill")
+    worse = "" if skill is None or skill > 0 else (
+        f"; the fit is farther from the tracked string than the string carried rigidly without swinging "
+        f"({err:.0f} against {fig['null_error_median_mm']:.0f} mm)")
+    return (f"the arm's sweep pinned {pinned['geometry']} and {pinned['clock']}, each at most {PINNED_SHARE:.0%} of "
+            f"the fit's {err:.0f} mm error, and tracking is ok: neither the geometry nor the clock accounts for "
+            f"it{worse}; {MODEL_ADVICE}")
+
+
+def likely_cause(fig: Mapping, est: EstimationSettings, upstream: Mapping[str, Verdict],
+                 sweep: Mapping | None = None) -> tuple[str, str]:
+    """(cause, the evidence in words) of module doc's "Likely cause"; ``model`` with no evidence. A cause the
+    sweep ruled out (``sweep``: :func:`sweep_bounds`; module doc, "pinned") has no evidence, and where it
+    ruled out both the geometry and the clock and tracking is ok, the cause is the model."""
+    pinned = _pinned(fig, upstream, sweep)
+    model = _model_pinned(fig, est, upstream, pinned)
+    if model is not None:
+        return "model", model
     ev = _evidence(fig, est, upstream)
+    for c in pinned:
+        ev[c] = []
     score = {c: sum(w for w, _ in ev[c]) for c in CAUSES}
     best = max(CAUSES, key=lambda c: (score[c], -CAUSES.index(c)))
     if score[best] == 0:
-        return "model", "no sign of a geometry, clock or tracking fault in this trial's figures"
+        ruled = "" if not pinned else f" (the arm's sweep pinned {' and '.join(pinned.values())})"
+        return "model", f"no sign of a geometry, clock or tracking fault in this trial's figures{ruled}"
     return best, "; ".join(s for _, s in ev[best])
 
 
 def fit_verdict(fig: Mapping, E_mm: float, estimation: EstimationSettings,
-                upstream: Mapping[str, Verdict] | None = None) -> tuple[Verdict, str]:
+                upstream: Mapping[str, Verdict] | None = None, sweep: Mapping | None = None) -> tuple[Verdict, str]:
     """The fit's verdict and its likely cause (module doc).
 
     Args:
         fig: :func:`stringcast.estimate.fitcheck.fit_figures`' figures of this trial's fit.
         E_mm: E of the estimate, mm (inf: every candidate blew up).
         estimation: the ``verdict_*`` thresholds (:class:`~stringcast.core.EstimationSettings`).
-        upstream: the earlier stages' verdicts by stage name ("calibration", "sync", "tracking").
+        upstream: the earlier stages' verdicts by stage name ("geometry", "clock", "tracking"; older
+            results: "calibration", "sync").
+        sweep: the sweep's bounds on the geometry and the clock (:func:`sweep_bounds`), or None.
 
     Returns:
         (verdict, likely cause): the cause is one of :data:`CAUSES`, or "" when the verdict is ok.
@@ -226,7 +300,7 @@ def fit_verdict(fig: Mapping, E_mm: float, estimation: EstimationSettings,
     own = _status_reasons(fig, E_mm, estimation)
     cause = ""
     if not own.ok:
-        cause, why = likely_cause(fig, estimation, upstream)
+        cause, why = likely_cause(fig, estimation, upstream, sweep)
         own = own.add(own.status, f"likely cause: {CAUSE_WORDS[cause]}: {why}")
     carried = [Verdict(v.status, tuple(f"{stage}: {r}" for r in v.reasons)) for stage, v in upstream.items()
                if not v.ok]

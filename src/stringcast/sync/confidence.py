@@ -15,6 +15,21 @@ correlated frames then counts as one piece of evidence, as it should.
   is as small as the video's in fewer than ``norm.sf(evidence_k)`` of them (0.13 % at k = 3):
   a one-sided test at ``evidence_k`` standard errors' confidence, in units of the clip's own
   noise, not a millisecond threshold tuned on one camera.
+* :func:`systematic_ms`: what no resampling of the frames sees (issue 51: on another lab's footage
+  the video overruled the trigger 6 times "as well in 0 of 4000 block resamples", 5 of them wrongly,
+  the video's offset 2.8-10.9 ms off): an error of the mapping where the arm is, common to the
+  whole clip. A segment displaced by e across itself while it moves at v across itself matches
+  best e / v away from the true offset; the summed score's peak weighs each frame's and segment's
+  match by its sharpness, which grows as v^2, so a displacement of at most E everywhere biases the
+  peak by at most E sum v / sum v^2 = E / v_eff. E is the board check's |d| (the mapping's error at
+  the still arm; the strips are moved by d, which takes off only the part of the error that is
+  the same everywhere, and an error of the intrinsics is not: it changes over the region the arm
+  sweeps by as much as it is), or, where the check found d to be the board pose's (a rigid shift
+  beyond what the intrinsics explain, its ``likely_cause``), which the shift takes off, the
+  features' own scatter about that shift (``fit_rms_mm``); without a board check, the arm-match
+  residual. The video's
+  **uncertainty** is then ``evidence_k`` standard errors plus that bound, and the video overrules a
+  trigger time only when the trigger lies outside it too (:func:`choose_offset`).
 * :func:`video_quality`: the video estimate's own standard error (the same bootstrap of the
   summed match score's peak), a second peak of similar height (ambiguous), too few frames,
   segments that disagree, and a residual or an uncertainty larger than ``match_warn_px``
@@ -150,6 +165,27 @@ def _second_peak(taus: np.ndarray, score: np.ndarray, boot: np.ndarray, k: float
     return None if best is None else float(taus[best])
 
 
+def systematic_ms(evidence, est: dict) -> tuple[float | None, float | None, float | None]:
+    """The bound on the video offset's error from the mapping's error at the arm (module doc):
+    (bound ms, E mm, v_eff m/s); None where no matches move (no speed) or no E is known.
+
+    Args:
+        evidence: :class:`~stringcast.sync.video_offset.VideoEvidence` (the agreeing segments' speeds).
+        est: the estimate's dict: ``board_check`` (its ``residual_mm`` |d|, ``likely_cause``, ``fit_rms_mm``)
+            and ``residual_mm``.
+    """
+    _, a, ok, _ = _equations(evidence)
+    v = np.abs(a[ok])
+    v_eff = float(np.sum(v ** 2) / np.sum(v)) if v.size and np.sum(v) > 0 else None
+    bc = est.get("board_check") or {}
+    E = bc.get("fit_rms_mm") if bc.get("likely_cause") == "board_pose" else bc.get("residual_mm")
+    if E is None or not np.isfinite(E):
+        E = est.get("residual_mm")
+    if v_eff is None or E is None or not np.isfinite(E):
+        return None, None, v_eff
+    return float(E) / v_eff, float(E), v_eff
+
+
 def video_quality(evidence, est: dict, st: SyncSettings) -> tuple[dict, list[str]]:
     """The video estimate's standard error and what makes it doubtful.
 
@@ -159,7 +195,10 @@ def video_quality(evidence, est: dict, st: SyncSettings) -> tuple[dict, list[str
 
     Returns:
         (figures, reasons): figures ``{"standard_error_ms", "ambiguous", "second_peak_s",
-        "block_frames", "residual_px", "arm_width_px", "uncertainty_px"}``; reasons, one
+        "block_frames", "residual_px", "arm_width_px", "uncertainty_px", "systematic_ms",
+        "mapping_error_mm", "speed_eff_m_s", "uncertainty_ms"}`` (:func:`systematic_ms`; the
+        uncertainty ``evidence_k`` standard errors plus the systematic bound, None where that is
+        not known); reasons, one
         sentence per cause (empty when the estimate is sound): an ambiguous or edge peak, fewer
         than ``min_frames`` frames, agreeing segments not a majority of those with a peak of their
         own, a residual or an uncertainty (``evidence_k`` standard errors times the arm's median
@@ -173,9 +212,12 @@ def video_quality(evidence, est: dict, st: SyncSettings) -> tuple[dict, list[str
     _, a, ok, _ = _equations(evidence)
     speed = float(np.median(a[ok])) if ok.any() else 0.0
     residual = est.get("residual_mm")
+    sys_ms, e_mm, v_eff = systematic_ms(evidence, est)
     fig = {"standard_error_ms": se_s * 1000, "ambiguous": second is not None, "second_peak_s": second,
            "block_frames": length, "residual_px": None if residual is None else residual / px,
-           "arm_width_px": evidence.arm_width_mm / px, "uncertainty_px": k * se_s * speed * 1000 / px}
+           "arm_width_px": evidence.arm_width_mm / px, "uncertainty_px": k * se_s * speed * 1000 / px,
+           "systematic_ms": sys_ms, "mapping_error_mm": e_mm, "speed_eff_m_s": v_eff,
+           "uncertainty_ms": None if sys_ms is None else k * se_s * 1000 + sys_ms}
     reasons = []
     i = int(np.argmax(score))
     if i in (0, len(score) - 1):
@@ -214,7 +256,10 @@ def choose_offset(est: dict | None, failure: str | None, trigger_s: float | None
     * The video gave no estimate (``failure``) or an ambiguous one: the trigger time, ``warn``.
     * Otherwise the trigger time is kept unless the arm matches the frames clearly worse at it
       (:func:`compare_residuals`: as well in fewer than ``norm.sf(evidence_k)`` of the block
-      resamples); overruled, the verdict stays ``ok`` (unless the video's quality warns) with a
+      resamples) **and** it lies outside the video's uncertainty (:func:`video_quality`'s
+      ``uncertainty_ms``: the frames' noise plus the bound of :func:`systematic_ms`, which the
+      resamples cannot see; a trigger kept for that reason alone gets a note saying so);
+      overruled, the verdict stays ``ok`` (unless the video's quality warns) with a
       reason naming both offsets and residuals: the choice is recorded with both candidates, never
       silent, and a sound video estimate that clearly fits better is the better offset (a wrong
       trigger is common: its delay, the camera's own). Kept, the verdict is ``ok`` when the video's
@@ -227,8 +272,12 @@ def choose_offset(est: dict | None, failure: str | None, trigger_s: float | None
         st: the sync settings.
 
     Returns:
-        ``{"chosen": "trigger" | "video", "offset_s", "candidates": {"trigger": {...}, "video": {...}},
-        "verdict": Verdict}``; a candidate that is absent is missing from ``candidates``.
+        ``{"chosen": "trigger" | "video", "offset_s", "uncertainty_ms", "candidates": {"trigger": {...},
+        "video": {...}}, "verdict": Verdict}``; a candidate that is absent is missing from ``candidates``.
+        ``uncertainty_ms`` bounds the chosen offset's error: the video's uncertainty for the video's
+        offset, and the trigger's distance from the video's offset plus that for a trigger kept against
+        it (the video found it no worse than its own offset); None where not determined (no video
+        estimate, or its systematic bound unknown).
 
     Raises:
         ValueError: neither an estimate nor a trigger time.
@@ -241,7 +290,8 @@ def choose_offset(est: dict | None, failure: str | None, trigger_s: float | None
         cands["trigger"] = {"offset_s": float(trigger_s), "residual_mm": None}
         v = v.add("warn", f"the video gave no offset ({failure}); video.yaml's trigger time {trigger_s:.5f} s is used "
                           "unchecked")
-        return {"chosen": "trigger", "offset_s": float(trigger_s), "candidates": cands, "verdict": v}
+        return {"chosen": "trigger", "offset_s": float(trigger_s), "uncertainty_ms": None, "candidates": cands,
+                "verdict": v}
     ev, video_s, k = est["evidence"], float(est["offset_s"]), float(st.evidence_k)
     fig, reasons = video_quality(ev, est, st)
     tau, a, _, _ = _equations(ev)
@@ -251,25 +301,52 @@ def choose_offset(est: dict | None, failure: str | None, trigger_s: float | None
     if trigger_s is None:
         for r in reasons:
             v = v.add("warn", r)
-        return {"chosen": "video", "offset_s": video_s, "candidates": cands, "verdict": v}
+        return {"chosen": "video", "offset_s": video_s, "uncertainty_ms": fig["uncertainty_ms"], "candidates": cands,
+                "verdict": v}
     cmp = compare_residuals(ev, video_s, float(trigger_s))
     alpha = 0.5 * math.erfc(k / math.sqrt(2.0))   # the normal tail norm.sf(k), without importing scipy.stats (0.8 s)
+    gap_ms, u = (float(trigger_s) - video_s) * 1000, fig["uncertainty_ms"]
     cands["trigger"] = {"offset_s": float(trigger_s), "residual_mm": cmp["trigger_mm"],
-                        "minus_video_ms": (float(trigger_s) - video_s) * 1000, "excess_mm": cmp["excess_mm"],
+                        "minus_video_ms": gap_ms, "excess_mm": cmp["excess_mm"],
                         "excess_standard_error_mm": cmp["standard_error_mm"], "excess_p": cmp["p"],
-                        "excess_p_needed": alpha, "resamples": cmp["resamples"], "block_frames": cmp["block_frames"]}
-    overrule = not fig["ambiguous"] and cmp["p"] is not None and cmp["excess_mm"] > 0 and cmp["p"] < alpha
-    if overrule:   # clearly better evidence, recorded with both candidates: a note, not a warning
-        v = v.add("ok", f"video.yaml's trigger time {trigger_s:.5f} s is overruled by the video's offset "
-                          f"{video_s:.5f} s ({(float(trigger_s) - video_s) * 1000:+.2f} ms): the arm matches the "
-                          f"frames with a residual of {cmp['trigger_mm']:.2f} mm at the trigger's offset against "
-                          f"{cmp['video_mm']:.2f} mm at the video's, and as well in "
-                          f"{round(cmp['p'] * cmp['resamples'])} of {cmp['resamples']} block resamples of the frames "
-                          f"(fewer than {alpha:.2%} needed, sync.evidence_k: {k:g}); check the trigger's wiring "
-                          "and delay")
+                        "excess_p_needed": alpha, "resamples": cmp["resamples"], "block_frames": cmp["block_frames"],
+                        "beyond_video_uncertainty": None if u is None else abs(gap_ms) > u}
+    fits_better = not fig["ambiguous"] and cmp["p"] is not None and cmp["excess_mm"] > 0 and cmp["p"] < alpha
+    if fits_better and u is not None and abs(gap_ms) > u:   # clearly better evidence: a note, not a warning
+        v = v.add("ok", _overruled(float(trigger_s), video_s, cmp, fig, k, alpha))
         for r in reasons:
             v = v.add("warn", r)
-        return {"chosen": "video", "offset_s": video_s, "candidates": cands, "verdict": v}
+        return {"chosen": "video", "offset_s": video_s, "uncertainty_ms": u, "candidates": cands, "verdict": v}
+    if fits_better:
+        v = v.add("ok", f"video.yaml's trigger time {trigger_s:.5f} s is kept: the arm matches the frames better at "
+                        f"the video's offset {video_s:.5f} s ({gap_ms:+.2f} ms; residual {cmp['video_mm']:.2f} against "
+                        f"{cmp['trigger_mm']:.2f} mm), but the trigger lies within the video's uncertainty "
+                        f"{_uncertainty_words(fig, k)}")
     for r in reasons:
         v = v.add("warn", f"video.yaml's trigger time {trigger_s:.5f} s is kept, but the video cannot confirm it: {r}")
-    return {"chosen": "trigger", "offset_s": float(trigger_s), "candidates": cands, "verdict": v}
+    return {"chosen": "trigger", "offset_s": float(trigger_s), "uncertainty_ms": None if u is None else abs(gap_ms) + u,
+            "candidates": cands, "verdict": v}
+
+
+def _uncertainty_words(fig: dict, k: float) -> str:
+    """The video's uncertainty and its two parts, in words (``+-U ms: ...``); "not determined" without it."""
+    u, sys_ms = fig["uncertainty_ms"], fig["systematic_ms"]
+    if u is None:
+        return "(not determined)"
+    return (f"+-{u:.2f} ms: {k:g} standard errors over the frames (+-{u - sys_ms:.2f} ms) and +-{sys_ms:.2f} ms from a "
+            f"mapping error of up to {fig['mapping_error_mm']:.1f} mm at the arm (the board check), seen by a match "
+            f"at {fig['speed_eff_m_s']:.2f} m/s, which no resampling of the frames sees")
+
+
+def _overruled(trigger_s: float, video_s: float, cmp: dict, fig: dict, k: float, alpha: float) -> str:
+    """The note of an overruled trigger time: both offsets and residuals, the video's uncertainty, and the
+    resampling test's count only where the frames' own noise, not the systematic bound, dominates it."""
+    u, sys_ms = fig["uncertainty_ms"], fig["systematic_ms"]
+    resampled = "" if sys_ms >= u - sys_ms else (
+        f", and as well in {round(cmp['p'] * cmp['resamples'])} of {cmp['resamples']} block resamples of the frames "
+        f"(fewer than {alpha:.2%} needed, sync.evidence_k: {k:g})")
+    return (f"video.yaml's trigger time {trigger_s:.5f} s is overruled by the video's offset {video_s:.5f} s "
+            f"({(trigger_s - video_s) * 1000:+.2f} ms, beyond the video's uncertainty {_uncertainty_words(fig, k)}): "
+            f"the arm matches the frames with a residual of {cmp['trigger_mm']:.2f} mm at the trigger's offset against "
+            f"{cmp['video_mm']:.2f} mm at the video's{resampled}; check the trigger's wiring and delay")
+

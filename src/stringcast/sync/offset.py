@@ -24,12 +24,15 @@ the last one where the arm is still at that end of the log: the arm is taken as 
 there, in the log's first (last) posture (:func:`stringcast.core.check_joint_coverage`); a
 log whose end shows the arm moving misses part of the motion and is refused.
 
-``sync.json`` holds: offset_s, fps, frames, method, chosen (``trigger`` or ``video``),
+``sync.json`` holds: offset_s, uncertainty_ms (a bound on its error, :func:`~stringcast.sync.confidence.choose_offset`;
+null where not determined), fps, frames, method, chosen (``trigger`` or ``video``),
 candidates (``trigger``: offset_s, residual_mm, minus_video_ms, excess_mm (its residual
 minus the video's), excess_standard_error_mm, excess_p (the share of block resamples of
-the frames in which the trigger fits as well), excess_p_needed, resamples, block_frames; ``video``: offset_s,
+the frames in which the trigger fits as well), excess_p_needed, resamples, block_frames,
+beyond_video_uncertainty; ``video``: offset_s,
 residual_mm, time_residual_ms, standard_error_ms, frames_used, segments_used, ambiguous,
-second_peak_s, block_frames, residual_px, arm_width_px, uncertainty_px; or ``error`` when
+second_peak_s, block_frames, residual_px, arm_width_px, uncertainty_px, systematic_ms,
+mapping_error_mm, speed_eff_m_s, uncertainty_ms; or ``error`` when
 the video gave no estimate), verdict (:class:`~stringcast.core.Verdict`), joint_log
 (starts_after_video_s, ends_before_video_s, extended, first_speed_share,
 last_speed_share), residual_mm (at the chosen offset: robust spread, over the agreeing
@@ -81,7 +84,8 @@ def _trigger_doc(meta: dict, video_yaml: Path) -> dict:
     if trig is None:
         raise DataError(f"{video_yaml}: no trigger_time_s, and config sync.method is 'trigger'; give the "
                         "controller-clock time of frame 0, or use sync.method: video")
-    return {"offset_s": float(trig), "method": METHOD_TRIGGER, "residual_mm": None, "chosen": "trigger",
+    return {"offset_s": float(trig), "uncertainty_ms": None, "method": METHOD_TRIGGER, "residual_mm": None,
+            "chosen": "trigger",
             "candidates": {"trigger": {"offset_s": float(trig), "residual_mm": None}},
             "note": "offset taken from the recording's trigger time, not estimated from the video"}
 
@@ -127,7 +131,8 @@ def _video_doc(trial_dir: Path, calibration_json, campaign, meta: dict, video_ya
             if cause:
                 choice["verdict"] = Verdict(choice["verdict"].status, (cause.removeprefix(": "), *choice["verdict"].reasons))
     doc = {k: v for k, v in (est or {}).items() if k != "evidence"}
-    doc.update(offset_s=choice["offset_s"], chosen=choice["chosen"], candidates=choice["candidates"],
+    doc.update(offset_s=choice["offset_s"], uncertainty_ms=choice["uncertainty_ms"], chosen=choice["chosen"],
+               candidates=choice["candidates"],
                verdict=choice["verdict"], residual_mm=choice["candidates"][choice["chosen"]]["residual_mm"],
                method=METHOD_VIDEO if choice["chosen"] == "video" else METHOD_CHECKED if est else METHOD_TRIGGER)
     doc["note"] = {"video": "offset estimated from the video" + (
@@ -140,9 +145,10 @@ def _video_doc(trial_dir: Path, calibration_json, campaign, meta: dict, video_ya
     doc["dropped_frames"] = None if stamps is None else [list(g) for g in dropped_frames(stamps, float(meta["fps"]))]
     bc = doc.get("board_check")
     if bc is not None and bc["residual_mm"] is not None and bc["residual_mm"] > sync.board_check_warn_mm:
+        what = ("the calibration's intrinsics (weak; their error grows from the board to the arm), then the board "
+                "pose in config" if bc.get("likely_cause") == "intrinsics" else "the board pose in config")
         warns.append(f"the still arm is seen {bc['residual_mm']:.1f} mm from where the forward kinematics and "
-                     f"the board-to-robot transform put it (> {sync.board_check_warn_mm} mm): check the "
-                     "board pose in config")
+                     f"the board-to-robot transform put it (> {sync.board_check_warn_mm} mm): check {what}")
     if doc["dropped_frames"]:
         warns.append(f"{len(doc['dropped_frames'])} dropped frame(s) by the file's timestamps")
     return doc, warns
