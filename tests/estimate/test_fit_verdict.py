@@ -85,6 +85,15 @@ def test_earlier_stages_verdicts_are_carried(trial, settings, campaign, tmp_path
         _fit(trial, settings, campaign, tmp_path)
 
 
+def test_a_carried_reason_names_its_stage_once():
+    """Tracking's reasons already begin "tracking: "; the fit carries them without a second prefix."""
+    fig = {**FIG}
+    up = {"tracking": Verdict("warn", ("tracking: the points jitter by 1.7 mm",)), "clock": Verdict("warn", ("off",))}
+    v, _ = fit_verdict(fig, 30.0, EstimationSettings(), up)
+    assert "tracking: the points jitter by 1.7 mm" in v.reasons and "clock: off" in v.reasons
+    assert not any(r.startswith("tracking: tracking:") for r in v.reasons)
+
+
 def test_cli_prints_the_verdict_after_E(trial, settings, campaign, tmp_path, capsys):
     df = read_parquet(trial / "tracks.parquet")
     df["t_s"] += 0.030

@@ -302,8 +302,8 @@ def fit_verdict(fig: Mapping, E_mm: float, estimation: EstimationSettings,
     if not own.ok:
         cause, why = likely_cause(fig, estimation, upstream, sweep)
         own = own.add(own.status, f"likely cause: {CAUSE_WORDS[cause]}: {why}")
-    carried = [Verdict(v.status, tuple(f"{stage}: {r}" for r in v.reasons)) for stage, v in upstream.items()
-               if not v.ok]
+    carried = [Verdict(v.status, tuple(r if r.startswith(f"{stage}: ") else f"{stage}: {r}" for r in v.reasons))
+               for stage, v in upstream.items() if not v.ok]   # each stage named once
     verdict = worst(own, *carried)
     if not cause and not verdict.ok:
         cause = next((UPSTREAM_CAUSE[s] for s, v in upstream.items() if not v.ok and s in UPSTREAM_CAUSE), "")
