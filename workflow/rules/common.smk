@@ -13,17 +13,17 @@ from stringcast.check import check_campaign
 from stringcast.cli import stage_sections
 from stringcast.core import (
     ConfigError,
-    campaign_entries,
-    load_yaml,
-    settings_from_config,
-)
-from stringcast.core.lifeline import ENV_PID
-from stringcast.core import (
+    DataError,
     RunConflict,
+    campaign_entries,
     claim_results,
+    find_video,
+    load_yaml,
     outputs_newer_than,
+    settings_from_config,
     workflow_stamp,
 )
+from stringcast.core.lifeline import ENV_PID
 
 
 wildcard_constraints:
@@ -119,9 +119,6 @@ def _lab_entries(campaign):
     return {k: (v[1] if isinstance(v, tuple) else v) for k, v in e.items()}
 
 
-VIDEO_NAMES = ("video.mkv", "video.avi", "video.mp4", "video.cihx", "video")
-
-
 def campaigns():
     """Campaign names: folders data/<campaign>/ holding a campaign.yaml."""
     return sorted(p.parent.name for p in Path("data").glob("*/campaign.yaml"))
@@ -188,14 +185,14 @@ def trials(campaign):
 
 
 def trial_video(wildcards):
-    """The trial's video: a container file, a frame folder, or a Photron .cihx (its campaign
-    checked first: checked)."""
+    """The trial's video: a container file, a frame folder, or a Photron .cihx, the one the
+    stages read (stringcast.core.find_video; its campaign checked first: checked)."""
     checked(wildcards.campaign)
     d = Path("data", wildcards.campaign, f"trial_{wildcards.trial}")
-    for name in VIDEO_NAMES:
-        if (d / name).exists():
-            return str(d / name)
-    return str(d / "video.mkv")
+    try:
+        return str(find_video(d))
+    except DataError:  # none: Snakemake names the missing input
+        return str(d / "video.mkv")
 
 
 def calib_input(wildcards):
