@@ -7,6 +7,7 @@ campaign it checks the workflow's bookkeeping: nothing to redo, a deleted produc
 only what depends on it, a run killed hard mid-trial and restarted gives the same
 results, and data/ is never written.
 """
+import contextlib
 import copy
 import hashlib
 import json
@@ -286,10 +287,21 @@ def test_two_runs_on_one_results_folder_lose_no_finished_output(finished):
     try:
         started = _wait_for(lambda: _job_processes(root, "track_1.log") or first.poll() is not None)
         assert started and first.poll() is None, first.communicate()[0] if first.poll() is not None else "no tracking"
-        during = snapshot(res)
-        second = subprocess.run([sys.executable, "-m", "snakemake", "--cores", "1", "--nolock", "--directory",
-                                 str(root), target, target.replace("params.json", "tracks.parquet")], cwd=root,
-                                capture_output=True, text=True, timeout=300)
+        # the first run held still (SIGSTOP) while the second plans: on a loaded machine the small trial's
+        # tracking could otherwise finish before the second run has built its DAG, leaving it nothing to do
+        frozen = [first.pid, *_job_processes(root, "track_1.log")]
+        for pid in frozen:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGSTOP)
+        try:
+            during = snapshot(res)
+            second = subprocess.run([sys.executable, "-m", "snakemake", "--cores", "1", "--nolock", "--directory",
+                                     str(root), target, target.replace("params.json", "tracks.parquet")], cwd=root,
+                                    capture_output=True, text=True, timeout=300)
+        finally:
+            for pid in frozen:
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(pid, signal.SIGCONT)
         out = second.stdout + second.stderr
         assert second.returncode != 0 and "results/e2e/trial_1 is being made by another snakemake run" in out, out
         after_second = snapshot(res)
