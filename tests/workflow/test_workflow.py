@@ -251,13 +251,21 @@ def test_killing_the_workflow_ends_its_jobs(finished):
     proc = subprocess.Popen([sys.executable, "-m", "snakemake", "--cores", "2", "--directory", str(root),
                              str(res.relative_to(root) / "params.json")],
                             cwd=root, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    jobs = []
     try:
         assert _wait_for(lambda: _job_processes(root, "estimate_1.log")), "the estimate job did not start"
-        time.sleep(1.0)
+        # the job held still (SIGSTOP) from its start until Snakemake is gone: a small trial's estimate could
+        # otherwise finish before the kill on a fast machine, and the test would see no orphan to end
         jobs = _job_processes(root, "estimate_1.log")
+        for pid in jobs:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGSTOP)
     finally:
         proc.kill()
         proc.wait()
+        for pid in jobs:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGCONT)
     assert _wait_for(lambda: not _job_processes(root, "estimate_1.log"), 20), "the job outlived its workflow"
     assert not (res / "params.json").exists() and not list(res.glob(".params.json*"))
     assert all(not Path(f"/proc/{pid}").exists() or "Z" in Path(f"/proc/{pid}/stat").read_text().split()[2]
