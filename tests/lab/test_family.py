@@ -220,12 +220,12 @@ def test_the_grasp_carries_the_strings_weight(engine):
 @pytest.mark.parametrize("kind", KINDS)
 def test_both_engines_hang_a_drawn_string_alike(kind):
     """The static hanging shape of a drawn material (0.3 m, 12 links, 10 g at the tip, gripper 0.8 rad
-    off the vertical) on the chain and on the rod: every point within 1 % of the length."""
+    off the vertical) on the chain and on the rod: every point within 1 mm (measured: at most 0.1 mm)."""
     phys = _phys(draw_material(_seed_of(kind, "clamp")))
     phi = -math.pi / 2 + 0.8
     a = _chain_hanging(phys, phi).sites()
     b = _rod_hanging(phys, phi).nodes()
-    assert np.linalg.norm(a - b, axis=1).max() < 0.01 * phys.length
+    assert np.linalg.norm(a - b, axis=1).max() < 1e-3
 
 
 def _swing(config, seed, engine):

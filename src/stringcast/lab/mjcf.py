@@ -2,7 +2,9 @@
 
 :class:`StringPhysics` (SI, validated when built, from ``lab.strings.<type>`` over
 :data:`STRING_DEFAULTS`) and :func:`build_mjcf` (capsule links, hinges with EI / l_link,
-clay spheres, rigid pipe spans, the driver body at the grasp). How the chain is stepped,
+clay spheres, rigid pipe spans, the driver body at the grasp; a slide per link where a drawn
+material stretches, :func:`slide_spring`). A drawn material (``lab.material``, :mod:`.materials`)
+replaces the table's cord. How the chain is stepped,
 dragged and driven is :mod:`stringcast.lab.physics`, whose docstring gives the physics.
 """
 from __future__ import annotations

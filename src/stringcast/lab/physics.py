@@ -7,7 +7,10 @@ model of ``docs/string_model.md`` (and shares no code with it):
   capsules joined by hinges about z (the swing plane is z = 0). Links are rigid
   and there is no slide joint: the string is inextensible (cotton/nylon cord
   stretches well under 1 % at the few newtons of a cast, and a slide joint per
-  link would double the degrees of freedom of an O(n^3) chain).
+  link would double the degrees of freedom of an O(n^3) chain). A drawn material
+  (:mod:`.materials`) that a cast strains over 0.5 % gets a slide per link
+  (:func:`.mjcf.slide_spring`), and the step is cut to ``lab.timestep_s`` / k from
+  the chain's stiffest mode (:meth:`ChainSim.refine`; k = 1 for ``lab.strings``).
 * Bending: each hinge is a torsional spring/damper, k = EI / l_link and
   d = eta / l_link (EI in N m^2, eta in N m^2 s, l_link the link length), so the
   string's bending is independent of how finely it is cut.
