@@ -10,7 +10,8 @@ contract says (plus ground truth for tests and benchmarks);
 :func:`write_calibration_clip` films the ChArUco board for intrinsics;
 :func:`apply_preset` makes the footage harder (dim, blur, oblique, fast, lowres, flicker);
 :func:`draw_setup` and :func:`apply_setup` (:mod:`.randomize`) make it another lab altogether:
-camera, lens, codec, light, background, board, arm, calibration set and clocks drawn from a family.
+camera, lens, codec, light, background, board, arm, calibration set and clocks drawn from a family;
+:func:`draw_material` and :func:`apply_material` (:mod:`.materials`) the string's material.
 """
 from .calib_clip import write_calibration_clip
 from .camera import PRESETS, CameraModel, IdealCanvas, Sensor, apply_preset, camera_settings
@@ -18,6 +19,7 @@ from .encode import h264_backend
 from .mjcf import StringPhysics
 from .physics import ChainSim, simulate
 from .recording import Recording
+from .materials import Material, apply_material, draw_material
 from .randomize import Setup, apply_setup, draw_setup
 from .servo import servo_lag
 from .trial import build_renderer, motion_end, run_trial
@@ -25,5 +27,6 @@ from .trial import build_renderer, motion_end, run_trial
 __all__ = [
     "PRESETS", "apply_preset", "CameraModel", "IdealCanvas", "Sensor", "camera_settings", "ChainSim",
     "Recording", "StringPhysics", "servo_lag", "simulate", "build_renderer", "motion_end", "run_trial",
-    "write_calibration_clip", "Setup", "apply_setup", "draw_setup", "h264_backend",
+    "write_calibration_clip", "Setup", "apply_setup", "draw_setup", "h264_backend", "Material",
+    "apply_material", "draw_material",
 ]

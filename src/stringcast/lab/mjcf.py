@@ -2,7 +2,9 @@
 
 :class:`StringPhysics` (SI, validated when built, from ``lab.strings.<type>`` over
 :data:`STRING_DEFAULTS`) and :func:`build_mjcf` (capsule links, hinges with EI / l_link,
-clay spheres, rigid pipe spans, the driver body at the grasp). How the chain is stepped,
+clay spheres, rigid pipe spans, the driver body at the grasp; a slide per link where a drawn
+material stretches, :func:`slide_spring`). A drawn material (``lab.material``, :mod:`.materials`)
+replaces the table's cord. How the chain is stepped,
 dragged and driven is :mod:`stringcast.lab.physics`, whose docstring gives the physics.
 """
 from __future__ import annotations
@@ -26,7 +28,15 @@ STRING_DEFAULTS = {
     "pipe_density_g_per_m": 40.0,  # pipe mass per length, added to the cord's
 }
 
+#: Keys a drawn material (:mod:`.materials`) or a ``lab.strings`` entry may add; absent, the cord
+#: is as it always was: inextensible in the chain, the rod's 1 GPa braid, the chain's compliant
+#: grasp hinge and the rod's rigid clamp.
+DRAWN_KEYS = ("axial_EA", "axial_damping", "grasp")
+GRASPS = (None, "clamp", "pivot")
 DRIVER_ARMATURE = (200.0, 200.0, 20.0)    # kg, kg, kg m^2 on slide x, slide y, hinge z
+G_ACC = 9.81                              # m/s^2
+V_CAST = 10.0                             # m/s, a cast's tip speed for the reference tension
+STRETCH_MIN = 5e-3                        # the chain stretches where a cast strains the string more
 
 
 @dataclass(frozen=True)
@@ -40,6 +50,12 @@ class StringPhysics:
         weights: ((at_m, mass_kg, diameter_m), ...) clay lumps along the string.
         pipes: ((from_m, to_m, density_kg_per_m, diameter_m), ...) rigid pipes.
         air_density: kg/m^3. air_viscosity: Pa s.
+        axial_EA: N, or None (the cord as always: the chain inextensible, the rod's 1 GPa braid).
+        axial_damping: Kelvin-Voigt eta_a on the axial strain rate, N s, or None (the rod's loss
+            factor rule). grasp: ``clamp`` (leaves the gripper along its axis through a hinge of
+            grasp_stiffness / grasp_damping, both physics), ``pivot`` (a free pivot with
+            grasp_damping), or None (as always: the chain's compliant hinge, the rod's rigid clamp).
+        material: the drawn material's name (``kind (seed N)``), None for ``lab.strings``' cord.
     """
 
     length: float
@@ -54,6 +70,10 @@ class StringPhysics:
     pipes: tuple = ()
     air_density: float = 1.2
     air_viscosity: float = 1.8e-5
+    axial_EA: float | None = None
+    axial_damping: float | None = None
+    grasp: str | None = None
+    material: str | None = None
 
     def __post_init__(self):
         if self.n_links < 2:
@@ -64,6 +84,14 @@ class StringPhysics:
         for name in ("bending_EI", "bending_damping", "grasp_stiffness", "grasp_damping"):
             if getattr(self, name) < 0:
                 raise ConfigError(f"lab string: {name} must not be negative")
+        for name in ("axial_EA", "axial_damping"):
+            v = getattr(self, name)
+            if v is not None and not (math.isfinite(v) and v >= (0 if name == "axial_damping" else 1e-300)):
+                raise ConfigError(f"lab string: {name} must be positive (or absent), got {v}")
+        if self.grasp not in GRASPS:
+            raise ConfigError(f"lab string: grasp {self.grasp!r} is not one of {list(GRASPS)}")
+        if self.grasp == "pivot" and self.grasp_stiffness != 0:
+            raise ConfigError("lab string: a pivot grasp has no stiffness (grasp_stiffness 0)")
         for at, mass, dia in self.weights:
             if not (0 <= at <= self.length + 1e-9 and mass > 0 and dia > 0):
                 raise ConfigError(f"lab string: bad weight at {at} m, mass {mass} kg")
@@ -81,22 +109,47 @@ class StringPhysics:
         return (self.density * self.length + sum(w[1] for w in self.weights)
                 + sum((b - a) * rho for a, b, rho, _ in self.pipes))
 
+    @property
+    def cast_tension(self) -> float:
+        """A cast's reference tension at the grasp, N: the whole mass at g + V_CAST^2 / L (a string
+        whirled at V_CAST m/s about the grasp, plus its weight; module doc)."""
+        return self.mass * (G_ACC + V_CAST ** 2 / self.length)
+
+    @property
+    def stretches(self) -> bool:
+        """True if the string stretches enough to matter: an ``axial_EA`` under which a cast's
+        tension (:attr:`cast_tension`) strains it more than STRETCH_MIN. Then the MuJoCo chain gets
+        a slide joint per link; else it is inextensible (as ``lab.strings``' cord always was)."""
+        return self.axial_EA is not None and self.cast_tension / self.axial_EA > STRETCH_MIN
+
     @classmethod
     def from_campaign(cls, campaign: Campaign, config: Mapping) -> "StringPhysics":
-        """Physical values for the campaign's string: ``lab.strings`` (default, then its type)."""
+        """Physical values for the campaign's string: ``lab.strings`` (default, then its type), its
+        cord replaced by the drawn material where ``lab.material`` names one
+        (:func:`~.materials.lab_material`: density, diameter, bending, stretch, damping, grasp;
+        clay lumps and pipes stay the table's).
+
+        Raises:
+            ConfigError: unknown keys, bad values or a bad ``lab.material``.
+        """
+        from .materials import lab_material
+
         lab = config.get("lab", {}) or {}
         table = lab.get("strings", {}) or {}
         vals = dict(STRING_DEFAULTS)
         vals.update(table.get("default", {}) or {})
         if campaign.string_id is not None:
             vals.update(table.get(str(campaign.string_id), {}) or {})
+        drawn = lab_material(lab)
+        if drawn is not None:
+            vals.update(drawn.strings_entry())
         if "damping" in vals:
             import warnings
 
             warnings.warn("lab.strings: key 'damping' is not used (its unit was undefined); "
                           "set bending_damping (N m^2 s) instead", stacklevel=2)
             vals.pop("damping")
-        unknown = set(vals) - set(STRING_DEFAULTS)
+        unknown = set(vals) - set(STRING_DEFAULTS) - set(DRAWN_KEYS)
         if unknown:
             raise ConfigError(f"lab.strings: unknown keys {sorted(unknown)} (known: {sorted(STRING_DEFAULTS)})")
         s = campaign.string
@@ -114,7 +167,13 @@ class StringPhysics:
             pipes=tuple((float(a), float(b), pipe_rho, pipe_d) for a, b in s.stiff_sections),
             air_density=float(air.get("density_kg_m3", 1.2)),
             air_viscosity=float(air.get("viscosity_pa_s", 1.8e-5)),
+            axial_EA=_opt(vals.get("axial_EA")), axial_damping=_opt(vals.get("axial_damping")),
+            grasp=vals.get("grasp"), material=None if drawn is None else f"{drawn.kind} (seed {drawn.seed})",
         )
+
+
+def _opt(v) -> float | None:
+    return None if v is None else float(v)
 
 
 def _rigid_joint(phys: StringPhysics, k: int) -> bool:
@@ -138,8 +197,29 @@ def weight_link(phys: StringPhysics, at: float) -> int:
     return int(min(phys.n_links - 1, max(0, math.floor(at / phys.link_length + 1e-9))))
 
 
+def slide_spring(phys: StringPhysics) -> tuple[float, float]:
+    """(stiffness N/m, damping N s/m) of each link's slide joint where the string stretches
+    (:attr:`StringPhysics.stretches`), else (0, 0).
+
+    The n_s slides (at every link start but the first and those inside a pipe) share the cord's
+    length L_c (L less the pipes): k = EA n_s / L_c and d = eta_a n_s / L_c, so a hanging string
+    stretches by integral T(s) / EA ds exactly for a uniform string or an end mass (the discrete
+    sum over the slides' tensions is that integral's trapezoid, exact for a linear T)."""
+    if not phys.stretches:
+        return 0.0, 0.0
+    n_s = sum(1 for k in range(1, phys.n_links) if not _rigid_joint(phys, k))
+    l_c = max(phys.length - sum(b - a for a, b, _, _ in phys.pipes), phys.link_length)
+    eta = phys.axial_damping or 0.0
+    return phys.axial_EA * n_s / l_c, eta * n_s / l_c
+
+
 def build_mjcf(phys: StringPhysics, timestep: float) -> str:
     """The MJCF text of driver + chain.
+
+    A string that stretches (:attr:`StringPhysics.stretches`) has, after each inner hinge
+    ``h{k}``, a slide ``a{k}`` along the link (:func:`slide_spring`): it opens a gap between
+    link k - 1's end and link k, and the sites follow. A ``pivot`` grasp is the grasp hinge with
+    no stiffness.
 
     Bodies ``link0..`` (each capsule along its local +x from its hinge), sites
     ``s0..s{n_links}`` at every link start and the tip (arc length k * l_link).
@@ -148,6 +228,7 @@ def build_mjcf(phys: StringPhysics, timestep: float) -> str:
     ll = phys.link_length
     k_hinge = phys.bending_EI / ll
     d_hinge = phys.bending_damping / ll
+    k_slide, d_slide = slide_spring(phys)
     xs = [
         '<mujoco model="stringcast_lab">',
         '  <compiler angle="radian" autolimits="true"/>',
@@ -176,6 +257,9 @@ def build_mjcf(phys: StringPhysics, timestep: float) -> str:
             else:
                 xs.append(f'{indent}  <joint name="h{k}" type="hinge" axis="0 0 1" '
                           f'stiffness="{k_hinge:.6g}" damping="{d_hinge:.6g}"/>')
+                if phys.stretches:      # after the hinge: along the link's own axis
+                    xs.append(f'{indent}  <joint name="a{k}" type="slide" axis="1 0 0" '
+                              f'stiffness="{k_slide:.9g}" damping="{d_slide:.9g}"/>')
         mass = phys.density * ll
         for a, b, rho, _ in phys.pipes:
             mass += rho * max(0.0, min(b, s1) - max(a, s0))

@@ -7,7 +7,10 @@ model of ``docs/string_model.md`` (and shares no code with it):
   capsules joined by hinges about z (the swing plane is z = 0). Links are rigid
   and there is no slide joint: the string is inextensible (cotton/nylon cord
   stretches well under 1 % at the few newtons of a cast, and a slide joint per
-  link would double the degrees of freedom of an O(n^3) chain).
+  link would double the degrees of freedom of an O(n^3) chain). A drawn material
+  (:mod:`.materials`) that a cast strains over 0.5 % gets a slide per link
+  (:func:`.mjcf.slide_spring`), and the step is cut to ``lab.timestep_s`` / k from
+  the chain's stiffest mode (:meth:`ChainSim.refine`; k = 1 for ``lab.strings``).
 * Bending: each hinge is a torsional spring/damper, k = EI / l_link and
   d = eta / l_link (EI in N m^2, eta in N m^2 s, l_link the link length), so the
   string's bending is independent of how finely it is cut.
@@ -55,6 +58,7 @@ from .servo import hand_trajectory, servo_lag
 
 _DRIVER_BANDWIDTH_HZ = 60.0               # PD bandwidth of the driver
 DRAG_EVERY = 2                            # air drag re-evaluated every 2 steps (0.1 ms)
+STEP_SAFETY = 0.5                         # the step keeps omega_max dt <= 2 STEP_SAFETY
 
 
 class ChainSim:
@@ -110,6 +114,55 @@ class ChainSim:
         drag_kernel(d.xpos, d.xmat, d.cvel, d.subtree_com[self._root], d.xipos, cb, cp, cd,
                      self.phys.link_length, sb, sp, sd, self.phys.air_density, self._nu, C_FRICTION,
                      d.xfrc_applied)
+
+    # -- the step the material allows ---------------------------------------
+    def omega_max(self) -> float:
+        """The chain's fastest linear mode under a cast, rad/s, hanging straight down.
+
+        Generalized eigenvalues of (K, M) over the string's joints (driver held): M MuJoCo's
+        joint-space mass matrix, K the joints' springs (hinges EI / l, grasp, slides) plus the
+        gravity Hessian scaled from g to g + V_CAST^2 / L (the geometric stiffness of a cast's
+        tension, :attr:`~.mjcf.StringPhysics.cast_tension`), by central differences of
+        ``qfrc_bias``."""
+        import mujoco
+        from scipy.linalg import eigh
+
+        from .mjcf import G_ACC, V_CAST
+
+        m, d = self.model, self.data
+        self.reset_hanging(np.array([0.0, 0.0, -math.pi / 2]))
+        q0 = d.qpos.copy()
+        nv = m.nv
+        full = np.zeros((nv, nv))
+        mujoco.mj_fullM(m, d, full)
+        mass = full[3:, 3:]
+        stiff = np.zeros((nv, nv))
+        for j in range(m.njnt):
+            stiff[m.jnt_dofadr[j], m.jnt_dofadr[j]] = m.jnt_stiffness[j]
+        h = 1e-6
+        for i in range(3, nv):
+            col = []
+            for sgn in (1.0, -1.0):
+                d.qpos[:] = q0
+                d.qpos[i] += sgn * h
+                mujoco.mj_forward(m, d)
+                col.append(d.qfrc_bias.copy())
+            stiff[:, i] += (col[0] - col[1]) / (2 * h) * (1 + V_CAST ** 2 / (self.phys.length * G_ACC))
+        d.qpos[:] = q0
+        mujoco.mj_forward(m, d)
+        k = stiff[3:, 3:]
+        w2 = eigh(0.5 * (k + k.T), mass, eigvals_only=True)
+        return float(math.sqrt(max(float(w2.max()), 0.0)))
+
+    def refine(self, timestep: float) -> int:
+        """Set the chain's step to ``timestep`` / k, k the fewest whole steps per ``timestep`` with
+        omega_max dt <= 2 STEP_SAFETY (:meth:`omega_max`; semi-implicit Euler is stable below 2).
+        Returns k (1 for every ``lab.strings`` type: their step stays ``lab.timestep_s``)."""
+        k = max(1, math.ceil(timestep * self.omega_max() / (2 * STEP_SAFETY) - 1e-9))
+        if k > 1:
+            self.model.opt.timestep = timestep / k
+            self.dt = float(self.model.opt.timestep)
+        return k
 
     def step(self, pose: np.ndarray, vel: np.ndarray, acc: np.ndarray) -> None:
         """One MuJoCo step with the driver pushed towards the hand pose (x, y, phi_h) and air drag."""
@@ -229,9 +282,11 @@ def simulate(phys: StringPhysics, arm: ArmSpec, t_cmd: np.ndarray, q_cmd: np.nda
     sim = ChainSim(phys, timestep)
     dt = sim.dt
     n = int(math.floor((t_cmd[-1] - t_cmd[0]) / dt + 1e-9)) + 1
-    t = t_cmd[0] + dt * np.arange(n)
-    q, _, _ = servo_lag(t_cmd, q_cmd, servo_lag_s, t)
-    pose, vel, acc = hand_trajectory(arm, q, dt)
+    k = sim.refine(dt)                  # sub-steps per recorded step (1: the step is lab.timestep_s)
+    t_fine = t_cmd[0] + sim.dt * np.arange(n * k)
+    t = t_fine[::k]
+    q, _, _ = servo_lag(t_cmd, q_cmd, servo_lag_s, t_fine)
+    pose, vel, acc = hand_trajectory(arm, q, sim.dt)
     speed = sim.settle(pose[0], settle_s)
     pts = np.empty((n, sim.n_sites, 2))
     d = sim.data
@@ -242,11 +297,15 @@ def simulate(phys: StringPhysics, arm: ArmSpec, t_cmd: np.ndarray, q_cmd: np.nda
         it = tqdm(it, desc="physics", unit="step", mininterval=1.0, leave=False, disable=None)
     t0 = time.perf_counter()
     for i in it:
-        sim.step(pose[i], vel[i], acc[i])   # positions are computed at the start of the step: t[i]
+        j = i * k
+        sim.step(pose[j], vel[j], acc[j])   # positions are computed at the start of the step: t[i]
         pts[i] = sx[:, :2]
+        for j in range(i * k + 1, i * k + k):
+            sim.step(pose[j], vel[j], acc[j])
         if i % 2000 == 0 and not np.isfinite(d.qacc).all():
             raise FloatingPointError(f"lab physics diverged at t = {t[i]:.4f} s")
     wall = time.perf_counter() - t0
     if not np.isfinite(pts).all():
         raise FloatingPointError("lab physics diverged (non-finite positions)")
-    return Recording(t, pts, q, speed, n / max(wall, 1e-9), physics="mujoco", detail={"timestep_s": dt})
+    detail = {"timestep_s": sim.dt, "steps_per_sample": k, "stretches": phys.stretches}
+    return Recording(t, pts, q[::k], speed, n * k / max(wall, 1e-9), physics="mujoco", detail=detail)

@@ -46,6 +46,9 @@ Its nodes are the Recording's sites (node k at rest arc k L / n, node 0 the gras
   The first element is held straight along the gripper: the cord bends from node 1 on, and under
   a cast's tension (bending boundary layer sqrt(EI / T) ~ 2 mm, finer than an element) element 0's
   shear is the clamp's compliance.
+* A drawn material (``lab.material``; docs/lab_physics.md, "The family of materials") sets EA
+  (capped where a cast strains it < 0.05 %), the axial dashpot and the grasp: a ``clamp`` turns
+  element 0 on a spring and dashpot towards the gripper axis, a ``pivot`` holds node 0 only.
 * Start: the rod's own exact static equilibrium hanging from the first hand pose (Newton on
   its internal forces, :mod:`.statics`), then ``lab.settle_s`` of free dynamics: it settles to
   ~1e-11 m/s.

@@ -26,6 +26,8 @@ PIPE_NU = 0.45
 PIPE_SHEAR_ALPHA = 0.5        # Timoshenko's coefficient of a thin-walled tube
 PIPE_MODE_MAX = 1.25          # a pipe's modes may be this much faster than the cord's axial one
 STEP_SAFETY = 0.5             # dt = STEP_SAFETY * 2 / omega_max (Verlet is stable below 2 / omega)
+STRAIN_FLOOR = 5e-4           # a drawn EA is built no stiffer than a cast strains by this (chains, ropes)
+OMEGA_ROT_MIN = 1.0e5         # rad/s: an element's rotation modes are slowed to max(axial, this), no lower
 
 
 @dataclass(frozen=True)
@@ -45,6 +47,10 @@ class RodMaterial:
         eta_axial: (n,) element dashpots, N s / m (AXIAL_LOSS at the first axial mode).
         pipe_ei: EI of the pipes as built, N m^2 (0 without pipes); pipe_capped: it was capped.
         dt_max: the largest stable step, s (:func:`stable_step`).
+        grasp: ``rigid`` (element 0 held along the gripper: ``lab.strings``' cord), ``clamp``
+            (element 0 on a torsional spring k_grasp N m/rad and dashpot c_grasp N m s/rad to the
+            gripper axis) or ``pivot`` (free, c_grasp only). rot_scaled: elements whose rotary
+            inertia was raised (:func:`_floor_rotary_inertia`).
     """
 
     n: int
@@ -66,6 +72,10 @@ class RodMaterial:
     pipe_ei: float
     pipe_capped: bool
     dt_max: float
+    grasp: str = "rigid"
+    k_grasp: float = 0.0
+    c_grasp: float = 0.0
+    rot_scaled: int = 0
 
     @property
     def junction_EI(self) -> np.ndarray:
@@ -82,7 +92,8 @@ class RodMaterial:
         return {"elements": self.n, "dt_max_s": self.dt_max, "cord_E_axial_pa": CORD_E_AXIAL,
                 "cord_EA_n": float(self.EA.min()), "cord_GA_n": float(self.GA.min()),
                 "cord_EI": float(self.EI.min()), "axial_loss": AXIAL_LOSS,
-                "pipe_EI": self.pipe_ei, "pipe_capped": self.pipe_capped}
+                "pipe_EI": self.pipe_ei, "pipe_capped": self.pipe_capped, "grasp": self.grasp,
+                "rotary_inertia_raised": self.rot_scaled}
 
 
 def _tube(outer_d: float, lam: float) -> tuple[float, float]:
@@ -117,7 +128,7 @@ def rod_material(phys: StringPhysics) -> RodMaterial:
     s0 = np.arange(n) * l
     lam = np.full(n, phys.density)
     radius = np.full(n, r_c)
-    EA = np.full(n, CORD_E_AXIAL * A_c)
+    EA = np.full(n, CORD_E_AXIAL * A_c if phys.axial_EA is None else min(phys.axial_EA, phys.cast_tension / STRAIN_FLOOR))
     GA = np.full(n, SHEAR_ALPHA * G_c * A_c)
     EI = np.full(n, EI_c)
     GJ = np.full(n, G_c * 2 * I_c)
@@ -143,6 +154,9 @@ def rod_material(phys: StringPhysics) -> RodMaterial:
     pipe_capped = _cap_pipes(covered, lam, EA, GA, EI, GJ, J_len, l)
     if pipe_capped:
         pipe_ei = float(EI[covered].max() - EI_c)
+    grasp = phys.grasp or "rigid"
+    k_g = phys.grasp_stiffness if grasp == "clamp" else 0.0
+    rot_scaled = _floor_rotary_inertia(covered, lam, EA, GA, EI, GJ, J_len, l, k_g)
     node_mass = np.zeros(n + 1)
     node_mass[:-1] += lam * l / 2
     node_mass[1:] += lam * l / 2
@@ -150,11 +164,33 @@ def rod_material(phys: StringPhysics) -> RodMaterial:
     clay_node, clay_w, clay_d = _clay(phys, n, l, node_mass, J)
     c_axial = np.sqrt(EA.min() / lam.max())
     omega_1 = math.pi / 2 * c_axial / L                      # first axial mode, clamped-free
-    eta_axial = AXIAL_LOSS * EA / omega_1 / l
+    if phys.axial_damping is None:
+        eta_axial = AXIAL_LOSS * EA / omega_1 / l
+    else:                                                    # eta_a d(eps)/dt, eps = dl / l
+        eta_axial = np.full(n, phys.axial_damping / l)
     eta_bend = np.full(n - 1, phys.bending_damping / l)
     dt = stable_step(l, lam, EA, GA, EI, GJ, J_len)
+    if grasp != "rigid":                                     # element 0 on the grasp spring
+        dt = min(dt, STEP_SAFETY * 2 / math.sqrt((k_g + 4 * EI[0] / l) / J[0]))
     return RodMaterial(n, L, l, lam, radius, EA, GA, EI, GJ, J, node_mass, clay_node, clay_w, clay_d,
-                       eta_bend, eta_axial, float(pipe_ei), pipe_capped, dt)
+                       eta_bend, eta_axial, float(pipe_ei), pipe_capped, dt, grasp, float(k_g),
+                       float(phys.grasp_damping) if grasp != "rigid" else 0.0, rot_scaled)
+
+
+def _floor_rotary_inertia(covered, lam, EA, GA, EI, GJ, J_len, l, k_grasp) -> int:
+    """Raise, in place, a cord element's rotary inertia per length J_len where its rotation modes
+    (bending-rotation (2/l) sqrt(EI/J), twist, shear-rotation sqrt(GA/J), and on element 0 the grasp
+    spring sqrt(k_g / (J l))) would be faster than omega_cap = max(the axial wave 2 sqrt(EA/lam) / l,
+    OMEGA_ROT_MIN): rotary inertia scaling, the standard device of explicit rod and shell codes
+    (the rotations of a string's cross-sections carry a negligible share of its kinetic energy; a
+    thin thread's would otherwise set a step of ~1e-7 s). Never active on ``lab.strings``' cords
+    (their rotation modes are below both). Returns how many elements were raised."""
+    omega_cap = np.maximum(2 * np.sqrt(EA / lam) / l, OMEGA_ROT_MIN)
+    need = np.maximum.reduce([GA / omega_cap ** 2, 4 * EI / (l * omega_cap) ** 2, 2 * GJ / (l * omega_cap) ** 2])
+    need[0] = max(need[0], 2 * k_grasp / (l * omega_cap[0] ** 2))
+    raise_ = ~covered & (need > J_len)
+    J_len[raise_] = need[raise_]
+    return int(raise_.sum())
 
 
 def _cap_pipes(covered, lam, EA, GA, EI, GJ, J_len, l) -> bool:

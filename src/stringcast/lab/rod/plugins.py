@@ -64,25 +64,30 @@ def _sample(t0: float, h: float, n: int, time: float) -> int:  # pragma: no cove
 
 
 @njit(cache=True)
-def _clamp_values(position, director, pose, t0, h, time):  # pragma: no cover - compiled
-    """Node 0 to the hand's (x, y, 0) and element 0's directors to :func:`directors` (phi_h)."""
+def _clamp_values(position, director, pose, t0, h, time, held):  # pragma: no cover - compiled
+    """Node 0 to the hand's (x, y, 0) and, if ``held``, element 0's directors to :func:`directors` (phi_h)."""
     i = _sample(t0, h, pose.shape[0], time)
     c, s = math.cos(pose[i, 2]), math.sin(pose[i, 2])
     position[0, 0] = pose[i, 0]
     position[1, 0] = pose[i, 1]
     position[2, 0] = 0.0
+    if not held:
+        return
     director[0, 0, 0], director[0, 1, 0], director[0, 2, 0] = 0.0, 0.0, 1.0
     director[1, 0, 0], director[1, 1, 0], director[1, 2, 0] = s, -c, 0.0
     director[2, 0, 0], director[2, 1, 0], director[2, 2, 0] = c, s, 0.0
 
 
 @njit(cache=True)
-def _clamp_rates(velocity, omega, vel, t0, h, time):  # pragma: no cover - compiled
-    """Node 0's velocity to the hand's, element 0's angular velocity to (dphi_h/dt, 0, 0) (frame d1 = +z)."""
+def _clamp_rates(velocity, omega, vel, t0, h, time, held):  # pragma: no cover - compiled
+    """Node 0's velocity to the hand's and, if ``held``, element 0's angular velocity to (dphi_h/dt, 0, 0)
+    (frame d1 = +z)."""
     i = _sample(t0, h, vel.shape[0], time)
     velocity[0, 0] = vel[i, 0]
     velocity[1, 0] = vel[i, 1]
     velocity[2, 0] = 0.0
+    if not held:
+        return
     omega[0, 0] = vel[i, 2]
     omega[1, 0] = 0.0
     omega[2, 0] = 0.0
@@ -163,33 +168,51 @@ def drag_kernel(vel, tangents, lengths, diam, clay_node, clay_w, clay_d, rho, nu
 
 # ------------------------------------------------------------------------------- damping
 @njit(cache=True)
-def _damp_rotation(omega, J, c, dt):  # pragma: no cover - compiled
-    """Implicit junction dashpots on the in-plane angular velocities omega[0] (element 0 held):
-    solve (J + dt D) w' = J w by Thomas' algorithm, D the dashpots' Laplacian (c (n - 1,) N m s)."""
+def _damp_rotation(omega, J, c, dt, free0, c_g, w_hand):  # pragma: no cover - compiled
+    """Implicit junction dashpots on the in-plane angular velocities omega[0]: solve
+    (J + dt D) w' = J w by Thomas' algorithm, D the dashpots' Laplacian (c (n - 1,) N m s). Element 0
+    is held (the rigid clamp) unless ``free0``; then it is an unknown too, with the grasp's dashpot
+    c_g N m s to the hand's rate w_hand rad/s."""
     n = J.shape[0]
     if n < 2:
         return
+    s0 = 0 if free0 else 1
     a = np.zeros(n)
     b = np.zeros(n)
     cc = np.zeros(n)
     r = np.zeros(n)
-    for e in range(1, n):
-        b[e] = J[e] + dt * c[e - 1]
+    for e in range(s0, n):
+        if e >= 1:
+            b[e] = J[e] + dt * c[e - 1]
+        else:
+            b[e] = J[e] + dt * c_g
         r[e] = J[e] * omega[0, e]
-        if e - 1 >= 1:
+        if e == 0:
+            r[e] += dt * c_g * w_hand
+        elif e - 1 >= s0:
             a[e] = -dt * c[e - 1]
         else:
             r[e] += dt * c[e - 1] * omega[0, 0]
         if e < n - 1:
             b[e] += dt * c[e]
             cc[e] = -dt * c[e]
-    for e in range(2, n):
+    for e in range(s0 + 1, n):
         m = a[e] / b[e - 1]
         b[e] -= m * cc[e - 1]
         r[e] -= m * r[e - 1]
     omega[0, n - 1] = r[n - 1] / b[n - 1]
-    for e in range(n - 2, 0, -1):
+    for e in range(n - 2, s0 - 1, -1):
         omega[0, e] = (r[e] - cc[e] * omega[0, e + 1]) / b[e]
+
+
+@njit(cache=True)
+def _grasp_torque(director, torques, pose, t0, h, time, k):  # pragma: no cover - compiled
+    """Add the grasp spring's couple -k (theta_0 - phi_h) (wrapped to a half turn) about d1 = +z to
+    element 0's torque (theta_0 the angle of its d3)."""
+    i = _sample(t0, h, pose.shape[0], time)
+    th = math.atan2(director[2, 1, 0], director[2, 0, 0])
+    d = (th - pose[i, 2] + math.pi) % (2 * math.pi) - math.pi
+    torques[0, 0] -= k * d
 
 
 @njit(cache=True)
@@ -253,9 +276,10 @@ _PLUGINS: dict = {}
 
 def plugin_classes() -> tuple[type, type, type]:
     """(HandClamp, AirDrag, CordDamping): the PyElastica plug-ins, made once on first use
-    (:func:`_hand_clamp`, :func:`_air_drag`, :func:`_cord_damping`; see the module docstring)."""
+    (:func:`_hand_clamp`, :func:`_air_drag`, :func:`_cord_damping`; see the module docstring);
+    ``_PLUGINS["grasp"]`` is the GraspSpring (:func:`_grasp_spring`)."""
     if not _PLUGINS:
-        _PLUGINS.update(clamp=_hand_clamp(), drag=_air_drag(), damping=_cord_damping())
+        _PLUGINS.update(clamp=_hand_clamp(), drag=_air_drag(), damping=_cord_damping(), grasp=_grasp_spring())
     return _PLUGINS["clamp"], _PLUGINS["drag"], _PLUGINS["damping"]
 
 
@@ -273,18 +297,20 @@ def _hand_clamp() -> type:
         ``owner.hand`` is the :class:`HandPath` (swapped between settling and the motion).
         """
 
-        def __init__(self, *, clamp, **kwargs):
+        def __init__(self, *, clamp, held: bool = True, **kwargs):
             super().__init__(**kwargs)
             self._owner = clamp
+            self._held = bool(held)
 
         def constrain_values(self, system, time) -> None:
             hand = self._owner.hand
             _clamp_values(system.position_collection, system.director_collection, hand.pose, hand.t0, hand.h,
-                          float(time))
+                          float(time), self._held)
 
         def constrain_rates(self, system, time) -> None:
             hand = self._owner.hand
-            _clamp_rates(system.velocity_collection, system.omega_collection, hand.vel, hand.t0, hand.h, float(time))
+            _clamp_rates(system.velocity_collection, system.omega_collection, hand.vel, hand.t0, hand.h, float(time),
+                         self._held)
 
     return HandClamp
 
@@ -334,17 +360,45 @@ def _cord_damping() -> type:
             material: the rod's :class:`~.material.RodMaterial`. time_step: the step, s.
         """
 
-        def __init__(self, material: RodMaterial, time_step: float, **kwargs):
+        def __init__(self, material: RodMaterial, time_step: float, clamp=None, **kwargs):
             super().__init__(**kwargs)
             rod = self._system
             self.J = np.ascontiguousarray(rod.mass_second_moment_of_inertia[0, 0, :])
             self.c_bend = np.ascontiguousarray(material.eta_bend, float)
             self.c_axial = np.ascontiguousarray(material.eta_axial, float)
             self.dt = float(time_step)
+            self.free0 = material.grasp != "rigid"
+            self.c_grasp = float(material.c_grasp)
+            self._owner = clamp
 
         def dampen_rates(self, system, time) -> None:
-            if self.c_bend.size and self.c_bend.max() > 0:
-                _damp_rotation(system.omega_collection, self.J, self.c_bend, self.dt)
+            if self.free0:
+                hand = self._owner.hand
+                w = hand.vel[_sample(hand.t0, hand.h, hand.vel.shape[0], float(time)), 2]
+                _damp_rotation(system.omega_collection, self.J, self.c_bend, self.dt, True, self.c_grasp, w)
+            elif self.c_bend.size and self.c_bend.max() > 0:
+                _damp_rotation(system.omega_collection, self.J, self.c_bend, self.dt, False, 0.0, 0.0)
             _damp_stretch(system.velocity_collection, system.tangents, system.mass, self.c_axial, self.dt)
 
     return CordDamping
+
+
+def _grasp_spring() -> type:
+    """The grasp spring class, a ``elastica.NoForces``: the couple of a ``clamp`` grasp."""
+    from elastica import NoForces
+
+    class GraspSpring(NoForces):
+        """The compliant clamp's couple on element 0 (:func:`_grasp_torque`), k N m/rad, towards
+        the gripper axis phi_h of ``clamp.hand`` (its dashpot is :class:`CordDamping`'s)."""
+
+        def __init__(self, k: float, clamp):
+            super().__init__()
+            self.k = float(k)
+            self._owner = clamp
+
+        def apply_torques(self, system, time=0.0) -> None:
+            hand = self._owner.hand
+            _grasp_torque(system.director_collection, system.external_torques, hand.pose, hand.t0, hand.h,
+                          float(time), self.k)
+
+    return GraspSpring

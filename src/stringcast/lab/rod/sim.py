@@ -12,7 +12,7 @@ from ..mjcf import StringPhysics
 from ..recording import Recording, command_arrays
 from ..servo import hand_trajectory, servo_lag
 from .material import CORD_E_AXIAL, G_ACC, RodMaterial, rod_material
-from .plugins import HandPath, directors, plugin_classes
+from .plugins import _PLUGINS, HandPath, directors, plugin_classes
 from .statics import hanging_nodes, rod_equilibrium
 
 REFINEMENTS = 2
@@ -90,10 +90,12 @@ class RodSim:
         self.rod = build_rod(self.mat)
         sim = self.sim = _simulator()
         sim.append(self.rod)
-        sim.constrain(self.rod).using(HandClamp, clamp=self)
+        sim.constrain(self.rod).using(HandClamp, clamp=self, held=self.mat.grasp == "rigid")
         sim.add_forcing_to(self.rod).using(ea.GravityForces, acc_gravity=np.array([0.0, -G_ACC, 0.0]))
         sim.add_forcing_to(self.rod).using(AirDrag, self.mat, phys.air_density, phys.air_viscosity)
-        sim.dampen(self.rod).using(CordDamping, material=self.mat, time_step=self.dt)
+        if self.mat.grasp == "clamp":
+            sim.add_forcing_to(self.rod).using(_PLUGINS["grasp"], self.mat.k_grasp, self)
+        sim.dampen(self.rod).using(CordDamping, material=self.mat, time_step=self.dt, clamp=self)
         sim.finalize()
         self.stepper = ea.PositionVerlet()
         self.time = 0.0

@@ -26,20 +26,25 @@ def hanging_angles(mat: RodMaterial, phi_h: float) -> np.ndarray:
     n, l = mat.n, mat.l
     k = mat.junction_EI / l                                     # (n - 1,) N m / rad
     below = np.cumsum(mat.node_mass[::-1])[::-1][1:]            # (n,) mass of nodes e + 1..n
+    free = mat.grasp != "rigid"                                  # element 0 on the grasp spring (or a pivot)
 
     def fun(x):
-        th = np.concatenate([[phi_h], x])
+        th = x if free else np.concatenate([[phi_h], x])
         dth = np.diff(th)
         e = 0.5 * np.sum(k * dth * dth) + G_ACC * l * np.sum(below * np.sin(th))
         g = G_ACC * l * below * np.cos(th)
         g[:-1] -= k * dth
         g[1:] += k * dth
+        if free:
+            e += 0.5 * mat.k_grasp * (th[0] - phi_h) ** 2
+            g[0] += mat.k_grasp * (th[0] - phi_h)
+            return e, g
         return e, g[1:]
 
     down = phi_h + (-np.pi / 2 - phi_h + np.pi) % (2 * np.pi) - np.pi      # -pi/2 (mod 2 pi), nearest phi_h
-    x0 = np.full(n - 1, down)
+    x0 = np.full(n if free else n - 1, down)
     res = minimize(fun, x0, jac=True, method="L-BFGS-B", options={"gtol": 1e-12, "ftol": 1e-15, "maxiter": 5000})
-    return np.concatenate([[phi_h], res.x])
+    return res.x.copy() if free else np.concatenate([[phi_h], res.x])
 
 
 def hanging_nodes(mat: RodMaterial, grasp_xy, phi_h: float, stretch: bool = True) -> np.ndarray:
@@ -68,6 +73,8 @@ def rod_equilibrium(rod, mat: RodMaterial, pose, nodes0: np.ndarray) -> float:
 
     n = mat.n
     pose = np.asarray(pose, float)
+    free = mat.grasp != "rigid"               # element 0's angle is an unknown, its couple the grasp's
+    e0 = 0 if free else 1
     weight = G_ACC * mat.node_mass[1:]
     f_scale = max(G_ACC * mat.node_mass.max(), 1e-9)
     t_scale = max(float(mat.junction_EI.max()) / mat.l, 1e-12)
@@ -76,19 +83,23 @@ def rod_equilibrium(rod, mat: RodMaterial, pose, nodes0: np.ndarray) -> float:
         rod.position_collection[0, 0], rod.position_collection[1, 0] = pose[0], pose[1]
         rod.position_collection[:2, 1:] = x[:2 * n].reshape(n, 2).T
         rod.position_collection[2] = 0.0
-        rod.director_collection[..., 0] = directors(pose[2])
-        for e in range(1, n):
-            rod.director_collection[..., e] = directors(x[2 * n + e - 1])
+        if not free:
+            rod.director_collection[..., 0] = directors(pose[2])
+        for e in range(e0, n):
+            rod.director_collection[..., e] = directors(x[2 * n + e - e0])
 
     def fun(x):
         place(x)
         rod.compute_internal_forces_and_torques(np.float64(0.0))
         f = rod.internal_forces[:2, 1:].copy()
         f[1] -= weight
-        return np.concatenate([f.T.ravel() / f_scale, rod.internal_torques[0, 1:] / t_scale])
+        tq = rod.internal_torques[0, e0:].copy()
+        if free:
+            tq[0] -= mat.k_grasp * ((x[2 * n] - pose[2] + np.pi) % (2 * np.pi) - np.pi)
+        return np.concatenate([f.T.ravel() / f_scale, tq / t_scale])
 
     d = np.diff(nodes0, axis=0)
-    x0 = np.concatenate([np.asarray(nodes0, float)[1:].ravel(), np.arctan2(d[1:, 1], d[1:, 0])])
+    x0 = np.concatenate([np.asarray(nodes0, float)[1:].ravel(), np.arctan2(d[e0:, 1], d[e0:, 0])])
     res = root(fun, x0, method="hybr", options={"xtol": 1e-13, "maxfev": 200 * (len(x0) + 1)})
     start = np.abs(fun(x0)).max()
     x = res.x if np.all(np.isfinite(res.x)) and np.abs(fun(res.x)).max() < start else x0
