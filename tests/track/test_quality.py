@@ -130,3 +130,20 @@ def test_a_string_seen_at_another_length_is_put_down_to_a_scale_the_calibration_
                            string_setting=lambda k: f"strings.7.{k}", scale_note=note)
     assert "the image scale is off; " + note in doc["verdict"]["reasons"][0]
     assert "strings.7" not in doc["verdict"]["reasons"][0]
+
+
+def test_the_error_scale_is_the_largest_mm_figure_and_none_where_points_may_lie_anywhere():
+    """tracking.json's error_scale_mm (what the fit's verdict weighs its own error against): the largest of
+    the seen length's disagreement, the spacing excess and the jitter at rest; none stated where too few
+    points were tracked or the string ran past the region tracked."""
+    rng = np.random.default_rng(3)
+    doc = _judge(_swing(rng, jitter_m=0.002))
+    figures = [doc["length_mismatch_mm"]["abs_p95"], doc["segment_excess_p95_mm"], doc["rest_jitter_p95_mm"]]
+    assert doc["rest_jitter_p95_mm"] > 1.0 and doc["verdict"]["status"] == "warn"      # a warn still states it
+    assert doc["error_scale_mm"] == pytest.approx(max(figures))
+    valid = np.ones((F, N + 1), bool)
+    valid[20:, 5:] = False
+    assert _judge(_swing(), valid)["error_scale_mm"] is None                           # points lost
+    past = np.zeros(F, bool)
+    past[25:] = True
+    assert _judge(_swing(), past_roi=past)["error_scale_mm"] is None                   # past the region tracked

@@ -277,15 +277,15 @@ def judge_fit(problem: EstimationProblem, sim: tuple[np.ndarray, bool], length_m
 
 
 def read_sweep_bounds(paths: Mapping[str, Path]) -> dict:
-    """The sweep's stated bounds on the geometry and the clock (:func:`~stringcast.estimate.verdict.sweep_bounds`)
-    from the ``"geometry"`` and ``"clock"`` files of ``paths`` (a missing file: None); malformed JSON is
+    """The stated bounds on the geometry, the clock and tracking (:func:`~stringcast.estimate.verdict.sweep_bounds`)
+    from the ``"geometry"``, ``"clock"`` and ``"tracking"`` files of ``paths`` (a missing file: None); malformed JSON is
     :func:`read_verdicts`' error."""
     docs = {}
-    for stage in ("geometry", "clock"):
+    for stage in ("geometry", "clock", "tracking"):
         path = paths.get(stage)
         doc = read_json(Path(path)) if path is not None and Path(path).exists() else None
         docs[stage] = doc if isinstance(doc, dict) else None
-    return sweep_bounds(docs["geometry"], docs["clock"])
+    return sweep_bounds(docs["geometry"], docs["clock"], docs["tracking"])
 
 
 def read_verdicts(paths: Mapping[str, Path]) -> dict[str, Verdict]:

@@ -62,13 +62,19 @@ that explains more wins; ties go in the order geometry, clock, tracking, model.
 * clock: the time shift above (at the gain that warns); sync's verdict.
 * tracking: the valid share above; tracking's verdict.
 * **pinned** (overrules the above): when the arm's sweep pinned the geometry and the clock
-  (``geometry.json`` and ``clock.json`` ok, their stated uncertainties ``uncertainty_p95_mm`` and
-  ``clock_uncertainty_ms`` given, :func:`sweep_bounds`) and tracking is ok, an error the sweep
+  (``geometry.json`` and ``clock.json`` not failed, their stated uncertainties ``uncertainty_p95_mm`` and
+  ``clock_uncertainty_ms`` given, :func:`sweep_bounds`) and tracking is ok or pinned, an error the sweep
   bounds cannot be the cause of a larger one: a mapping known to u mm moves a tracked point by at
   most u, a clock known to c ms by at most c times the string's speed (``speed_median_mm_s``). One
   at most ``PINNED_SHARE`` (1/4) of the fit's median error would leave at least 3/4 of it if taken
-  off: it is not the likely cause, and its evidence counts for nothing. When both are, and tracking
-  is ok (its verdict, the fit's valid share), the cause is the model, whatever a constant offset or
+  off: it is not the likely cause, and its evidence counts for nothing. A stage's warn is about its
+  own tolerance (a mapping known to 2.6 mm where the sweep asks for 1 mm), not about the bound it
+  states, whose coverage :mod:`benchmarks.certainty` checks over the lab's family: a warned stage's
+  bound still pins; a failed stage's does not. Tracking is pinned likewise by the error scale its
+  figures state (``tracking.json``'s ``error_scale_mm``: :func:`stringcast.track.quality.error_scale_mm`;
+  none where too few points were tracked or the string ran out of the region tracked). When the
+  geometry and the clock are pinned, and tracking is ok or pinned (and the fit's valid share is ok),
+  the cause is the model, whatever a constant offset or
   the error at rest suggests (a model that starts from the wrong rest shape or hangs the string
   wrongly also errs at rest and in one direction). The reason says so, with the skill against the
   rigidly carried string where the fit is worse than it, and that recalibrating will not help
@@ -217,55 +223,65 @@ def _evidence(fig: Mapping, est: EstimationSettings, upstream: Mapping[str, Verd
     return ev
 
 
-def sweep_bounds(geometry: Mapping | None, clock: Mapping | None) -> dict:
+def sweep_bounds(geometry: Mapping | None, clock: Mapping | None, tracking: Mapping | None = None) -> dict:
     """The bounds the arm's sweep states on the geometry and the clock, from ``geometry.json`` and
-    ``clock.json`` (their ``"sweep"`` blocks): ``{"mapping_uncertainty_mm", "clock_uncertainty_ms"}``,
-    each None where the sweep did not run (no block, ``applied`` false) or states none."""
+    ``clock.json`` (their ``"sweep"`` blocks), and tracking's from ``tracking.json``: ``{"mapping_uncertainty_mm", "clock_uncertainty_ms"}``,
+    each None where the sweep did not run (no block, ``applied`` false) or states none; and
+    ``tracking_scale_mm``, ``tracking.json``'s stated error scale (None without one)."""
     def get(doc, key):
         block = (doc or {}).get("sweep") or {}
         v = block.get(key) if block.get("applied") else None
         return None if v is None or not np.isfinite(v) else float(v)
+    scale = (tracking or {}).get("error_scale_mm")
     return {"mapping_uncertainty_mm": get(geometry, "uncertainty_p95_mm"),
-            "clock_uncertainty_ms": get(clock, "clock_uncertainty_ms")}
+            "clock_uncertainty_ms": get(clock, "clock_uncertainty_ms"),
+            "tracking_scale_mm": None if scale is None or not np.isfinite(scale) else float(scale)}
 
 
 def _pinned(fig: Mapping, upstream: Mapping[str, Verdict], sweep: Mapping | None) -> dict[str, str]:
     """The causes the sweep rules out (module doc, "pinned"): ``{"geometry" | "clock": how, in words}``
-    for each whose verdict is ok and whose bound is at most ``PINNED_SHARE`` of the fit's median error."""
+    for each whose verdict is not fail and whose bound is at most ``PINNED_SHARE`` of the fit's median error
+    (tracking's: its stated error scale)."""
     err, speed = _get(fig, "error_median_mm"), _get(fig, "speed_median_mm_s")
     if err is None or err <= 0:
         return {}
     u_map, u_clock = ((sweep or {}).get(k) for k in ("mapping_uncertainty_mm", "clock_uncertainty_ms"))
     out = {}
-    if u_map is not None and "geometry" in upstream and upstream["geometry"].ok and u_map <= PINNED_SHARE * err:
+    if u_map is not None and "geometry" in upstream and upstream["geometry"].status != "fail" and u_map <= PINNED_SHARE * err:
         out["geometry"] = f"the mapping to {u_map:.2f} mm"
-    if (u_clock is not None and speed is not None and "clock" in upstream and upstream["clock"].ok
+    if (u_clock is not None and speed is not None and "clock" in upstream and upstream["clock"].status != "fail"
             and u_clock * speed / 1000 <= PINNED_SHARE * err):
         out["clock"] = f"the clock to {u_clock:.2f} ms ({u_clock * speed / 1000:.1f} mm at the string's median speed)"
+    u_track = (sweep or {}).get("tracking_scale_mm")
+    if (u_track is not None and "tracking" in upstream and upstream["tracking"].status != "fail"
+            and u_track <= PINNED_SHARE * err):
+        out["tracking"] = f"its errors to {u_track:.1f} mm"
     return out
 
 
 def _model_pinned(fig: Mapping, est: EstimationSettings, upstream: Mapping[str, Verdict], pinned: dict) -> str | None:
     """The evidence that the model is the cause because the sweep pinned the geometry and the clock and
-    tracking is ok (its verdict and the fit's valid share), in words; None where not."""
+    tracking is ok or pinned (and the fit's valid share is ok), in words; None where not."""
     valid = _get(fig, "valid_share")
-    if len(pinned) < 2 or ("tracking" in upstream and not upstream["tracking"].ok) or (
+    tracking_ok = "tracking" not in upstream or upstream["tracking"].ok or "tracking" in pinned
+    if "geometry" not in pinned or "clock" not in pinned or not tracking_ok or (
             valid is not None and valid < est.verdict_min_valid_share):
         return None
     err, skill = _get(fig, "error_median_mm"), _get(fig, "skill")
     worse = "" if skill is None or skill > 0 else (
         f"; the fit is farther from the tracked string than the string carried rigidly without swinging "
         f"({err:.0f} against {fig['null_error_median_mm']:.0f} mm)")
-    return (f"the arm's sweep pinned {pinned['geometry']} and {pinned['clock']}, each at most {PINNED_SHARE:.0%} of "
-            f"the fit's {err:.0f} mm error, and tracking is ok: neither the geometry nor the clock accounts for "
-            f"it{worse}; {MODEL_ADVICE}")
+    track = f"tracking's own figures state {pinned['tracking']}" if "tracking" in pinned else "tracking is ok"
+    return (f"the arm's sweep pinned {pinned['geometry']} and {pinned['clock']}, and {track}, each at most "
+            f"{PINNED_SHARE:.0%} of the fit's {err:.0f} mm error: neither the geometry, the clock nor tracking "
+            f"accounts for it{worse}; {MODEL_ADVICE}")
 
 
 def likely_cause(fig: Mapping, est: EstimationSettings, upstream: Mapping[str, Verdict],
                  sweep: Mapping | None = None) -> tuple[str, str]:
     """(cause, the evidence in words) of module doc's "Likely cause"; ``model`` with no evidence. A cause the
     sweep ruled out (``sweep``: :func:`sweep_bounds`; module doc, "pinned") has no evidence, and where it
-    ruled out both the geometry and the clock and tracking is ok, the cause is the model."""
+    ruled out both the geometry and the clock and tracking is ok or pinned, the cause is the model."""
     pinned = _pinned(fig, upstream, sweep)
     model = _model_pinned(fig, est, upstream, pinned)
     if model is not None:
@@ -276,7 +292,9 @@ def likely_cause(fig: Mapping, est: EstimationSettings, upstream: Mapping[str, V
     score = {c: sum(w for w, _ in ev[c]) for c in CAUSES}
     best = max(CAUSES, key=lambda c: (score[c], -CAUSES.index(c)))
     if score[best] == 0:
-        ruled = "" if not pinned else f" (the arm's sweep pinned {' and '.join(pinned.values())})"
+        swept = [v for c, v in pinned.items() if c != "tracking"]
+        ruled = (f" (the arm's sweep pinned {' and '.join(swept)})" if swept else "") + (
+            f" (tracking's own figures state {pinned['tracking']})" if "tracking" in pinned else "")
         return "model", f"no sign of a geometry, clock or tracking fault in this trial's figures{ruled}"
     return best, "; ".join(s for _, s in ev[best])
 

@@ -77,7 +77,7 @@ def tracking_quality(tracks: pd.DataFrame, mismatch_m: np.ndarray, L: float, n: 
     Returns:
         ``{"valid_share", "judged_frames", "length_mismatch_mm": {"frames", "median", "spread_p95",
         "abs_p95"}, "past_roi_share", "off_image_share", "segment_excess_p95_mm", "rest_jitter_p95_mm",
-        "verdict"}`` (a figure without data is None).
+        "verdict", "error_scale_mm"}`` (a figure without data is None; :func:`error_scale_mm`).
 
     Raises:
         ValueError: the table does not hold (n + 1) points for every frame, or mismatched lengths.
@@ -113,7 +113,25 @@ def tracking_quality(tracks: pd.DataFrame, mismatch_m: np.ndarray, L: float, n: 
            "off_image_share": float(flags[1][use].mean()) if use.any() else None,
            "segment_excess_p95_mm": _p95(excess) if excess.size else None, "rest_jitter_p95_mm": jitter}
     doc["verdict"] = tracking_verdict(doc, st, L, n, string_setting, scale_note).as_dict()
+    doc["error_scale_mm"] = error_scale_mm(doc, st, L)
     return doc
+
+
+def error_scale_mm(doc: dict, st: TrackingSettings, L: float | None) -> float | None:
+    """The size of the tracked points' errors that tracking's own figures show, mm, for a later stage to
+    weigh its errors against (the fit's verdict: a tracking error at most a quarter of the fit's cannot be
+    its cause): the largest of the seen length's p95 disagreement with L, the p95 excess of consecutive
+    points' spacing over the string's, and the p95 jitter at rest. None where a figure that says the points
+    may lie anywhere passes its limit (too few points tracked, the string running past the region tracked,
+    a string of another length, a limit of ``st``) or no mm figure was measured: no scale is then stated."""
+    share, roi, D = doc["valid_share"], doc["past_roi_share"], doc["length_mismatch_mm"]
+    if share is None or share < st.verdict_min_valid_share or (roi is not None and roi > st.verdict_past_roi_share):
+        return None
+    if L is not None and D["median"] is not None and abs(D["median"]) > st.verdict_length_share * L * 1000:
+        return None
+    figures = [D["abs_p95"], doc["segment_excess_p95_mm"], doc["rest_jitter_p95_mm"]]
+    figures = [f for f in figures if f is not None and np.isfinite(f)]
+    return float(max(figures)) if figures else None
 
 
 MIN_LENGTH_FRAMES = 5
