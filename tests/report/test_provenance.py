@@ -71,3 +71,15 @@ def test_campaign_page_footer_shows_provenance(tmp_path, files, method):
     footer = html[html.index('<footer id="provenance">'):]
     assert f'<td class="l">{method}</td>' in footer
     assert prov.git_commit() in footer and f"numpy {prov.library_versions()['numpy']}" in footer
+
+
+def test_the_campaign_table_s_fit_cell_names_the_verdict_and_its_cause():
+    """Issue 52: a failed fit shows on the campaign page, with its likely cause; an ok fit names none."""
+    from stringcast.report.pages import _fit_cell
+
+    assert _fit_cell({"verdict": {"status": "fail", "reasons": ["x"], "likely_cause": "model"}}) == \
+        {"fit_status": "fail", "fit_cause": "model"}
+    assert _fit_cell({"verdict": {"status": "ok", "reasons": [], "likely_cause": ""}}) == \
+        {"fit_status": "ok", "fit_cause": ""}
+    assert _fit_cell({}) == {"fit_status": "not judged", "fit_cause": ""}
+    assert _fit_cell({"verdict": "garbled"}) == {"fit_status": "not judged", "fit_cause": ""}

@@ -101,6 +101,10 @@ def test_campaign_end_to_end(tmp_path, finished):
     assert params["E_mm"] is not None and params["E_mm"] > 0
     html = (res / "report.html").read_text()
     assert "trial_1/report.html" in html and "<table" in html
+    # each execution's fit verdict, with its cause where not ok, in the campaign's table
+    v = params["verdict"]
+    assert f'class="l fit-{v["status"]}">{v["status"]}' in html
+    assert (f"(likely cause: {v['likely_cause']})" in html) == (v["status"] != "ok")
     trial_html = (res / "trial_1" / "report.html").read_text()
     assert 'id="fig-valid"' in trial_html and "ground truth" not in trial_html.lower()
     # the lab's truth is the driver's (the experimenter's), not the workflow's: summary, not report

@@ -315,6 +315,14 @@ def write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign,
                         f"({type(exc).__name__}: {exc})") from exc
 
 
+def _fit_cell(params: dict) -> dict:
+    """The campaign table's fit cell from a trial's ``params.json``: ``fit_status`` (ok, warn, fail or
+    "not judged") and ``fit_cause`` (the likely cause where not ok, else "")."""
+    v = params.get("verdict") if isinstance(params.get("verdict"), dict) else {}
+    status = v.get("status") if v.get("status") in ("ok", "warn", "fail") else "not judged"
+    return {"fit_status": status, "fit_cause": str(v.get("likely_cause") or "") if status in ("warn", "fail") else ""}
+
+
 def _write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign, out: Path,
                            settings: Settings) -> None:
     """:func:`write_campaign_report`'s work."""
@@ -336,7 +344,8 @@ def _write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign
         row = {"trial": k, "E_mm": _fmt(params.get("E_mm")), "measured_mm": _fmt(d * 1000, ".1f"),
                "predicted_mm": _fmt(played.get("closest_approach_mm"), ".1f"),
                "hit_measured": bool(d <= campaign.target.radius),
-               "tip_valid_pct": _fmt(float(valid[window, n].mean()) * 100 if window.any() else None, ".0f")}
+               "tip_valid_pct": _fmt(float(valid[window, n].mean()) * 100 if window.any() else None, ".0f"),
+               **_fit_cell(params), "played_on_failed_fit": bool(played.get("planned_on_failed_fit"))}
         rows.append(row)
     figures = []
     if tips:
