@@ -15,6 +15,8 @@ from typing import Mapping
 
 from stringcast.core import Campaign, ConfigError
 
+from .materials import lab_material
+
 #: Defaults for ``lab.strings.<type>`` keys (SI after conversion).
 STRING_DEFAULTS = {
     "density_g_per_m": 20.0,       # cord linear density
@@ -132,7 +134,6 @@ class StringPhysics:
         Raises:
             ConfigError: unknown keys, bad values or a bad ``lab.material``.
         """
-        from .materials import lab_material
 
         lab = config.get("lab", {}) or {}
         table = lab.get("strings", {}) or {}

@@ -52,7 +52,7 @@ import numpy as np
 
 from stringcast.core import ArmSpec
 from .air import C_FRICTION, drag_kernel
-from .mjcf import DRIVER_ARMATURE, StringPhysics, build_mjcf, link_diameter, weight_link
+from .mjcf import DRIVER_ARMATURE, G_ACC, V_CAST, StringPhysics, build_mjcf, link_diameter, weight_link
 from .recording import Recording, command_arrays
 from .servo import hand_trajectory, servo_lag
 
@@ -126,8 +126,6 @@ class ChainSim:
         ``qfrc_bias``."""
         import mujoco
         from scipy.linalg import eigh
-
-        from .mjcf import G_ACC, V_CAST
 
         m, d = self.model, self.data
         self.reset_hanging(np.array([0.0, 0.0, -math.pi / 2]))
