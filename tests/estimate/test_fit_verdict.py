@@ -222,3 +222,17 @@ def test_sweep_bounds_are_read_from_geometry_and_clock(tmp_path):
                                         "tracking_scale_mm": None}
     write_json(tmp_path / "tracking.json", {"error_scale_mm": 5.1, "verdict": {"status": "warn", "reasons": ["x"]}})
     assert es.read_sweep_bounds({"tracking": tmp_path / "tracking.json"})["tracking_scale_mm"] == 5.1
+
+
+@pytest.mark.parametrize("skill, status", [(-0.2, "fail"), (0.0, "fail"), (0.1, "ok"), (0.6, "ok")])
+def test_a_close_fit_no_better_than_the_rigid_string_fails(skill, status):
+    """Issue 52: a fit worse than a string carried rigidly by the hand is never a usable estimate, even where
+    its error is under verdict_floor_share of L (there the skill's warn thresholds do not judge it)."""
+    err = 9.0                                                    # 3 % of the 300 mm string: under the floor
+    fig = {**FIG, "error_median_mm": err, "error_share": err / 300.0, "skill": skill,
+           "null_error_median_mm": err / (1 - skill) if skill < 1 else 1.0}
+    v, cause = fit_verdict(fig, 20.0, EstimationSettings())
+    assert v.status == status, v.reasons
+    assert (status == "fail") == any("no closer to the tracked string than the string carried rigidly" in r
+                                     for r in v.reasons)
+    assert (cause != "") == (status == "fail")

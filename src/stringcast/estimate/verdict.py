@@ -19,7 +19,9 @@ general):
 * **Skill** (1 - error / the error of a string carried rigidly by the grasp, no swing) at or
   below ``verdict_skill`` = [0.45, 0.25]: warn, fail. The yardstick is the trial's own motion:
   at 0.25 the fit explains a quarter of what a model without dynamics misses. The lab's fits
-  are at 0.69-0.77.
+  are at 0.69-0.77. A fit at or below skill 0 (no closer than the rigidly carried string) fails
+  also below ``verdict_floor_share``: however small its error, the model then explains nothing of
+  the motion (issue 52: such a fit is never a usable estimate).
 * **Time shift** (clock): when shifting the frames' times by ``SHIFT_FRAMES`` = 3 frame periods
   or more cuts the error to ``verdict_shift_gain`` = [0.7, 0.5] of itself or less: warn, fail.
   A right sync is within a frame period (the frame's exposure); a fitted model that agrees far
@@ -161,6 +163,10 @@ def _status_reasons(fig: Mapping, E_mm: float, est: EstimationSettings) -> Verdi
                           + ("the estimate is not usable" if status == "fail" else "the estimate is doubtful"))
     judged = share is not None and share > est.verdict_floor_share
     skill = _get(fig, "skill")
+    if skill is not None and skill <= 0 and not judged:            # worse than no dynamics: never usable
+        v = v.add("fail", f"the fit is no closer to the tracked string than the string carried rigidly without "
+                          f"swinging ({err:.1f} against {fig['null_error_median_mm']:.1f} mm at the median frame): "
+                          "the model adds nothing to no dynamics at all, and its predictions are not to be trusted")
     if judged and skill is not None and skill <= est.verdict_skill[0]:
         v = v.add("fail" if skill <= est.verdict_skill[1] else "warn",
                   f"the fit explains only {max(skill, 0):.0%} of the tracked motion: a string carried without "
