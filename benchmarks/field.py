@@ -117,10 +117,12 @@ def main(argv=None) -> int:
     path = write("field", doc)
     for name, t in doc["trials"].items():
         skill = t.get("skill")
+        fit = (t["verdicts"].get("fit") or {}).get("status")
         print(f"{name}: skill {skill if skill is None else round(skill, 2)}, median error "
-              f"{t.get('error_median_mm') or float('nan'):.1f} mm, fit {(t['verdicts'].get('fit') or {}).get('status')}")
+              f"{t.get('error_median_mm') or float('nan'):.1f} mm, fit {fit} (likely cause: {t.get('likely_cause')})")
     if doc["workflow_exit_status"]:
-        print(f"the workflow ended with exit status {doc['workflow_exit_status']}:\n{doc['workflow_tail']}", file=sys.stderr)
+        print(f"the workflow ended with exit status {doc['workflow_exit_status']}:\n{doc['workflow_tail']}",
+              file=sys.stderr)
     print(f"-> {path}")
     return 0 if doc["workflow_exit_status"] == 0 else 1
 

@@ -231,9 +231,10 @@ def _evidence(fig: Mapping, est: EstimationSettings, upstream: Mapping[str, Verd
 
 def sweep_bounds(geometry: Mapping | None, clock: Mapping | None, tracking: Mapping | None = None) -> dict:
     """The bounds the arm's sweep states on the geometry and the clock, from ``geometry.json`` and
-    ``clock.json`` (their ``"sweep"`` blocks), and tracking's from ``tracking.json``: ``{"mapping_uncertainty_mm", "clock_uncertainty_ms"}``,
-    each None where the sweep did not run (no block, ``applied`` false) or states none; and
-    ``tracking_scale_mm``, ``tracking.json``'s stated error scale (None without one)."""
+    ``clock.json`` (their ``"sweep"`` blocks), and tracking's from ``tracking.json``:
+    ``{"mapping_uncertainty_mm", "clock_uncertainty_ms"}``, each None where the sweep did not run (no
+    block, ``applied`` false) or states none, and ``tracking_scale_mm``, ``tracking.json``'s stated
+    error scale (None without one)."""
     def get(doc, key):
         block = (doc or {}).get("sweep") or {}
         v = block.get(key) if block.get("applied") else None
@@ -253,7 +254,8 @@ def _pinned(fig: Mapping, upstream: Mapping[str, Verdict], sweep: Mapping | None
         return {}
     u_map, u_clock = ((sweep or {}).get(k) for k in ("mapping_uncertainty_mm", "clock_uncertainty_ms"))
     out = {}
-    if u_map is not None and "geometry" in upstream and upstream["geometry"].status != "fail" and u_map <= PINNED_SHARE * err:
+    if (u_map is not None and "geometry" in upstream and upstream["geometry"].status != "fail"
+            and u_map <= PINNED_SHARE * err):
         out["geometry"] = f"the mapping to {u_map:.2f} mm"
     if (u_clock is not None and speed is not None and "clock" in upstream and upstream["clock"].status != "fail"
             and u_clock * speed / 1000 <= PINNED_SHARE * err):
@@ -277,10 +279,11 @@ def _model_pinned(fig: Mapping, est: EstimationSettings, upstream: Mapping[str, 
     worse = "" if skill is None or skill > 0 else (
         f"; the fit is farther from the tracked string than the string carried rigidly without swinging "
         f"({err:.0f} against {fig['null_error_median_mm']:.0f} mm)")
-    track = f"tracking's own figures state {pinned['tracking']}" if "tracking" in pinned else "tracking is ok"
-    return (f"the arm's sweep pinned {pinned['geometry']} and {pinned['clock']}, and {track}, each at most "
-            f"{PINNED_SHARE:.0%} of the fit's {err:.0f} mm error: neither the geometry, the clock nor tracking "
-            f"accounts for it{worse}; {MODEL_ADVICE}")
+    track = f", and tracking's own figures state {pinned['tracking']}" if "tracking" in pinned else ""
+    ok = "" if "tracking" in pinned else ", and tracking is ok"
+    return (f"the arm's sweep pinned {pinned['geometry']} and {pinned['clock']}{track}, each at most "
+            f"{PINNED_SHARE:.0%} of the fit's {err:.0f} mm error{ok}: neither the geometry, the clock nor "
+            f"tracking accounts for it{worse}; {MODEL_ADVICE}")
 
 
 def likely_cause(fig: Mapping, est: EstimationSettings, upstream: Mapping[str, Verdict],
