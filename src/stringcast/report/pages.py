@@ -318,9 +318,8 @@ def write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign,
 def _fit_cell(params: dict) -> dict:
     """The campaign table's fit cell from a trial's ``params.json``: ``fit_status`` (ok, warn, fail or
     "not judged") and ``fit_cause`` (the likely cause where not ok, else "")."""
-    v = params.get("verdict") if isinstance(params.get("verdict"), dict) else {}
-    status = v.get("status") if v.get("status") in ("ok", "warn", "fail") else "not judged"
-    return {"fit_status": status, "fit_cause": str(v.get("likely_cause") or "") if status in ("warn", "fail") else ""}
+    row = stage_verdicts({"fit": params})["rows"][0]
+    return {"fit_status": row["status"], "fit_cause": row["cause"] if row["status"] in ("warn", "fail") else ""}
 
 
 def _write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign, out: Path,
