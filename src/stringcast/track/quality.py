@@ -124,10 +124,10 @@ def error_scale_mm(doc: dict, st: TrackingSettings, L: float | None) -> float | 
     points' spacing over the string's, and the p95 jitter at rest. None where a figure that says the points
     may lie anywhere passes its limit (too few points tracked, the string running past the region tracked,
     a string of another length, a limit of ``st``) or no mm figure was measured: no scale is then stated."""
-    share, roi, D = doc["valid_share"], doc["past_roi_share"], doc["length_mismatch_mm"]
-    if share is None or share < st.verdict_min_valid_share or (roi is not None and roi > st.verdict_past_roi_share):
+    share, D = doc["valid_share"], doc["length_mismatch_mm"]
+    if share is None or share < st.verdict_min_valid_share or _past_roi(doc, st):
         return None
-    if L is not None and D["median"] is not None and abs(D["median"]) > st.verdict_length_share * L * 1000:
+    if L is not None and _length_off(doc, st, L, 1):        # any frame seen at another length: no scale
         return None
     figures = [D["abs_p95"], doc["segment_excess_p95_mm"], doc["rest_jitter_p95_mm"]]
     figures = [f for f in figures if f is not None and np.isfinite(f)]
@@ -136,6 +136,18 @@ def error_scale_mm(doc: dict, st: TrackingSettings, L: float | None) -> float | 
 
 MIN_LENGTH_FRAMES = 5
 """Frames with a trusted free end the seen length's verdict needs."""
+
+
+def _length_off(doc: dict, st: TrackingSettings, L: float, min_frames: int) -> bool:
+    """The string is seen at another length than L (m), over at least ``min_frames`` frames."""
+    D = doc["length_mismatch_mm"]
+    return D["frames"] >= max(1, min_frames) and abs(D["median"]) > st.verdict_length_share * L * 1000
+
+
+def _past_roi(doc: dict, st: TrackingSettings) -> bool:
+    """The string runs past the region tracked in more of the frames judged than the limit allows."""
+    roi = doc["past_roi_share"]
+    return roi is not None and roi > st.verdict_past_roi_share
 
 
 def _not_this_string(doc: dict, st: TrackingSettings, L: float, n: int, setting, scale_note=None) -> list[str]:
@@ -151,14 +163,14 @@ def _not_this_string(doc: dict, st: TrackingSettings, L: float, n: int, setting,
     else:
         check = f"check {names} (or the image scale, if the calibration's verdict names it)"
         verdict = "the string filmed is not the one configured"
-    if D["frames"] >= MIN_LENGTH_FRAMES and abs(D["median"]) > st.verdict_length_share * L_mm:
+    if _length_off(doc, st, L, MIN_LENGTH_FRAMES):
         seen = L_mm - D["median"]
         out.append(f"tracking: the string is seen {seen:.0f} mm long from the grasp to its free end (median of "
                    f"{D['frames']} frames), but the campaign's string is {L_mm:.0f} mm with {n} points ({seen / L_mm:.2f} "
                    f"times; > tracking.verdict_length_share {st.verdict_length_share:g} off): {verdict}, and no point "
                    f"is trusted where the lengths disagree; {check}")
     roi = doc["past_roi_share"]
-    if roi is not None and roi > st.verdict_past_roi_share:
+    if _past_roi(doc, st):
         out.append(f"tracking: in {roi:.0%} of the frames judged the string runs on past "
                    f"{L_mm + st.roi_margin_mm:.0f} mm from the grasp (the campaign's {L_mm:.0f} mm string + "
                    f"tracking.roi_margin_mm), out of the region tracked: "
