@@ -234,6 +234,13 @@ def _job_processes(root: Path, log_name: str) -> list[int]:
     return pids
 
 
+def _signal(sig: int, pids) -> None:
+    """Send ``sig`` to each of ``pids`` that still exists."""
+    for pid in pids:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, sig)
+
+
 def _wait_for(pred, timeout_s: float = 180.0) -> bool:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
@@ -261,15 +268,11 @@ def test_killing_the_workflow_ends_its_jobs(finished):
         # the job held still (SIGSTOP) from its start until Snakemake is gone: a small trial's estimate could
         # otherwise finish before the kill on a fast machine, and the test would see no orphan to end
         jobs = _job_processes(root, "estimate_1.log")
-        for pid in jobs:
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(pid, signal.SIGSTOP)
+        _signal(signal.SIGSTOP, jobs)
     finally:
         proc.kill()
         proc.wait()
-        for pid in jobs:
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(pid, signal.SIGCONT)
+        _signal(signal.SIGCONT, jobs)
     assert _wait_for(lambda: not _job_processes(root, "estimate_1.log"), 20), "the job outlived its workflow"
     assert not (res / "params.json").exists() and not list(res.glob(".params.json*"))
     assert all(not Path(f"/proc/{pid}").exists() or "Z" in Path(f"/proc/{pid}/stat").read_text().split()[2]
@@ -302,18 +305,14 @@ def test_two_runs_on_one_results_folder_lose_no_finished_output(finished):
         # the first run held still (SIGSTOP) while the second plans: on a loaded machine the small trial's
         # tracking could otherwise finish before the second run has built its DAG, leaving it nothing to do
         frozen = [first.pid, *_job_processes(root, "track_1.log")]
-        for pid in frozen:
-            with contextlib.suppress(ProcessLookupError):
-                os.kill(pid, signal.SIGSTOP)
+        _signal(signal.SIGSTOP, frozen)
         try:
             during = snapshot(res)
             second = subprocess.run([sys.executable, "-m", "snakemake", "--cores", "1", "--nolock", "--directory",
                                      str(root), target, target.replace("params.json", "tracks.parquet")], cwd=root,
                                     capture_output=True, text=True, timeout=300)
         finally:
-            for pid in frozen:
-                with contextlib.suppress(ProcessLookupError):
-                    os.kill(pid, signal.SIGCONT)
+            _signal(signal.SIGCONT, frozen)
         out = second.stdout + second.stderr
         assert second.returncode != 0 and "results/e2e/trial_1 is being made by another snakemake run" in out, out
         after_second = snapshot(res)
