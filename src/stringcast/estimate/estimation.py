@@ -75,7 +75,7 @@ class Estimate:
         message: empty, or what went wrong (all candidates invalid, rest fallback).
         chi_evaluated: (N, D) every candidate in evaluation order; E_evaluated: (N,) its E (m).
         verdict: the fit's verdict (:mod:`stringcast.estimate.verdict`; ok until :func:`run_estimation`
-            judges it). likely_cause: geometry, clock, tracking, model, or "" when ok.
+            judges it). likely_cause: geometry, clock, tracking, model, recording, or "" when ok.
     """
 
     coeffs: np.ndarray

@@ -44,12 +44,17 @@ Figures (``None`` where the frames to compute one are missing):
   helps; the twin of ``shift_gain`` for geometry).
 * ``early_error_mm``, ``late_error_mm``: the median error of the early and late spans.
 * ``frame_period_ms``: the median step between compared frames.
+* ``inertia_share``, ``rotation_coupling``, ``swing_period_s``, ``inertia_points``: how the tracked
+  string's chords answer the grasp's acceleration, against a pendulum of their own swing period, with no
+  string model (:func:`stringcast.estimate.inertia.string_response`): about 1 for any string hanging in
+  air; None where the motion or the tracked frames do not state it.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from stringcast.model import FOLD_CHORD_SHARE, folded_points
+from .inertia import string_response
 from .problem import EstimationProblem
 
 MIN_FRAMES = 3
@@ -152,6 +157,9 @@ def fit_figures(problem: EstimationProblem, sim: np.ndarray, length_m: float, t_
     out["skill"] = None if err is None or not null else 1.0 - err / null
     out.update(_rest_figures(problem, d, va, rest, L))
     out.update(_time_figures(problem, sim, d, va, moving, period, t_stop))
+    inertia = string_response(problem.frame_t, problem.tracked, problem.valid, problem.hand_t, problem.hand)
+    out.update({"inertia_share": inertia["inertia_share"], "rotation_coupling": inertia["rotation_coupling"],
+                "swing_period_s": inertia["swing_period_s"], "inertia_points": inertia["points"]})
     return out
 
 
