@@ -8,7 +8,9 @@ up to every trial's fit and next motion. No ground truth is read: a field record
 Per trial, from the pipeline's own files: the fit's skill (the share of the tracked motion it
 explains over a string carried rigidly by the hand, ``params.json``'s ``fit_check``), its median
 point error in mm and as a share of the string's length, E (eq. 6, ours' weighting), the fitted
-coefficients and masses, the fit's likely cause, and each stage's verdict (status and first reason).
+coefficients and masses, the fit's likely cause and reasons, the tracked string's inertial response
+(:mod:`stringcast.estimate.inertia`: its share of a pendulum's tilt under the grasp's acceleration), and
+each stage's verdict (status and first reason).
 ``results/bench/field.json`` holds them with the library versions.
 
 The work folder (``--work``, default a temporary one) is a Snakemake project whose ``data/<c>`` link
@@ -76,6 +78,9 @@ def trial_figures(res: Path) -> dict:
                    error_share=fig.get("error_share"), tip_error_median_mm=fig.get("tip_error_median_mm"),
                    null_error_median_mm=fig.get("null_error_median_mm"), E_mm=p.get("E_mm"),
                    likely_cause=(p.get("verdict") or {}).get("likely_cause"),
+                   fit_reasons=(p.get("verdict") or {}).get("reasons"),
+                   inertia={k: fig.get(k) for k in ("inertia_share", "rotation_coupling", "swing_period_s",
+                                                    "inertia_points")},
                    coefficients=p.get("coefficients"), mu_groups=p.get("mu_groups"))
     return out
 
