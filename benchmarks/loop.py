@@ -59,8 +59,15 @@ entries per physics and their relative difference to the state mode's mean), ``s
 commits. A run without a hit counts as ``cap`` executions in the means (a lower bound).
 Figure: results/bench/loop.png (one panel per physics); table: results/bench/loop.md.
 
+The family (issue 52, ``--family``): each seed s also draws the lab's string material
+(``lab.material``: seed s, class ``KINDS[s % 5]``, so seeds 0-4 cover thread, cord, rope, elastic cord
+and bead chain), the runs are named ``loop_family_...``, and their summary (the same keys, ``draws``)
+goes into loop.json's ``family`` entry beside today's (:func:`benchmarks.loop_summary.family_into`)
+and loop_family.md. Every run records ``fit_skill`` (each fit's skill, the fit check's share of the
+tracked motion explained) and the summary its median and 10th percentile per method.
+
 Run: ``python -m benchmarks.loop [--quick] [--physics mujoco elastica] [--mode state|video]
-[--types 1 5] [--seeds 0 1 2 3 4] [--methods paper ours] [--video-seeds 0] [--work DIR]``, one
+[--types 1 5] [--seeds 0 1 2 3 4] [--methods paper ours] [--video-seeds 0] [--family] [--work DIR]``, one
 campaign after another in this process. Default per physics: 7 types x 5 seeds x both methods
 (state mode) and 7 types x seed 0 x ours (video check); ``--quick``: types 1 and 5, seed 0.
 
@@ -90,7 +97,8 @@ import numpy as np
 import yaml
 
 from benchmarks.common import BENCH_DIR, ROOT, git_commit, library_versions, write
-from benchmarks.loop_summary import CAP, PAPER_TABLE3, PAPER_TARGET, document, figure, markdown, prediction_steps
+from benchmarks.loop_summary import (CAP, PAPER_TABLE3, PAPER_TARGET, document, family_into, figure, markdown,
+                                    prediction_steps)
 
 OURS_CONFIG = ROOT / "config" / "ours.yaml"
 METHODS = {
@@ -124,6 +132,9 @@ class Spec:
     video_seeds: tuple[int, ...] = (0,)
     video_methods: tuple[str, ...] = ("ours",)
     state_source: Path = STATE_SOURCE
+    family: bool = False
+    """Each seed s also draws the lab's string material (``lab.material``: seed s, class ``KINDS[s % 5]``,
+    :func:`material_of`); the runs are named ``loop_family_...`` and summarized under loop.json's ``family``."""
 
     def __post_init__(self):
         bad = ([f"type {k}" for k in (*self.types, *(self.video_types or ())) if k not in PAPER_TARGET]
@@ -146,9 +157,19 @@ class Spec:
         return out
 
 
-def method_config(config: dict, method: str, seed: int, physics: str = "mujoco", mode: str = "video") -> dict:
+def material_of(seed: int) -> dict:
+    """A family run's ``lab.material``: the draw ``seed`` of class ``KINDS[seed % 5]`` (every class
+    among any five consecutive seeds; :mod:`stringcast.lab.materials`)."""
+    from stringcast.lab.materials import KINDS
+
+    return {"seed": int(seed), "class": KINDS[int(seed) % len(KINDS)]}
+
+
+def method_config(config: dict, method: str, seed: int, physics: str = "mujoco", mode: str = "video",
+                  family: bool = False) -> dict:
     """The config a run uses: ``config`` (as loaded) with the method's overlay, the seed,
-    ``lab.physics`` and, in the state mode, ``lab.render: false``.
+    ``lab.physics``, in the state mode ``lab.render: false``, and in a family run ``lab.material``
+    (:func:`material_of`).
 
     Raises:
         KeyError: unknown method (not in ``METHODS`` or ``VARIANTS``).
@@ -164,6 +185,8 @@ def method_config(config: dict, method: str, seed: int, physics: str = "mujoco",
     cfg["lab"] = dict(cfg.get("lab") or {}, physics=physics)
     if mode == "state":
         cfg["lab"]["render"] = False
+    if family:
+        cfg["lab"]["material"] = material_of(seed)
     return cfg
 
 
@@ -183,9 +206,9 @@ def project_root(path: Path, cfg: dict) -> Path:
 
 
 def run_dir(work: Path, string_type: int, seed: int, method: str, physics: str = "mujoco",
-            mode: str = "state") -> Path:
+            mode: str = "state", family: bool = False) -> Path:
     """The campaign's project folder (and campaign name) under ``work``."""
-    return work / f"loop_{physics}_{mode}_s{string_type}_seed{seed}_{method}"
+    return work / f"loop_{'family_' if family else ''}{physics}_{mode}_s{string_type}_seed{seed}_{method}"
 
 
 def check_physics(truth_json: Path, physics: str) -> None:
@@ -254,7 +277,8 @@ def predictions(root: Path, name: str, n: int, cores: int, workflow_args, hook) 
 
 
 def run_one(string_type: int, seed: int, method: str, config: dict, work: Path, cores: int = 2,
-            physics: str = "mujoco", mode: str = "state", state_source: Path = STATE_SOURCE) -> dict:
+            physics: str = "mujoco", mode: str = "state", state_source: Path = STATE_SOURCE,
+            family: bool = False) -> dict:
     """One campaign: string ``string_type`` at its paper target, ``method``, ``seed``, ``physics`` and
     ``mode``, at most ``CAP`` executions. Reuses ``run_dir(...)/run.json`` when a previous run finished.
 
@@ -271,18 +295,19 @@ def run_one(string_type: int, seed: int, method: str, config: dict, work: Path, 
     from stringcast.campaign import run_campaign
     from stringcast.core.files import DataError, read_json, write_json
 
-    root = run_dir(work, string_type, seed, method, physics, mode)
+    root = run_dir(work, string_type, seed, method, physics, mode, family)
     name, done = root.name, root / "run.json"
     if done.exists():
         return read_json(done)
     model = error_model(string_type, state_source) if mode == "state" else None
-    cfg = method_config(config, method, seed, physics, mode)
+    cfg = method_config(config, method, seed, physics, mode, family)
     cfg_path = project_root(root, cfg)
     records: list[dict] = []
     hook = _trial_hook(physics, mode, cfg, model, seed, records)
     args = WORKFLOW_ARGS if mode == "state" else ()
     rec = {"string": string_type, "target": PAPER_TARGET[string_type], "seed": seed, "method": method,
            "physics": physics, "mode": mode, "campaign": name, "git_commit": git_commit(),
+           "material": cfg["lab"].get("material"), "fit_skill": [],
            "libraries": library_versions(), "error": None,
            "state_mode": None if model is None else {"error_model": model.as_dict(), "trials": records}}
     t0 = time.perf_counter()
@@ -306,8 +331,10 @@ def run_one(string_type: int, seed: int, method: str, config: dict, work: Path, 
     rec["E_mm"] = []
     for t in trials:
         p = root / "results" / name / f"trial_{t['trial']}" / "params.json"
-        e = read_json(p).get("E_mm") if p.exists() else None
+        doc = read_json(p) if p.exists() else {}
+        e, skill = doc.get("E_mm"), (doc.get("fit_check") or {}).get("skill")
         rec["E_mm"].append(None if e is None else float(e))
+        rec["fit_skill"].append(None if skill is None else float(skill))
     steps = prediction_steps(rec)
     rec["prediction_error_mm"] = float(np.median(steps)) if steps else None
     rec["timings_s"] = summary["timings_s"]
@@ -340,13 +367,13 @@ def run(quick: bool = False, spec: Spec | None = None, work: Path | None = None,
     if finished_only:
         if not work:
             raise ValueError("finished_only: name the campaigns' folder (--work)")
-        todo = [c for c in todo if (run_dir(Path(work), c[2], c[3], c[4], c[0], c[1]) / "run.json").exists()]
+        todo = [c for c in todo if (run_dir(Path(work), c[2], c[3], c[4], c[0], c[1], spec.family) / "run.json").exists()]
     runs: list[dict] = []
     doc = document(runs, spec, False, quick, METHODS)
     with tempfile.TemporaryDirectory(prefix="bench_loop_") as tmp:
         work = Path(work).resolve() if work else Path(tmp)
         for i, (p, mode, k, s, m) in enumerate(todo, 1):
-            r = run_one(k, s, m, config, work, cores, p, mode, spec.state_source)
+            r = run_one(k, s, m, config, work, cores, p, mode, spec.state_source, spec.family)
             runs.append(r)
             print(f"  [{i}/{len(todo)}] {p} {mode} string {k} seed {s} {m}: "
                   + (f"FAILED {r['error']}" if r["error"] else
@@ -354,6 +381,10 @@ def run(quick: bool = False, spec: Spec | None = None, work: Path | None = None,
                      + ", ".join(f"{c:.1f}" for c in r["closest_approach_mm"]) + f" mm; {r['wall_s']:.0f} s"),
                   flush=True)
             doc = document(runs, spec, i == n_all, quick, METHODS)
+            if spec.family:    # beside today's entries in loop.json, and its own table
+                write("loop", family_into(BENCH_DIR / "loop.json", doc, spec))
+                write_text(BENCH_DIR / "loop_family.md", markdown(doc, spec))
+                continue
             write("loop", doc)
             figure({q: doc[q] for q in spec.physics}, list(spec.methods), BENCH_DIR / "loop.png")
             write_text(BENCH_DIR / "loop.md", markdown(doc, spec))   # all three agree at every point
@@ -376,6 +407,8 @@ def _parser() -> argparse.ArgumentParser:
                     help="the video check's methods")
     ap.add_argument("--state-source", type=Path, default=STATE_SOURCE,
                     help="folder holding tracking.json and generalization.json (the state mode's error)")
+    ap.add_argument("--family", action="store_true", help="each seed also draws the lab's string material "
+                    "(lab.material); summarized as loop.json's family entry")
     ap.add_argument("--work", type=Path, help="keep (and reuse/resume) the campaigns here")
     ap.add_argument("--cores", type=int, default=2, help="Snakemake --cores per campaign")
     ap.add_argument("--finished-only", action="store_true",
@@ -395,7 +428,7 @@ def main(argv: list[str] | None = None) -> None:
                     seeds=tuple(a.seeds if a.seeds is not None else quick_seeds or (0, 1, 2, 3, 4)),
                     methods=tuple(a.methods or METHODS), physics=tuple(a.physics), mode=a.mode,
                     video_types=tuple(a.video_types) if a.video_types else None, video_seeds=tuple(a.video_seeds),
-                    video_methods=tuple(a.video_methods), state_source=a.state_source.resolve())
+                    video_methods=tuple(a.video_methods), state_source=a.state_source.resolve(), family=a.family)
     except ValueError as exc:
         ap.error(str(exc))
     if not a.only:
@@ -409,7 +442,7 @@ def main(argv: list[str] | None = None) -> None:
     from stringcast.core import load_config
 
     for p in spec.physics:
-        r = run_one(k, s, m, load_config(), Path(a.work).resolve(), a.cores, p, a.mode, spec.state_source)
+        r = run_one(k, s, m, load_config(), Path(a.work).resolve(), a.cores, p, a.mode, spec.state_source, a.family)
         print(f"{p} {a.mode} string {k} seed {s} {m}: " + (f"FAILED {r['error']}" if r["error"] else
                                                             f"{'hit' if r['hit'] else 'no hit'} after {r['executions']}"))
 

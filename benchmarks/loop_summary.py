@@ -90,7 +90,8 @@ def per_string(runs: list[dict], types: list[int], methods: list[str]) -> dict:
 def summarize(runs: list[dict], types: list[int], methods: list[str]) -> dict:
     """One physics' entry of loop.json (docs/results.md): per_string; per method ``campaigns``, the mean
     (type means averaged), max, all-hit flag, first-shot hit rate and the median next-motion prediction
-    error over every loop step, and the campaigns that ended in an error (``failed_*``, [type, seed];
+    error over every loop step, ``fit_skill_*`` (the fit check's skill, median and 10th percentile over every
+    fit), and the campaigns that ended in an error (``failed_*``, [type, seed];
     counted as ``CAP`` without a hit); ``mean_ours_ci95``; and over the campaigns both methods ran,
     ``paired_campaigns``, ``paired_mean_*`` and ``paired_diff_ci95`` (ours minus the paper's)."""
     per = per_string(runs, types, methods)
@@ -109,6 +110,9 @@ def summarize(runs: list[dict], types: list[int], methods: list[str]) -> dict:
                                              if mine else None)
         out[f"prediction_error_mm_{lab}"] = _median(steps)
         out[f"prediction_steps_{lab}"] = len(steps)
+        skills = [x for r in mine for x in (r.get("fit_skill") or []) if x is not None]
+        out[f"fit_skill_{lab}"] = ({"median": float(np.median(skills)), "p10": float(np.percentile(skills, 10)),
+                                    "fits": len(skills)} if skills else None)
         # a campaign that ended in an error counts as CAP executions without a hit: named, never silent
         out[f"failed_{lab}"] = sorted([int(r["string"]), int(r["seed"])] for r in mine if r["error"])
     out["paper_table3_mean"] = float(np.mean([PAPER_TABLE3[k] for k in types]))
@@ -298,3 +302,21 @@ def markdown(doc: dict, spec) -> str:
     commits = "; ".join(f"{m} at " + ", ".join(c[:7] + c[40:] if len(c) >= 40 else c for c in cs)
                         for m, cs in doc["git_commits"].items() if cs)
     return "\n".join(out) + (f"\nCode that ran the campaigns: {commits}.\n" if commits else "")
+
+
+def family_into(loop_json: Path, doc: dict, spec: Spec) -> dict:
+    """loop.json with ``doc`` (a family run's document) as its ``family`` entry: per physics the summary
+    (:func:`benchmarks.loop_summary.summarize`'s keys, ``fit_skill``), the draws (type, seed, material)
+    and whether the family run is complete; the rest of loop.json as it was (a fresh one if none)."""
+    from stringcast.core.files import read_json
+    from benchmarks.loop import material_of
+
+    base = read_json(loop_json) if loop_json.exists() else header("loop", False)
+    runs = doc["runs"]
+    base["family"] = {p: doc[p] | {"draws": sorted({(r["string"], r["seed"], (r.get("material") or {}).get("class"))
+                                                    for r in runs if r["physics"] == p})}
+                      for p in spec.physics} | {
+        "complete": doc["complete"], "mode": spec.mode, "types": list(spec.types), "seeds": list(spec.seeds),
+        "materials": {str(s): material_of(s) for s in spec.seeds}, "runs": runs,
+        "git_commits": doc["git_commits"], "libraries": doc["libraries"]}
+    return base

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from benchmarks.loop import Spec, method_config, run_dir
+from benchmarks.loop_summary import family_into
 from benchmarks.loop_summary import bootstrap_ci, summarize
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -115,6 +116,32 @@ def test_spec_and_run_config(config):
     assert cfg["lab"]["physics"] == "elastica" and cfg["lab"]["render"] is False and cfg["estimation"]["seed"] == 3
     assert "render" not in method_config(config, "paper", 0, "mujoco", "video")["lab"]
     assert run_dir(Path("/w"), 5, 1, "ours", "elastica", "state").name == "loop_elastica_state_s5_seed1_ours"
+
+
+def test_a_family_run_draws_every_material_class_and_joins_loop_json(config, tmp_path):
+    """Seeds 0-4 of a family run draw one material of each class; the lab reads it; loop.json keeps its
+    other entries and gains ``family`` with the draws and the fits' skill."""
+    from stringcast.lab.materials import KINDS, lab_material
+
+    classes = [method_config(config, "ours", s, "mujoco", "state", family=True)["lab"]["material"]["class"]
+               for s in range(5)]
+    assert sorted(classes) == sorted(KINDS)
+    cfg = method_config(config, "paper", 3, "elastica", "state", family=True)
+    assert lab_material(cfg["lab"]).kind == classes[3] and "material" not in method_config(config, "paper", 3)["lab"]
+    assert run_dir(Path("/w"), 5, 1, "ours", "mujoco", "state", True).name == "loop_family_mujoco_state_s5_seed1_ours"
+    runs = [_record(k, s, m, 1 + (m == "paper"), True) | {"material": {"seed": s, "class": KINDS[s]},
+                                                           "fit_skill": [0.8, 0.6]}
+            for k in (1, 2) for s in (0, 1) for m in ("ours", "paper")]
+    spec = Spec(types=(1, 2), seeds=(0, 1), physics=("mujoco",), family=True)
+    doc = {"mujoco": summarize(runs, [1, 2], ["paper", "ours"]), "complete": False, "runs": runs,
+           "git_commits": {}, "libraries": {}}
+    old = tmp_path / "loop.json"
+    old.write_text(json.dumps({"mujoco": {"mean_ours": 1.5}, "complete": True}))
+    out = family_into(old, doc, spec)
+    assert out["mujoco"] == {"mean_ours": 1.5} and out["complete"] is True
+    fam = out["family"]["mujoco"]
+    assert fam["mean_ours"] == 1.0 and fam["mean_paper_method"] == 2.0 and len(fam["draws"]) == 4
+    assert fam["fit_skill_ours"] == {"median": pytest.approx(0.7), "p10": pytest.approx(0.6), "fits": 8}
 
 
 def test_a_variant_is_ours_with_one_setting_changed(config):
