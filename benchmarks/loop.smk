@@ -9,7 +9,8 @@
 # video_types (default: types), video_seeds (default 0; "" for none) and video_methods
 # (default ours); state_source: the folder with tracking.json and generalization.json
 # (default results/bench/ in the repository); campaign_cores: each campaign's Snakemake
-# --cores (default 2). The jobs run in the repository (benchmarks/ is not an installed
+# --cores (default 2); family=true: each seed also draws the lab's string material (loop.json's
+# family entry; benchmarks/loop.py). The jobs run in the repository (benchmarks/ is not an installed
 # package); loop.json goes to results/bench/ there, or to $STRINGCAST_BENCH_DIR.
 
 
@@ -38,6 +39,9 @@ VIDEO_TYPES = words("video_types", " ".join(TYPES))
 VIDEO_SEEDS = words("video_seeds", "0") if MODE == "state" else []
 VIDEO_METHODS = words("video_methods", "ours")
 CORES = int(config.get("campaign_cores", 2))
+FAMILY = str(config.get("family", "false")).lower() in ("1", "true", "yes")
+FAMILY_ARG = "--family" if FAMILY else ""
+FAMILY_TAG = "family_" if FAMILY else ""
 PY = sys.executable
 REPO = Path(workflow.basedir).parent
 BENCH = Path(
@@ -46,7 +50,7 @@ BENCH = Path(
 STATE_SOURCE = Path(
     str(config.get("state_source", REPO / "results" / "bench"))
 ).resolve()
-RUN = f"{WORK}/loop_{{physics}}_{{mode}}_s{{type}}_seed{{seed}}_{{method}}/run.json"
+RUN = f"{WORK}/loop_{FAMILY_TAG}{{physics}}_{{mode}}_s{{type}}_seed{{seed}}_{{method}}/run.json"
 
 
 wildcard_constraints:
@@ -66,7 +70,7 @@ rule campaign:
     output:
         RUN,
     log:
-        f"{WORK}/logs/loop_{{physics}}_{{mode}}_s{{type}}_seed{{seed}}_{{method}}.log",
+        f"{WORK}/logs/loop_{FAMILY_TAG}{{physics}}_{{mode}}_s{{type}}_seed{{seed}}_{{method}}.log",
     threads: CORES
     resources:
         runtime=600,
@@ -75,7 +79,7 @@ rule campaign:
     shell:
         'cd "{REPO}" && "{PY}" -m benchmarks.loop --only {wildcards.type} {wildcards.seed} {wildcards.method} '
         '--physics {wildcards.physics} --mode {wildcards.mode} --state-source "{STATE_SOURCE}" '
-        '--work "{WORK}" --cores {threads} > "{log}" 2>&1'
+        '--work "{WORK}" --cores {threads} {FAMILY_ARG} > "{log}" 2>&1'
 
 
 rule gather:
@@ -101,4 +105,4 @@ rule gather:
     shell:
         'cd "{REPO}" && "{PY}" -m benchmarks.loop --finished-only --work "{WORK}" --types {TYPES} '
         "--seeds {SEEDS} --methods {METHODS} --physics {PHYSICS} --mode {MODE} {params.video} "
-        '--state-source "{STATE_SOURCE}"'
+        '--state-source "{STATE_SOURCE}" {FAMILY_ARG}'
