@@ -97,9 +97,9 @@ that explains more wins; ties go in the order geometry, clock, tracking, model.
   at a pendulum's period yet does not tilt under it is moving as if carried in the gripper's frame
   without its inertial forces (a simulator that omits them, or a joint log of another motion), and no
   string model's parameters can follow it. Over the lab's string family (five material classes, seven
-  string types, ours' first motions, both engines: ``benchmarks/inertia.py``) the chords' shares are
-  0.47 and more where stated; the field recording of issue 52 gives 0.02-0.08 with a rotation coupling
-  near 1 (its fit: skill -0.52, the model's cause until then).
+  string types, ours' first motions, both engines: ``benchmarks/inertia.py``; and the field's motion)
+  the chords' shares are 0.81-1.43 where stated; the field recording of issue 52 gives 0.01-0.06 with
+  a rotation coupling near 1 (its fit: skill -0.52, the model's cause until then).
 
 Reported in ``fit_check`` but not judged: ``speed_correlation`` (the error's rank correlation
 with the model's speed; a clock error makes the error follow the speed) ranges from -0.6 to +0.5
@@ -137,8 +137,9 @@ taking it off would leave at least 3/4 of the error (module doc, "pinned")."""
 INERTIA_SHARE_MAX = 0.25
 """The recording, not the model: the tracked string's tilt answers the grasp's acceleration at under a
 quarter of a pendulum's of its own swing period (:mod:`stringcast.estimate.inertia`). Over the lab's
-string family (benchmarks/inertia.py, both engines) the chords' shares are 0.47 and more, their medians
-0.56 and more; the field recording of issue 52 gives 0.02-0.08."""
+string family the stated chords' shares are 0.97-1.21 (benchmarks/inertia.py: 40 strings, both engines,
+ours' first motions; 32 chords on 11 of them) and 0.81-1.43 under the field's motion (MuJoCo, 21
+strings, 14 chords); the field recording of issue 52 gives 0.01-0.06."""
 INERTIA_MIN_POINTS = 2
 """The recording is named only where the share is stated on at least this many chords."""
 MODEL_ADVICE = ("recalibrating will not help; look at the model instead: widen model.ranges, fit more trials "
@@ -318,7 +319,7 @@ def _not_inertial(fig: Mapping) -> str | None:
     return (f"the tracked string tilts under the grasp's acceleration at {share:.0%} of what a pendulum of its "
             f"own swing period does{swing}{turn} (chords to points {points}); every string, rope or chain "
             f"hanging in air tilts at {INERTIA_SHARE_MAX:.0%} of it or more (the lab's string family on both "
-            "engines: 47 % or more): it moves as if carried in the gripper's frame without that frame's inertial "
+            "engines, thread to chain: 81 % or more): it moves as if carried in the gripper's frame without that frame's inertial "
             "forces, which no parameter set of a string model follows. Check that the joint log is this "
             "video's motion and, on a simulator, that the string feels the gripper's acceleration")
 
