@@ -1,4 +1,4 @@
-"""Steps of :func:`stringcast.planning.search` (the candidate search; its module doc says how):
+"""Steps of :func:`stringcast.plan.planning.search` (the candidate search; its module doc says how):
 the postures candidates start from, the candidate curves of one batch, the residual
 correction's sets, and the ranking that keeps the best candidate so far."""
 from __future__ import annotations
@@ -15,7 +15,7 @@ def start_postures(campaign: Campaign, motion: MotionSettings, rng: np.random.Ge
                    previous: Motion | None) -> np.ndarray:
     """The initial postures (P, J) rad candidates start from: ``previous``'s q0 (P = 1) for a
     perturbation, else a pool of ``motion.posture_pool`` random postures drawn with ``rng``
-    (:func:`stringcast.motion.sample_postures`).
+    (:func:`stringcast.plan.motion.sample_postures`).
 
     Raises:
         ValueError: ``previous`` has no control points to perturb.
@@ -32,8 +32,8 @@ def draw_candidates(arm, rate: float, rng: np.random.Generator, T: float, want: 
                     previous: Motion | None, perturb: float, n_cp: int, alpha: float) -> list:
     """Up to ``want`` candidate motions of T s within the arm's limits, from rounds (at most 50) of
     4 * want curves: ``previous``'s control points moved by U(-perturb, +perturb) rad/s (V_N kept),
-    else random curves (:func:`stringcast.motion.sample_control_points`: n_cp points, alpha rad/s^2).
-    Each is :func:`stringcast.motion.valid_curves`' (control points (J, N), q0 (J,), q (M, J),
+    else random curves (:func:`stringcast.plan.motion.sample_control_points`: n_cp points, alpha rad/s^2).
+    Each is :func:`stringcast.plan.motion.valid_curves`' (control points (J, N), q0 (J,), q (M, J),
     posture index); [] when none fits."""
     cands = []
     for _ in range(50):

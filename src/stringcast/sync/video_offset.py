@@ -168,7 +168,7 @@ def _rest_and_board(video, calibration, arm, q0: np.ndarray, st: SyncSettings,
 
 def _coarse_search(video, calibration, frame_strips, rest_s: np.ndarray, template: np.ndarray,
                    strips, n_rest: int, t_j: np.ndarray, q_j: np.ndarray, fps: float, st: SyncSettings) -> float:
-    """The coarse offset, s (:func:`stringcast.sync_arm.coarse_offset`): every frame's match with the rest
+    """The coarse offset, s (:func:`stringcast.sync.arm_match.coarse_offset`): every frame's match with the rest
     template against the predicted match of the rest image at the arm's logged postures (1 ms grid).
     ``strips(q)``: the shifted strip points of postures q; ``frame_strips(frame, q)``: the frame, smoothed,
     sampled there.
