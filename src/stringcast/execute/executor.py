@@ -28,6 +28,7 @@ import numpy as np
 
 from stringcast.core import (Campaign, ConfigError, DataError, ExecutorSettings, assert_within_limits, atomic_path,
                              check_motion_timing, load_campaign, read_joint_table)
+from stringcast.lab import run_trial
 from .ur_rtde import UR_JOINTS, URSettings, play_ur
 
 BACKENDS = ("virtual", "ur-rtde")
@@ -116,8 +117,6 @@ def execute(motion_csv: Path, backend: str, out_dir: Path, campaign_yaml: Path |
         result = play_ur(t_cmd, q_cmd, arm, ur, out_dir, robot_ip, move_to_start, interfaces)
     else:
         out_dir.mkdir(parents=True, exist_ok=True)
-        from stringcast.lab import run_trial   # the virtual lab only where it plays: a real arm loads no simulator
-
         result = run_trial(t_cmd, q_cmd, campaign, config, out_dir, seed, t_move)
     _copy(motion_csv, out_dir / "motion.csv")
     _copy(sidecar, out_dir / "motion.json")
