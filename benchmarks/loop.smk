@@ -10,7 +10,8 @@
 # (default ours); state_source: the folder with tracking.json and generalization.json
 # (default results/bench/ in the repository); campaign_cores: each campaign's Snakemake
 # --cores (default 2); family=true: each seed also draws the lab's string material (loop.json's
-# family entry; benchmarks/loop.py). The jobs run in the repository (benchmarks/ is not an installed
+# family entry; benchmarks/loop.py). Where the gathered file (loop.json, or loop_family.md) exists
+# already, Snakemake finds nothing to do: add --forcerun gather to run new campaigns. The jobs run in the repository (benchmarks/ is not an installed
 # package); loop.json goes to results/bench/ there, or to $STRINGCAST_BENCH_DIR.
 
 
@@ -42,6 +43,9 @@ CORES = int(config.get("campaign_cores", 2))
 FAMILY = str(config.get("family", "false")).lower() in ("1", "true", "yes")
 FAMILY_ARG = "--family" if FAMILY else ""
 FAMILY_TAG = "family_" if FAMILY else ""
+# a family run's own product (it adds loop.json's family entry, which a finished main run's loop.json
+# would otherwise already stand for)
+GATHERED = "loop_family.md" if FAMILY else "loop.json"
 PY = sys.executable
 REPO = Path(workflow.basedir).parent
 BENCH = Path(
@@ -63,7 +67,7 @@ wildcard_constraints:
 
 rule all:
     input:
-        f"{BENCH}/loop.json",
+        f"{BENCH}/{GATHERED}",
 
 
 rule campaign:
@@ -96,7 +100,7 @@ rule gather:
             method=VIDEO_METHODS,
         ),
     output:
-        f"{BENCH}/loop.json",
+        f"{BENCH}/{GATHERED}",
     params:
         video=(
             f"--video-types {' '.join(VIDEO_TYPES)} --video-methods {' '.join(VIDEO_METHODS)} "
