@@ -11,8 +11,9 @@
 # (default results/bench/ in the repository); campaign_cores: each campaign's Snakemake
 # --cores (default 2); family=true: each seed also draws the lab's string material (loop.json's
 # family entry; benchmarks/loop.py). Where the gathered file (loop.json, or loop_family.md) exists
-# already, Snakemake finds nothing to do: add --forcerun gather to run new campaigns. The jobs run in the repository (benchmarks/ is not an installed
-# package); loop.json goes to results/bench/ there, or to $STRINGCAST_BENCH_DIR.
+# already, Snakemake finds nothing to do: add --forcerun gather to run new campaigns. The jobs run
+# in the repository (benchmarks/ is not an installed package); loop.json goes to results/bench/
+# there, or to $STRINGCAST_BENCH_DIR.
 
 
 import os
