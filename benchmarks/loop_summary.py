@@ -307,16 +307,20 @@ def markdown(doc: dict, spec) -> str:
 def family_into(loop_json: Path, doc: dict, spec: Spec) -> dict:
     """loop.json with ``doc`` (a family run's document) as its ``family`` entry: per physics the summary
     (:func:`benchmarks.loop_summary.summarize`'s keys, ``fit_skill``), the draws (type, seed, material)
-    and whether the family run is complete; the rest of loop.json as it was (a fresh one if none)."""
+    and whether the family run is complete; another physics' family entry and the rest of loop.json as
+    they were (a fresh one if none)."""
     from stringcast.core.files import read_json
     from benchmarks.loop import material_of
 
     base = read_json(loop_json) if loop_json.exists() else header("loop", False)
     runs = doc["runs"]
-    base["family"] = {p: doc[p] | {"draws": sorted({(r["string"], r["seed"], (r.get("material") or {}).get("class"))
-                                                    for r in runs if r["physics"] == p})}
-                      for p in spec.physics} | {
-        "complete": doc["complete"], "mode": spec.mode, "types": list(spec.types), "seeds": list(spec.seeds),
-        "materials": {str(s): material_of(s) for s in spec.seeds}, "runs": runs,
-        "git_commits": doc["git_commits"], "libraries": doc["libraries"]}
+    family = dict(base.get("family") or {})    # another physics' family entry stays (a run per engine)
+    runs = [r for r in family.get("runs", []) if r["physics"] not in spec.physics] + doc["runs"]
+    family.update({p: doc[p] | {"draws": [list(d) for d in sorted({(r["string"], r["seed"], (r.get("material") or {})
+                                                                     .get("class")) for r in doc["runs"] if r["physics"] == p})]}
+                   for p in spec.physics})
+    family.update({"complete": doc["complete"], "mode": spec.mode, "types": list(spec.types),
+                   "seeds": list(spec.seeds), "materials": {str(s): material_of(s) for s in spec.seeds},
+                   "runs": runs, "git_commits": doc["git_commits"], "libraries": doc["libraries"]})
+    base["family"] = family
     return base

@@ -142,6 +142,13 @@ def test_a_family_run_draws_every_material_class_and_joins_loop_json(config, tmp
     fam = out["family"]["mujoco"]
     assert fam["mean_ours"] == 1.0 and fam["mean_paper_method"] == 2.0 and len(fam["draws"]) == 4
     assert fam["fit_skill_ours"] == {"median": pytest.approx(0.7), "p10": pytest.approx(0.6), "fits": 8}
+    old.write_text(json.dumps(out))                     # a second engine's family run keeps the first's
+    el = [r | {"physics": "elastica"} for r in runs]
+    spec_el = Spec(types=(1, 2), seeds=(0, 1), physics=("elastica",), family=True)
+    both = family_into(old, {"elastica": summarize(el, [1, 2], ["paper", "ours"]), "complete": True, "runs": el,
+                             "git_commits": {}, "libraries": {}}, spec_el)
+    assert both["family"]["mujoco"] == fam and both["family"]["elastica"]["mean_ours"] == 1.0
+    assert len(both["family"]["runs"]) == 16
 
 
 def test_a_variant_is_ours_with_one_setting_changed(config):
