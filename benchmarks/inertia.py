@@ -93,6 +93,22 @@ def _span(rows: list[dict], key: str) -> list[float] | None:
     return [float(min(vals)), float(max(vals))] if vals else None
 
 
+def _line(r: dict) -> str:
+    """One run's progress line: the share (or not stated) and each chord's share and r2."""
+    share = r["inertia_share"]
+    head = ("share not stated" if share is None else
+            f"share {share:.2f}, coupling {r['rotation_coupling']:.2f}, period {r['swing_period_s']:.2f} s")
+    chords = ", ".join(f"{k}: {'-' if v['inertia_share'] is None else round(v['inertia_share'], 2)} "
+                       f"r2 {v['fit_r2'] or 0:.2f}" for k, v in r["per_point"].items())
+    return f"{head}; per point {chords}"
+
+
+def _physics_summary(rows: list[dict]) -> dict:
+    """One engine's share and coupling spans, and how many of its runs state a share."""
+    return {"share": _span(rows, "inertia_share"), "coupling": _span(rows, "rotation_coupling"),
+            "stated": sum(r["inertia_share"] is not None for r in rows), "runs": len(rows)}
+
+
 def run(quick: bool = False, draws: int | None = None, physics: tuple[str, ...] | None = None,
         work: Path | None = None) -> dict:
     """Run the draws and write results/bench/inertia.json (after every run)."""
@@ -110,15 +126,8 @@ def run(quick: bool = False, draws: int | None = None, physics: tuple[str, ...] 
             for i in range(draws):
                 r = one_run(p, i, config, base)
                 rows.append(r)
-                share = r["inertia_share"]
-                print(f"  {p} draw {i} ({r['class']}, {r['grasp']}, string {r['string']}): share "
-                      + ("not stated" if share is None else f"{share:.2f}, coupling {r['rotation_coupling']:.2f}, "
-                         f"period {r['swing_period_s']:.2f} s") + "; per point " + ", ".join(f"{k}: {v['inertia_share'] if v['inertia_share'] is None else round(v['inertia_share'], 2)}"
-                                               f" r2 {v['fit_r2'] or 0:.2f}" for k, v in r["per_point"].items()), flush=True)
-                per = {q: {"share": _span([x for x in rows if x["physics"] == q], "inertia_share"),
-                           "coupling": _span([x for x in rows if x["physics"] == q], "rotation_coupling"),
-                           "stated": sum(x["inertia_share"] is not None for x in rows if x["physics"] == q),
-                           "runs": sum(x["physics"] == q for x in rows)} for q in physics}
+                print(f"  {p} draw {i} ({r['class']}, {r['grasp']}, string {r['string']}): {_line(r)}", flush=True)
+                per = {q: _physics_summary([x for x in rows if x["physics"] == q]) for q in physics}
                 doc = header("inertia", quick) | {
                     "threshold_inertia_share": INERTIA_SHARE_MAX, "noise_mm": NOISE_M * 1000,
                     "per_physics": per, "share_span": _span(rows, "inertia_share"),

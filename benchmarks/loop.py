@@ -367,7 +367,8 @@ def run(quick: bool = False, spec: Spec | None = None, work: Path | None = None,
     if finished_only:
         if not work:
             raise ValueError("finished_only: name the campaigns' folder (--work)")
-        todo = [c for c in todo if (run_dir(Path(work), c[2], c[3], c[4], c[0], c[1], spec.family) / "run.json").exists()]
+        todo = [c for c in todo
+                if (run_dir(Path(work), c[2], c[3], c[4], c[0], c[1], spec.family) / "run.json").exists()]
     runs: list[dict] = []
     doc = document(runs, spec, False, quick, METHODS)
     with tempfile.TemporaryDirectory(prefix="bench_loop_") as tmp:
@@ -382,7 +383,8 @@ def run(quick: bool = False, spec: Spec | None = None, work: Path | None = None,
                   flush=True)
             doc = document(runs, spec, i == n_all, quick, METHODS)
             if spec.family:    # beside today's entries in loop.json, and its own table
-                write("loop", family_into(BENCH_DIR / "loop.json", doc, spec))
+                materials = {str(s): material_of(s) for s in spec.seeds}
+                write("loop", family_into(BENCH_DIR / "loop.json", doc, spec, materials))
                 write_text(BENCH_DIR / "loop_family.md", markdown(doc, spec))
                 continue
             write("loop", doc)

@@ -304,23 +304,21 @@ def markdown(doc: dict, spec) -> str:
     return "\n".join(out) + (f"\nCode that ran the campaigns: {commits}.\n" if commits else "")
 
 
-def family_into(loop_json: Path, doc: dict, spec: Spec) -> dict:
+def family_into(loop_json: Path, doc: dict, spec, materials: dict) -> dict:
     """loop.json with ``doc`` (a family run's document) as its ``family`` entry: per physics the summary
     (:func:`benchmarks.loop_summary.summarize`'s keys, ``fit_skill``), the draws (type, seed, material)
-    and whether the family run is complete; another physics' family entry and the rest of loop.json as
-    they were (a fresh one if none)."""
+    and whether the family run is complete, and ``materials`` (each seed's ``lab.material``); another
+    physics' family entry and the rest of loop.json as they were (a fresh one if none)."""
     from stringcast.core.files import read_json
-    from benchmarks.loop import material_of
 
     base = read_json(loop_json) if loop_json.exists() else header("loop", False)
-    runs = doc["runs"]
     family = dict(base.get("family") or {})    # another physics' family entry stays (a run per engine)
     runs = [r for r in family.get("runs", []) if r["physics"] not in spec.physics] + doc["runs"]
     family.update({p: doc[p] | {"draws": [list(d) for d in sorted({(r["string"], r["seed"], (r.get("material") or {})
                                                                      .get("class")) for r in doc["runs"] if r["physics"] == p})]}
                    for p in spec.physics})
     family.update({"complete": doc["complete"], "mode": spec.mode, "types": list(spec.types),
-                   "seeds": list(spec.seeds), "materials": {str(s): material_of(s) for s in spec.seeds},
+                   "seeds": list(spec.seeds), "materials": materials,
                    "runs": runs, "git_commits": doc["git_commits"], "libraries": doc["libraries"]})
     base["family"] = family
     return base

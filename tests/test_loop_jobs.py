@@ -137,7 +137,7 @@ def test_a_family_run_draws_every_material_class_and_joins_loop_json(config, tmp
            "git_commits": {}, "libraries": {}}
     old = tmp_path / "loop.json"
     old.write_text(json.dumps({"mujoco": {"mean_ours": 1.5}, "complete": True}))
-    out = family_into(old, doc, spec)
+    out = family_into(old, doc, spec, {"0": runs[0]["material"]})
     assert out["mujoco"] == {"mean_ours": 1.5} and out["complete"] is True
     fam = out["family"]["mujoco"]
     assert fam["mean_ours"] == 1.0 and fam["mean_paper_method"] == 2.0 and len(fam["draws"]) == 4
@@ -146,7 +146,7 @@ def test_a_family_run_draws_every_material_class_and_joins_loop_json(config, tmp
     el = [r | {"physics": "elastica"} for r in runs]
     spec_el = Spec(types=(1, 2), seeds=(0, 1), physics=("elastica",), family=True)
     both = family_into(old, {"elastica": summarize(el, [1, 2], ["paper", "ours"]), "complete": True, "runs": el,
-                             "git_commits": {}, "libraries": {}}, spec_el)
+                             "git_commits": {}, "libraries": {}}, spec_el, {})
     assert both["family"]["mujoco"] == fam and both["family"]["elastica"]["mean_ours"] == 1.0
     assert len(both["family"]["runs"]) == 16
 

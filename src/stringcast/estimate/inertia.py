@@ -11,25 +11,26 @@ simulator that moves the string in the gripper's frame without that frame's iner
 joint log that is not this video's motion).
 
 :func:`inertial_response` identifies, for the chord from the grasp point to a tracked point, the
-linear second-order response
+balance of its angular acceleration
 
-    theta'' + c theta' + omega^2 (theta - theta_eq) = b_x x_g'' + b_y y_g'' + b_phi phi_h''
+    theta'' = a_s sin theta + a_c cos theta - c theta' + b_a (x_g'' sin theta - y_g'' cos theta) + b_phi phi_h''
 
-to the grasp's path (x_g, y_g) and the hand angle phi_h (FK, the problem's ``hand``), by variable
-projection: for each (omega^2, c) the response is linear in (b_x, b_y, b_phi, theta_eq and the two
-initial conditions), solved by least squares with Huber weights (s^2 / (s^2 + c s + omega^2) applied to
-the positions, bilinear-discretized: no numerical second derivative), and (omega^2, c)
-searched on a grid then refined (Nelder-Mead). Its figures:
+(gravity's restoring term with omega^2 = hypot(a_s, a_c) and any equilibrium angle, damping, the grasp's
+acceleration as the pendulum's pseudo-force, and the hand's angular acceleration), from the tracked
+angle and the grasp's path (x_g, y_g) and hand angle phi_h (FK, the problem's ``hand``). The fit is
+linear least squares with Huber weights in weak form: the balance times a bump of half-width
+:data:`SMOOTH_S`, integrated, the angle's derivatives moved onto the bump by parts, so no tracked angle
+is differentiated. Its figures:
 
-* ``inertia_share``: -b_x g / omega^2, the chord's tilt per horizontal grasp acceleration as a share
-  of a pendulum's with the same swing frequency (1 for a point pendulum; more for a distributed
-  chain, whose lower part lags more). Over the lab's string family (both engines, every material
-  class, :mod:`stringcast.lab.materials`; docs/method.md) 1.4-2.0; the field recording 0.01-0.05.
-* ``rotation_coupling``: b_phi, how much of the hand's angular acceleration the chord takes:
-  near 1 where the string turns with the hand as if carried in its frame; 0-0.5 over the family.
-* ``swing_period_s``: 2 pi / omega; ``fit_r2``: the share of the chord angle's variance over the
-  compared frames the response explains; ``excitation``: the peak horizontal grasp acceleration over
-  g (a pendulum's quasi-static tilt, rad), below which the share is not stated.
+* ``inertia_share``: b_a g / omega^2, the chord's tilt per grasp acceleration as a share of a
+  pendulum's with the same swing frequency (1 for a point pendulum). Over the lab's string family
+  (both engines, every material class, :mod:`stringcast.lab.materials`; benchmarks/inertia.py,
+  docs/method.md) 0.81-1.43 where stated; the field recording of issue 52 0.01-0.06.
+* ``rotation_coupling``: b_phi, how much of the hand's angular acceleration the chord takes: near 1
+  where the string turns with the hand as if carried in its frame; -0.34 to +0.08 over the family.
+* ``swing_period_s``: 2 pi / omega; ``fit_r2``: the share of the weak-form left side's variance the
+  balance explains (without its worst 5 %); ``excitation``: the peak horizontal grasp acceleration over
+  g (a pendulum's quasi-static tilt, rad); ``inertia_share_se``: the share's standard error.
 """
 from __future__ import annotations
 
@@ -44,9 +45,9 @@ about 6 deg for a pendulum): a gentler motion does not separate inertia from noi
 MIN_R2 = 0.5
 """The share is stated only where the balance explains this share of the chord's angular acceleration."""
 SMOOTH_S = 0.1
-"""The Savitzky-Golay window (cubic) for the angle's and the hand's derivatives, s: a tenth of a hanging
-string's swing period (0.9-1.4 s for 300-610 mm) and long enough that 1 mm of tracking noise at 1 kHz
-does not swamp the second derivative."""
+"""The weak form's bump half-width, and the Savitzky-Golay window (cubic) for the grasp's acceleration,
+s: a tenth of a hanging string's swing period (0.9-1.4 s for 300-610 mm) and long enough that 1 mm of
+tracking noise at 1 kHz averages out."""
 OUTLIER_RAD = np.radians(5.0)
 """A tracked angle this far from its running median (over ``GAP_S``) is an outlier (a lost point)."""
 GAP_S = 0.03
@@ -60,7 +61,7 @@ MIN_RUN_S = 0.2
 """Only runs of consecutive tracked frames at least this long enter (the window needs its span)."""
 
 
-def POINTS(n: int) -> list[int]:
+def chord_points(n: int) -> list[int]:
     """The tracked points (0-based) whose chords are judged: a quarter, half, three quarters and the tip."""
     return sorted({max(0, n // 4 - 1), n // 2 - 1, 3 * n // 4 - 1, n - 1})
 
@@ -81,13 +82,13 @@ def _runs(ok: np.ndarray, min_len: int) -> list[slice]:
     return [slice(a, b) for a, b in zip(edges[::2], edges[1::2]) if b - a >= min_len]
 
 
-def _huber_lstsq(X, y, scale):
+def _huber_lstsq(X, y):
     """Huber-weighted least squares (5 reweightings, threshold 1.345 robust sd): (coefficients, residuals)."""
     w = np.ones(len(y))
     for _ in range(5):
         beta = np.linalg.lstsq(X * w[:, None], y * w, rcond=None)[0]
         r = y - X @ beta
-        k = 1.345 * max(scale, 1.4826 * float(np.median(np.abs(r))))
+        k = 1.345 * 1.4826 * float(np.median(np.abs(r)))
         w = np.sqrt(np.minimum(1.0, k / np.maximum(np.abs(r), 1e-12)))
     return beta, r
 
@@ -107,7 +108,6 @@ def _clean(ang: np.ndarray, period: float) -> np.ndarray:
     idx, th = idx[good], th[good]
     if len(idx) < 3:
         return out
-    out[idx] = th
     span = np.arange(idx[0], idx[-1] + 1)
     gap_to = np.diff(idx)                                           # bridge short gaps only
     fill = np.interp(span, idx, th)
@@ -115,6 +115,11 @@ def _clean(ang: np.ndarray, period: float) -> np.ndarray:
     out[span[:-1][short]] = fill[:-1][short]
     out[idx] = th
     return out
+
+
+def _window(period: float) -> int:
+    """The Savitzky-Golay window for :data:`SMOOTH_S` at a frame period, samples (odd, at least 5)."""
+    return max(5, int(round(SMOOTH_S / period)) | 1)
 
 
 def _bump(u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -133,7 +138,7 @@ def _rows(frame_t, ang, hand_t, hand):
     period = float(np.median(np.diff(frame_t)))
     h = max(SMOOTH_S, 5 * period)
     ang = _clean(ang, period)
-    win = max(5, int(round(SMOOTH_S / period)) | 1)
+    win = _window(period)
     ys, xs = [], []
     for run in _runs(np.isfinite(ang), max(int(2 * h / period) + 2, int(MIN_RUN_S / period))):
         t, th = frame_t[run], ang[run]
@@ -198,10 +203,10 @@ def inertial_response(frame_t: np.ndarray, tracked: np.ndarray, valid: np.ndarra
     y, X = rows
     hq = np.stack([np.interp(frame_t[inside], hand_t, hand[:, j]) for j in (0, 1)], -1)
     period = float(np.median(np.diff(frame_t)))
-    win = max(5, int(round(SMOOTH_S / period)) | 1)
+    win = _window(period)
     if len(hq) > win:
         out["excitation"] = float(np.max(np.abs(signal.savgol_filter(hq[:, 0], win, 3, deriv=2, delta=period))) / G)
-    beta, r = _huber_lstsq(X, y, 0.0)
+    beta, r = _huber_lstsq(X, y)
     core = np.abs(r) <= np.percentile(np.abs(r), 95)                       # R^2 without the worst 5 %
     spread = float(np.var(y[core]))
     r2 = 1.0 - float(np.var(r[core])) / spread if spread > 0 else 0.0
@@ -219,18 +224,19 @@ def inertial_response(frame_t: np.ndarray, tracked: np.ndarray, valid: np.ndarra
 
 
 def string_response(frame_t, tracked, valid, hand_t, hand) -> dict:
-    """:func:`inertial_response` of the chords to the middle point and the tip, and their median share.
+    """:func:`inertial_response` of the chords to the points :func:`chord_points` names, and their medians.
 
     Args:
         as :func:`inertial_response`, without ``point``.
 
     Returns:
-        ``{"inertia_share", "rotation_coupling", "swing_period_s", "fit_r2", "excitation", "points"}``: the
-        medians over the points whose share is stated (None where none is), ``fit_r2`` and
-        ``excitation`` of the first point, and ``points`` (1-based) the share was stated for.
+        ``{"inertia_share", "rotation_coupling", "swing_period_s", "fit_r2", "excitation", "points",
+        "per_point"}``: the medians over the points whose share is stated (None where none is),
+        ``fit_r2`` and ``excitation`` of the first point, ``points`` (1-based) the share was stated for,
+        and ``per_point`` each chord's share, coupling, ``fit_r2`` and standard error by point (1-based).
     """
     n = np.asarray(tracked).shape[1]
-    rows = {pt: inertial_response(frame_t, tracked, valid, hand_t, hand, pt) for pt in POINTS(n)}
+    rows = {pt: inertial_response(frame_t, tracked, valid, hand_t, hand, pt) for pt in chord_points(n)}
     stated = {pt: r for pt, r in rows.items() if r["inertia_share"] is not None}
     first = next(iter(rows.values()))
 
@@ -239,5 +245,5 @@ def string_response(frame_t, tracked, valid, hand_t, hand) -> dict:
     return {"inertia_share": med("inertia_share"), "rotation_coupling": med("rotation_coupling"),
             "swing_period_s": med("swing_period_s"), "fit_r2": first["fit_r2"], "excitation": first["excitation"],
             "points": [pt + 1 for pt in stated],
-            "per_point": {str(pt + 1): {k: r[k] for k in ("inertia_share", "rotation_coupling", "fit_r2", "inertia_share_se")}
-                          for pt, r in rows.items()}}
+            "per_point": {str(pt + 1): {k: r[k] for k in ("inertia_share", "rotation_coupling", "fit_r2",
+                                                          "inertia_share_se")} for pt, r in rows.items()}}
