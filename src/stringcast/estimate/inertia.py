@@ -27,7 +27,8 @@ is differentiated. Its figures:
   (both engines, every material class, :mod:`stringcast.lab.materials`; benchmarks/inertia.py,
   docs/method.md) 0.81-1.43 where stated; the field recording of issue 52 0.01-0.06.
 * ``rotation_coupling``: b_phi, how much of the hand's angular acceleration the chord takes: near 1
-  where the string turns with the hand as if carried in its frame; -0.34 to +0.08 over the family.
+  where the string turns with the hand as if carried in its frame; over the family -0.34 to +0.08 on
+  ours' first motions and -1.38 to +0.19 under the field's motion (never near +1).
 * ``swing_period_s``: 2 pi / omega; ``fit_r2``: the share of the weak-form left side's variance the
   balance explains (without its worst 5 %); ``excitation``: the peak horizontal grasp acceleration over
   g (a pendulum's quasi-static tilt, rad); ``inertia_share_se``: the share's standard error.
