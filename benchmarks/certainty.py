@@ -49,7 +49,7 @@ def calibration_errors(cal: dict, setup) -> tuple[float | None, float | None]:
 
 def swing_grid(n: int = 13) -> np.ndarray:
     """(n * n, 2) m: a grid over the lab's swing region (robot frame)."""
-    from stringcast.lab.view import SWING_REGION_M
+    from stringcast_lab.view import SWING_REGION_M
 
     (x0, x1), (y0, y1) = SWING_REGION_M
     return np.stack(np.meshgrid(np.linspace(x0, x1, n), np.linspace(y0, y1, n)), -1).reshape(-1, 2)

@@ -82,7 +82,7 @@ def film_first_motion(string_type: int, config: dict, work: Path, seed: int, cal
 def lab_calibration_clip(config: dict, work: Path) -> Path:
     """The lab's ChArUco clip (seed 11) that every benchmark calibrates its trials with: ``work/calib``."""
     from stringcast.core import resolve_campaign
-    from stringcast.lab import write_calibration_clip
+    from stringcast_lab import write_calibration_clip
 
     return write_calibration_clip(resolve_campaign({"string": 1, "target": 1}, config, "bench"), config,
                                   work / "calib", seed=11)

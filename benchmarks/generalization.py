@@ -1,6 +1,6 @@
 """Benchmark ``generalization``: the pipeline on setups it has never seen (issue 25).
 
-Each of ``--setups`` seeded draws of the lab's family (:func:`stringcast.lab.draw_setup`:
+Each of ``--setups`` seeded draws of the lab's family (:func:`stringcast_lab.draw_setup`:
 resolution, colour, codec, fps, lens, view, light, background, board pose, the arm's look, the
 calibration set, the trigger and the joint log) gets one string type (cycling 1-7) and that
 type's first planned motion. The lab films it (and the draw's calibration shots); the
@@ -95,11 +95,11 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str 
     """Film one drawn setup and run the pipeline's stages on it, from ``start`` up to ``until``
     (:data:`STAGES`; a stage before ``start`` whose output is in ``work`` is read, not rerun);
     its figures against the truth."""
-    from stringcast.campaign import tracking_errors
+    from stringcast_lab.campaign import tracking_errors
     from stringcast.core import read_json, resolve_campaign, settings_from_config, stage_kwargs
     from stringcast.estimate import run_estimation
     from stringcast.execute import execute
-    from stringcast.lab import apply_setup, draw_setup, write_calibration_clip
+    from stringcast_lab import apply_setup, draw_setup, write_calibration_clip
     from stringcast.plan import run_first_plan
     from stringcast.calibrate import run_calibration
     from stringcast.sync import run_sync, run_sweep
@@ -291,7 +291,7 @@ def figure(rows: list[dict], path: Path) -> None:
 def _resumed(work: Path, seeds: list[int], until: str, results: str = "results") -> dict[int, dict]:
     """The rows of ``seeds`` that the last JSON holds for the same ``work`` and ``until`` (their
     tracking errors read back from each setup's files), by seed."""
-    from stringcast.campaign import tracking_errors
+    from stringcast_lab.campaign import tracking_errors
 
     path = BENCH_DIR / f"{bench_name(results)}.json"
     if not path.exists():

@@ -5,7 +5,7 @@ string does not tilt under the grasp's acceleration as a hanging string does
 (:mod:`stringcast.estimate.inertia`, ``inertia_share`` under
 :data:`stringcast.estimate.verdict.INERTIA_SHARE_MAX`). This benchmark states what the share is on
 strings that do obey gravity and inertia: for each engine (``lab.physics``) and each draw i =
-0..N-1, a material of class ``KINDS[i % 5]`` drawn with seed i (:func:`stringcast.lab.materials.draw_material`),
+0..N-1, a material of class ``KINDS[i % 5]`` drawn with seed i (:func:`stringcast_lab.materials.draw_material`),
 string type ``1 + i % 7`` (its weights and pipes) at target ``1 + i % 4``, ours' first motion for it
 (:func:`stringcast.plan.planning.run_first_plan`, seed i) played by the engine with 0.3 s of rest
 before and 0.6 s after; the lab's points at the model's mass points, sampled at 1 kHz with 1 mm of
@@ -59,9 +59,9 @@ def one_run(physics: str, i: int, config: dict, work: Path) -> dict:
     """Draw i on ``physics`` (module doc): the run's identity and :func:`string_response`'s figures."""
     from stringcast.core import hand_pose, merge_config, resolve_campaign, settings_from_config
     from stringcast.estimate.inertia import string_response
-    from stringcast.lab.materials import KINDS, apply_material, draw_material
-    from stringcast.lab.mjcf import StringPhysics
-    from stringcast.lab.trial import lab_physics
+    from stringcast_lab.materials import KINDS, apply_material, draw_material
+    from stringcast_lab.mjcf import StringPhysics
+    from stringcast_lab.trial import lab_physics
 
     kind, stype, target = KINDS[i % len(KINDS)], 1 + i % 7, 1 + i % 4
     material = draw_material(i, kind)

@@ -3,7 +3,7 @@
 For every lab physics (``lab.physics``: ``mujoco``, the MuJoCo chain, and ``elastica``, the
 Cosserat rod of issue 27), every string type (1-7) with its paper target (docs/results.md,
 "String types": types 1, 2 -> target 1; 3 -> 2; 4, 5, 6 -> 3; 7 -> 4), every seed and every
-method, the whole loop runs as a person would run it: :func:`stringcast.campaign.run_campaign`
+method, the whole loop runs as a person would run it: :func:`stringcast_lab.campaign.run_campaign`
 in a project root of its own (the repo's Snakefile and workflow/ linked, its own
 config/config.yaml carrying the method, ``lab.physics`` and the mode), at most ``CAP`` = 8
 executions. Whether the tip hit is the *lab's* verdict (``ground_truth.json`` of the last
@@ -161,8 +161,8 @@ class Spec:
 
 def material_of(seed: int) -> dict:
     """A family run's ``lab.material``: the draw ``seed`` of class ``KINDS[seed % 5]`` (every class
-    among any five consecutive seeds; :mod:`stringcast.lab.materials`)."""
-    from stringcast.lab.materials import KINDS
+    among any five consecutive seeds; :mod:`stringcast_lab.materials`)."""
+    from stringcast_lab.materials import KINDS
 
     return {"seed": int(seed), "class": KINDS[int(seed) % len(KINDS)]}
 
@@ -249,7 +249,7 @@ def predictions(root: Path, name: str, n: int, cores: int, workflow_args, hook) 
     workflow's ``prediction.json`` of trials 2..n (the hitting trial tracked first, or in the state
     mode synthesized by ``hook``). Returns (one dict per step, seconds); a step whose job failed
     has ``error``."""
-    from stringcast.campaign import run_workflow
+    from stringcast_lab.campaign import run_workflow
     from stringcast.core.files import read_json
 
     if n < 2:
@@ -294,7 +294,7 @@ def run_one(string_type: int, seed: int, method: str, config: dict, work: Path, 
         DataError: (state mode) the error model's files are missing (before anything runs).
     """
     from benchmarks.loop_state import WORKFLOW_ARGS, error_model
-    from stringcast.campaign import run_campaign
+    from stringcast_lab.campaign import run_campaign
     from stringcast.core.files import DataError, read_json, write_json
 
     root = run_dir(work, string_type, seed, method, physics, mode, family)

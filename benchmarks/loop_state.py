@@ -2,7 +2,7 @@
 error and dropout, in place of filming, calibrating, syncing and tracking.
 
 A state-mode campaign runs the lab with ``lab.render: false`` (physics and the camera's clock, no
-video; :mod:`stringcast.lab.trial`). After each execution, and before the workflow processes it,
+video; :mod:`stringcast_lab.trial`). After each execution, and before the workflow processes it,
 :func:`synthesize_trial` (this harness, never a workflow stage) writes what the skipped stages
 would have written into ``results/<campaign>/trial_<k>/``:
 
@@ -181,7 +181,7 @@ def synthesize_trial(k: int, trial_dir: Path, results_dir: Path, campaign, model
     Raises:
         DataError: a missing or malformed ground truth or joint log (named).
     """
-    from stringcast.campaign import tracking_errors
+    from stringcast_lab.campaign import tracking_errors
     from stringcast.core import motion_window, read_joint_table, read_json, read_parquet, write_json, write_parquet
     from stringcast.track.quality import frames_judged, tracking_quality
 

@@ -55,7 +55,7 @@ def _decode_fps(video: Path) -> float:
 def track_string(string_type: int, config: dict, settings, calib_dir: Path, work: Path, seed: int) -> dict:
     """Film, calibrate, sync, sweep and track one string type's first motion; errors and timings.
     ``settings``: every stage's settings (:class:`stringcast.core.Settings`)."""
-    from stringcast.campaign import tracking_errors
+    from stringcast_lab.campaign import tracking_errors
     from stringcast.core import resolve_campaign, stage_kwargs
     from stringcast.sync import run_sweep, run_sync
     from stringcast.track.tracking import run_tracking

@@ -55,10 +55,10 @@ def _project(work: Path) -> Path:
 
 def _film(root: Path) -> Path:
     """The campaign's first motion, planned by the workflow and played on the lab: data/<c>/trial_1."""
-    from stringcast.campaign import campaign_config
+    from stringcast_lab.campaign import campaign_config
     from stringcast.core import load_yaml, resolve_campaign, settings_from_config, write_yaml
     from stringcast.execute import execute
-    from stringcast.lab import write_calibration_clip
+    from stringcast_lab import write_calibration_clip
 
     data = root / "data" / CAMPAIGN
     trial = data / "trial_1"

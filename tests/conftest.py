@@ -48,7 +48,7 @@ def tiny_lab_trial(tmp_path, config, bands=None, view_up_mm=0.0):
     command line. Returns (trial folder, results folder, campaign, config)."""
     import copy
 
-    lab = pytest.importorskip("stringcast.lab")
+    lab = pytest.importorskip("stringcast_lab")
     from stringcast.core.arm import hand_pose
     from stringcast.calibrate.calibration import run_calibration
     from stringcast.core import resolve_campaign

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from stringcast.campaign import campaign_config
+from stringcast_lab.campaign import campaign_config
 from stringcast.cli import build_parser, campaign_config_paths
 from stringcast.core import DEFAULT_CONFIG, OURS_CONFIG, load_config
 from stringcast.core.settings import settings_from_config
@@ -121,7 +121,7 @@ def test_stage_progress_prints_each_stage_start_and_end_from_snakemake_lines():
     the step count; stages side by side timed apart; ``all`` and other lines not printed."""
     import io
 
-    from stringcast.campaign import StageProgress
+    from stringcast_lab.campaign import StageProgress
 
     out = io.StringIO()
     p = StageProgress("campaign c, trial 1", out)
@@ -204,7 +204,7 @@ def test_a_stage_prints_its_verdict_line_with_its_first_reason(capfd, tmp_path):
     assert err.splitlines() == ["sync: warn: first reason (+1 more reasons in the log) -> sync.json",
                                 "sync: ok: offset 0.1 s -> sync.json",
                                 "fit: fail, likely cause model: worse than the hand -> p.json"]
-    from stringcast.campaign import _JOB_LINE
+    from stringcast_lab.campaign import _JOB_LINE
 
     assert all(_JOB_LINE.match(line) for line in err.splitlines())
     assert "  warn: second" in log.read_text()

@@ -13,9 +13,12 @@ from pathlib import Path
 import pytest
 
 PKG = Path(__file__).resolve().parents[1] / "src" / "stringcast"
-# The stage subpackages and the loop around them (the paper's Fig. 2), lowest first.
+LAB = PKG.parent / "stringcast_lab"
+# The stage subpackages (the paper's Fig. 2), lowest first.
 SUBPACKAGES = ("core", "video", "check", "model", "calibrate", "sync", "track", "estimate", "plan",
-               "execute", "report", "lab")
+               "execute", "report")
+SIMULATORS = ("mujoco", "elastica", "av", "stringcast_lab")
+"""What the ``lab`` extra brings: a lab with a real arm installs the pipeline without them."""
 
 
 def _module_name(path: Path) -> str:
@@ -100,7 +103,7 @@ def test_the_package_has_no_import_circle():
 
 def test_the_top_level_reads_like_the_loop():
     names = sorted(p.name for p in PKG.iterdir() if not p.name.startswith(("_", ".")) and p.name != "py.typed")
-    assert names == sorted([*SUBPACKAGES, "campaign.py", "cli.py", "cli_parser.py"])
+    assert names == sorted([*SUBPACKAGES, "cli.py", "cli_parser.py"])
 
 
 def test_function_level_imports_only_in_the_cli():
@@ -131,9 +134,9 @@ def test_stages_use_each_others_public_faces():
 
 @pytest.mark.parametrize("sub", SUBPACKAGES)
 def test_a_stage_imports_only_lower_layers(sub):
-    """Each subpackage imports only subpackages listed before it in SUBPACKAGES (lab and
-    execute stand beside the pipeline: the lab imports core only)."""
-    allowed = {"lab": {"core"}, "execute": {"core", "plan", "lab"}}.get(
+    """Each subpackage imports only subpackages listed before it in SUBPACKAGES (execute stands
+    beside the pipeline: it reads core and plan only)."""
+    allowed = {"execute": {"core", "plan"}}.get(
         sub, set(SUBPACKAGES[: SUBPACKAGES.index(sub)]))
     graph = import_graph()
     bad = sorted({f"{m} -> {t}" for m, ts in graph.items() if m.startswith(f"stringcast.{sub}")
@@ -160,3 +163,81 @@ def test_a_stage_loads_only_what_it_runs(tmp_path):
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split("\n")
     assert out[:4] == ["False", "False", "True", "False"]
     assert "no attribute 'no_such_name'" in out[4]
+
+
+def _top_level_imports(path: Path) -> set[str]:
+    """The top-level package of every import in ``path``, wherever it stands."""
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            out |= {a.name.split(".")[0] for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and not node.level and node.module:
+            out.add(node.module.split(".")[0])
+    return out
+
+
+def test_the_pipeline_imports_no_simulator():
+    """The pipeline's modules never import the virtual lab or its simulators; only the two places
+    that run the lab load it on demand (the executor's ``virtual`` backend, the CLI's ``campaign``
+    and ``calib-clip`` by module name)."""
+    bad = sorted(f"{_module_name(p)} imports {m}" for p in PKG.rglob("*.py")
+                 for m in _top_level_imports(p) & set(SIMULATORS)
+                 if _module_name(p) != "stringcast.execute.executor")
+    assert bad == []
+
+
+def test_the_lab_uses_the_pipelines_core_only():
+    """The virtual lab shares no code with the string model, the estimator or the planner: it imports
+    ``stringcast.core``; its campaign driver also plays motions with ``stringcast.execute``."""
+    bad = []
+    for p in LAB.rglob("*.py"):
+        tree = ast.parse(p.read_text())
+        for node in ast.walk(tree):
+            mods = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                    else [node.module] if isinstance(node, ast.ImportFrom) and not node.level and node.module else [])
+            for mod in mods:
+                parts = mod.split(".")
+                allowed = {"core", "execute"} if p.name == "campaign.py" else {"core"}
+                if parts[0] == "stringcast" and (len(parts) < 2 or parts[1] not in allowed):
+                    bad.append(f"{p.relative_to(LAB)} imports {mod}")
+    assert len(list(LAB.rglob("*.py"))) > 10
+    assert bad == []
+
+
+BLOCK_SIMULATORS = """
+import importlib.abc, sys
+class _NoLab(importlib.abc.MetaPathFinder):
+    def find_spec(self, name, path=None, target=None):
+        if name.split('.')[0] in {blocked!r}:
+            raise ImportError(f"No module named {{name!r}} (blocked: a core install)")
+sys.meta_path.insert(0, _NoLab())
+"""
+
+
+def test_the_pipeline_runs_without_the_lab(tmp_path):
+    """A fresh interpreter in which MuJoCo, PyElastica, PyAV and the virtual lab cannot be imported
+    (a core install) imports every pipeline module, and the lab's commands say what to install."""
+    import subprocess
+    import sys
+
+    code = BLOCK_SIMULATORS.format(blocked=set(SIMULATORS)) + f"""
+import importlib, pkgutil, stringcast
+names = [m.name for m in pkgutil.walk_packages(stringcast.__path__, 'stringcast.')]
+for name in names:
+    importlib.import_module(name)
+print(len(names))
+from stringcast.cli import main
+print(main(['campaign', 'x', '--root', {str(tmp_path)!r}]))
+from stringcast.execute.executor import virtual_lab_trial
+try:
+    virtual_lab_trial()
+except Exception as e:
+    print(type(e).__name__, e)
+"""
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr[-2000:]
+    out = run.stdout.strip().split("\n")
+    assert int(out[0]) > 40
+    assert out[-2] == "2"                        # the CLI's status for bad input, not a traceback
+    assert "pip install 'stringcast[lab]'" in run.stdout + run.stderr
+    assert out[-1].startswith("ConfigError") and "stringcast[lab]" in out[-1]

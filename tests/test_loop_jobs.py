@@ -121,7 +121,7 @@ def test_spec_and_run_config(config):
 def test_a_family_run_draws_every_material_class_and_joins_loop_json(config, tmp_path):
     """Seeds 0-4 of a family run draw one material of each class; the lab reads it; loop.json keeps its
     other entries and gains ``family`` with the draws and the fits' skill."""
-    from stringcast.lab.materials import KINDS, lab_material
+    from stringcast_lab.materials import KINDS, lab_material
 
     classes = [method_config(config, "ours", s, "mujoco", "state", family=True)["lab"]["material"]["class"]
                for s in range(5)]

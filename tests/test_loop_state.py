@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 
 from benchmarks.loop_state import WORKFLOW_ARGS, ErrorModel, draw_tracks, error_model, synthesize_trial
-from stringcast.campaign import tracking_errors
+from stringcast_lab.campaign import tracking_errors
 from stringcast.core import (DataError, forward_kinematics, joints_at, load_campaign, load_yaml, read_json,
                              read_parquet, settings_from_config, write_joint_table, write_json, write_parquet,
                              write_yaml)

@@ -25,7 +25,7 @@ def postures(tmp_path_factory, config):
     """Four 768 x 768 clips of the arm holding still, one per posture: [(rest image, q, truth)], campaign."""
     from stringcast.calibrate.calibration import median_frame
     from stringcast.core import resolve_campaign
-    from stringcast.lab import run_trial
+    from stringcast_lab import run_trial
     from stringcast.video.container import open_video
 
     cfg = small_camera_config(config, "sw_small")

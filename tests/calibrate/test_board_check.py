@@ -31,7 +31,7 @@ def still_arm(request, tmp_path_factory, config):
     """A 768 x 768 clip of the arm holding still at one posture, string hanging: rest image, truth, campaign."""
     from stringcast.calibrate.calibration import median_frame
     from stringcast.core import resolve_campaign
-    from stringcast.lab import run_trial
+    from stringcast_lab import run_trial
     from stringcast.video.container import open_video
 
     root = tmp_path_factory.mktemp(f"board_{request.param}")
@@ -114,7 +114,7 @@ def test_calibration_stage_records_the_check_and_warns(still_arm, tmp_path, sett
     """run_calibration puts the check in calibration.json; a board pose 30 mm off in config is caught."""
     from stringcast.calibrate.calibration import run_calibration
     from stringcast.core import resolve_campaign
-    from stringcast.lab import write_calibration_clip
+    from stringcast_lab import write_calibration_clip
 
     _, _, campaign, cfg, _, trial = still_arm
     calib = write_calibration_clip(campaign, cfg, tmp_path / "calib", seed=5, n_frames=14)
@@ -139,7 +139,7 @@ def test_the_campaigns_views_found_once_give_the_trials_calibration_exactly(stil
     from stringcast.calibrate.calib_views import read_calib_views
     from stringcast.calibrate.calibration import run_calibration
     from stringcast.core import DataError
-    from stringcast.lab import write_calibration_clip
+    from stringcast_lab import write_calibration_clip
 
     _, _, campaign, cfg, _, trial = still_arm
     calib = write_calibration_clip(campaign, cfg, tmp_path / "calib", seed=5, n_frames=14)
@@ -166,7 +166,7 @@ def test_the_campaigns_intrinsics_fitted_once_give_the_trials_calibration_exactl
     from stringcast.calibrate.calib_views import write_campaign_intrinsics
     from stringcast.calibrate.calibration import run_calibration
     from stringcast.core import DataError
-    from stringcast.lab import write_calibration_clip
+    from stringcast_lab import write_calibration_clip
 
     _, _, campaign, cfg, _, trial = still_arm
     calib = write_calibration_clip(campaign, cfg, tmp_path / "calib", seed=5, n_frames=14)
@@ -221,7 +221,7 @@ def lab_camera(config):
     """The default lab camera's true calibration (1024 x 1024) and the campaign's arm."""
     from stringcast.calibrate.calibration import Calibration
     from stringcast.core import resolve_campaign
-    from stringcast.lab import CameraModel
+    from stringcast_lab import CameraModel
 
     campaign = resolve_campaign({"string": 1, "target": 1}, config, "plain")
     cam = CameraModel.from_config(campaign.setup.camera, config)

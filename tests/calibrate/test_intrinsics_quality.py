@@ -20,7 +20,7 @@ ST = CalibrationSettings()
 def lab_clip(tmp_path_factory, config):
     """The lab's calibration clip (40 shots) from a 640 x 640 camera (the lowres preset): frames,
     the true K, the shots' tilts (deg), the board, and the config."""
-    lab = pytest.importorskip("stringcast.lab")
+    lab = pytest.importorskip("stringcast_lab")
     from stringcast.core import resolve_campaign
 
     cfg = lab.apply_preset(copy.deepcopy(config), "lowres")
@@ -180,7 +180,7 @@ def test_views_plus_one_more():
 @pytest.fixture(scope="module")
 def still_trial(tmp_path_factory, lab_clip):
     """A lab trial (same 640 x 640 camera) of the arm holding still, the board in the swing plane."""
-    from stringcast.lab import run_trial
+    from stringcast_lab import run_trial
 
     _, _, _, _, cfg, campaign = lab_clip
     cfg = dict(cfg, lab=dict(cfg["lab"], links_per_point=2, settle_s=0.1))

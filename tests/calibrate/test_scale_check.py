@@ -20,7 +20,7 @@ def still_arm(request, tmp_path_factory, config):
     campaign's board pose, the campaign and the first posture."""
     from stringcast.calibrate.calibration import median_frame
     from stringcast.core import resolve_campaign
-    from stringcast.lab import run_trial
+    from stringcast_lab import run_trial
     from stringcast.video.container import open_video
 
     posture = {"reaching": [0.3, -1.5, -0.4], "folded": [2.0, -1.6, -1.5]}[request.param]

@@ -120,6 +120,6 @@ def test_the_check_loads_neither_the_lab_nor_a_physics_engine(tmp_path):
     code = ("import sys\nfrom stringcast.core import load_config\nfrom stringcast.check import check_campaign\n"
             f"assert check_campaign({str(c)!r}, load_config([{str(CONFIG)!r}])) == []\n"
             "print(sorted(m for m in sys.modules if m.split('.')[0] in ('mujoco', 'elastica', 'numba')"
-            " or m.startswith('stringcast.lab')))\n")
+            " or m.startswith('stringcast_lab')))\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"

@@ -12,7 +12,7 @@ from stringcast.core.joint_log import read_joint_table, write_joint_table
 
 @pytest.fixture
 def fake_lab(monkeypatch):
-    """A recording stand-in for stringcast.lab.run_trial (writes a joints.csv like the lab)."""
+    """A recording stand-in for stringcast_lab.run_trial (writes a joints.csv like the lab)."""
     calls = []
 
     def run_trial(t_cmd, q_cmd, campaign, config, out_dir, seed, motion_start_s):
@@ -20,7 +20,7 @@ def fake_lab(monkeypatch):
         write_joint_table(out_dir / "joints.csv", t_cmd, q_cmd)
         return {"hit": False}
 
-    monkeypatch.setattr("stringcast.execute.executor.run_trial", run_trial)
+    monkeypatch.setattr("stringcast.execute.executor.virtual_lab_trial", lambda: run_trial)
     return calls
 
 

@@ -17,11 +17,11 @@ pytest.importorskip("elastica")
 
 from stringcast.core import ConfigError  # noqa: E402
 from stringcast.core.arm import hand_pose  # noqa: E402
-from stringcast.lab import StringPhysics, run_trial  # noqa: E402
-from stringcast.lab.rod import RodSim, rod_material, simulate_rod  # noqa: E402
-from stringcast.lab.rod.material import CORD_E_AXIAL, G_ACC  # noqa: E402
-from stringcast.lab.rod.plugins import HandPath, cylinder_cd, drag_kernel, skin_cf, sphere_cd  # noqa: E402
-from stringcast.lab.trial import lab_physics  # noqa: E402
+from stringcast_lab import StringPhysics, run_trial  # noqa: E402
+from stringcast_lab.rod import RodSim, rod_material, simulate_rod  # noqa: E402
+from stringcast_lab.rod.material import CORD_E_AXIAL, G_ACC  # noqa: E402
+from stringcast_lab.rod.plugins import HandPath, cylinder_cd, drag_kernel, skin_cf, sphere_cd  # noqa: E402
+from stringcast_lab.trial import lab_physics  # noqa: E402
 
 from tests.lab.test_lab import Q0, _tiny, _wrist_flick  # noqa: E402
 
@@ -314,11 +314,11 @@ def test_rod_shares_no_code_with_the_chain_or_the_model():
     """The rod imports from the lab only the string's description (mjcf.StringPhysics), the arm's
     servo, the Recording container and its set-point check: nothing of the MuJoCo chain
     (physics, air, the MJCF builders), nothing of the string model, and not MuJoCo itself."""
-    import stringcast.lab.rod as rod
+    import stringcast_lab.rod as rod
 
-    allowed = {("stringcast.lab.mjcf", "StringPhysics"), ("stringcast.lab.recording", "Recording"),
-               ("stringcast.lab.recording", "command_arrays"),
-               ("stringcast.lab.servo", "hand_trajectory"), ("stringcast.lab.servo", "servo_lag")}
+    allowed = {("stringcast_lab.mjcf", "StringPhysics"), ("stringcast_lab.recording", "Recording"),
+               ("stringcast_lab.recording", "command_arrays"),
+               ("stringcast_lab.servo", "hand_trajectory"), ("stringcast_lab.servo", "servo_lag")}
     for f in Path(rod.__file__).parent.glob("*.py"):
         for node in ast.walk(ast.parse(f.read_text())):
             if isinstance(node, ast.Import):
@@ -326,11 +326,11 @@ def test_rod_shares_no_code_with_the_chain_or_the_model():
             elif isinstance(node, ast.ImportFrom):
                 mod = node.module or ""
                 if node.level >= 2:                         # from ..x import y: the lab's modules
-                    mod = "stringcast.lab." + mod
+                    mod = "stringcast_lab." + mod
                 elif node.level == 1:
                     continue                                # the rod package's own modules
                 assert mod.split(".")[0] != "mujoco", f.name
-                if mod.startswith("stringcast.lab"):
+                if mod.startswith("stringcast_lab"):
                     for a in node.names:
                         assert (mod, a.name) in allowed, f"{f.name} imports {a.name} from {mod}"
                 elif mod.startswith("stringcast."):
@@ -338,19 +338,19 @@ def test_rod_shares_no_code_with_the_chain_or_the_model():
 
 
 def test_the_lab_imports_pyelastica_only_for_a_rod():
-    """``import stringcast.lab`` (the MuJoCo lab, the trial, the rod package) leaves PyElastica
+    """``import stringcast_lab`` (the MuJoCo lab, the trial, the rod package) leaves PyElastica
     unimported: it costs 0.5-0.9 s and only a rod needs it."""
     import subprocess
     import sys
 
-    code = "import sys, stringcast.lab, stringcast.lab.rod; print('elastica' in sys.modules)"
+    code = "import sys, stringcast_lab, stringcast_lab.rod; print('elastica' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
 
 
 def test_both_physics_check_the_set_points_alike():
     """The trial, the chain and the rod take the controller's set-points through one check (lab.recording)."""
-    from stringcast.lab.recording import command_arrays
+    from stringcast_lab.recording import command_arrays
 
     t, q = command_arrays([0, 1, 2], [[0, 1], [1, 2], [2, 3]], 2, "sim")
     assert t.dtype == q.dtype == np.float64 and q.shape == (3, 2)
@@ -371,7 +371,7 @@ def test_a_diverged_swing_is_run_again_at_half_the_step(monkeypatch):
     mid-swing (through ``RodSim.step``), as a diverged integrator leaves it. A step claimed too
     large diverges or not by rounding: 6 times the stable step held with OpenBLAS's AVX-512
     kernels and blew up with its AVX2 ones (issue 51)."""
-    from stringcast.lab.rod import sim as rod_sim
+    from stringcast_lab.rod import sim as rod_sim
 
     phys, arm, t_cmd, q_cmd = _weighted_flick()
     timestep, diverging = 5e-5, rod_sim.REFINEMENTS

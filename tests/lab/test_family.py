@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from stringcast.core import ConfigError, resolve_campaign
-from stringcast.lab import ChainSim, StringPhysics, simulate
-from stringcast.lab.air import cylinder_cd as white_cd
-from stringcast.lab.materials import (KINDS, MATERIAL_CLASSES, Material, apply_material, draw_material,
+from stringcast_lab import ChainSim, StringPhysics, simulate
+from stringcast_lab.air import cylinder_cd as white_cd
+from stringcast_lab.materials import (KINDS, MATERIAL_CLASSES, Material, apply_material, draw_material,
                                       material_ranges)
 
 from tests.lab.test_lab import _tiny, _wrist_flick
@@ -98,8 +98,8 @@ def test_lab_material_builds_the_campaigns_string(config):
 def test_lab_strings_cords_keep_their_physics(config):
     """Without lab.material every type's chain keeps lab.timestep_s and stays inextensible, and the rod
     keeps its 1 GPa braid, rigid clamp and natural rotary inertia (the demo's physics bit for bit)."""
-    from stringcast.lab.rod import rod_material
-    from stringcast.lab.rod.material import CORD_E_AXIAL
+    from stringcast_lab.rod import rod_material
+    from stringcast_lab.rod.material import CORD_E_AXIAL
 
     for sid in config["strings"]:
         phys = StringPhysics.from_campaign(resolve_campaign({"string": int(sid), "target": 1}, config), config)
@@ -116,7 +116,7 @@ def test_white_drag_stays_right_for_thin_strings():
     at Re 3-5, either side of Tritton's 1959 measurements), White's within 20 % of Lamb's there; the
     thinnest drawn thread (0.3 mm) is at Re 0.3 at 1.5 cm/s, where its drag is under 1 % of its weight."""
     pytest.importorskip("elastica")
-    from stringcast.lab.rod.plugins import cylinder_cd as sb_cd
+    from stringcast_lab.rod.plugins import cylinder_cd as sb_cd
 
     for re in np.geomspace(0.3, 1e4, 40):
         assert white_cd(re) == pytest.approx(sb_cd(re), rel=0.25)
@@ -137,7 +137,7 @@ def _chain_hanging(phys, phi):
 
 def _rod_hanging(phys, phi):
     pytest.importorskip("elastica")
-    from stringcast.lab.rod import RodSim
+    from stringcast_lab.rod import RodSim
 
     sim = RodSim(phys)
     sim.reset_hanging(np.array([0.0, 0.0, phi]))
@@ -237,7 +237,7 @@ def _swing(config, seed, engine):
         rec = simulate(phys, campaign.arm, t_cmd, q_cmd, 5e-5, 0.008, 0.05)
     else:
         pytest.importorskip("elastica")
-        from stringcast.lab.rod import simulate_rod
+        from stringcast_lab.rod import simulate_rod
 
         rec = simulate_rod(phys, campaign.arm, t_cmd, q_cmd, 5e-5, 0.008, 0.05)
     seg = np.linalg.norm(np.diff(rec.points, axis=1), axis=2).sum(axis=1)

@@ -16,11 +16,11 @@ from stringcast.core import ConfigError, resolve_campaign
 from stringcast.core.config import validate
 from stringcast.core.files import read_video_meta
 from stringcast.core.joint_log import read_joint_table
-from stringcast.lab import (CameraModel, apply_setup, build_renderer, draw_setup, h264_backend, run_trial,
+from stringcast_lab import (CameraModel, apply_setup, build_renderer, draw_setup, h264_backend, run_trial,
                             write_calibration_clip)
-from stringcast.lab.look import LUMA_BGR, ArmLook, scene_look
-from stringcast.lab.scene import arm_shapes
-from stringcast.lab.view import ARM_REST_ZONES_M, SWING_REGION_M, board_corners, region_outline
+from stringcast_lab.look import LUMA_BGR, ArmLook, scene_look
+from stringcast_lab.scene import arm_shapes
+from stringcast_lab.view import ARM_REST_ZONES_M, SWING_REGION_M, board_corners, region_outline
 from stringcast.video import open_video
 
 N_SEEDS = 200
@@ -131,7 +131,7 @@ def test_arm_without_discs_has_round_caps_in_the_links_shade(config):
 
 
 def test_bad_lab_look_and_video_are_refused(config):
-    from stringcast.lab.encode import video_settings
+    from stringcast_lab.encode import video_settings
 
     for lab, match in (({"look": {"backgrund": "plain"}}, "backgrund"), ({"look": {"background": "brick"}}, "brick"),
                        ({"look": {"tint": {"sky": [1, 1, 1]}}}, "sky"), ({"video": {"codec": "vp9"}}, "vp9")):

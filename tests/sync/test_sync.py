@@ -26,7 +26,7 @@ def lab_trial(tmp_path_factory, config, settings):
     """A 768 x 768, 500 fps lab clip of a short swing, with the whole arm in view; calibrated."""
     from stringcast.calibrate.calibration import run_calibration
     from stringcast.core import resolve_campaign
-    from stringcast.lab import run_trial
+    from stringcast_lab import run_trial
     from stringcast.plan.motion import joint_paths
 
     root = tmp_path_factory.mktemp("sync")

@@ -153,10 +153,10 @@ def test_the_lab_draws_bands_at_the_models_points(config):
     seen in a noise-free frame along the true projection of a still string."""
     import copy
 
-    pytest.importorskip("stringcast.lab")
+    pytest.importorskip("stringcast_lab")
     from stringcast.core.arm import forward_kinematics
     from stringcast.core import ConfigError, resolve_campaign
-    from stringcast.lab import build_renderer
+    from stringcast_lab import build_renderer
 
     cfg = copy.deepcopy(config)
     cfg["cameras"]["tiny"] = {"width_px": 320, "height_px": 240, "fps": 250.0, "bit_depth": 8, "mono": True}

@@ -5,7 +5,7 @@ motion of ~0.15 s; the whole chain (calibration from the trial's first frames, t
 trigger time as sync, tracking) as in tests/test_tracking.py. Each test prints its numbers and checks
 (a) the valid points' median / 95th-percentile error, (b) the valid share, and (c) that
 ground-truth points the camera cannot see (behind the arm, outside the image) are never
-marked valid. The presets of :func:`stringcast.lab.apply_preset` are checked to change
+marked valid. The presets of :func:`stringcast_lab.apply_preset` are checked to change
 the footage (so they cannot be silently ignored).
 """
 import copy
@@ -21,8 +21,8 @@ from stringcast.core import settings_from_config
 from stringcast.core import resolve_campaign
 from stringcast.core.files import read_video_meta, write_json
 from stringcast.core.joint_log import read_joint_table
-from stringcast.lab import apply_preset, build_renderer, run_trial
-from stringcast.lab.scene import arm_shapes
+from stringcast_lab import apply_preset, build_renderer, run_trial
+from stringcast_lab.scene import arm_shapes
 
 RATE = 500.0
 Q0 = np.array([0.2, -0.4, -0.3])

@@ -28,7 +28,7 @@ import pytest
 import yaml
 
 from lab_project import ROOT, make_project
-from stringcast.campaign import run_campaign
+from stringcast_lab.campaign import run_campaign
 
 REAL_PROFILE = ROOT / "config" / "profiles" / "slurm" / "config.yaml"
 # the account and partition jobs are submitted to: make slurm's, unless set for another cluster

@@ -27,7 +27,7 @@ import yaml
 
 import browser
 from lab_project import make_project
-from stringcast.campaign import run_campaign, tracking_error_mm, tracking_errors
+from stringcast_lab.campaign import run_campaign, tracking_error_mm, tracking_errors
 from stringcast.core.files import DataError
 from stringcast.video import open_video
 

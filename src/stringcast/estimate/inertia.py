@@ -24,7 +24,7 @@ is differentiated. Its figures:
 
 * ``inertia_share``: b_a g / omega^2, the chord's tilt per grasp acceleration as a share of a
   pendulum's with the same swing frequency (1 for a point pendulum). Over the lab's string family
-  (both engines, every material class, :mod:`stringcast.lab.materials`; benchmarks/inertia.py,
+  (both engines, every material class, :mod:`stringcast_lab.materials`; benchmarks/inertia.py,
   docs/method.md) 0.81-1.43 where stated; the field recording of issue 52 0.01-0.06.
 * ``rotation_coupling``: b_phi, how much of the hand's angular acceleration the chord takes: near 1
   where the string turns with the hand as if carried in its frame; over the family -0.34 to +0.08 on

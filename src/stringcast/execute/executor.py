@@ -11,8 +11,9 @@ flight window).
 
 Backends:
 
-* ``virtual``: :func:`stringcast.lab.run_trial` (MuJoCo string, simulated arm and
-  camera) writes video.mkv, video.yaml, joints.csv and the ground truth.
+* ``virtual``: :func:`stringcast_lab.run_trial` (MuJoCo or PyElastica string, simulated arm
+  and camera) writes video.mkv, video.yaml, joints.csv and the ground truth. The virtual lab
+  is an extra (``pip install 'stringcast[lab]'``), imported only when this backend plays.
 * ``ur-rtde``: a Universal Robots arm through ``ur_rtde`` servoJ
   (:func:`stringcast.execute.ur_rtde.play_ur`): checks the arm's current posture
   against the start, writes joints.csv and executor.json (a stopped trial:
@@ -28,10 +29,24 @@ import numpy as np
 
 from stringcast.core import (Campaign, ConfigError, DataError, ExecutorSettings, assert_within_limits, atomic_path,
                              check_motion_timing, load_campaign, read_joint_table)
-from stringcast.lab import run_trial
 from .ur_rtde import UR_JOINTS, URSettings, play_ur
 
 BACKENDS = ("virtual", "ur-rtde")
+
+
+def virtual_lab_trial():
+    """The ``virtual`` backend's player, :func:`stringcast_lab.run_trial`, imported on demand:
+    the pipeline and the ``ur-rtde`` backend run without the virtual lab's simulators.
+
+    Raises:
+        ConfigError: the virtual lab (the ``lab`` extra: MuJoCo, PyElastica, PyAV) is not installed.
+    """
+    try:
+        from stringcast_lab import run_trial
+    except ImportError as e:
+        raise ConfigError(f"executor: the virtual backend needs the virtual lab, which is not installed "
+                          f"({e}): pip install 'stringcast[lab]'") from e
+    return run_trial
 
 
 def _copy(src: Path, dst: Path) -> None:
@@ -116,6 +131,7 @@ def execute(motion_csv: Path, backend: str, out_dir: Path, campaign_yaml: Path |
     if backend == "ur-rtde":
         result = play_ur(t_cmd, q_cmd, arm, ur, out_dir, robot_ip, move_to_start, interfaces)
     else:
+        run_trial = virtual_lab_trial()
         out_dir.mkdir(parents=True, exist_ok=True)
         result = run_trial(t_cmd, q_cmd, campaign, config, out_dir, seed, t_move)
     _copy(motion_csv, out_dir / "motion.csv")

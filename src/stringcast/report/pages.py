@@ -13,7 +13,7 @@ produced it (:mod:`stringcast.report.provenance`: the method, the git commit, th
 The pages show only what the pipeline measured and computed. The virtual lab's
 ground truth files are never read here, as in every other stage: footage from a
 real camera has none. The lab's verdict and the tracking error against its truth
-are in the campaign driver's ``campaign_summary.json`` (:mod:`stringcast.campaign`)
+are in the campaign driver's ``campaign_summary.json`` (:mod:`stringcast_lab.campaign`)
 and in ``benchmarks/``.
 """
 from __future__ import annotations

@@ -39,7 +39,7 @@ model of ``docs/string_model.md`` (and shares no code with it):
   (so a ramp lags by servo_lag_s); the command u is the controller's set-points
   interpolated linearly (as servoJ does).
 
-The string's description and MJCF are :mod:`stringcast.lab.mjcf`.
+The string's description and MJCF are :mod:`stringcast_lab.mjcf`.
 
 Integrator: MuJoCo's semi-implicit Euler (joint damping implicit) at
 ``lab.timestep_s`` (5e-5 s): the starting design measured implicitfast 15-35x slower on
@@ -271,7 +271,7 @@ def simulate(phys: StringPhysics, arm: ArmSpec, t_cmd: np.ndarray, q_cmd: np.nda
         A :class:`Recording` from t_cmd[0] to t_cmd[-1] at every step.
 
     Raises:
-        ValueError: bad shapes or t_cmd not increasing (:func:`~stringcast.lab.recording.command_arrays`).
+        ValueError: bad shapes or t_cmd not increasing (:func:`~stringcast_lab.recording.command_arrays`).
         FloatingPointError: the simulation diverged.
     """
     import time

@@ -21,7 +21,7 @@ bending over a free length c d beyond the jaws, k_g = EI / (c d), c drawn; dampi
 a time constant (on a pivot, the time constant times the clamp's stiffness it would have).
 
 The pipeline never reads a draw: a config names it in ``lab.material`` (``seed``, optional
-``class``), and :meth:`~stringcast.lab.mjcf.StringPhysics.from_campaign` builds the string from it.
+``class``), and :meth:`~stringcast_lab.mjcf.StringPhysics.from_campaign` builds the string from it.
 """
 from __future__ import annotations
 

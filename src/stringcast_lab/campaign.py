@@ -35,7 +35,7 @@ import pandas as pd
 from stringcast.core import (ConfigError, load_config, load_yaml, read_parquet, resolve_campaign, settings_from_config,
                              write_yaml)
 from stringcast.execute import execute
-from stringcast.lab import write_calibration_clip
+from .calib_clip import write_calibration_clip
 
 
 _RULE = re.compile(r"^(?:local)?rule (\w+):")

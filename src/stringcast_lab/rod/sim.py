@@ -168,12 +168,12 @@ def simulate_rod(phys: StringPhysics, arm: ArmSpec, t_cmd: np.ndarray, q_cmd: np
                  servo_lag_s: float, settle_s: float = 0.3, progress: bool = False) -> Recording:
     """Settle the rod at q_cmd[0], then swing it through the commanded joint motion.
 
-    The same contract as :func:`stringcast.lab.physics.simulate`: the hand is the lagged arm's
-    (:func:`~stringcast.lab.servo.servo_lag`, :func:`~stringcast.lab.servo.hand_trajectory`, on the
+    The same contract as :func:`stringcast_lab.physics.simulate`: the hand is the lagged arm's
+    (:func:`~stringcast_lab.servo.servo_lag`, :func:`~stringcast_lab.servo.hand_trajectory`, on the
     rod's half-step clock), the rod steps at dt = timestep / k (k the fewest whole steps per sample
     within the stable step), and the nodes are recorded every ``timestep`` s.
 
-    The stable step (:func:`~stringcast.lab.rod.material.stable_step`) is the undamped wave
+    The stable step (:func:`~stringcast_lab.rod.material.stable_step`) is the undamped wave
     limit; a fast swing of a damped, weighted rod can still blow up at it (seen once in stop 47's
     140 loop campaigns: type 7, seed 7, at t = 1.21 s). A diverged run is therefore run again from the
     start at half the step, up to ``REFINEMENTS`` times; the recording's ``detail`` says how
@@ -186,11 +186,11 @@ def simulate_rod(phys: StringPhysics, arm: ArmSpec, t_cmd: np.ndarray, q_cmd: np
         settle_s: free dynamics at the first pose after the static equilibrium, s.
 
     Returns:
-        A :class:`~stringcast.lab.recording.Recording` (physics "elastica") from t_cmd[0] to
+        A :class:`~stringcast_lab.recording.Recording` (physics "elastica") from t_cmd[0] to
         t_cmd[-1], points (N, n_links + 1, 2) = the nodes.
 
     Raises:
-        ValueError: bad shapes or t_cmd not increasing (:func:`~stringcast.lab.recording.command_arrays`).
+        ValueError: bad shapes or t_cmd not increasing (:func:`~stringcast_lab.recording.command_arrays`).
         FloatingPointError: the simulation diverged at every step tried.
     """
     t_cmd, q_cmd = command_arrays(t_cmd, q_cmd, arm.n_joints, "simulate_rod")

@@ -5,7 +5,7 @@
 clay spheres, rigid pipe spans, the driver body at the grasp; a slide per link where a drawn
 material stretches, :func:`slide_spring`). A drawn material (``lab.material``, :mod:`.materials`)
 replaces the table's cord. How the chain is stepped,
-dragged and driven is :mod:`stringcast.lab.physics`, whose docstring gives the physics.
+dragged and driven is :mod:`stringcast_lab.physics`, whose docstring gives the physics.
 """
 from __future__ import annotations
 

@@ -4,7 +4,7 @@ ChArUco board, target).
 
 Everything is drawn as *reflectance* in [0, 1] (mono), or BGR reflectance (colour,
 :mod:`.look`), on the camera's ideal (undistorted) canvas
-(:class:`~stringcast.lab.camera.IdealCanvas`), through the plane homography of the swing plane
+(:class:`~stringcast_lab.camera.IdealCanvas`), through the plane homography of the swing plane
 (so circles in the plane become the right ellipses), as anti-aliased coverage masks
 composited over the background (:mod:`.draw`). The string (cord ~3 mm, clay lumps ~16 mm,
 pipes ~8 mm) is drawn at 4x in a box around it and area-averaged, so its width is right to a

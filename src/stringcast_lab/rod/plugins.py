@@ -12,7 +12,7 @@ Planar: the rod lies in z = 0 and every force here is in that plane (z component
 
 The three classes subclass PyElastica's, so they are made on first use by :func:`plugin_classes`:
 PyElastica is imported only when a rod is built (it takes 0.5-0.9 s, scipy.interpolate
-included), as the MuJoCo chain imports MuJoCo only when a chain is built, so ``stringcast.lab``
+included), as the MuJoCo chain imports MuJoCo only when a chain is built, so ``stringcast_lab``
 stays as quick to import as it was. The numba kernels and :class:`HandPath` need neither.
 """
 from __future__ import annotations

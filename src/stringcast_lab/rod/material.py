@@ -1,9 +1,9 @@
-"""The Cosserat rod's material, element by element, from a :class:`~stringcast.lab.mjcf.StringPhysics`.
+"""The Cosserat rod's material, element by element, from a :class:`~stringcast_lab.mjcf.StringPhysics`.
 
 :class:`RodMaterial` turns what the string *is* (length, g/m, diameter, the configured bending EI
 and damping, clay lumps, plastic pipes) into the per-element stiffnesses and inertias of a
 PyElastica ``CosseratRod`` of ``phys.n_links`` elements, and the explicit time step they allow.
-The values and their sources are in the package docstring (:mod:`stringcast.lab.rod`).
+The values and their sources are in the package docstring (:mod:`stringcast_lab.rod`).
 """
 from __future__ import annotations
 

@@ -1,9 +1,9 @@
 """The virtual lab's second string physics (``lab.physics: elastica``): a PyElastica Cosserat rod.
 
-Independent of the MuJoCo chain (:mod:`stringcast.lab.physics`, :mod:`stringcast.lab.air`) and of
+Independent of the MuJoCo chain (:mod:`stringcast_lab.physics`, :mod:`stringcast_lab.air`) and of
 the pipeline's string model (:mod:`stringcast.model`): from the lab it takes only what the string
-*is* (:class:`~stringcast.lab.mjcf.StringPhysics`, plain data), the arm's servo and hand path
-(:mod:`stringcast.lab.servo`) and the :class:`~stringcast.lab.recording.Recording` it returns.
+*is* (:class:`~stringcast_lab.mjcf.StringPhysics`, plain data), the arm's servo and hand path
+(:mod:`stringcast_lab.servo`) and the :class:`~stringcast_lab.recording.Recording` it returns.
 docs/lab_physics.md has the same account with the figures measured.
 
 The rod (PyElastica 1.0, ``CosseratRod``; Gazzola, Dudte & Mahadevan 2018, R. Soc. open sci. 5:
@@ -42,7 +42,7 @@ Its nodes are the Recording's sites (node k at rest arc k L / n, node 0 the gras
   warning and ``pipe_capped`` in the ground truth.
 * The grasp (:class:`~.plugins.HandClamp`): node 0 at the hand, element 0's directors along the
   gripper axis (d3 = (cos phi_h, sin phi_h), as the MuJoCo chain's first link at rest), both
-  with the hand's velocities: a clamp following :func:`~stringcast.lab.servo.hand_trajectory`.
+  with the hand's velocities: a clamp following :func:`~stringcast_lab.servo.hand_trajectory`.
   The first element is held straight along the gripper: the cord bends from node 1 on, and under
   a cast's tension (bending boundary layer sqrt(EI / T) ~ 2 mm, finer than an element) element 0's
   shear is the clamp's compliance.

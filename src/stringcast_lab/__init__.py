@@ -1,5 +1,9 @@
 """The virtual lab: a stand-in for the arm, the string and the high-speed camera.
 
+It lies beside the pipeline, not inside it (the ``lab`` extra: ``pip install 'stringcast[lab]'``):
+it imports the pipeline's core (config, arm kinematics, file writers), the pipeline never imports it
+(the executor's ``virtual`` backend loads it on demand).
+
 It shares no code with the string model (``stringcast.model.string_model``): the string is a
 MuJoCo capsule chain (:mod:`.mjcf`, :mod:`.physics`) in air (:mod:`.air`), held by an arm with
 servo lag (:mod:`.servo`), filmed by a simulated pinhole camera with OpenCV lens
