@@ -6,7 +6,7 @@ from pathlib import Path
 
 from benchmarks.common import LIBRARIES, header
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _norm(name: str) -> str:
@@ -26,7 +26,7 @@ def _pins() -> dict[str, str]:
 
 def test_constraints_pin_every_dependency_and_benchmark_library():
     meta = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
-    deps = meta["dependencies"] + meta["optional-dependencies"]["test"]
+    deps = meta["dependencies"] + meta["optional-dependencies"]["lab"] + meta["optional-dependencies"]["test"]
     names = {_norm(re.split(r"[<>=!~\[; ]", d, maxsplit=1)[0]) for d in deps} | {_norm(n) for n in LIBRARIES}
     missing = sorted(names - set(_pins()))
     assert not missing, f"constraints.txt pins no version of {missing}: run `make lock`"

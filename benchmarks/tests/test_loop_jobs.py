@@ -14,7 +14,7 @@ from benchmarks.loop import Spec, method_config, run_dir
 from benchmarks.loop_summary import family_into
 from benchmarks.loop_summary import bootstrap_ci, summarize
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _record(k: int, seed: int, method: str, executions: int, hit: bool, physics: str = "mujoco",

@@ -6,7 +6,7 @@ import yaml
 
 from benchmarks.loop_prediction import campaigns, summarize, variants
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _campaign(work: Path, name: str, trials: int) -> None:

@@ -17,7 +17,7 @@ from stringcast.core import (DataError, forward_kinematics, joints_at, load_camp
                              read_parquet, settings_from_config, write_joint_table, write_json, write_parquet,
                              write_yaml)
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "tests" / "workflow"))
 from lab_project import make_project  # noqa: E402
 
