@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-fast bench bench-quick lint clean venv browser slurm lock
+.PHONY: demo test test-fast test-core bench bench-quick lint clean venv browser slurm lock
 
 venv: $(STAMP)
 
@@ -23,6 +23,17 @@ test: $(STAMP)
 
 test-fast: $(STAMP)
 	$(PY) -m pytest -n 2 --dist loadfile -q -m "not slow"
+
+# The pipeline as a lab with a real arm installs it (no lab extra: no MuJoCo, PyElastica or PyAV), in
+# its own venv: the test modules that do not use the virtual lab (tests/conftest.py leaves the others
+# out), and `stringcast next` on the field recording (tests/test_next_core.py).
+VENV_CORE := .venv-core
+test-core:
+	test -x $(VENV_CORE)/bin/python || $(PYTHON) -m venv $(VENV_CORE)
+	$(VENV_CORE)/bin/python -m pip install --quiet --upgrade pip
+	$(VENV_CORE)/bin/python -m pip install --quiet -c constraints.txt -e ".[test]"
+	! $(VENV_CORE)/bin/python -c "import mujoco" 2>/dev/null
+	$(VENV_CORE)/bin/python -m pytest -n 2 --dist loadfile -q -m "not slow" tests
 
 bench: $(STAMP)
 	$(PY) -m benchmarks.run

@@ -26,7 +26,9 @@ the first motion with each weight's point at 10 times a plain one's mass (tried 
 0fe8d58, left out: docs/method.md); ``ours_first_ensemble`` plans it under 16 random Table 2
 sets (stop 46, left out: docs/method.md); ``ours_rest_folds`` fills tracked rest points where the
 string folds within a segment (stop 48); ``ours_no_residual`` plans without the residual correction
-(and so without its gate on perturbations), the weak class of the family being threads (issue 52). ``benchmarks.loop_ab`` compares such a run with ours.
+(and so without its gate on perturbations), the weak class of the family being threads (issue 52);
+``ours_always_perturb`` perturbs the played motion (+-0.5 rad/s) after any miss, as the paper does, instead
+of a wider perturbation or a new motion after a miss over 45 mm. ``benchmarks.loop_ab`` compares such a run with ours.
 
 A seed ``s`` sets the lab's noise (the campaign's seed: camera noise, joint noise, trigger
 error), the pipeline's own searches (``estimation.seed`` and ``motion.seed`` = ``s``) and, in
@@ -113,6 +115,7 @@ VARIANTS = {
     "ours_first_ensemble": {"motion": {"first_ensemble": 16, "first_extra_after_hit": 2000}},
     "ours_rest_folds": {"estimation": {"rest_min_chord_share": 0.9}},
     "ours_no_residual": {"motion": {"residual_correction": False}},
+    "ours_always_perturb": {"motion": {"replan_miss_mm": 0.0}},
 }
 PHYSICS = ("mujoco", "elastica")
 MODES = ("state", "video")

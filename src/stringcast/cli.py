@@ -307,6 +307,17 @@ def cmd_campaign(args):
                  root=Path(args.root))
 
 
+def cmd_next(args):
+    from stringcast.chain import run_next, trial_location
+    from stringcast.core import METHOD_CONFIGS
+
+    base = trial_location(args.trial_dir)[0] / "config" / "config.yaml"
+    paths = ([str(base)] if base.is_file() else []) + (args.config or []) + [str(c) for c in METHOD_CONFIGS[args.method]]
+    log = _LOG
+    motion = run_next(args.trial_dir, paths, main, say=log.say)
+    log.say(f"next motion -> {motion}")
+
+
 def check_summary(campaign_dir: str, problems: list, n_trials: int) -> str:
     """``stringcast check``'s last line: the counts of errors and warnings, or ok."""
     errors = sum(p.is_error for p in problems)
@@ -357,7 +368,7 @@ def cmd_settings(args):
 HANDLERS = {"decode": cmd_decode, "calib-views": cmd_calib_views, "calibrate": cmd_calibrate, "sync": cmd_sync, "sweep": cmd_sweep, "track": cmd_track,
             "estimate": cmd_estimate, "predict": cmd_predict, "plan-first": cmd_plan_first, "plan": cmd_plan,
             "report-trial": cmd_report_trial, "report-campaign": cmd_report_campaign, "execute": cmd_execute,
-            "calib-clip": cmd_calib_clip, "campaign": cmd_campaign, "settings": cmd_settings, "check": cmd_check}
+            "calib-clip": cmd_calib_clip, "campaign": cmd_campaign, "next": cmd_next, "settings": cmd_settings, "check": cmd_check}
 """Each subcommand's function."""
 
 
@@ -378,7 +389,7 @@ def main(argv: list[str] | None = None) -> int:
     from stringcast.core import ConfigError, DataError, JointLimitError, start_lifeline
 
     args = build_parser().parse_args(argv)
-    _LOG = JobLog(args.log)
+    outer, _LOG = _LOG, JobLog(args.log)        # a command run by another (``next``) gives its log back
     if args.command in STAGES:
         start_lifeline()
     try:
@@ -394,6 +405,7 @@ def main(argv: list[str] | None = None) -> int:
         return INTERNAL_ERROR_STATUS
     finally:
         _LOG.close()
+        _LOG = outer
     return code if isinstance(code, int) else 0
 
 

@@ -186,6 +186,15 @@ def _add_planning_and_tools(add) -> None:
                     help="paper: the config as given (config/config.yaml: the paper's method); ours: "
                          "config/ours.yaml merged over it, after any --config")
 
+    sp = add("next", "one trial's stages in this process, in the workflow's order, to its next motion.csv: "
+                     "decode, calibrate, sync, sweep, track, estimate, predict, plan, reports (the same files "
+                     "and logs as the workflow's rules)")
+    sp.add_argument("trial_dir", help="<project>/data/<campaign>/trial_<k>: the trial just played and filmed; "
+                                      "results go to <project>/results/<campaign>/trial_<k>/")
+    sp.add_argument("--method", choices=list(METHOD_CONFIGS), default="paper",
+                    help="paper: the config as given; ours: config/ours.yaml merged over it, after any --config. "
+                         "The config, as the workflow reads it: <project>/config/config.yaml, then each --config")
+
     sp = add("check", "check every raw file of a campaign before any decode (campaign.yaml, calib/, each "
                       "trial's video header, video.yaml, joints.csv, motion.csv, motion.json): one line per "
                       "problem, exit status 2 on any error")

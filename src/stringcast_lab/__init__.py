@@ -17,14 +17,19 @@ contract says (plus ground truth for tests and benchmarks);
 camera, lens, codec, light, background, board, arm, calibration set and clocks drawn from a family;
 :func:`draw_material` and :func:`apply_material` (:mod:`.materials`) the string's material.
 """
+try:
+    import mujoco  # noqa: F401  (the default physics: without it, the lab extra is not installed)
+except ImportError as exc:
+    raise ImportError(f"the virtual lab needs its extra ({exc}): pip install 'stringcast[lab]'") from exc
+
 from .calib_clip import write_calibration_clip
 from .camera import PRESETS, CameraModel, IdealCanvas, Sensor, apply_preset, camera_settings
 from .encode import h264_backend
+from .materials import Material, apply_material, draw_material
 from .mjcf import StringPhysics
 from .physics import ChainSim, simulate
-from .recording import Recording
-from .materials import Material, apply_material, draw_material
 from .randomize import Setup, apply_setup, draw_setup
+from .recording import Recording
 from .servo import servo_lag
 from .trial import build_renderer, motion_end, run_trial
 

@@ -13,6 +13,7 @@ import hashlib
 import json
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -163,6 +164,34 @@ def test_campaign_end_to_end(tmp_path, finished):
     assert again["E_mm"] == pytest.approx(params["E_mm"], rel=1e-9)
     # raw data under data/ were never written by the workflow
     assert snapshot(root / "data") == before_data
+
+
+@pytest.mark.slow
+def test_next_writes_what_the_workflow_writes(tmp_path, finished):
+    """``stringcast next data/<c>/trial_1`` in another project holding the same raw files writes the
+    workflow's files (the same names, logs included) with the same content, in one process."""
+    from stringcast.cli import main
+
+    root, _ = finished
+    other = make_project(tmp_path / "project", yaml.safe_load((root / "config" / "config.yaml").read_text()))
+    src, dst = root / "data" / "e2e", other / "data" / "e2e"
+    dst.mkdir(parents=True)
+    for name in ("campaign.yaml", "calib", "trial_1"):
+        (shutil.copytree if (src / name).is_dir() else shutil.copyfile)(src / name, dst / name)
+    assert main(["next", str(dst / "trial_1")]) == 0
+    res, res2 = root / "results" / "e2e", other / "results" / "e2e"
+    names = {p.name for p in (res / "trial_1").iterdir()}
+    assert names == {p.name for p in (res2 / "trial_1").iterdir()} and "motion.csv" in names
+    logs = {p.name for p in (res2 / "logs").iterdir()}
+    assert logs <= {p.name for p in (res / "logs").iterdir()} and {"track_1.log", "plan_1.log"} <= logs
+    assert (res2 / "report.html").is_file() and "trial_1/report.html" in (res2 / "report.html").read_text()
+    pd.testing.assert_frame_equal(pd.read_parquet(res2 / "trial_1" / "tracks.parquet"),
+                                  pd.read_parquet(res / "trial_1" / "tracks.parquet"))
+    for name, key in (("geometry.json", "H_pixel_to_robot"), ("clock.json", "offset_s"), ("params.json", "E_mm"),
+                      ("params.json", "chi")):
+        a, b = (json.loads((r / "trial_1" / name).read_text()) for r in (res, res2))
+        np.testing.assert_allclose(np.asarray(b[key], float), np.asarray(a[key], float), rtol=1e-9, err_msg=name)
+    assert (res2 / "trial_1" / "motion.csv").read_text() == (res / "trial_1" / "motion.csv").read_text()
 
 
 def _edit_config(root: Path, section: str, key: str, value) -> dict:

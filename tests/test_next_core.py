@@ -1,0 +1,77 @@
+"""``stringcast next`` on a recorded trial from another lab (../shared/field): the pipeline from the raw
+files to the next motion in one process, without the virtual lab (``make test-core`` runs it in a
+venv without the lab extra; the product's suite runs it too)."""
+import json
+import os
+import shutil
+from pathlib import Path
+
+import pytest
+import yaml
+
+from stringcast.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+FIELD = Path(os.environ.get("STRINGCAST_FIELD_DATA", ROOT.parent / "shared" / "field"))
+SMALL = {"estimation": {"iterations": 128, "batch": 64}, "motion": {"max_candidates": 1024, "extra_after_hit": 32}}
+"""Small search budgets: the chain, not the search, is under test."""
+
+
+def project(root: Path, trials=("trial_1",)) -> Path:
+    """A project at ``root``: the repo's config, small budgets (small.yaml) and data/field_1 with its
+    calib/ and each of ``trials`` linked to the field's trial_1 files (read-only, not copied)."""
+    if not (FIELD / "field_1" / "trial_1" / "joints.csv").is_file():
+        pytest.skip(f"the field recording is not at {FIELD} (set STRINGCAST_FIELD_DATA)")
+    (root / "config").mkdir(parents=True)
+    shutil.copyfile(ROOT / "config" / "config.yaml", root / "config" / "config.yaml")
+    (root / "small.yaml").write_text(yaml.safe_dump(SMALL))
+    dst = root / "data" / "field_1"
+    dst.mkdir(parents=True)
+    shutil.copyfile(FIELD / "field_1" / "campaign.yaml", dst / "campaign.yaml")
+    (dst / "calib").symlink_to(FIELD / "field_1" / "calib")
+    for name in trials:
+        (dst / name).mkdir()
+        for f in (FIELD / "field_1" / "trial_1").iterdir():
+            (dst / name / f.name).symlink_to(f)
+    return root
+
+
+@pytest.fixture(scope="module")
+def field_project(tmp_path_factory):
+    return project(tmp_path_factory.mktemp("field") / "project")
+
+
+def test_next_runs_a_recorded_trial_to_its_next_motion(field_project, capsys):
+    root = field_project
+    before = {p: p.stat().st_mtime_ns for p in (root / "data").rglob("*") if p.is_file()}
+    code = main(["--config", str(FIELD / "lab.yaml"), "--config", str(root / "small.yaml"), "next",
+                 str(root / "data" / "field_1" / "trial_1")])
+    out = capsys.readouterr().out
+    assert code == 0, out
+    res = root / "results" / "field_1"
+    for i, stage in enumerate(("decode", "calib-views", "calibrate", "sync", "sweep", "track", "estimate", "plan",
+                               "report-trial"), 1):
+        assert f"[next {i}/9] {stage} done" in out
+    motion = (res / "trial_1" / "motion.csv").read_text().splitlines()
+    assert motion[0].startswith("t_s,q1_rad") and len(motion) > 100
+    params = json.loads((res / "trial_1" / "params.json").read_text())
+    assert params["verdict"]["status"] in ("ok", "warn", "fail") and params["fit_check"]
+    plan = json.loads((res / "trial_1" / "motion.json").read_text())
+    assert plan["planned_on_failed_fit"] == (params["verdict"]["status"] == "fail")
+    assert (res / "report.html").is_file() and (res / "logs" / "track_1.log").is_file()
+    assert f"next motion -> {res / 'trial_1' / 'motion.csv'}" in out
+    # the raw files are only read
+    assert {p: p.stat().st_mtime_ns for p in (root / "data").rglob("*") if p.is_file()} == before
+
+
+def test_next_names_a_missing_earlier_estimate(tmp_path, capsys):
+    root = project(tmp_path / "project", trials=("trial_1", "trial_2"))
+    assert main(["--config", str(FIELD / "lab.yaml"), "next", str(root / "data" / "field_1" / "trial_2")]) == 2
+    out = "".join(capsys.readouterr())
+    assert "results/field_1/trial_1/params.json: missing" in out and "stringcast next data/field_1/trial_1" in out
+    assert not (root / "results").exists()
+
+
+def test_next_refuses_a_folder_that_is_not_a_trial(tmp_path, capsys):
+    assert main(["next", str(tmp_path)]) == 2
+    assert "not a trial folder" in "".join(capsys.readouterr())
