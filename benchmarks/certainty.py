@@ -250,7 +250,8 @@ def figure(rows: list[dict], path: Path) -> None:
             for axis in (ax.xaxis, ax.yaxis):
                 axis.set_minor_formatter(NullFormatter())
         c, b = cov[q], old[q]
-        share = lambda x: "-" if x["share"] is None else f"{x['share']:.0%}"
+        def share(x):
+            return "-" if x["share"] is None else f"{x['share']:.0%}"
         ax.set_title(f"{q}: {c['covered']}/{c['stated']} covered ({share(c)}); before {b['covered']}/{b['stated']}",
                      fontsize=9)
         unit = "mm" if q == "mapping" else "ms"

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import os
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -47,7 +47,7 @@ def library_versions() -> dict[str, str | None]:
 
 def header(name: str, quick: bool) -> dict:
     """The keys every benchmark JSON starts with."""
-    return {"benchmark": name, "cores": cores(), "created": datetime.now(timezone.utc).isoformat(),
+    return {"benchmark": name, "cores": cores(), "created": datetime.now(UTC).isoformat(),
             "git_commit": git_commit(), "libraries": library_versions(), "quick": bool(quick)}
 
 

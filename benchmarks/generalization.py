@@ -139,7 +139,7 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, until: str 
         cal_doc = read_json(out / "calibration.json")
         row["fx_error_pct"], row["principal_point_error_px"] = _calibration_errors(cal_doc, setup)
         row["calibration_verdict"] = _verdict(cal_doc)
-        row["calibration_reasons"] = list(((cal_doc.get("verdict") or {}).get("reasons") or []))
+        row["calibration_reasons"] = list((cal_doc.get("verdict") or {}).get("reasons") or [])
         truth = read_json(trial / "ground_truth.json")
         row["plane_error_median_mm"], row["plane_error_max_mm"] = _plane_errors(out / "calibration.json", truth["camera"])
         if until == "calibrate":

@@ -125,7 +125,7 @@ def error_model(string_type: int, source_dir: Path) -> ErrorModel:
             "sync": {"file": str(gp), "git_commit": gen.get("git_commit"), "created": gen.get("created"),
                      "figures": what, "count": len(sync)}})
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
-        raise DataError(f"{tp} / {gp}: no usable median_mm, p95_mm, valid_share or {key}: {exc}")
+        raise DataError(f"{tp} / {gp}: no usable median_mm, p95_mm, valid_share or {key}: {exc}") from exc
     return model
 
 

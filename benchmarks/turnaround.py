@@ -1,4 +1,4 @@
-"""Benchmark ``turnaround``: from a new trial folder to the next ``motion.csv``, through Snakemake.
+"""Benchmark ``turnaround``: from a new trial folder to the next ``motion.csv``, through Snakemake and through ``stringcast next``.
 
 Between two executions a person waits at the arm for the next motion file; this is that wait.
 The lab films one trial of the default camera (the campaign's first motion, string 1,
@@ -12,7 +12,11 @@ motion and the calibration clip's board views (``calib_views.npz``, found once p
 * seconds_per_stage: each rule's wall seconds from its ``benchmark:`` file (the ``s`` column);
 * decode_seconds: a plain decode of the same video (``video.open_video``, every frame, one
   pass), in the same run;
-* ratio_to_decode = seconds_total / decode_seconds.
+* ratio_to_decode = seconds_total / decode_seconds;
+* next_seconds: the same trial through ``stringcast next data/<c>/trial_1`` (one process, no
+  Snakemake; its results deleted first), until its ``motion.csv`` is written (``next_seconds_total``:
+  until the command ends, the trial's and the campaign's pages included);
+  next_ratio_to_decode = next_seconds / decode_seconds.
 
 With ``--repeats`` the whole Snakemake call is repeated (results deleted each time) and the
 median is kept, with every run's figures. The filmed trial is kept in ``--work`` and reused.
@@ -92,6 +96,19 @@ def _snakemake(root: Path, target: str, cores: int) -> float:
     return time.perf_counter() - t0
 
 
+def _next(root: Path) -> tuple[float, float]:
+    """``stringcast next`` on trial 1, as a person runs it: (seconds until its motion.csv is written,
+    seconds until the command ends). Raises RuntimeError on failure."""
+    motion = root / "results" / CAMPAIGN / "trial_1" / "motion.csv"
+    cmd = [str(Path(sys.executable).parent / "stringcast"), "next", f"data/{CAMPAIGN}/trial_1"]
+    t0, wall0 = time.perf_counter(), time.time()
+    proc = subprocess.run(cmd, cwd=root, capture_output=True, text=True)
+    total = time.perf_counter() - t0
+    if proc.returncode != 0 or not motion.is_file():
+        raise RuntimeError(f"stringcast next failed (exit {proc.returncode})\n{proc.stdout[-3000:]}{proc.stderr[-2000:]}")
+    return motion.stat().st_mtime - wall0, total
+
+
 def _clear_trial(root: Path) -> None:
     """Delete trial 1's results, logs and rule benchmarks (the first motion stays)."""
     res = root / "results" / CAMPAIGN
@@ -135,17 +152,24 @@ def run(quick: bool = False, work: Path | None = None, repeats: int | None = Non
             _clear_trial(root)
             decode_s, frames = _decode_seconds(video)
             total = _snakemake(root, f"results/{CAMPAIGN}/trial_1/motion.csv", cores)
-            runs.append({"seconds_total": total, "seconds_per_stage": _stage_seconds(root),
-                         "decode_seconds": decode_s})
-            print(f"  run {r + 1}: {total:.1f} s total, decode {decode_s:.1f} s, stages "
-                  + ", ".join(f"{k} {v:.1f}" for k, v in runs[-1]["seconds_per_stage"].items()), flush=True)
+            stages = _stage_seconds(root)
+            _clear_trial(root)
+            to_motion, next_total = _next(root)
+            runs.append({"seconds_total": total, "seconds_per_stage": stages, "decode_seconds": decode_s,
+                         "next_seconds": to_motion, "next_seconds_total": next_total})
+            print(f"  run {r + 1}: {total:.1f} s total, decode {decode_s:.1f} s, next {to_motion:.1f} s "
+                  f"({next_total:.1f} s with the reports), stages "
+                  + ", ".join(f"{k} {v:.1f}" for k, v in stages.items()), flush=True)
     total = float(np.median([x["seconds_total"] for x in runs]))
     decode = float(np.median([x["decode_seconds"] for x in runs]))
     stages = {k: float(np.median([x["seconds_per_stage"].get(k, np.nan) for x in runs])) for k in STAGES}
+    next_s = float(np.median([x["next_seconds"] for x in runs]))
+    next_total = float(np.median([x["next_seconds_total"] for x in runs]))
     doc = header("turnaround", quick) | {
         "video": {"frames": frames, "file": video.name}, "workflow_cores": cores, "repeats": repeats,
         "seconds_total": total, "seconds_per_stage": stages, "decode_seconds": decode,
-        "ratio_to_decode": total / decode, "runs": runs}
+        "ratio_to_decode": total / decode, "next_seconds": next_s, "next_seconds_total": next_total,
+        "next_ratio_to_decode": next_s / decode, "runs": runs}
     write("turnaround", doc)
     return doc
 
@@ -159,7 +183,8 @@ def main() -> None:
     a = ap.parse_args()
     doc = run(a.quick, a.work, a.repeats, a.cores)
     print(f"turnaround: {doc['seconds_total']:.1f} s to the next motion.csv, decode {doc['decode_seconds']:.1f} s "
-          f"(ratio {doc['ratio_to_decode']:.1f}); " + ", ".join(f"{k} {v:.1f} s" for k, v in
+          f"(ratio {doc['ratio_to_decode']:.1f}); stringcast next {doc['next_seconds']:.1f} s "
+          f"(ratio {doc['next_ratio_to_decode']:.1f}); " + ", ".join(f"{k} {v:.1f} s" for k, v in
                                                                  doc["seconds_per_stage"].items()))
 
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Mapping
+from collections.abc import Mapping
 
 import cv2
 import numpy as np

@@ -28,7 +28,7 @@ from __future__ import annotations
 import copy
 import math
 from dataclasses import dataclass
-from typing import Mapping
+from collections.abc import Mapping
 
 import cv2
 import numpy as np
@@ -151,7 +151,7 @@ class CameraModel:
             raise ValueError("CameraModel: image too small")
 
     @classmethod
-    def from_config(cls, setup_camera: Mapping, config: Mapping) -> "CameraModel":
+    def from_config(cls, setup_camera: Mapping, config: Mapping) -> CameraModel:
         """Image size from the set-up's camera (width_px, height_px); the rest from ``lab.camera``."""
         c = camera_settings(config)
         try:
@@ -245,7 +245,7 @@ class IdealCanvas:
             raise ValueError("IdealCanvas: map_x and map_y must be equal (H, W) arrays")
 
     @classmethod
-    def for_camera(cls, cam: CameraModel, margin_px: int = 4) -> "IdealCanvas":
+    def for_camera(cls, cam: CameraModel, margin_px: int = 4) -> IdealCanvas:
         """Canvas covering the undistorted positions of every image pixel (+ margin)."""
         u, v = np.meshgrid(np.arange(cam.width, dtype=np.float64), np.arange(cam.height, dtype=np.float64))
         pix = np.stack([u.ravel(), v.ravel()], axis=1).reshape(-1, 1, 2)

@@ -26,7 +26,7 @@ import subprocess
 import threading
 from fractions import Fraction
 from pathlib import Path
-from typing import Mapping
+from collections.abc import Mapping
 
 import cv2
 import numpy as np
@@ -143,7 +143,7 @@ class ThreadedWriter:
     def __init__(self, sink, path: Path, queue_size: int = 8):
         self.path = Path(path)
         self._sink = sink
-        self._q: "queue.Queue" = queue.Queue(queue_size)
+        self._q: queue.Queue = queue.Queue(queue_size)
         self._error: BaseException | None = None
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._thread.start()
@@ -180,7 +180,7 @@ class ThreadedWriter:
         if self._error is not None:
             raise DataError(f"{self.path}: writing a frame failed: {self._error}")
 
-    def __enter__(self) -> "ThreadedWriter":
+    def __enter__(self) -> ThreadedWriter:
         return self
 
     def __exit__(self, *exc) -> None:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Mapping
+from collections.abc import Mapping
 
 from stringcast.core import Campaign, ConfigError
 
@@ -97,7 +97,7 @@ class StringPhysics:
         for at, mass, dia in self.weights:
             if not (0 <= at <= self.length + 1e-9 and mass > 0 and dia > 0):
                 raise ConfigError(f"lab string: bad weight at {at} m, mass {mass} kg")
-        for a, b, rho, dia in self.pipes:
+        for a, b, _rho, _dia in self.pipes:
             if not (0 <= a < b <= self.length + 1e-9):
                 raise ConfigError(f"lab string: bad pipe span {a}-{b} m")
 
@@ -125,7 +125,7 @@ class StringPhysics:
         return self.axial_EA is not None and self.cast_tension / self.axial_EA > STRETCH_MIN
 
     @classmethod
-    def from_campaign(cls, campaign: Campaign, config: Mapping) -> "StringPhysics":
+    def from_campaign(cls, campaign: Campaign, config: Mapping) -> StringPhysics:
         """Physical values for the campaign's string: ``lab.strings`` (default, then its type), its
         cord replaced by the drawn material where ``lab.material`` names one
         (:func:`~.materials.lab_material`: density, diameter, bending, stretch, damping, grasp;

@@ -237,7 +237,7 @@ class ChainSim:
         if speed > speed_tol:
             import warnings
 
-            warnings.warn(f"lab: the string is still moving at {speed:.2g} m/s after settling")
+            warnings.warn(f"lab: the string is still moving at {speed:.2g} m/s after settling", stacklevel=2)
         return speed
 
     def max_speed(self) -> float:

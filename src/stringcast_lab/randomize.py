@@ -24,7 +24,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 from dataclasses import dataclass
-from typing import Mapping
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -119,7 +119,7 @@ class Setup:
         """The draw as plain JSON-able values (tuples become lists)."""
         return {k: list(v) if isinstance(v, tuple) else v for k, v in dataclasses.asdict(self).items()}
 
-    def scaled(self, factor: float) -> "Setup":
+    def scaled(self, factor: float) -> Setup:
         """The same view on a sensor ``factor`` times as wide and high (even sizes; focal length and
         principal point offset scaled alike): small frames for fast tests."""
         w, h = (max(16, 2 * int(round(v * factor / 2))) for v in (self.width_px, self.height_px))

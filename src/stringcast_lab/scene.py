@@ -73,7 +73,7 @@ class StringLook:
 
     @classmethod
     def from_physics(cls, phys, bands: tuple = (), band_diameter: float = 0.0,
-                     band_reflectance: float = 0.0) -> "StringLook":
+                     band_reflectance: float = 0.0) -> StringLook:
         """The look of the lab string ``phys``, with bands ((from, to), ...) m (:func:`.trial.string_bands`)."""
         arc = np.arange(phys.n_links + 1) * phys.link_length
         return cls(arc, phys.diameter, tuple((a, d) for a, _, d in phys.weights),

@@ -104,8 +104,9 @@ def test_a_principal_point_off_is_refitted_beyond_the_arms_reach(scene):
     beyond = rng.uniform([-0.3, 0.3], [0.4, 0.7], (500, 2))           # the string reaches further
     off = _shifted(true, corners_xy, 20.0)
     rows = _rows(true, off, reach, rng, 0.0, noise_m=0.0003)
-    err = (lambda cal: np.percentile(np.linalg.norm(cal.pixel_to_robot(true.robot_to_pixel(beyond)) - beyond,
-                                                    axis=1), 95) * 1000)
+    def err(cal):
+        return (np.percentile(np.linalg.norm(cal.pixel_to_robot(true.robot_to_pixel(beyond)) - beyond,
+                                                        axis=1), 95) * 1000)
     plain = refine_mapping(off, rows, corners_xy)
     prior = {"k1": 0.02, "cx": 20.0, "cy": 20.0}
     lens = refine_mapping(off, rows, corners_xy, fit=("H", "dt", "k1", "c"), prior_sd=prior)

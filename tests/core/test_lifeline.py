@@ -1,7 +1,6 @@
 """A workflow job ends with its workflow (stringcast.core.lifeline), its forked workers with it, and
 one run at a time holds a results folder (stringcast.core.runlock)."""
 import os
-import signal
 import subprocess
 import sys
 import textwrap

@@ -6,6 +6,7 @@ import pandas as pd
 import pytest
 
 from stringcast.estimate import estimation as es
+from stringcast.estimate.problem import build_problem
 from stringcast.model import parameters as prm
 from stringcast.core.arm import hand_pose, motion_start
 from stringcast.core import PARAM_NAMES, ConfigError, model_ranges
@@ -229,7 +230,7 @@ def test_all_candidates_blown_up_does_not_crash(settings):
 def test_build_problem(settings, campaign, chi_true, tmp_path):
     c, mu = prm.decode(chi_true, settings.model, campaign.string.mass_groups())
     df, t, q, p0 = make_trial(campaign, c, mu, tmp_path, drop=(4,))
-    prob = es.build_problem(df, t, q, campaign, **_problem_settings(settings))
+    prob = build_problem(df, t, q, campaign, **_problem_settings(settings))
     n_rest = settings.tracking.rest_frames
     t_move = motion_start(t, q)
     ft = np.unique(df["t_s"])
@@ -244,10 +245,10 @@ def test_build_problem(settings, campaign, chi_true, tmp_path):
     assert not prob.valid[:, 3].any() and prob.valid[:, 0].all()
     late = df[df["t_s"] > t[0] + 0.02]
     with pytest.raises(DataError, match="before the motion starts"):
-        es.build_problem(late[late["t_s"] < t[0] + 0.02 + 0.003], t, q, campaign,
+        build_problem(late[late["t_s"] < t[0] + 0.02 + 0.003], t, q, campaign,
                          **_problem_settings(settings))
     with pytest.raises(DataError, match="missing columns"):
-        es.build_problem(df.drop(columns="valid"), t, q, campaign, **_problem_settings(settings))
+        build_problem(df.drop(columns="valid"), t, q, campaign, **_problem_settings(settings))
 
 
 def test_compare_after_motion_cuts_the_window(settings, campaign, chi_true, tmp_path):
@@ -255,15 +256,15 @@ def test_compare_after_motion_cuts_the_window(settings, campaign, chi_true, tmp_
     (the log holds the end posture 0.3 s), the start unchanged; null keeps the whole log."""
     c, mu = prm.decode(chi_true, settings.model, campaign.string.mass_groups())
     df, t, q, _ = make_trial(campaign, c, mu, tmp_path)
-    whole = es.build_problem(df, t, q, campaign, **_problem_settings(settings))
-    cut = es.build_problem(df, t, q, campaign, **_problem_settings(settings, compare_after_motion_s=0.1))
+    whole = build_problem(df, t, q, campaign, **_problem_settings(settings))
+    cut = build_problem(df, t, q, campaign, **_problem_settings(settings, compare_after_motion_s=0.1))
     t_stop = t[0] + 0.3 + 0.5          # make_trial: 0.3 s at rest, a 0.5 s motion, 0.3 s still
     assert cut.frame_t[0] == whole.frame_t[0]
     assert t_stop + 0.1 - 0.01 < cut.frame_t[-1] <= t_stop + 0.1 + 0.01
     assert whole.frame_t[-1] > t_stop + 0.25
     np.testing.assert_array_equal(cut.tracked, whole.tracked[:len(cut.frame_t)])
     none = _problem_settings(settings, compare_after_motion_s=None)
-    assert len(es.build_problem(df, t, q, campaign, **none).frame_t) == len(whole.frame_t)
+    assert len(build_problem(df, t, q, campaign, **none).frame_t) == len(whole.frame_t)
 
 
 def test_a_rest_point_folded_within_its_segment_is_refilled(settings, campaign, chi_true, tmp_path):
@@ -276,15 +277,16 @@ def test_a_rest_point_folded_within_its_segment_is_refilled(settings, campaign, 
     grasp = df[df["point"] == 0][["x_m", "y_m"]].to_numpy()
     one = df["point"] == 1
     df.loc[one, ["x_m", "y_m"]] = grasp + (p0[0] - grasp[0]) * (0.012 / campaign.string.l0)
-    still = lambda prob: prob.frame_t < motion_start(t, q)
+    def still(prob):
+        return prob.frame_t < motion_start(t, q)
 
     def rest_drift(prob):
         sim, ok = es.simulate_fit(prob, settings.model, chi_true)
         assert ok
         return np.linalg.norm(sim[still(prob)][:, 1:] - p0[None, 1:], axis=2).max()
 
-    as_tracked = es.build_problem(df, t, q, campaign, **_problem_settings(settings))
-    refilled = es.build_problem(df, t, q, campaign, **_problem_settings(settings, rest_min_chord_share=0.9))
+    as_tracked = build_problem(df, t, q, campaign, **_problem_settings(settings))
+    refilled = build_problem(df, t, q, campaign, **_problem_settings(settings, rest_min_chord_share=0.9))
     assert as_tracked.folded_points == () and refilled.folded_points == (1,) and refilled.fallback_points == ()
     seg = np.linalg.norm(np.diff(np.vstack([refilled.hand[0, :2], refilled.p_init]), axis=0), axis=1)
     # this chain hangs stretched by its load (chord > 2 l0): point 1 halfway on the line, never short
@@ -304,14 +306,15 @@ def test_rest_settle_starts_every_set_at_its_own_rest(settings, campaign, chi_tr
     rest = df["t_s"] < motion_start(t, q)
     bend = np.clip(df["point"].to_numpy() - 3, 0, None) * 0.004      # points below 3 pushed sideways
     df.loc[rest, "x_m"] += bend[rest.to_numpy()]
-    plain = es.build_problem(df, t, q, campaign, **_problem_settings(settings))
-    settled = es.build_problem(df, t, q, campaign, **_problem_settings(settings, rest_settle_s=2.0))
+    plain = build_problem(df, t, q, campaign, **_problem_settings(settings))
+    settled = build_problem(df, t, q, campaign, **_problem_settings(settings, rest_settle_s=2.0))
     assert plain.settle_s == 0.0 and settled.settle_s == 2.0
     np.testing.assert_allclose(settled.p_init, plain.p_init)
     still = plain.frame_t < motion_start(t, q)
     (sim_plain, ok1), (sim_settled, ok2) = (es.simulate_fit(p, settings.model, chi_true) for p in (plain, settled))
     assert ok1 and ok2
-    move = lambda sim: np.linalg.norm(sim[still] - sim[still][:1], axis=2).max()
+    def move(sim):
+        return np.linalg.norm(sim[still] - sim[still][:1], axis=2).max()
     assert move(sim_settled) < 1e-3 < move(sim_plain)
     np.testing.assert_allclose(sim_settled[0], p0, atol=2e-3)
     E = [es.make_objective(p, settings.model)(chi_true[None])[0] for p in (plain, settled)]
@@ -325,7 +328,7 @@ def test_hidden_rest_points_start_the_model_at_rest(settings, campaign, chi_true
     at (at least) l0, so the model starts at rest and, while the arm is still, stays near the true pose."""
     c, mu = prm.decode(chi_true, settings.model, campaign.string.mass_groups())
     df, t, q, p0 = make_trial(campaign, c, mu, tmp_path, drop=(1, 2, 3))
-    prob = es.build_problem(df, t, q, campaign, **_problem_settings(settings))
+    prob = build_problem(df, t, q, campaign, **_problem_settings(settings))
     assert prob.fallback_points == (1, 2, 3)
     seg = np.linalg.norm(np.diff(np.vstack([prob.hand[0, :2], prob.p_init]), axis=0), axis=1)
     # this chain hangs stretched by its load (chord > 4 l0): the gap is spaced evenly on the line
@@ -385,7 +388,7 @@ def test_joint_estimation_fits_every_trial(settings, campaign, chi_true, tmp_pat
     problems = []
     for d in ("a", "b"):
         t, q = read_joint_table(tmp_path / d / "joints.csv")
-        problems.append(es.build_problem(read_parquet(tmp_path / d / "tracks.parquet"), t, q, campaign,
+        problems.append(build_problem(read_parquet(tmp_path / d / "tracks.parquet"), t, q, campaign,
                                          **_problem_settings(settings)))
     chi = np.random.default_rng(0).uniform(0.2, 0.8, (6, len(chi_true)))
     chi[0] = chi_true

@@ -89,7 +89,7 @@ def test_valid_curves_keep_the_arm_inside_its_limits(campaign):
     cps = mo.sample_control_points(rng, T, arm.n_joints, 6, 40.0, 200)
     kept = mo.valid_curves(arm, cps, T, rate, postures, rng)
     assert 0 < len(kept) <= 200
-    for cp, q0, q, i in kept:
+    for _cp, q0, q, i in kept:
         np.testing.assert_array_equal(q0, postures[i])
         np.testing.assert_allclose(q[0], q0)
         rep = check_limits(arm, q, 1.0 / rate)

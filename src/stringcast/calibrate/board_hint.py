@@ -21,7 +21,7 @@ Nothing is said where neither is seen (no board in view, or too small or blurred
 """
 from __future__ import annotations
 
-from typing import Iterable
+from collections.abc import Iterable
 
 import cv2
 import numpy as np

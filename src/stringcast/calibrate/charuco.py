@@ -18,7 +18,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Iterable
+from collections.abc import Iterable
 
 import cv2
 import numpy as np
@@ -153,7 +153,7 @@ class Views:
     def __len__(self) -> int:
         return len(self.object_points)
 
-    def plus(self, obj: np.ndarray, img: np.ndarray, name: str) -> "Views":
+    def plus(self, obj: np.ndarray, img: np.ndarray, name: str) -> Views:
         """These views and one more (e.g. the trial's board in the swing plane)."""
         return Views((*self.object_points, np.asarray(obj, np.float32).reshape(-1, 1, 3)),
                      (*self.image_points, np.asarray(img, np.float32).reshape(-1, 1, 2)),

@@ -19,7 +19,7 @@ assumptions: the error about the mapping used is then the held fit's distance fr
 """
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

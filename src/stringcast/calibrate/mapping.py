@@ -143,11 +143,12 @@ class Calibration:
         write_json(path, self.to_dict())
 
     @classmethod
-    def from_json(cls, path: str | Path) -> "Calibration":
+    def from_json(cls, path: str | Path) -> Calibration:
         """Read ``calibration.json``. Raises DataError naming the file if keys are missing or wrong."""
         d = read_json(path, mapping=True)
         try:
-            arr = (lambda k: None if d.get(k) is None else np.asarray(d[k], float))
+            def arr(k):
+                return (None if d.get(k) is None else np.asarray(d[k], float))
             return cls(H_pixel_to_robot=np.asarray(d["H_pixel_to_robot"], float),
                        image_size=tuple(int(v) for v in d["image_size"]), K=arr("K"), dist=arr("dist"),
                        reprojection_error_px=float(d.get("reprojection_error_px") or math.nan),

@@ -152,10 +152,16 @@ def coverage(image_points, image_size: tuple[int, int], grid: tuple[int, int]) -
     uv = np.concatenate([np.asarray(p, float).reshape(-1, 2) for p in image_points]) if len(image_points) else np.zeros((0, 2))
     occ = np.zeros((rows, cols), bool)
     occ[np.clip((uv[:, 1] / h * rows).astype(int), 0, rows - 1), np.clip((uv[:, 0] / w * cols).astype(int), 0, cols - 1)] = True
-    third = (lambda n: np.minimum(((np.arange(n) + 0.5) / n * 3).astype(int), 2))
+
+    def third(n):
+        return np.minimum(((np.arange(n) + 0.5) / n * 3).astype(int), 2)
+
     tr, tc = third(rows), third(cols)
     parts = [[float(occ[np.ix_(tr == a, tc == b)].mean()) for b in range(3)] for a in range(3)]
-    span = (lambda a, n: [float(a.min() / n), float(a.max() / n)] if len(a) else [0.0, 0.0])
+
+    def span(a, n):
+        return [float(a.min() / n), float(a.max() / n)] if len(a) else [0.0, 0.0]
+
     return {"grid": [cols, rows], "share": float(occ.mean()), "cells": occ.astype(int).tolist(), "parts": parts,
             "u_span": span(uv[:, 0], w), "v_span": span(uv[:, 1], h)}
 

@@ -4,7 +4,7 @@ checks in turn (:mod:`.campaign_file`, :mod:`.calib_files`, :mod:`.video_files`,
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Mapping
+from collections.abc import Mapping
 
 from stringcast.core import ArmSpec, Campaign, SyncSettings, settings_from_config
 from .calib_files import calib_findings

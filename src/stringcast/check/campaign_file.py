@@ -15,7 +15,8 @@ import math
 import re
 from importlib import resources
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
+from collections.abc import Mapping
 
 from stringcast.core import (ArmSpec, BoardSpec, Campaign, ConfigError, SetupSpec, StringSpec, TargetSpec, load_yaml,
                              resolve_campaign, schema_problems, target_reach_problem)

@@ -10,7 +10,8 @@ from __future__ import annotations
 import difflib
 import math
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
+from collections.abc import Mapping
 
 from stringcast.core import ConfigError, DataError, find_video, load_yaml
 from stringcast.video import open_video, video_meta_problems

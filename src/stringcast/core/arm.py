@@ -148,7 +148,7 @@ def motion_start(t: np.ndarray, q: np.ndarray, speed_threshold: float = 0.05) ->
     speed[: w] = speed[w]  # edge effects of the smoothing
     moving = np.nonzero(speed > speed_threshold)[0]
     if len(moving) == 0:
-        raise ValueError("the joint log never moves (no joint exceeds %.3g rad/s)" % speed_threshold)
+        raise ValueError(f"the joint log never moves (no joint exceeds {speed_threshold:.3g} rad/s)")
     return float(t[max(0, moving[0] - w // 2)])
 
 

@@ -320,7 +320,7 @@ def write_joint_table(path: str | Path, t: np.ndarray, q: np.ndarray,
     bad = [k for k, v in cols.items() if v.shape != (K,)]
     if bad:
         raise ValueError(f"write_joint_table({path}): columns {bad} are not ({K},) like t_s")
-    cells = [["" if np.isnan(x) else "%.9g" % x for x in v.tolist()] for v in cols.values()]
+    cells = [["" if np.isnan(x) else f"{x:.9g}" for x in v.tolist()] for v in cols.values()]
     with atomic_path(path) as tmp:
         with open(tmp, "w", newline="") as f:
             f.write(",".join(cols) + "\n")

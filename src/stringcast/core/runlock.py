@@ -20,7 +20,7 @@ from __future__ import annotations
 import hashlib
 import os
 from pathlib import Path
-from typing import Iterable
+from collections.abc import Iterable
 
 LOCK_DIR = Path(".snakemake", "stringcast", "locks")
 """Where the lock files are, under the workflow's working directory."""

@@ -21,7 +21,8 @@ import dataclasses
 import typing
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Any, Mapping
+from typing import Any
+from collections.abc import Mapping
 
 from .config import ConfigError
 

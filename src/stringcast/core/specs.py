@@ -12,7 +12,7 @@ import difflib
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Mapping
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -78,7 +78,7 @@ class ArmSpec:
         return float(np.sum(self.link_lengths) + self.gripper)
 
     @classmethod
-    def from_config(cls, name: str, d: Mapping) -> "ArmSpec":
+    def from_config(cls, name: str, d: Mapping) -> ArmSpec:
         rad = math.pi / 180
         return cls(
             name=name,
@@ -168,7 +168,7 @@ class SetupSpec:
             raise ConfigError(f"setup {self.name}: board_to_robot must be 3x3")
 
     @classmethod
-    def from_config(cls, name: str, d: Mapping, cameras: Mapping) -> "SetupSpec":
+    def from_config(cls, name: str, d: Mapping, cameras: Mapping) -> SetupSpec:
         cam_name = d["camera"]
         if cam_name not in cameras:
             raise ConfigError(f"setup {name}: unknown camera {cam_name!r}")
@@ -240,7 +240,7 @@ class StringSpec:
         return groups
 
     @classmethod
-    def from_config(cls, name: str, d: Mapping) -> "StringSpec":
+    def from_config(cls, name: str, d: Mapping) -> StringSpec:
         return cls(
             name=str(name),
             length=float(d["length_mm"]) / 1000,

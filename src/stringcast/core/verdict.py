@@ -8,7 +8,7 @@ act on: what was measured, against what, and what to do.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Mapping
+from collections.abc import Mapping
 
 STATUSES = ("ok", "warn", "fail")
 """The statuses from best to worst."""
@@ -31,7 +31,7 @@ class Verdict:
         if self.status != "ok" and not self.reasons:
             raise ValueError(f"a {self.status} verdict needs a reason")
 
-    def add(self, status: str, reason: str) -> "Verdict":
+    def add(self, status: str, reason: str) -> Verdict:
         """This verdict with ``reason`` added, its status the worse of the two."""
         worse = max(self.status, status, key=STATUSES.index)
         return Verdict(worse, (*self.reasons, reason))
@@ -45,7 +45,7 @@ class Verdict:
         return {"status": self.status, "reasons": list(self.reasons)}
 
     @classmethod
-    def from_dict(cls, d: Mapping | None) -> "Verdict":
+    def from_dict(cls, d: Mapping | None) -> Verdict:
         """The verdict written by :meth:`as_dict`; a missing one (older files) is ``ok``."""
         if not d:
             return cls()

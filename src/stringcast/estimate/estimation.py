@@ -38,7 +38,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Callable, Mapping
+from collections.abc import Callable, Mapping
 
 import numpy as np
 import pandas as pd
@@ -51,7 +51,7 @@ from stringcast.model import decode, start_chi
 from .diagnostics import best_k, checked, diagnostics
 from .fitcheck import fit_figures
 from .optimizers import OPTIMIZERS, Recorder
-from .problem import (EstimationProblem, build_problem, build_problem_explained, make_joint_objective, make_objective,
+from .problem import (EstimationProblem, build_problem_explained, make_joint_objective, make_objective,
                       point_errors, simulate_fit)
 from .verdict import fit_verdict, sweep_bounds
 

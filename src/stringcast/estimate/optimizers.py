@@ -47,7 +47,7 @@ its E and the search history. ``estimation`` is the estimation settings
 """
 from __future__ import annotations
 
-from typing import Mapping
+from collections.abc import Mapping
 
 import numpy as np
 

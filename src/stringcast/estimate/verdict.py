@@ -109,7 +109,7 @@ way to ``offset_gain``: a time shift during a one-way swing also errs in one dir
 """
 from __future__ import annotations
 
-from typing import Mapping
+from collections.abc import Mapping
 
 import numpy as np
 

@@ -45,7 +45,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -233,7 +233,7 @@ def _write_log(out_dir: Path, arm: ArmSpec, settings: URSettings, stamps: np.nda
     meta.update(joints=path.name, rows=int(keep.sum()), duplicate_stamps_dropped=int(n - keep.sum()),
                 max_period_s=float(np.max(np.diff(t))) if len(t) > 1 else None,
                 held_joint_drift_rad={UR_JOINTS[i]: float(d) for i, d in zip(held, drift)},
-                created=datetime.now(timezone.utc).isoformat(timespec="seconds"))
+                created=datetime.now(UTC).isoformat(timespec="seconds"))
     write_json(out_dir / "executor.json", meta)
     return path
 

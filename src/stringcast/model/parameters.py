@@ -13,7 +13,7 @@ Shared by the estimation and planning stages, so neither reaches into the other.
 """
 from __future__ import annotations
 
-from typing import Mapping
+from collections.abc import Mapping
 
 import numpy as np
 

@@ -328,7 +328,7 @@ def _write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign
     motion = settings.motion
     rows, tips = [], {}
     n = campaign.string.n_points
-    trials = sorted((int(p.name.split("_")[1]) for p in data_dir.glob("trial_*") if p.name.split("_")[1].isdigit()))
+    trials = sorted(int(p.name.split("_")[1]) for p in data_dir.glob("trial_*") if p.name.split("_")[1].isdigit())
     for k in trials:
         dd, rd = data_dir / f"trial_{k}", results_dir / f"trial_{k}"
         if not (rd / "params.json").exists():

@@ -36,11 +36,13 @@ def draw_arm_mask(shape, poses_px, arm: ArmSpec, st: TrackingSettings, m_per_px:
     m = np.zeros(shape, np.uint8)
     poses = np.asarray(poses_px, float).reshape(-1, *np.shape(poses_px)[-2:])
     grow = st.arm_mask_margin_px + grow_px
-    px = lambda v: v / m_per_px   # m -> px
+    def px(v):
+        return v / m_per_px   # m -> px
     links, radii = arm.link_widths, arm.joint_radii
     gw = [px(w) + 2 * grow for w in arm.gripper_widths]
     sh = 4  # fixed-point bits for sub-pixel polygons
-    fix = lambda v: np.round(np.asarray(v) * 2 ** sh).astype(np.int32)
+    def fix(v):
+        return np.round(np.asarray(v) * 2 ** sh).astype(np.int32)
     for pose in poses:
         p = pose - offset
         J = len(p) - 2

@@ -228,7 +228,7 @@ def find_bands(image: np.ndarray, path_px: np.ndarray, seen_seg: np.ndarray, s_p
                           float(st.band_contrast_min) * contrast, st.band_polarity)
     lt = float(st.band_length_tol)
     best = None
-    for sign, rr in runs.items():
+    for _sign, rr in runs.items():
         left, right = (np.interp(rr[:, k], t, s_t) for k in (0, 1))
         length = right - left
         whole = (rr[:, 3] == 0) & (rr[:, 4] == 0) & (np.abs(length - band_width) <= lt * band_width)

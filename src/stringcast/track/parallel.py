@@ -9,7 +9,7 @@ back only each frame's points. The result does not depend on the number of worke
 from __future__ import annotations
 
 import sys
-from typing import Iterator
+from collections.abc import Iterator
 
 import numpy as np
 

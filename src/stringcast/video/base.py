@@ -6,7 +6,7 @@ and Photron files (:mod:`.photron`) subclass it; :func:`~stringcast.video.open_v
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Iterator
+from collections.abc import Iterator
 
 import cv2
 import numpy as np
@@ -73,7 +73,7 @@ class VideoReader:
     def __len__(self) -> int:
         return self.n_frames
 
-    def __enter__(self) -> "VideoReader":
+    def __enter__(self) -> VideoReader:
         return self
 
     def __exit__(self, *exc) -> None:

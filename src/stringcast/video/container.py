@@ -25,7 +25,7 @@ size, or a file that ends before its announced frame count (truncated).
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Iterator
+from collections.abc import Iterator
 
 import cv2
 import numpy as np

@@ -39,7 +39,7 @@ class HandPath:
         self.vel = np.ascontiguousarray(vel, float)
 
     @classmethod
-    def hold(cls, pose) -> "HandPath":
+    def hold(cls, pose) -> HandPath:
         """The hand held still at ``pose`` (x, y, phi_h) for all time."""
         p = np.asarray(pose, float).reshape(1, 3)
         return cls(0.0, 1.0, p, np.zeros((1, 3)))

@@ -141,7 +141,7 @@ class RodSim:
         if speed > speed_tol:
             import warnings
 
-            warnings.warn(f"lab (elastica): the string is still moving at {speed:.2g} m/s after settling")
+            warnings.warn(f"lab (elastica): the string is still moving at {speed:.2g} m/s after settling", stacklevel=2)
         return speed
 
     def nodes(self) -> np.ndarray:
