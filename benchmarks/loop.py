@@ -20,13 +20,10 @@ Methods are config overlays:
   in the file; the evidence, and what was tried and left out, is in docs/method.md.
 
 Variants (``VARIANTS``) are ours with one setting changed, to A/B it on the same code and
-campaigns; they run only by name (``--only 1 0 ours_first_mu_weight``, or loop.smk's
-``methods="ours_first_mu_weight"``) and loop.json leaves them out: ``ours_first_mu_weight`` plans
-the first motion with each weight's point at 10 times a plain one's mass (tried in ours from
-0fe8d58, left out: docs/method.md); ``ours_first_ensemble`` plans it under 16 random Table 2
-sets (stop 46, left out: docs/method.md); ``ours_rest_folds`` fills tracked rest points where the
-string folds within a segment (stop 48); ``ours_no_residual`` plans without the residual correction
-(and so without its gate on perturbations), the weak class of the family being threads (issue 52);
+campaigns; they run only by name (``--only 1 0 ours_no_residual``, or loop.smk's
+``methods="ours_no_residual"``) and loop.json leaves them out: ``ours_no_residual`` plans without
+the residual correction (and so without its gate on perturbations), the weak class of the family
+being threads (issue 52);
 ``ours_always_perturb`` perturbs the played motion (+-0.5 rad/s) after any miss, as the paper does, instead
 of a wider perturbation or a new motion after a miss over 45 mm. ``benchmarks.loop_ab`` compares such a run with ours.
 
@@ -111,9 +108,6 @@ METHODS = {
 VARIANTS = {
     # ours with one setting changed (merged over ours), run only by name (--only, loop.smk's
     # methods=...) and left out of loop.json: an A/B of that setting on the same code and campaigns
-    "ours_first_mu_weight": {"model": {"first_mu_weight": 10.0}},
-    "ours_first_ensemble": {"motion": {"first_ensemble": 16, "first_extra_after_hit": 2000}},
-    "ours_rest_folds": {"estimation": {"rest_min_chord_share": 0.9}},
     "ours_no_residual": {"motion": {"residual_correction": False}},
     "ours_always_perturb": {"motion": {"replan_miss_mm": 0.0}},
 }

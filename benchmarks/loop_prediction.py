@@ -59,7 +59,7 @@ def campaigns(work: Path, physics: list[str], seeds: list[int]) -> list[tuple[Pa
     """The paper-method campaigns in ``work`` with a processed second trial: (folder, physics, type, seed)."""
     out = []
     for camp in sorted(work.glob("loop_*_*_s*_seed*_paper")):
-        phys, _mode, s, seed, _ = camp.name.split("_")[1:]
+        phys, _mode, s, seed, _ = camp.name.split("_")[-5:]       # loop_[family_]<physics>_<mode>_s<k>_seed<s>_paper
         res = camp / "results" / camp.name
         if phys in physics and int(seed[4:]) in seeds and (res / "trial_2" / "tracks.parquet").exists():
             out.append((camp, phys, int(s[1:]), int(seed[4:])))

@@ -24,16 +24,16 @@ def test_two_runs_paired_by_physics_type_and_seed(tmp_path):
     base, var = tmp_path / "a", tmp_path / "b"
     #                      type 1: base 1 / variant 2 executions; type 2: base 3 / variant 1
     _campaign(base, "mujoco", 1, 0, "ours", [5.0])
-    _campaign(var, "mujoco", 1, 0, "ours", [30.0, 4.0], {"first_ensemble": 16})
+    _campaign(var, "mujoco", 1, 0, "ours", [30.0, 4.0], {"replan_miss_mm": 30.0})
     _campaign(base, "mujoco", 2, 3, "ours", [50.0, 25.0, 3.0])
-    _campaign(var, "mujoco", 2, 3, "ours", [9.0], {"first_ensemble": 16})
+    _campaign(var, "mujoco", 2, 3, "ours", [9.0], {"replan_miss_mm": 30.0})
     _campaign(base, "mujoco", 2, 3, "ours_other", [9.0])          # another method: not read
     _campaign(base, "elastica", 1, 0, "ours", [40.0] * 8)          # no hit in 8: counts CAP
     _campaign(var, "elastica", 1, 0, "ours", [40.0, 10.0])
     a, b = load_runs(base, "ours"), load_runs(var, "ours")
     assert set(a) == set(b) == {("mujoco", 1, 0), ("mujoco", 2, 3), ("elastica", 1, 0)}
     assert config_difference(base / "loop_mujoco_state_s1_seed0_ours", var / "loop_mujoco_state_s1_seed0_ours") == \
-        {"motion.first_ensemble": [None, 16]}
+        {"motion.replan_miss_mm": [None, 30.0]}
     assert [split_of("mujoco", 2), split_of("mujoco", 3), split_of("elastica", 0)] == ["choosing", "judging", "judging"]
 
     m = compare(a, b, [("mujoco", 1, 0), ("mujoco", 2, 3)])

@@ -152,14 +152,14 @@ def test_a_family_run_draws_every_material_class_and_joins_loop_json(config, tmp
 
 
 def test_a_variant_is_ours_with_one_setting_changed(config):
-    """``ours_first_mu_weight`` is ours with first_mu_weight set, and loop.json's spec refuses it."""
+    """``ours_no_residual`` is ours without the residual correction, and loop.json's spec refuses it."""
     ours = method_config(config, "ours", 0, "mujoco", "state")
-    variant = method_config(config, "ours_first_mu_weight", 0, "mujoco", "state")
-    assert ours["model"].get("first_mu_weight") is None and variant["model"]["first_mu_weight"] == 10.0
-    variant["model"].pop("first_mu_weight"), ours["model"].pop("first_mu_weight", None)
+    variant = method_config(config, "ours_no_residual", 0, "mujoco", "state")
+    assert ours["motion"]["residual_correction"] is True and variant["motion"]["residual_correction"] is False
+    variant["motion"].pop("residual_correction"), ours["motion"].pop("residual_correction")
     assert ours == variant
-    with pytest.raises(ValueError, match="method ours_first_mu_weight"):
-        Spec(methods=("ours_first_mu_weight",))
+    with pytest.raises(ValueError, match="method ours_no_residual"):
+        Spec(methods=("ours_no_residual",))
 
 
 def test_a_lab_that_ran_other_physics_is_refused(tmp_path):

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from stringcast.check import check_campaign
-from stringcast.core import DataError, EstimationSettings, claim_results, load_config, settings_from_config
+from stringcast.core import DataError, claim_results, load_config
 
 RULE_WORKERS = {"sync": 4, "sweep": 2, "track": 4}
 """The rules' ``threads`` for the stages that take ``--workers`` (capped at this machine's CPUs)."""
@@ -59,12 +59,11 @@ def trial_location(trial_dir: str | Path) -> tuple[Path, str, int]:
     return d.parent.parent.parent, d.parent.name, int(suffix)
 
 
-def trial_steps(campaign: str, k: int, estimation: EstimationSettings, has_calib: bool, workers: int) -> list[Step]:
+def trial_steps(campaign: str, k: int, has_calib: bool, workers: int) -> list[Step]:
     """The steps that make trial ``k``'s results, as the workflow's rules run them.
 
     Args:
-        campaign, k: the trial (``data/<campaign>/trial_<k>``). estimation: its ``joint_trials``
-            says which earlier trials the estimate fits too. has_calib: the campaign has ``calib/``.
+        campaign, k: the trial (``data/<campaign>/trial_<k>``). has_calib: the campaign has ``calib/``.
         workers: the most worker processes a stage may use.
     """
     data, res = f"data/{campaign}", f"results/{campaign}"
@@ -94,13 +93,9 @@ def trial_steps(campaign: str, k: int, estimation: EstimationSettings, has_calib
                        f"{out}/tracking_overlay.png", *frames, "--workers", w["track"]),
              (f"{out}/tracks.parquet", f"{out}/tracking.json", f"{out}/tracking_overlay.png")),
     ]
-    n = estimation.joint_trials
-    earlier = range(1 if n == 0 else max(1, k - n + 1), k)
     prev = ("--prev", f"{res}/trial_{k - 1}/params.json") if k > 1 else ()
-    linked = (("--earlier-tracks", *(f"{res}/trial_{j}/tracks.parquet" for j in earlier),
-               "--earlier-joints", *(f"{data}/trial_{j}/joints.csv" for j in earlier)) if len(earlier) else ())
     steps.append(_step("estimate", ("estimate", "--tracks", f"{out}/tracks.parquet", "--joints",
-                                   f"{trial}/joints.csv", "--campaign", camp, *prev, *linked, "--trial", str(k),
+                                   f"{trial}/joints.csv", "--campaign", camp, *prev, "--trial", str(k),
                                    "--out-params", f"{out}/params.json", "--out-fit", f"{out}/fit.parquet"),
                       (f"{out}/params.json", f"{out}/fit.parquet")))
     if k > 1:
@@ -161,8 +156,7 @@ def run_next(trial_dir: str | Path, config_paths: list[str], main, say=print) ->
         if k > 1 and not prev.is_file():
             raise DataError(f"{root / prev}: missing: trial {k}'s estimate starts from trial {k - 1}'s "
                             f"(eq. 3): run `stringcast next data/{campaign}/trial_{k - 1}` first")
-        steps = trial_steps(campaign, k, settings_from_config(config).estimation, Path("data", campaign, "calib").is_dir(),
-                            os.cpu_count() or 1)
+        steps = trial_steps(campaign, k, Path("data", campaign, "calib").is_dir(), os.cpu_count() or 1)
         if Path(f"results/{campaign}/intrinsics.json").is_file() and Path(f"results/{campaign}/calib_views.npz").is_file():
             steps = [s for s in steps if s.rule != "calib_views"]          # once per campaign
         claim_results({str(Path(o).parent) for s in steps for o in s.outputs})

@@ -198,18 +198,9 @@ def cmd_track(args):
                   f"{df['frame'].nunique()} frames, valid share {df['valid'].mean():.3f}", args.out)
 
 
-def _earlier(args) -> tuple:
-    """Pairs (tracks, joints) of the earlier trials fitted together (estimation.joint_trials)."""
-    tracks, joints = args.earlier_tracks or [], args.earlier_joints or []
-    if len(tracks) != len(joints):
-        raise SystemExit(f"estimate: {len(tracks)} --earlier-tracks but {len(joints)} --earlier-joints")
-    return tuple(zip(map(Path, tracks), map(Path, joints)))
-
-
 def cmd_estimate(args):
     est = _run("estimate", args, Path(args.tracks), Path(args.joints), _campaign(args),
-               Path(args.prev) if args.prev else None, int(args.trial), Path(args.out_params), Path(args.out_fit),
-               _earlier(args))
+               Path(args.prev) if args.prev else None, int(args.trial), Path(args.out_params), Path(args.out_fit))
     print(f"estimation: E = {est.E_m * 1000:.2f} mm after {est.n_evaluations} evaluations")
     usable = {"ok": "", "warn": "doubtful", "fail": "the estimate is not usable"}[est.verdict.status]
     cause = f"likely cause {est.likely_cause}" if est.likely_cause else ""

@@ -111,8 +111,6 @@ def _add_analysis_commands(add) -> None:
     sp.add_argument("--out-params", required=True, help="params.json to write: coefficients, masses, E in mm")
     sp.add_argument("--out-fit", required=True, help="fit.parquet to write: tracked and simulated points per "
                                                      "frame (m)")
-    sp.add_argument("--earlier-tracks", nargs="*", help="earlier trials' tracks.parquet, fitted together")
-    sp.add_argument("--earlier-joints", nargs="*", help="their joints.csv, in the same order")
 
     sp = add("predict", "the previous trial's estimate predicting this trial's tip -> prediction.json")
     sp.add_argument("--params", required=True, help="the previous trial's params.json (the estimate that predicts)")

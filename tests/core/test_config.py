@@ -53,14 +53,14 @@ def test_config_files_merge_in_order_as_snakemake_does(tmp_path, config):
     base = config["_path"]
     mid, over = tmp_path / "mid.yaml", tmp_path / "over.yaml"
     mid.write_text("estimation: {iterations: 500}\nmotion: {T_range_s: [0.1, 2.0], batch: 32}\n")
-    over.write_text("estimation: {optimizer: cmaes, joint_trials: 0}\nmotion: {T_range_s: [0.3, 0.9]}\n")
+    over.write_text("estimation: {optimizer: cmaes, cmaes_runs: 3}\nmotion: {T_range_s: [0.3, 0.9]}\n")
     merged = load_config([base, mid, over])
-    assert merged["estimation"]["optimizer"] == "cmaes" and merged["estimation"]["joint_trials"] == 0
+    assert merged["estimation"]["optimizer"] == "cmaes" and merged["estimation"]["cmaes_runs"] == 3
     assert merged["estimation"]["iterations"] == 500 and merged["motion"]["batch"] == 32   # kept from the file before
     assert merged["motion"]["T_range_s"] == [0.3, 0.9] and merged["strings"] == config["strings"]
     assert str(mid) in merged["_path"] and merged["_path"].index(str(mid)) < merged["_path"].index(str(over))
     s = settings_from_config(merged)   # the settings no file sets keep their defaults
-    assert (s.estimation.optimizer, s.estimation.iterations, s.estimation.joint_trials) == ("cmaes", 500, 0)
+    assert (s.estimation.optimizer, s.estimation.iterations, s.estimation.cmaes_runs) == ("cmaes", 500, 3)
     assert s.motion.T_range_s == (0.3, 0.9) and s.estimation.batch == settings_from_config(config).estimation.batch
     assert str(over) in merged["_path"]
     with pytest.raises(ConfigError, match=r"over.yaml.*required property"):   # a partial file alone is not a config

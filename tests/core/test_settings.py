@@ -93,7 +93,7 @@ def test_ours_yaml_is_read_by_the_same_classes():
 
 def test_the_config_schema_knows_every_setting_and_no_other():
     """config.schema.json refuses keys it does not list: a setting missing there is one no config file can
-    set (estimation.rest_min_chord_share was, until a loop run was refused); a key only there is one no
+    set (an estimation option was, until a loop run was refused); a key only there is one no
     settings class reads."""
     import json
     from importlib.resources import files

@@ -11,7 +11,7 @@ from stringcast.model import parameters as prm
 from stringcast.core.arm import hand_pose, motion_start
 from stringcast.core import PARAM_NAMES, ConfigError, model_ranges
 from stringcast.core.files import DataError, read_json, read_parquet, write_json, write_parquet
-from stringcast.core.joint_log import read_joint_table, write_joint_table
+from stringcast.core.joint_log import write_joint_table
 from stringcast.model.string_model import hanging_equilibrium, simulate
 from stringcast.plan.motion import joint_paths
 from stringcast.model.parameters import first_parameters
@@ -267,62 +267,6 @@ def test_compare_after_motion_cuts_the_window(settings, campaign, chi_true, tmp_
     assert len(build_problem(df, t, q, campaign, **none).frame_t) == len(whole.frame_t)
 
 
-def test_a_rest_point_folded_within_its_segment_is_refilled(settings, campaign, chi_true, tmp_path):
-    """Point 1 tracked 12 mm below the grasp at rest (the string leaves a tilted gripper and folds back
-    within the first segment): taken as is, the model's first segment starts 18 mm short and the stiff
-    axial spring throws the chain while the arm is still; with estimation.rest_min_chord_share the point
-    is filled like a hidden one, every segment starts at l0, and the chain stays near the tracked pose."""
-    c, mu = prm.decode(chi_true, settings.model, campaign.string.mass_groups())
-    df, t, q, p0 = make_trial(campaign, c, mu, tmp_path)
-    grasp = df[df["point"] == 0][["x_m", "y_m"]].to_numpy()
-    one = df["point"] == 1
-    df.loc[one, ["x_m", "y_m"]] = grasp + (p0[0] - grasp[0]) * (0.012 / campaign.string.l0)
-    def still(prob):
-        return prob.frame_t < motion_start(t, q)
-
-    def rest_drift(prob):
-        sim, ok = es.simulate_fit(prob, settings.model, chi_true)
-        assert ok
-        return np.linalg.norm(sim[still(prob)][:, 1:] - p0[None, 1:], axis=2).max()
-
-    as_tracked = build_problem(df, t, q, campaign, **_problem_settings(settings))
-    refilled = build_problem(df, t, q, campaign, **_problem_settings(settings, rest_min_chord_share=0.9))
-    assert as_tracked.folded_points == () and refilled.folded_points == (1,) and refilled.fallback_points == ()
-    seg = np.linalg.norm(np.diff(np.vstack([refilled.hand[0, :2], refilled.p_init]), axis=0), axis=1)
-    # this chain hangs stretched by its load (chord > 2 l0): point 1 halfway on the line, never short
-    assert seg[0] == pytest.approx(seg[1], rel=1e-9) and seg[0] >= campaign.string.l0
-    np.testing.assert_allclose(refilled.p_init[1:], as_tracked.p_init[1:])
-    assert rest_drift(refilled) < 2e-3 < rest_drift(as_tracked)
-    with pytest.raises(ConfigError, match="rest_min_chord_share"):
-        _est(settings, rest_min_chord_share=0.0)
-
-
-def test_rest_settle_starts_every_set_at_its_own_rest(settings, campaign, chi_true, tmp_path):
-    """estimation.rest_settle_s: the tracked rest pose bent 20 mm off the string's own rest; started there
-    the chain swings while the arm is still; relaxed first, it starts (and stays) at the set's own rest,
-    and E, fitted on the true set, is lower."""
-    c, mu = prm.decode(chi_true, settings.model, campaign.string.mass_groups())
-    df, t, q, p0 = make_trial(campaign, c, mu, tmp_path)
-    rest = df["t_s"] < motion_start(t, q)
-    bend = np.clip(df["point"].to_numpy() - 3, 0, None) * 0.004      # points below 3 pushed sideways
-    df.loc[rest, "x_m"] += bend[rest.to_numpy()]
-    plain = build_problem(df, t, q, campaign, **_problem_settings(settings))
-    settled = build_problem(df, t, q, campaign, **_problem_settings(settings, rest_settle_s=2.0))
-    assert plain.settle_s == 0.0 and settled.settle_s == 2.0
-    np.testing.assert_allclose(settled.p_init, plain.p_init)
-    still = plain.frame_t < motion_start(t, q)
-    (sim_plain, ok1), (sim_settled, ok2) = (es.simulate_fit(p, settings.model, chi_true) for p in (plain, settled))
-    assert ok1 and ok2
-    def move(sim):
-        return np.linalg.norm(sim[still] - sim[still][:1], axis=2).max()
-    assert move(sim_settled) < 1e-3 < move(sim_plain)
-    np.testing.assert_allclose(sim_settled[0], p0, atol=2e-3)
-    E = [es.make_objective(p, settings.model)(chi_true[None])[0] for p in (plain, settled)]
-    assert E[1] < E[0]
-    with pytest.raises(ConfigError, match="rest_settle_s"):
-        _est(settings, rest_settle_s=0.0)
-
-
 def test_hidden_rest_points_start_the_model_at_rest(settings, campaign, chi_true, tmp_path):
     """Points 1-3 never tracked (a gripper hides them): the filled rest state keeps the hidden segments
     at (at least) l0, so the model starts at rest and, while the arm is still, stays near the true pose."""
@@ -379,40 +323,6 @@ def test_run_estimation_end_to_end(settings, campaign, chi_true, tmp_path):
         prm.start_chi(None, campaign.string, settings.model, settings.motion).tolist())
 
 
-def test_joint_estimation_fits_every_trial(settings, campaign, chi_true, tmp_path):
-    """estimation.joint_trials: E is the mean of the trials' E; params.json says each trial's."""
-    c, mu = prm.decode(chi_true, settings.model, campaign.string.mass_groups())
-    (tmp_path / "a").mkdir(), (tmp_path / "b").mkdir()
-    make_trial(campaign, c, mu, tmp_path / "a")
-    make_trial(campaign, c, mu, tmp_path / "b", speed=0.6, t0=20.0)
-    problems = []
-    for d in ("a", "b"):
-        t, q = read_joint_table(tmp_path / d / "joints.csv")
-        problems.append(build_problem(read_parquet(tmp_path / d / "tracks.parquet"), t, q, campaign,
-                                         **_problem_settings(settings)))
-    chi = np.random.default_rng(0).uniform(0.2, 0.8, (6, len(chi_true)))
-    chi[0] = chi_true
-    each = [es.make_objective(pb, settings.model)(chi) for pb in problems]
-    joint = es.make_joint_objective(problems, settings.model)(chi)
-    assert joint == pytest.approx((each[0] + each[1]) / 2)
-    assert joint[0] < 1e-4 < joint[1:].min()  # the truth fits both motions; random sets fit neither
-    assert not np.allclose(each[0][1:], each[1][1:])  # the two motions are different evidence
-
-    write_json(tmp_path / "prev.json", {"chi": chi_true})
-    est = es.run_estimation(tmp_path / "b" / "tracks.parquet", tmp_path / "b" / "joints.csv", campaign,
-                            tmp_path / "prev.json", 2, tmp_path / "params.json", tmp_path / "fit.parquet",
-                            earlier=((tmp_path / "a" / "tracks.parquet", tmp_path / "a" / "joints.csv"),),
-                            **_stage_settings(settings, iterations=64, batch=32))
-    doc = read_json(tmp_path / "params.json")
-    assert len(doc["E_trials_mm"]) == 2 and doc["trials_fitted"][0].endswith("tracks.parquet")
-    assert doc["E_mm"] == pytest.approx(np.mean(doc["E_trials_mm"])) == pytest.approx(est.E_m * 1000)
-    assert max(doc["E_trials_mm"]) < 0.1
-
-    other = es.EstimationProblem(**{**problems[0].__dict__, "mass_groups": np.zeros(problems[0].n_points, np.int64)})
-    with pytest.raises(ValueError, match="disagree"):
-        es.make_joint_objective([problems[0], other], settings.model)
-
-
 def test_cmaes_options_reach_cma_and_unknown_ones_are_refused(settings, monkeypatch):
     """estimation.cmaes_options goes to every cma.CMAEvolutionStrategy the search builds, over our
     defaults; a name cma does not know is a ConfigError that names it."""
@@ -457,42 +367,3 @@ def test_cmaes_first_look_samples_eq3_and_starts_at_its_best(settings):
     best = look[np.argmin(np.sum((look - corner) ** 2, axis=1))]
     assert np.abs(cand[L:L + pop].mean(axis=0) - best).mean() < 0.15   # CMA-ES starts at the look's best
     assert np.sum((cand - corner) ** 2, axis=1).min() < 1e-3
-
-
-def test_cmaes_stall_generations_restart_at_the_best_point(settings, monkeypatch):
-    """cmaes_stall_generations = G: after G generations without a new best, CMA-ES restarts at its best
-    point with the step it had reached. The objective is a smooth bowl whose only deep pocket is the
-    first generation's first candidate: the mean drifts to the bowl, and only the restart goes back."""
-    import cma
-
-    starts = []
-    real = cma.CMAEvolutionStrategy
-
-    def spy(x0, sigma0, opts):   # each start, and the step the run before it had reached
-        starts.append((np.array(x0, float), float(sigma0), float(spy.last.sigma) if starts else None))
-        spy.last = real(x0, sigma0, opts)
-        return spy.last
-
-    monkeypatch.setattr(cma, "CMAEvolutionStrategy", spy)
-    centre = np.full(12, 0.9)
-    pocket = []
-
-    def objective(c):
-        E = 1.0 + np.sum((c - centre) ** 2, axis=1)
-        if not pocket:
-            pocket.append(c[0].copy())
-        return np.where(np.all(c == pocket[0], axis=1), 0.0, E)
-
-    pop = 4 + int(3 * np.log(12))
-    for stall, restarts in ((5, True), (0, False)):
-        starts.clear()
-        pocket.clear()
-        estimation = _est(settings, optimizer="cmaes", iterations=40 * pop, batch=32, cmaes_first_look=0,
-                          cmaes_first_start="best", cmaes_stall_generations=stall)
-        est = es.estimate(_problem_stub(), settings.model, estimation, np.full(12, 0.2), 2, seed=0,
-                          objective=objective)
-        assert est.E_m == 0.0 and np.array_equal(est.chi, pocket[0])
-        later = starts[1:]
-        assert bool(later) == restarts
-        for x0, sigma0, reached in later:     # every restart at the pocket, with the step reached (>= 1e-3)
-            assert np.array_equal(x0, pocket[0]) and sigma0 == max(reached, 1e-3)

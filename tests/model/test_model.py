@@ -3,7 +3,7 @@ import pytest
 
 from stringcast.core.arm import hand_pose
 from stringcast.core import model_ranges
-from stringcast.model.string_model import (closest_approach_batch, hanging_equilibrium, relax_batch, simulate,
+from stringcast.model.string_model import (closest_approach_batch, hanging_equilibrium, simulate,
                               simulate_batch, straight_hanging)
 from stringcast.model.reference import simulate_reference
 
@@ -177,31 +177,6 @@ def test_blow_up_gives_ok_false_not_an_exception(campaign, ranges):
         hanging_equilibrium(c, np.ones(N), hand[0], L0, 0.0, N, dt=5e-3)
     with pytest.raises(RuntimeError, match="still"):
         hanging_equilibrium(c, np.ones(N), hand[0] + [0, 0, 1.0], L0, 0.0, N, t_max=0.01)
-
-
-def test_relax_batch_settles_each_set_near_its_own_equilibrium(mid, ranges):
-    """From one bent pose under a tilted hand, each set of a batch relaxes to its own hanging equilibrium
-    (hanging_equilibrium's relaxation, started elsewhere); a set that blows up is NaN and not ok."""
-    hand0 = np.array([0.9, 0.2, -np.pi / 2 + 0.6])
-    ang = -np.pi / 2 + 0.6 - 0.15 * np.arange(N)
-    start = hand0[:2] + np.cumsum(L0 * np.stack([np.cos(ang), np.sin(ang)], 1), axis=0)
-    stiff = mid.copy()
-    stiff[2] = stiff[4] = stiff[8] = 1.0                     # bending springs k_h, k_sh and the hand's, k_ph
-    coeffs = np.stack([mid, stiff])
-    pos, ok = relax_batch(coeffs, np.ones((2, N)), hand0, start, L0, 0.0, DT, 20.0)
-    assert ok.all()
-    for c, p in zip(coeffs, pos):
-        np.testing.assert_allclose(p, hanging_equilibrium(c, np.ones(N), hand0, L0, 0.0, N), atol=2e-3)
-    assert np.abs(pos[0] - pos[1]).max() > 5e-3                # the stiffer string hangs otherwise
-    short, _ = relax_batch(coeffs[:1], np.ones((1, N)), hand0, start, L0, 0.0, DT, 0.05)
-    assert 1e-4 < np.abs(short[0] - start).max() < np.abs(pos[0] - start).max()   # cut at t_relax: on its way
-    lo, _ = ranges
-    wild = lo.copy()
-    wild[0] = 1e6
-    pos, ok = relax_batch(np.stack([wild, mid]), np.ones((2, N)), hand0, start, L0, 0.0, 5e-3, 0.5)
-    assert not ok[0] and np.isnan(pos[0]).all() and ok[1]
-    with pytest.raises(ValueError, match="t_relax"):
-        relax_batch(coeffs, np.ones((2, N)), hand0, start, L0, 0.0, DT, 0.0)
 
 
 def _random_case(ranges, seed, n=6):

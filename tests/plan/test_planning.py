@@ -28,10 +28,6 @@ def _first(s, string):
     return pn.first_parameters(model=s.model, motion=s.motion, string=string)
 
 
-def _prior(s, string, k, rng):
-    return pn.prior_ensemble(model=s.model, motion=s.motion, string=string, k=k, rng=rng)
-
-
 def test_first_parameters_carry_their_weight(settings, campaign):
     coeffs, mu = _first(settings, campaign.string)
     lo = np.array([settings.model.ranges[k][0] for k in PARAM_NAMES])
@@ -52,63 +48,6 @@ def test_first_k_s_max_and_bad_mode(settings, campaign):
     np.testing.assert_array_equal(mu_s, mu_c)
     with pytest.raises(pn.ConfigError, match="motion.first_k_s"):   # refused as the settings are built
         _with(cfg, first_k_s="stiff")
-
-
-def test_prior_ensemble_spans_table2_and_carries_its_weight(settings, campaign):
-    from stringcast.model.parameters import encode
-
-    coeffs, mu = _prior(settings, campaign.string, 64, np.random.default_rng(0))
-    n = campaign.string.n_points
-    assert coeffs.shape == (64, len(PARAM_NAMES)) and mu.shape == (64, n)
-    lo = np.array([settings.model.ranges[k][0] for k in PARAM_NAMES])
-    hi = np.array([settings.model.ranges[k][1] for k in PARAM_NAMES])
-    assert np.all(coeffs >= lo * (1 - 1e-12)) and np.all(coeffs[:, 1:] <= hi[1:] * (1 + 1e-12))
-    # log-uniform: every coefficient but the lifted k_s spreads over most of its log range
-    chi = np.log(coeffs / lo) / np.log(hi / lo)
-    assert np.all(chi[:, 1:].max(axis=0) - chi[:, 1:].min(axis=0) > 0.7)
-    # the k_s lift of first_parameters, per member: the top segment stretches at most first_max_strain
-    strain = settings.motion.first_max_strain
-    assert np.all(9.81 * mu.sum(axis=1) / coeffs[:, 0] <= strain * campaign.string.l0 * (1 + 1e-9))
-    # plain points share one mass (one group), special points have their own
-    plain = campaign.string.mass_groups() == 0
-    assert np.all(mu[:, plain] == mu[:, plain][:, :1])
-    with pytest.raises(ValueError, match="k must be"):
-        _prior(settings, campaign.string, 0, np.random.default_rng(0))
-    assert encode(coeffs[0], mu[0, :1], settings.model).shape == (len(PARAM_NAMES) + 1,)
-
-
-def test_prior_ensemble_takes_first_k_s_max(settings, campaign):
-    """With motion.first_k_s: max every member takes Table 2's largest k_s, as the first set does
-    (the carrying lift above it only for members too heavy for it); the other entries are the
-    same draw as with carrying."""
-    hi_k_s = settings.model.ranges["k_s"][1]
-    carrying, mu_c = _prior(settings, campaign.string, 32, np.random.default_rng(3))
-    stiff, mu_s = _prior(_with(settings, first_k_s="max"), campaign.string, 32, np.random.default_rng(3))
-    np.testing.assert_array_equal(stiff[:, 0], np.maximum(carrying[:, 0], hi_k_s))
-    assert np.all(stiff[:, 0] >= hi_k_s) and np.any(carrying[:, 0] < hi_k_s)
-    np.testing.assert_array_equal(stiff[:, 1:], carrying[:, 1:])
-    np.testing.assert_array_equal(mu_s, mu_c)
-
-
-def test_first_plan_with_prior_ensemble(tmp_path, campaign, small):
-    """motion.first_ensemble: the first plan is scored under K random sets, and says so in motion.json."""
-    cfg = _with(small, first_ensemble=6, first_extra_after_hit=32, robust_screen_mm=200.0)
-    res = pn.run_first_plan(campaign, tmp_path / "motion.csv", tmp_path / "motion.json", seed=0, model=cfg.model, motion=cfg.motion)
-    assert res.planner == "robust" and res.ensemble_d_min.shape == (6,)
-    assert res.hit_share == pytest.approx(np.mean(res.ensemble_d_min <= campaign.target.radius))
-    doc = read_json(tmp_path / "motion.json")
-    assert doc["kind"] == doc["origin"] == "first" and doc["ensemble_size"] == 6
-    # the search went on past the first hit by first_extra_after_hit, not extra_after_hit
-    assert res.candidates <= small.motion.max_candidates
-    base = pn.run_first_plan(campaign, tmp_path / "m0.csv", tmp_path / "m0.json", seed=0, model=small.model, motion=small.motion)
-    assert base.planner == "paper" and base.hit_share is None
-    # the chosen motion hits under at least as many sets as the paper's first plan does
-    ens = _prior(cfg, campaign.string, 6, pn._rng(cfg.motion, 0))
-    pl = pn.Predictor(campaign, cfg.model, cfg.motion, *_first(cfg, campaign.string))
-    p0 = np.stack([pl.equilibrium(base.motion.q0, c, m) for c, m in zip(*ens)])
-    d, my, ok = pl.evaluate_ensemble(base.motion.q[None], base.motion.T, p0[None], *ens)
-    base_share = np.mean(ok[0] & (d[0] <= campaign.target.radius) & (my[0] >= campaign.arm.floor_y))
-    assert res.hit_share >= base_share
 
 
 def test_aim_radius_starts_the_count_at_a_pass_near_the_centre(tmp_path, campaign, small):
@@ -359,23 +298,3 @@ def test_robust_needs_the_ensemble(tmp_path, campaign, small):
     with pytest.raises(ConfigError, match="motion.planner"):   # refused as the settings are built
         cfg = _with(cfg, planner="magic")
         pn.run_plan(tmp_path / "params.json", tmp_path / "played.json", campaign, tmp_path / "m.csv", tmp_path / "m.json", model=cfg.model, motion=cfg.motion)
-
-
-def test_first_mu_weight_sits_at_the_weights_points_and_starts_the_estimate(settings, config):
-    """model.first_mu_weight: the first plan's relative mass at each point carrying a weight (the paper's
-    Table 4 estimates 3.5-20 for its 10 g clay points), the others first_mu; the first estimate's
-    chi_best starts from those group masses."""
-    from stringcast.core import resolve_campaign
-    from stringcast.model import decode
-    from stringcast.model.parameters import start_chi
-
-    s = replace(settings, model=replace(settings.model, first_mu_weight=10.0))
-    four = resolve_campaign({"string": "4", "target": "3"}, config, "c").string   # weights at 442 and 510 mm
-    _, mu = _first(s, four)
-    assert four.weight_points() == [13, 15]
-    assert mu[[12, 14]].tolist() == [10.0, 10.0] and set(np.delete(mu, [12, 14])) == {1.0}
-    np.testing.assert_array_equal(_first(settings, four)[1], np.ones(four.n_points))   # null: every point first_mu
-    chi = start_chi(None, four, s.model, s.motion)
-    np.testing.assert_allclose(decode(chi, s.model, four.mass_groups())[1], mu)
-    six = resolve_campaign({"string": "6", "target": "3"}, config, "c").string          # a stiff tip, no weight
-    assert six.weight_points() == [] and np.all(_first(s, six)[1] == 1.0)

@@ -85,31 +85,3 @@ def test_config_typo_is_a_schema_error_naming_the_key(project, tmp_path, doc, me
     proc = _run([str(BIN / "snakemake"), "-n", "--cores", "1", "--configfile", str(bad)], project)
     out = proc.stdout + proc.stderr
     assert proc.returncode != 0 and message in out, out[-2000:]
-
-
-def test_joint_trials_hands_earlier_trials_to_estimate(project, tmp_path):
-    """estimation.joint_trials: trial 2's estimate reads trial 1's tracks and joints too (0: all so far)."""
-    t2 = project / "data" / "c1" / "trial_2"
-    t2.mkdir(exist_ok=True)
-    for name in ("joints.csv", "video.yaml", "video.mkv", "motion.csv", "motion.json"):
-        (t2 / name).write_bytes((project / "data" / "c1" / "trial_1" / name).read_bytes())
-    try:
-        outputs = {}
-        for n in (1, 0):
-            cfg = tmp_path / f"joint{n}.yaml"
-            cfg.write_text(yaml.safe_dump({"estimation": {"joint_trials": n}}))
-            proc = _run([str(BIN / "snakemake"), "results/c1/trial_2/params.json", "-n", "-p", "--cores", "1",
-                         "--configfile", str(cfg)], project)
-            out = proc.stdout + proc.stderr
-            assert proc.returncode == 0, out[-2000:]
-            line = next(x for x in out.splitlines() if 'estimate --tracks "results/c1/trial_2' in x)
-            outputs[n] = line[line.index("stringcast --log"):]
-            # no config path on the command line: the job reads the files from $STRINGCAST_CONFIG
-            assert "--config" not in outputs[n]
-        assert "--earlier-tracks" not in outputs[1]
-        assert ('--earlier-tracks "results/c1/trial_1/tracks.parquet" --earlier-joints '
-                '"data/c1/trial_1/joints.csv"') in outputs[0]
-    finally:
-        for p in t2.iterdir():
-            p.unlink()
-        t2.rmdir()

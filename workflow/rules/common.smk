@@ -228,30 +228,6 @@ def predicting_params(wildcards):
     return f"results/{wildcards.campaign}/trial_{k - 1}/params.json"
 
 
-def earlier_trials(wildcards):
-    """The earlier trials fitted together with this one (estimation.joint_trials; 1: none)."""
-    k = int(wildcards.trial)
-    n = SETTINGS.estimation.joint_trials
-    first = 1 if n == 0 else max(1, k - n + 1)
-    return {
-        "earlier_tracks": [
-            f"results/{wildcards.campaign}/trial_{j}/tracks.parquet"
-            for j in range(first, k)
-        ],
-        "earlier_joints": [
-            f"data/{wildcards.campaign}/trial_{j}/joints.csv" for j in range(first, k)
-        ],
-    }
-
-
-def earlier_arg(wildcards, input):
-    if not input.earlier_tracks:
-        return ""
-    tracks = " ".join(f'"{p}"' for p in input.earlier_tracks)
-    joints = " ".join(f'"{p}"' for p in input.earlier_joints)
-    return f"--earlier-tracks {tracks} --earlier-joints {joints}"
-
-
 def prev_arg(wildcards, input):
     return f'--prev "{input.prev[0]}"' if input.prev else ""
 

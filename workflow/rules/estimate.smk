@@ -4,7 +4,6 @@
 
 rule estimate:
     input:
-        unpack(earlier_trials),
         tracks="results/{campaign}/trial_{trial}/tracks.parquet",
         # the earlier stages' verdicts, carried into the fit's (read beside tracks.parquet)
         verdicts=expand(
@@ -27,12 +26,11 @@ rule estimate:
     params:
         cli=CLI,
         prev=prev_arg,
-        earlier=earlier_arg,
         settings=stage_settings("estimate"),
         lab=campaign_lab_entries,
     shell:
         'NUMBA_NUM_THREADS={threads} {params.cli} --log "{log}" estimate --tracks "{input.tracks}" '
-        '--joints "{input.joints}" --campaign "{input.campaign}" {params.prev} {params.earlier} '
+        '--joints "{input.joints}" --campaign "{input.campaign}" {params.prev} '
         '--trial {wildcards.trial} --out-params "{output.params}" --out-fit "{output.fit}"'
 
 

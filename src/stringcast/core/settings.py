@@ -103,7 +103,6 @@ class ModelSettings(_Section):
     dt_s: float = _f(1.0e-4, "integration step of the string model, s")
     psi0_deg: float = _f(0.0, "the string's rest direction in the hand frame, deg")
     first_mu: float = _f(1.0, "relative masses for the first plan (Table 2 has no mass row)")
-    first_mu_weight: float | None = _f(None, "first plan: relative mass of a point carrying a weight (null: first_mu)")
     ranges: Mapping[str, tuple] = _f({
         "k_s": (1.0e+3, 1.0e+6), "c_s": (1.0, 10.0), "k_h": (1.0e-3, 10.0), "c_h": (1.0e-3, 10.0),
         "k_sh": (1.0e-4, 1.0), "c_sh": (1.0e-4, 1.0), "C_c1": (1.0e-6, 10.0), "C_c2": (1.0e-6, 10.0),
@@ -143,11 +142,7 @@ class EstimationSettings(_Section):
     cmaes_runs: int = _f(1, "CMA-ES runs sharing the budget: the first from the last estimate, the others from the centre")
     cmaes_options: Mapping[str, Any] = _f({}, "passed on to cma.CMAOptions (e.g. {CSA_dampfac: 0.5}); an unknown name is an error")
     cmaes_first_look: int = _f(300, "CMA-ES: first evaluate this many eq. (3) samples around chi_best and start at their best (0: off)")
-    cmaes_stall_generations: int = _f(0, "CMA-ES: restart at the best point after this many generations without a gain (0: off)")
     compare_after_motion_s: float | None = _f(None, "compare frames up to this long after the arm stops, s (null: the whole joint log, as the paper)")
-    joint_trials: int = _f(1, "trials fitted at once: 1 the last (paper), N the last N, 0 every trial so far")
-    rest_min_chord_share: float | None = _f(None, "a tracked rest point nearer the point above than this share of l0 is filled like a hidden one: the string folds within that segment (null: off, the paper)")
-    rest_settle_s: float | None = _f(None, "the model first relaxes under the still hand from the tracked rest pose for up to this long (the planner's dynamic relaxation), s (null: starts at the tracked pose, the paper)")
     cmaes_first_start: str = _f("centre", "CMA-ES on trial 1 without a first look: from the centre of the box (centre) or from chi_best (best)")
     verdict_error_share: tuple = _f((0.18, 0.25), "fit verdict: [warn, fail] when the fit's median error over the moving frames exceeds these shares of the string's length")
     verdict_skill: tuple = _f((0.45, 0.25), "fit verdict: [warn, fail] when the fit explains at most this share of the error of a string carried without swinging (1 - error / that error)")
@@ -158,11 +153,6 @@ class EstimationSettings(_Section):
 
     def __post_init__(self):
         _one_of("estimation", "optimizer", self.optimizer, OPTIMIZERS)
-        share = self.rest_min_chord_share
-        if share is not None and not 0 < float(share) <= 1:
-            raise ConfigError(f"estimation.rest_min_chord_share: null or in (0, 1]; got {share}")
-        if self.rest_settle_s is not None and not float(self.rest_settle_s) > 0:
-            raise ConfigError(f"estimation.rest_settle_s: null or > 0 s; got {self.rest_settle_s}")
         pairs = {"verdict_error_share": 1, "verdict_skill": -1, "verdict_shift_gain": -1}
         for name, order in pairs.items():
             pair = tuple(getattr(self, name))
@@ -202,8 +192,6 @@ class MotionSettings(_Section):
     replan_perturb_rad_s: float = _f(0.0, "> 0 (with replan_miss_mm): first try perturbing the played motion by up to this, rad/s")
     replan_min_share: float = _f(0.9, "that wider perturbation is kept when it hits under at least this share of the ensemble")
     replan_residual_mm: float = _f(0.0, "> 0 (with residual_correction): no perturbation when the model's tip error on the played motion exceeds this, mm")
-    first_ensemble: int = _f(0, "> 0: the first plan prefers the motion that hits under most of this many random Table 2 sets")
-    first_extra_after_hit: int = _f(200, "first plan with first_ensemble: candidates searched past the first hit")
 
     def __post_init__(self):
         _one_of("motion", "planner", self.planner, PLANNERS)

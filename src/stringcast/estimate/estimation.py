@@ -51,7 +51,7 @@ from stringcast.model import decode, start_chi
 from .diagnostics import best_k, checked, diagnostics
 from .fitcheck import fit_figures
 from .optimizers import OPTIMIZERS, Recorder
-from .problem import (EstimationProblem, build_problem_explained, make_joint_objective, make_objective,
+from .problem import (EstimationProblem, build_problem_explained, make_objective,
                       point_errors, simulate_fit)
 from .verdict import fit_verdict, sweep_bounds
 
@@ -113,8 +113,7 @@ class Estimate:
 # Search
 # ---------------------------------------------------------------------------
 def estimate(problem: EstimationProblem, model: ModelSettings, estimation: EstimationSettings,
-             chi_start: np.ndarray, M: int, seed: int, objective: Callable | None = None,
-             earlier: tuple = ()) -> Estimate:
+             chi_start: np.ndarray, M: int, seed: int, objective: Callable | None = None) -> Estimate:
     """Run the configured optimizer on ``problem``.
 
     Args:
@@ -123,9 +122,6 @@ def estimate(problem: EstimationProblem, model: ModelSettings, estimation: Estim
         chi_start: (10 + G,) chi_best at m = 0. M: executions so far (>= 1, eq. 3).
         objective: batch objective chi (B, D) -> E (B,); default :func:`make_objective`
             (with a custom objective ``E_i`` is NaN).
-        earlier: problems of earlier trials of the same string, fitted together with
-            ``problem`` (:func:`make_joint_objective`; E_m is then the mean over the
-            trials, E_i stays ``problem``'s).
 
     Returns:
         The :class:`Estimate` (never raises on blown-up candidates: E = inf and a message).
@@ -145,7 +141,7 @@ def estimate(problem: EstimationProblem, model: ModelSettings, estimation: Estim
         raise ValueError(f"chi_start: expected ({d},), got {chi_start.shape}")
     custom = objective is not None
     if not custom:
-        objective = make_joint_objective((*earlier, problem), model)   # E itself for one trial
+        objective = make_objective(problem, model)
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
     rec = Recorder(objective, budget, f"estimate ({name})")
@@ -173,9 +169,6 @@ def estimate(problem: EstimationProblem, model: ModelSettings, estimation: Estim
     if problem.fallback_points:
         msgs.append(f"points {list(problem.fallback_points)} were never tracked at rest: their initial state "
                     "is filled with rest-length segments between the tracked points around them")
-    if problem.folded_points:
-        msgs.append(f"points {list(problem.folded_points)} sit nearer the point above than the model's segments "
-                    "allow at rest (the string folds within a segment): their initial state is filled so too")
     return Estimate(coeffs=coeffs, mu=mu, chi=best_chi, E_m=float(top_E[0]), E_i=E_i,
                     history=rec.history, optimizer=name, seed=int(seed), n_evaluations=len(all_E),
                     n_blown_up=blown, seconds=time.perf_counter() - t0,
@@ -187,7 +180,7 @@ def estimate(problem: EstimationProblem, model: ModelSettings, estimation: Estim
 # ---------------------------------------------------------------------------
 def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign,
                    prev_params_json: Path | None, trial_index: int, out_params_json: Path,
-                   out_fit_parquet: Path, earlier: tuple = (), *, model: ModelSettings,
+                   out_fit_parquet: Path, *, model: ModelSettings,
                    evaluation: EvaluationSettings, estimation: EstimationSettings, motion: MotionSettings,
                    tracking: TrackingSettings, upstream: Mapping[str, Path] | None = None) -> Estimate:
     """Estimate the parameters of one trial and write ``params.json`` and ``fit.parquet``.
@@ -196,9 +189,6 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign,
         tracks_parquet, joints_csv: the trial's tracked points and measured joint log.
         prev_params_json: the previous trial's ``params.json`` (chi_best of eq. 3) or None.
         trial_index: k >= 1, the number of executions so far (M of eq. 3); seed = estimation.seed + k.
-        earlier: (tracks_parquet, joints_csv) pairs of earlier trials of the campaign, fitted
-            together with this one (``estimation.joint_trials``; :func:`make_joint_objective`).
-            params.json's ``E_mm`` is then the mean over the trials, ``E_trials_mm`` each one's.
         model, evaluation, estimation, tracking: the settings of the search and its problem
             (:class:`~stringcast.core.ModelSettings`, :class:`~stringcast.core.EvaluationSettings`,
             :class:`~stringcast.core.EstimationSettings`, :class:`~stringcast.core.TrackingSettings`).
@@ -223,18 +213,12 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign,
     chi0 = start_chi(prev, campaign.string, model, motion, str(prev_params_json))
     k = max(1, int(trial_index))
     seed = int(estimation.seed) + k
-    earlier_problems = []
-    for tr, jo in earlier:
-        t_e, q_e = read_joint_table(jo, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
-        earlier_problems.append(build_problem_explained(read_parquet(tr, TRACK_COLUMNS), t_e, q_e, campaign, tr,
-                                                        **problem_settings))
-    est = estimate(problem, model, estimation, chi0, k, seed, earlier=tuple(earlier_problems))
-    E_trials = [float(make_objective(p, model)(est.chi[None])[0]) * 1000 for p in (*earlier_problems, problem)]
+    est = estimate(problem, model, estimation, chi0, k, seed)
     if upstream is None:
         upstream = dict(trial_result(Path(tracks_parquet).parent, stage) for stage in UPSTREAM)
     sim = simulate_fit(problem, model, est.chi)
     figures, verdict, cause = judge_fit(problem, sim, campaign.string.length, motion_window(t_j, q_j)[1],
-                                        E_trials[-1], estimation, read_verdicts(upstream), read_sweep_bounds(upstream))
+                                        est.E_m * 1000, estimation, read_verdicts(upstream), read_sweep_bounds(upstream))
     est = replace(est, verdict=verdict, likely_cause=cause)
 
     _, mu_groups_all = decode(est.top_chi, model, np.arange(problem.n_groups))
@@ -249,8 +233,7 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign,
     write_json(out_params_json, {
         "coefficients": dict(zip(PARAM_NAMES, est.coeffs)), "mu": est.mu, "mu_groups": mu_groups_all[0],
         "mass_groups": problem.mass_groups, "special_points": campaign.string.special_points(),
-        "E_mm": est.E_m * 1000, "E_i_mm": est.E_i * 1000, "E_trials_mm": E_trials,
-        "trials_fitted": [str(tr) for tr, _ in earlier] + [str(tracks_parquet)],
+        "E_mm": est.E_m * 1000, "E_i_mm": est.E_i * 1000,
         "history": {"evaluations": est.history["evaluations"],
                     "best_E_mm": [e * 1000 for e in est.history["best_E_m"]]},
         "optimizer": est.optimizer, "seed": est.seed, "evaluations": est.n_evaluations,
@@ -259,8 +242,7 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign,
         "verdict": {**verdict.as_dict(), "likely_cause": cause}, "fit_check": figures,
         "t_motion_start_s": problem.t_motion_start,
         "t_sim_start_s": problem.frame_t[0], "frames_compared": len(problem.frame_t),
-        "rest_fallback_points": list(problem.fallback_points),
-        "rest_folded_points": list(problem.folded_points), "dt_s": problem.dt})
+        "rest_fallback_points": list(problem.fallback_points), "dt_s": problem.dt})
     write_parquet(out_fit_parquet, fit_table(tracks, problem, sim, campaign.string.n_points))
     return est
 

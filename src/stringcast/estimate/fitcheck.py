@@ -25,8 +25,7 @@ Figures (``None`` where the frames to compute one are missing):
   tracked rest point hangs from the grasp point, max_i (|p_i - grasp| - i l0) / L (0 when none
   does): a hanging string cannot do that, however stiff or heavy it is; ``rest_folded_points``:
   the tracked rest points nearer the point above than :data:`~stringcast.model.FOLD_CHORD_SHARE`
-  l0 (:func:`~stringcast.model.folded_points`; those the problem refilled, with
-  ``estimation.rest_min_chord_share``): the string folds within a segment there, which the model's
+  l0 (:func:`~stringcast.model.folded_points`): the string folds within a segment there, which the model's
   straight segments cannot start from, so it moves while the arm is still.
 * ``best_shift_ms``, ``best_shift_frames``, ``shift_gain``: the time that, added to the frames'
   times, makes tracked and simulated points agree best (the median error over the moving
@@ -170,8 +169,8 @@ def _rest_figures(problem: EstimationProblem, d: np.ndarray, va: np.ndarray, res
     g0 = np.array([np.interp(problem.frame_t[0], problem.hand_t, problem.hand[:, j]) for j in (0, 1)])
     i = np.arange(1, problem.n_points + 1)
     gap = np.linalg.norm(problem.p_init - g0, axis=1) - i * problem.l0
-    known = np.setdiff1d(i, problem.fallback_points + problem.folded_points) - 1
-    folds = problem.folded_points or folded_points(g0, problem.p_init, problem.l0, FOLD_CHORD_SHARE)
+    known = np.setdiff1d(i, problem.fallback_points) - 1
+    folds = folded_points(g0, problem.p_init, problem.l0, FOLD_CHORD_SHARE)
     return {"rest_error_mm": float(np.median(d[rv]) * 1000) if tracked_rest else None,
             "rest_gap_share": float(max(0.0, gap[known].max()) / L) if len(known) else None,
             "rest_folded_points": [int(i) for i in folds]}

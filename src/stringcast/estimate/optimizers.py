@@ -39,10 +39,7 @@ its E and the search history. ``estimation`` is the estimation settings
   (median final E, type 3: 84 -> 59 mm, type 2: 64 -> 53 mm): from the centre, CMA-ES settled
   in basins with a light clay point (its mu's chi 0.0-0.4 against 0.8-0.9 in the paper
   search's best sets). ``cmaes_options`` (a mapping) is passed on to
-  ``cma.CMAOptions`` (e.g. ``CSA_dampfac``); an unknown name is a ConfigError. (f)
-  ``cmaes_stall_generations`` = G > 0 (default 0, off): when G generations bring no new best, the
-  run restarts at its best point with the step it has reached: CMA-ES's mean follows the smoothed
-  E and can drift away from a narrow pocket it once sampled (docs/method.md, "CMA-ES variants").
+  ``cma.CMAOptions`` (e.g. ``CSA_dampfac``); an unknown name is a ConfigError.
 * ``de``: SciPy differential evolution (vectorized), x0 = chi_best.
 """
 from __future__ import annotations
@@ -135,7 +132,6 @@ def cmaes_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: n
     sigma0 = float(estimation.cmaes_sigma0)
     popsize = int(estimation.cmaes_popsize) or 4 + int(3 * np.log(d))
     runs = max(1, int(estimation.cmaes_runs))
-    stall = int(estimation.cmaes_stall_generations)
     first = np.asarray(chi_best, float)
     look = min(int(estimation.cmaes_first_look), rec.remaining)
     if look > 0:  # eq. (3) at m = 0 around chi_best: clipped steps put many samples on the box's faces
@@ -149,7 +145,7 @@ def cmaes_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: n
     results = []
     for r, (x0, s0) in enumerate(starts):
         keep = rec.remaining - rec.remaining // (runs - r)      # budget left for the later runs
-        results.append((*_cma_run(rec, x0, s0, popsize, batch, rng, keep, options, stall), s0))
+        results.append((*_cma_run(rec, x0, s0, popsize, batch, rng, keep, options), s0))
     _, best, s0 = min(results, key=lambda x: x[0])
     while rec.remaining > 0:  # spend the rest (< popsize, or after a stop) around the best run's best point
         rec(np.clip(best + (s0 / 4) * rng.standard_normal((min(batch, rec.remaining), d)), 0.0, 1.0))
@@ -172,22 +168,20 @@ def cma_options(estimation: EstimationSettings) -> dict:
 
 
 def _cma_run(rec: Recorder, x0: np.ndarray, sigma0: float, popsize: int, batch: int, rng: np.random.Generator,
-             keep: int, options: Mapping | None = None, stall: int = 0) -> tuple[float, np.ndarray]:
+             keep: int, options: Mapping | None = None) -> tuple[float, np.ndarray]:
     """One CMA-ES run from x0 until ``keep`` evaluations of the budget are left; returns its best (E, point).
     ``options`` (checked by :func:`cma_options`) override the defaults below. CMA-ES restarts from the
-    best point when it stops (with sigma0), or with ``stall`` > 0 also after ``stall`` generations
-    without a new best (then, and after a stop, with the step it had reached, at least 1e-3)."""
+    best point, with sigma0, when it stops."""
     import cma
 
-    best, step = (np.inf, x0), sigma0
+    best = (np.inf, x0)
     while rec.remaining - keep >= popsize:
-        es = cma.CMAEvolutionStrategy(x0, step, {
+        es = cma.CMAEvolutionStrategy(x0, sigma0, {
             "popsize": popsize, "seed": int(rng.integers(1, 2**31 - 1)),
             "verbose": -9, "tolfun": 1e-12, "tolx": 1e-6, **(options or {})})
         if es.stop():
             break
-        since = 0   # generations without a new best
-        while rec.remaining - keep >= popsize and not es.stop() and not (stall and since >= stall):
+        while rec.remaining - keep >= popsize and not es.stop():
             xs = np.asarray(es.ask())
             inside = np.clip(xs, 0.0, 1.0)
             E = np.concatenate([rec(inside[a:a + batch]) for a in range(0, popsize, batch)])
@@ -196,12 +190,9 @@ def _cma_run(rec: Recorder, x0: np.ndarray, sigma0: float, popsize: int, batch: 
             fit = np.where(np.isfinite(E), E, worst) * (1.0 + np.sum((xs - inside) ** 2, axis=1))
             es.tell(list(xs), fit.tolist())
             i = int(np.argmin(E))
-            since += 1
             if E[i] < best[0]:
-                best, since = (float(E[i]), inside[i]), 0
+                best = (float(E[i]), inside[i])
         x0 = best[1]
-        if stall:
-            step = max(float(es.sigma), 1e-3)
     return best
 
 

@@ -9,9 +9,7 @@ data; L. Ljung, *System Identification: Theory for the User*, 2nd ed., 1999, Ch.
   ``params.json``'s ``coefficients`` and ``mu`` (its best set);
 * the input: trial k + 1's *measured* joint log (``joints.csv``), through the forward
   kinematics to the grasp's path and the hand's angle, from trial k + 1's tracked rest state
-  (:func:`stringcast.estimate.problem.build_problem`, as the paper's fit builds its problem:
-  ``estimation.rest_min_chord_share`` off whatever the method fitted with, so that one yardstick
-  measures every method's estimate);
+  (:func:`stringcast.estimate.problem.build_problem`, as the paper's fit builds its problem);
 * the output compared: trial k + 1's tracked tip (point n of ``tracks.parquet``), in every frame
   where it is valid, from the motion's start (the joint log's, :func:`stringcast.core.motion_start`)
   to the tracked tip's closest approach to the target. That closest approach is searched from

@@ -11,9 +11,7 @@ Choices where the paper is silent: the rest state p_init is the median of the
 valid tracked positions over the last ``tracking.rest_frames`` frames before the
 motion starts (:func:`stringcast.core.arm.motion_start`); points never valid there are
 filled with l0 segments between the known points around them
-(:func:`stringcast.model.rest_state.fill_rest_pose`, reported in ``Estimate.message``), and so,
-with ``estimation.rest_min_chord_share`` (our option), are tracked points where the string folds
-within one segment (:func:`stringcast.model.rest_state.folded_points`).
+(:func:`stringcast.model.rest_state.fill_rest_pose`, reported in ``Estimate.message``).
 The simulation starts at the first of those frames and is compared at every later
 frame up to the end of the joint log, or (``estimation.compare_after_motion_s``, our
 option) up to that long after the arm stops (:func:`stringcast.core.arm.motion_window`).
@@ -31,8 +29,7 @@ import pandas as pd
 from stringcast.core import (Campaign, DataError, EstimationSettings, EvaluationSettings, ModelSettings,
                              TrackingSettings, hand_pose, motion_start, motion_window, tracks_arrays, trial_result)
 from stringcast.model import decode
-from stringcast.model import fill_rest_pose, folded_points
-from stringcast.model import relax_batch, simulate_batch
+from stringcast.model import fill_rest_pose, simulate_batch
 from .evaluation import evaluation_value, per_point_errors
 
 MIN_REST_FRAMES = 3
@@ -54,9 +51,6 @@ class EstimationProblem:
         dt: integration step, s. mass_groups: (n,) int (0 = mu_others).
         w: tip weighting of eq. (6).
         fallback_points: points (1..n) never valid at rest (p_init filled by ``fill_rest_pose``).
-        folded_points: tracked points (1..n) filled so too, the string folding within their segment.
-        settle_s: s, > 0: every simulation first relaxes from p_init under the still hand for up to
-            this long (:func:`stringcast.model.relax_batch`); 0: it starts at p_init.
         t_motion_start: s, when the joint log starts to move.
     """
 
@@ -73,8 +67,6 @@ class EstimationProblem:
     mass_groups: np.ndarray
     w: float
     fallback_points: tuple = ()
-    folded_points: tuple = ()
-    settle_s: float = 0.0
     t_motion_start: float = 0.0
 
     def __post_init__(self):
@@ -110,7 +102,7 @@ def build_problem(tracks_df: pd.DataFrame, t_joints: np.ndarray, q_joints: np.nd
         t_joints: (K,) s; q_joints: (K, J) rad, the measured joint log.
         model, evaluation, estimation, tracking: the settings read (:class:`~stringcast.core.ModelSettings`:
             ``dt_s``, ``psi0_deg``; :class:`~stringcast.core.EvaluationSettings`: ``w``;
-            :class:`~stringcast.core.EstimationSettings`: ``compare_after_motion_s``, ``rest_min_chord_share``;
+            :class:`~stringcast.core.EstimationSettings`: ``compare_after_motion_s``;
             :class:`~stringcast.core.TrackingSettings`: ``rest_frames``).
 
     Raises:
@@ -152,11 +144,7 @@ def build_problem(tracks_df: pd.DataFrame, t_joints: np.ndarray, q_joints: np.nd
         if ok.any():
             known[i - 1] = np.median(xy[rest[ok], i], axis=0)
     psi0 = np.radians(float(model.psi0_deg))
-    share = estimation.rest_min_chord_share
-    folded = () if share is None else folded_points(hand[0, :2], known, s.l0, float(share))
-    known[[i - 1 for i in folded]] = np.nan
-    p_init, filled = fill_rest_pose(hand[0, :2], hand[0, 2] + psi0, known, s.l0)
-    fallback = tuple(i for i in filled if i not in folded)
+    p_init, fallback = fill_rest_pose(hand[0, :2], hand[0, 2] + psi0, known, s.l0)
     if not valid[use, 1:].any():
         raise DataError(f"{source}: no valid tracked point 1..{n} in the frames to compare")
     tracked = np.where(valid[use, 1:, None], xy[use, 1:], 0.0)
@@ -164,9 +152,7 @@ def build_problem(tracks_df: pd.DataFrame, t_joints: np.ndarray, q_joints: np.nd
         hand_t=hand_t, hand=hand, p_init=p_init, frame_t=t[use], frames=frames[use], tracked=tracked,
         valid=valid[use, 1:], l0=s.l0, psi0=psi0,
         dt=float(model.dt_s), mass_groups=s.mass_groups(),
-        w=float(evaluation.w), fallback_points=fallback, folded_points=folded,
-        settle_s=float(estimation.rest_settle_s or 0.0),
-        t_motion_start=t_move)
+        w=float(evaluation.w), fallback_points=tuple(fallback), t_motion_start=t_move)
 
 
 def upstream_causes(results_dir: str | Path, stages: tuple[str, ...] = ("geometry", "clock", "tracking")) -> str:
@@ -198,19 +184,9 @@ def build_problem_explained(tracks_df: pd.DataFrame, t_joints: np.ndarray, q_joi
 
 
 def _simulate(problem: EstimationProblem, coeffs: np.ndarray, mu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(B, F, n, 2) m and (B,) ok: B sets along the problem's hand path from its start state (p_init, or,
-    with ``settle_s``, each set's own rest near it)."""
-    b = len(coeffs)
-    if problem.settle_s <= 0:
-        return simulate_batch(coeffs, mu, problem.hand_t, problem.hand[None], np.zeros(b, np.int64),
-                              problem.p_init[None], problem.l0, problem.psi0, problem.dt, problem.frame_t)
-    start, fine = relax_batch(coeffs, mu, problem.hand[0], problem.p_init, problem.l0, problem.psi0, problem.dt,
-                              problem.settle_s)
-    start = np.where(fine[:, None, None], start, problem.p_init[None])      # a blown-up set: E = inf below
-    hands = np.ascontiguousarray(np.broadcast_to(problem.hand, (b, *problem.hand.shape)))
-    pos, ok = simulate_batch(coeffs, mu, problem.hand_t, hands, np.arange(b, dtype=np.int64), start,
-                             problem.l0, problem.psi0, problem.dt, problem.frame_t)
-    return pos, np.asarray(ok, bool) & fine
+    """(B, F, n, 2) m and (B,) ok: B sets along the problem's hand path from p_init."""
+    return simulate_batch(coeffs, mu, problem.hand_t, problem.hand[None], np.zeros(len(coeffs), np.int64),
+                          problem.p_init[None], problem.l0, problem.psi0, problem.dt, problem.frame_t)
 
 
 def make_objective(problem: EstimationProblem, model: ModelSettings) -> Callable[[np.ndarray], np.ndarray]:
@@ -226,28 +202,6 @@ def make_objective(problem: EstimationProblem, model: ModelSettings) -> Callable
 
     return objective
 
-
-def make_joint_objective(problems, model: ModelSettings) -> Callable[[np.ndarray], np.ndarray]:
-    """E over several trials of one string: chi (B, D) -> mean over ``problems`` of E (B,), m.
-
-    The issue's "fit all of a campaign's trials at once": a set must reproduce every
-    motion played so far, not only the last (our choice: each trial weighs the same,
-    whatever its number of frames). +inf where any trial's simulation blew up.
-
-    Raises:
-        ValueError: no problems, or problems of different strings (points, mass groups).
-    """
-    problems = list(problems)
-    if not problems:
-        raise ValueError("make_joint_objective: no problems")
-    if len({(p.n_points, p.n_groups) for p in problems}) != 1:
-        raise ValueError("make_joint_objective: the trials disagree on the string's points or mass groups")
-    objectives = [make_objective(p, model) for p in problems]
-
-    def objective(chi: np.ndarray) -> np.ndarray:
-        return np.mean([f(chi) for f in objectives], axis=0)
-
-    return objective
 
 def simulate_fit(problem: EstimationProblem, model: ModelSettings, chi: np.ndarray) -> tuple[np.ndarray, bool]:
     """Simulated points (F, n, 2) at ``problem.frame_t`` for one chi, and whether the run stayed valid."""

@@ -142,8 +142,8 @@ ours' first motions; 32 chords on 11 of them) and 0.81-1.43 under the field's mo
 strings, 14 chords); the field recording of issue 52 gives 0.01-0.06."""
 INERTIA_MIN_POINTS = 2
 """The recording is named only where the share is stated on at least this many chords."""
-MODEL_ADVICE = ("recalibrating will not help; look at the model instead: widen model.ranges, fit more trials "
-                "together (estimation.joint_trials), or plan a gentler motion")
+MODEL_ADVICE = ("recalibrating will not help; look at the model instead: widen model.ranges, or plan a gentler "
+                "motion")
 
 
 def _get(fig: Mapping, key: str) -> float | None:

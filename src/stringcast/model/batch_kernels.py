@@ -114,43 +114,6 @@ def simulate_batch_kernel(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, 
     return out, ok
 
 
-@njit(parallel=True, **_KERNEL)
-def settle_batch_kernel(coeffs, mu, hand_pose, p_init, l0, psi0, dt, g, lmax, relax, tol, t_max, check_every):
-    """B candidates relaxed from one pose under a still hand (:func:`kernels.settle` each, in parallel).
-
-    Parameters
-    ----------
-    coeffs : ndarray, (B, 10)
-    mu : ndarray, (B, n)
-    hand_pose : ndarray, (3,)
-        The still hand (x m, y m, phi rad).
-    p_init : ndarray, (n, 2)
-        The pose every candidate starts from, m, at rest.
-    l0, psi0, dt, g, lmax : float
-        As :func:`simulate_batch_kernel`.
-    relax, tol, t_max : float
-        Added damping 1/s, the rest test's speed m/s, the longest relaxation s.
-    check_every : int
-        Steps between rest tests.
-
-    Returns
-    -------
-    pos : ndarray, (B, n, 2)
-        Where each candidate stopped (at rest, or at t_max), m.
-    status : ndarray, (B,) int64
-        0 at rest, 1 blew up, 2 still moving at t_max.
-    """
-    B, n = coeffs.shape[0], p_init.shape[0]
-    out = np.empty((B, n, 2))
-    status = np.empty(B, dtype=np.int64)
-    for b in prange(B):
-        pos, st = kernels.settle(coeffs[b], mu[b], hand_pose, p_init, l0, psi0, dt, g, lmax, relax, tol, t_max,
-                                 check_every)
-        out[b] = pos
-        status[b] = st
-    return out, status
-
-
 # Per-lane state of a closest-approach block, Q (7 W,): field F of lane w is Q[F + w]: the
 # tip at the previous step (AX, AY m), the target now (TX, TY m), d_min (DM m), t_min (TM s),
 # min_y (MY m). One array, unsigned constant offsets: the lane loops vectorise (lockstep).

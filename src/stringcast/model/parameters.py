@@ -3,8 +3,7 @@
 * :func:`decode` / :func:`encode`: chi in [0, 1]^(10 + G) <-> the ten coefficients
   (k_s, c_s, k_h, c_h, k_sh, c_sh, C_c1, C_c2, k_ph, c_ph) on log scales over Table 2's
   ranges, and G group masses mu (Table 4's special points plus one shared value).
-* :func:`first_parameters`: the first plan's set (no estimate yet); :func:`prior_ensemble`:
-  random sets over Table 2's box for a first plan that hits under many of them.
+* :func:`first_parameters`: the first plan's set (no estimate yet).
 * :func:`planned_parameters`, :func:`ensemble_parameters`: the estimate's best set and
   best K sets, read from ``params.json``.
 * :func:`start_chi`: where the estimation's search starts (eq. 3's chi_best at m = 0).
@@ -24,8 +23,7 @@ from stringcast.core import ConfigError, DataError, ModelSettings, MotionSetting
 # Parameter sets the model is simulated with
 # ---------------------------------------------------------------------------
 def first_parameters(model: ModelSettings, motion: MotionSettings, string) -> tuple[np.ndarray, np.ndarray]:
-    """The first plan's set: coeffs (10,) Table 2 minima, mu (n,) = ``model.first_mu``, but
-    ``model.first_mu_weight`` (where set) at the points carrying a weight; k_s per
+    """The first plan's set: coeffs (10,) Table 2 minima, mu (n,) = ``model.first_mu``; k_s per
     ``motion.first_k_s`` (below). ``model``, ``motion``: model and motion settings
     (:class:`~stringcast.core.ModelSettings`, :class:`~stringcast.core.MotionSettings`).
 
@@ -46,8 +44,6 @@ def first_parameters(model: ModelSettings, motion: MotionSettings, string) -> tu
     """
     lo, hi, _ = model_ranges(model)
     mu = np.full(string.n_points, float(model.first_mu))
-    if model.first_mu_weight is not None:
-        mu[np.asarray(string.weight_points(), int) - 1] = float(model.first_mu_weight)
     coeffs = lo.copy()
     mode = str(motion.first_k_s)
     if mode not in ("carrying", "max"):
@@ -63,35 +59,6 @@ def _k_s_carrying(motion: MotionSettings, string, mu: np.ndarray) -> np.ndarray:
     g sum(mu) / (strain l0), for mu (..., n) -> (...)."""
     strain = float(motion.first_max_strain)
     return 9.81 * np.sum(mu, axis=-1) / (strain * string.l0)
-
-
-def prior_ensemble(model: ModelSettings, motion: MotionSettings, string, k: int,
-                   rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """K random sets over Table 2's box for the first plan's ensemble (``motion.first_ensemble``).
-
-    chi ~ U[0, 1]^(10 + G) (eq. 2, log-uniform over every range, one mass per group of
-    :meth:`StringSpec.mass_groups`), with k_s lifted per set as in :func:`first_parameters`
-    (top-segment static strain <= ``motion.first_max_strain``; for heavy sets above Table 2's
-    maximum), so that no member hangs stretched beyond the model's blow-up limit; with
-    ``motion.first_k_s: max`` every member takes Table 2's largest k_s, as the first set does. Before any
-    execution nothing is known of the string; a motion that hits under many of these sets is
-    one whose tip path depends little on the parameters.
-
-    Returns:
-        coeffs (K, 10), mu (K, n).
-
-    Raises:
-        ValueError: k < 1.
-    """
-    if k < 1:
-        raise ValueError(f"prior_ensemble: k must be >= 1, got {k}")
-    groups = string.mass_groups()
-    chi = rng.uniform(0.0, 1.0, (int(k), len(PARAM_NAMES) + int(groups.max()) + 1))
-    coeffs, mu = decode(chi, model, groups)
-    coeffs[:, 0] = np.maximum(coeffs[:, 0], _k_s_carrying(motion, string, mu))
-    if str(motion.first_k_s) == "max":        # as first_parameters: strings barely stretch
-        coeffs[:, 0] = np.maximum(coeffs[:, 0], model_ranges(model)[1][0])
-    return coeffs, mu
 
 
 def planned_parameters(n_points: int, params: Mapping, source: str = "params.json") -> tuple[np.ndarray, np.ndarray]:

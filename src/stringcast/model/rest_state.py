@@ -21,7 +21,7 @@ bends within one segment (a curl near the clamp: the labs' strings under a gripp
 left of down had one until their start state was fixed at 3c83cc8; a cord stored coiled can),
 the chord from the point above to it is far shorter than l0, and the model's straight segment
 starts compressed by as much. :func:`folded_points` names such points, so
-that the caller fills them like hidden ones (``estimation.rest_min_chord_share``).
+that the fit check can say why the model moves at rest (``fit_check.rest_folded_points``).
 :data:`FOLD_CHORD_SHARE` is the share the fit's verdict reads such a fold at.
 """
 from __future__ import annotations

@@ -217,45 +217,10 @@ def _targets(target_xy, target_dt, target_idx, B: int):
 def _relaxation(relax: float | None, g: float, n: int, l0: float, dt: float) -> tuple[float, int]:
     """The dynamic relaxation's damping, 1/s (default 2 sqrt(g / (n l0)), about critical for the
     pendulum mode), and its rest test's interval in steps (every millisecond of simulated time):
-    one definition for the planner's equilibrium and the fit's settled start."""
+    one definition for the planner's equilibrium."""
     if relax is None:
         relax = 2.0 * math.sqrt(max(g, 1e-9) / (n * l0))
     return float(relax), max(1, int(round(1e-3 / dt)))
-
-
-def relax_batch(coeffs, mu, hand_pose, p_init, l0, psi0, dt, t_relax, *, g: float = G, max_stretch: float = 3.0,
-                relax: float | None = None):
-    """B candidates relaxed from one pose under a still hand for at most ``t_relax`` s.
-
-    :func:`hanging_equilibrium`'s dynamic relaxation (added damping -relax v; rest: every speed
-    under 1e-4 m/s and every acceleration under 1e-4 max(relax, 1) m/s^2), started from
-    ``p_init`` instead of straight down and cut at ``t_relax``: the estimation's start
-    (``estimation.rest_settle_s``, docs/string_model.md "Initial state") is the model's own rest
-    near the tracked pose, not the tracked pose itself.
-
-    Args:
-        coeffs (B, 10), mu (B, n), hand_pose (3,) = (x m, y m, phi rad), p_init (n, 2) m, l0 m,
-        psi0 rad, dt s, t_relax s (> 0). relax: 1/s, default 2 sqrt(g / (n l0)).
-
-    Returns:
-        pos (B, n, 2) m (NaN where the candidate blew up), ok (B,) bool.
-
-    Raises:
-        ValueError: bad shapes, non-finite inputs or t_relax <= 0.
-    """
-    p = _f64(p_init, "p_init", 2, 2)
-    n = p.shape[0]
-    c, m = _batch(coeffs, mu, n)
-    hp = _f64(hand_pose, "hand_pose", 1, 3)
-    l0, dt, lmax = _scalars(l0, dt, max_stretch)
-    if not (t_relax > 0) or not np.all(np.isfinite(p)):
-        raise ValueError(f"relax_batch: need t_relax > 0 and a finite p_init (got {t_relax})")
-    relax, check = _relaxation(relax, g, n, l0, dt)
-    pos, status = _bk.settle_batch_kernel(c, m, hp, p, l0, float(psi0), dt, float(g), lmax, relax, 1e-4,
-                                          float(t_relax), check)
-    ok = status != 1
-    pos[~ok] = np.nan
-    return pos, ok
 
 
 def straight_hanging(coeffs, mu, hand_pose, l0, n, *, g: float = G) -> np.ndarray:

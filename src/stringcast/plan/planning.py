@@ -35,10 +35,6 @@ from an initial posture q0):
   margin (radius - median d_min over the members); the stopping rule is the paper's, or
   with ``motion.robust_min_share`` > 0 (tried, off in ours) the first hit that starts the
   count of ``extra_after_hit`` candidates must hit under at least that share of the members.
-* First-plan ensemble (``motion.first_ensemble`` = K > 0; tried, off in ours): the first plan
-  is scored the same way under K random sets over Table 2's box
-  (:func:`stringcast.model.parameters.prior_ensemble`), ``motion.first_extra_after_hit`` candidates
-  past the first hit (docs/method.md says why it is off).
 * Residual correction (``motion.residual_correction``, later motions, with either
   planner; ours): every set aims at the target minus the model's error on the played
   motion's tracked tip (:mod:`stringcast.plan.residual`), so d_min is the corrected one.
@@ -69,7 +65,7 @@ import numpy as np
 
 from stringcast.core import (Campaign, ConfigError, ModelSettings, MotionSettings, PARAM_NAMES, read_json,
                              write_joint_table, write_json)
-from stringcast.model import ensemble_parameters, first_parameters, planned_parameters, prior_ensemble
+from stringcast.model import ensemble_parameters, first_parameters, planned_parameters
 from .motion import Motion, read_motion_json, time_grid
 from .search import draw_candidates, keep_best, residual_correction, start_postures
 from .prediction import Predictor
@@ -277,16 +273,9 @@ def _rng(motion: MotionSettings, seed: int) -> np.random.Generator:
 def run_first_plan(campaign: Campaign, out_csv: Path, out_json: Path, seed: int = 0, *, model: ModelSettings,
                    motion: MotionSettings) -> PlanResult:
     """First motion of a campaign, planned with :func:`first_parameters` (Table 2 minima, k_s per
-    ``motion.first_k_s``);
-    with ``motion.first_ensemble`` = K > 0 also scored under K random sets (module doc)."""
+    ``motion.first_k_s``)."""
     coeffs, mu = first_parameters(model=model, motion=motion, string=campaign.string)
-    rng = _rng(motion, seed)
-    k = int(motion.first_ensemble)
-    ensemble = None
-    if k > 0:
-        ensemble = prior_ensemble(model=model, motion=motion, string=campaign.string, k=k, rng=rng)
-        motion = replace(motion, extra_after_hit=int(motion.first_extra_after_hit))
-    result = replace(search(campaign, model, motion, coeffs, mu, rng, ensemble=ensemble), origin="first")
+    result = replace(search(campaign, model, motion, coeffs, mu, _rng(motion, seed)), origin="first")
     write_motion(result, campaign, motion, coeffs, mu, seed, out_csv, out_json, "first")
     return result
 
