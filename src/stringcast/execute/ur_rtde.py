@@ -100,17 +100,18 @@ class URMapping:
 
 @dataclass(frozen=True)
 class URSettings:
-    """The backend's settings (``executor.ur`` and ``executor.start_tolerance_rad``), SI units."""
+    """The backend's settings (``executor.ur`` and ``executor.start_tolerance_rad``), SI units, built by
+    :meth:`from_settings`: their defaults are declared once, in :class:`~stringcast.core.ExecutorSettings`."""
 
     mapping: URMapping
-    lookahead_time_s: float = 0.1
-    gain: float = 300.0
-    servo_speed: float = 0.5          # rad/s, servoJ's speed argument (unused by URScript's servoj)
-    servo_acceleration: float = 0.5   # rad/s^2, likewise
-    start_tolerance_rad: float = 0.02
-    move_speed: float = 0.3           # rad/s, moveJ to the start (--move-to-start)
-    move_acceleration: float = 0.5    # rad/s^2
-    settle_s: float = 0.2             # unlogged servoJ ramp from the actual posture to the start
+    lookahead_time_s: float
+    gain: float
+    servo_speed: float                # rad/s, servoJ's speed argument (unused by URScript's servoj)
+    servo_acceleration: float         # rad/s^2, likewise
+    start_tolerance_rad: float
+    move_speed: float                 # rad/s, moveJ to the start (--move-to-start)
+    move_acceleration: float          # rad/s^2
+    settle_s: float                   # unlogged servoJ ramp from the actual posture to the start
 
     def __post_init__(self):
         if not 0.03 <= self.lookahead_time_s <= 0.2:
