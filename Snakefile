@@ -6,12 +6,16 @@
 # src/stringcast/ and is tested without Snakemake.
 from snakemake.utils import min_version, validate
 
+from stringcast.core import merge_config, typed_overrides
+
 min_version("8.0")
 
 
 configfile: "config/config.yaml"
 
 
+# --config 'SECTION={KEY: VALUE}' sets settings, typed as in a config file
+merge_config(config, typed_overrides(workflow.config_settings.config))
 validate(config, "workflow/schemas/config.schema.json")
 
 

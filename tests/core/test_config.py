@@ -5,7 +5,7 @@ import pytest
 import yaml
 
 from stringcast.core import (PARAM_NAMES, ConfigError, StringSpec, load_campaign, load_config,
-                               model_ranges, resolve_campaign)
+                               model_ranges, resolve_campaign, validate)
 from stringcast.core.settings import settings_from_config
 
 
@@ -128,3 +128,25 @@ def test_campaign_entries_are_what_resolve_campaign_reads(config):
     assert c.string.name == "c-inline" and c.target.name == "1" and c.arm.name == arm_id and c.setup.name == "default"
     with pytest.raises(ConfigError, match="unknown target 99"):
         campaign_entries({"string": 1, "target": 99}, config)
+
+
+def test_a_section_on_the_command_line_is_typed_as_in_a_file(tmp_path, config):
+    """``--config 'evaluation={w: 0.5}'`` reaches Snakemake as {'w': '0.5'} (YAML's BaseLoader); typed
+    again and merged, it is the setting w = 0.5, lists and booleans too; top-level scalars are kept;
+    the job config file is named by its content."""
+    from stringcast.core import merge_config, typed_overrides, write_job_config
+
+    cfg = copy.deepcopy({k: v for k, v in config.items() if k != "_path"})
+    over = {"evaluation": {"w": "0.5"}, "motion": {"T_range_s": ["0.3", "0.9"], "residual_correction": "true"},
+            "note": "0.5"}
+    typed = typed_overrides(over)
+    assert typed == {"evaluation": {"w": 0.5}, "motion": {"T_range_s": [0.3, 0.9], "residual_correction": True},
+                     "note": "0.5"}
+    merge_config(cfg, {k: v for k, v in typed.items() if k != "note"})
+    validate(cfg, "config.schema.json", "test")
+    s = settings_from_config(cfg)
+    assert s.evaluation.w == 0.5 and s.motion.T_range_s == (0.3, 0.9) and s.motion.residual_correction is True
+    a = write_job_config(cfg, tmp_path)
+    assert a == write_job_config(copy.deepcopy(cfg), tmp_path) and load_config([a])["evaluation"]["w"] == 0.5
+    cfg["evaluation"]["w"] = 0.7
+    assert write_job_config(cfg, tmp_path) != a and len(list(tmp_path.glob("config-*.yaml"))) == 2

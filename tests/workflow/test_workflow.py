@@ -232,6 +232,26 @@ def test_a_changed_setting_reruns_exactly_what_reads_it(finished, section, key, 
 
 
 @pytest.mark.slow
+def test_a_setting_on_the_command_line_reruns_exactly_what_reads_it(finished):
+    """``snakemake --config 'evaluation={w: 0.5}'`` plans estimate, plan and the reports (the params
+    changed), nothing upstream, and its jobs would read w = 0.5 (the run's config file); an unknown
+    setting is refused by the schema before any job."""
+    root, _ = finished
+    reruns = {"estimate", "plan", "report_trial", "report_campaign"}
+    if (root / "data" / "e2e" / "trial_2").exists():
+        reruns |= {"predict"}
+    out = snakemake(root, "-n", "--config", "evaluation={w: 0.5}")
+    assert planned_rules(out) == reruns, out
+    written = [yaml.safe_load(p.read_text()) for p in (root / "results" / ".stringcast").glob("config-*.yaml")]
+    w = [(c.get("evaluation") or {}).get("w") for c in written]    # None: the default (0.1)
+    assert 0.5 in w and None in w
+    bad = subprocess.run([sys.executable, "-m", "snakemake", "-n", "--cores", "1", "--directory", str(root),
+                          "--config", "evaluation={ww: 0.5}"], cwd=root, capture_output=True, text=True)
+    assert bad.returncode != 0 and "ww" in bad.stdout + bad.stderr
+    assert "Nothing to be done" in snakemake(root, "-n")
+
+
+@pytest.mark.slow
 def test_a_configfile_that_changes_nothing_a_stage_reads_reruns_nothing(finished):
     """A --configfile that restates a default and changes only the virtual lab (which no stage
     reads) leaves every result as it is; one that changes a setting reruns."""

@@ -22,6 +22,7 @@ from stringcast.core import (
     outputs_newer_than,
     settings_from_config,
     workflow_stamp,
+    write_job_config,
 )
 from stringcast.core.lifeline import ENV_PID
 
@@ -32,30 +33,16 @@ wildcard_constraints:
 
 
 # Jobs run the package's `stringcast` command from the environment Snakemake runs in
-# (the project's venv), found by PATH, and read the config files Snakemake read: the
-# Snakefile's configfile, then every --configfile over it (stringcast merges them the same
-# way), named in $STRINGCAST_CONFIG. Neither is part of a rule's command line: a rule's
-# params are the settings its stage reads, so Snakemake reruns a stage when, and only
-# when, one of them changes. --config KEY=VALUE overrides would not reach the jobs, so
-# they are refused.
-if workflow.config_settings.config:
-    raise WorkflowError(
-        "stringcast: --config KEY=VALUE overrides do not reach the jobs, which read config "
-        "files; put the overrides in a YAML file and pass it with --configfile"
-    )
-CONFIG_FILES = [
-    *(
-        ["config/config.yaml"]
-        if Path("config/config.yaml").exists()
-        and not workflow.config_settings.replace_workflow_config
-        else []
-    ),
-    *map(str, workflow.config_settings.configfiles),
-]
+# (the project's venv), found by PATH, and read the config this run holds (the Snakefile's
+# configfile, every --configfile over it, and --config 'SECTION={KEY: VALUE}'), written once
+# to results/.stringcast/config-<hash>.yaml and named in $STRINGCAST_CONFIG. No config path is
+# part of a rule's command line: a rule's params are the settings its stage reads, so Snakemake
+# reruns a stage when, and only when, one of them changes.
+JOB_CONFIG = os.path.abspath(write_job_config(config))
 # Each job's stringcast ends with this run, even one killed hard (stringcast.core.lifeline).
 shell.prefix(
     f'set -euo pipefail; export PATH="{Path(sys.executable).parent}:$PATH"; '
-    f'export STRINGCAST_CONFIG="{os.pathsep.join(map(os.path.abspath, CONFIG_FILES))}"; '
+    f'export STRINGCAST_CONFIG="{JOB_CONFIG}"; '
     f'export {ENV_PID}="{workflow_stamp()}"; '
 )
 CLI = "stringcast"

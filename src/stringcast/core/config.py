@@ -122,6 +122,30 @@ def merge_config(into: dict, over: Mapping) -> dict:
     return into
 
 
+def typed_overrides(overrides: Mapping) -> dict:
+    """Snakemake's ``--config KEY=VALUE`` with a YAML value, as the command line gives a section
+    (``--config 'evaluation={w: 0.5}'``; its parser takes top-level keys only, refusing
+    ``evaluation.w``), typed as a config file would be: Snakemake reads such a value with YAML's
+    BaseLoader, which keeps every scalar a string (``{'w': '0.5'}``), so each string inside a
+    section is read again as YAML (``0.5``, ``true``, ``[0.3, 0.9]``). Top-level scalars, which
+    Snakemake types itself, are kept. Returns a new mapping to merge over the config
+    (:func:`merge_config`).
+    """
+    def typed(value):
+        if isinstance(value, Mapping):
+            return {k: typed(v) for k, v in value.items()}
+        if isinstance(value, list):
+            return [typed(v) for v in value]
+        if isinstance(value, str):
+            try:
+                return yaml.safe_load(value)
+            except yaml.YAMLError:
+                return value
+        return value
+
+    return {k: typed(v) if isinstance(v, (Mapping, list)) else v for k, v in dict(overrides or {}).items()}
+
+
 def load_config(path: str | Path | Sequence | None = None) -> dict:
     """Load and schema-validate the config (default ``config/config.yaml``).
 

@@ -12,7 +12,7 @@ import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 
 import numpy as np
 
@@ -241,3 +241,21 @@ def tracks_arrays(tracks, n: int, source="tracks") -> tuple[np.ndarray, np.ndarr
 __all__ = ["BEFORE_SWEEP", "TRACK_COLUMNS", "DataError", "atomic_path", "find_video", "read_json", "read_parquet",
            "read_parquet_columns", "read_video_meta", "tracks_arrays", "trial_result", "write_json",
            "write_parquet", "write_text", "write_yaml"]
+
+
+def write_job_config(config: Mapping, folder: str | Path = "results/.stringcast") -> Path:
+    """The config a workflow run holds (its config files merged, ``--config`` overrides included), as
+    one YAML file for its jobs to read (``$STRINGCAST_CONFIG``): ``<folder>/config-<sha256[:12]>.yaml``,
+    named by its content and written atomically where it is not there yet, so that runs with the
+    same config share it and a job started by Slurm, which parses the Snakefile again, finds it.
+
+    Returns:
+        The file's path (as ``folder`` gives it).
+    """
+    import hashlib
+
+    text = yaml.safe_dump(_jsonable(dict(config)), sort_keys=True)
+    path = Path(folder) / f"config-{hashlib.sha256(text.encode()).hexdigest()[:12]}.yaml"
+    if not path.is_file():
+        write_text(path, text)
+    return path
