@@ -49,6 +49,8 @@ RULES = {"plan_first", "decode", "calib_views", "calibrate", "sync", "sweep", "t
 #   benchmarks/*.tsv: Snakemake's timings and memory of each job (only their columns compare).
 #   campaign_summary.json: the lab driver's summary (with its timings), written only by the
 #   local run (run_campaign), not by the workflow.
+#   .stringcast/config-<hash>.yaml: each run's merged config for its jobs (the two runs name their
+#   config files differently); the results compare, not the runs' bookkeeping.
 # No other stage writes a host, a path of the run or a time of day into its JSON or YAML.
 # The pages' provenance (git commit, library versions) compares whole: both runs run the same code.
 RUN_DEPENDENT_FIELDS = {"params.json": {"seconds"}, "frames.json": {"source"}}   # top-level keys, by file name
@@ -172,8 +174,11 @@ def _text_difference(a: str, b: str) -> str:
 def compare_results(a: Path, b: Path) -> list[str]:
     """The differences between two results/ folders of the same data (empty: equal), by file;
     the run-dependent parts named at the top of this module are left out."""
-    files_a = {p.relative_to(a) for p in a.rglob("*") if p.is_file() and p.name not in LOCAL_ONLY}
-    files_b = {p.relative_to(b) for p in b.rglob("*") if p.is_file() and p.name not in LOCAL_ONLY}
+    def kept(p: Path, root: Path) -> bool:
+        return p.is_file() and p.name not in LOCAL_ONLY and p.relative_to(root).parts[0] != ".stringcast"
+
+    files_a = {p.relative_to(a) for p in a.rglob("*") if kept(p, a)}
+    files_b = {p.relative_to(b) for p in b.rglob("*") if kept(p, b)}
     diffs = [f"{f}: only in {a}" for f in sorted(files_a - files_b)]
     diffs += [f"{f}: only in {b}" for f in sorted(files_b - files_a)]
     for f in sorted(files_a & files_b):
