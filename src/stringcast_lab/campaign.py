@@ -2,8 +2,8 @@
 
 ``run_campaign`` plays the role of the person at the arm: it creates
 ``data/<name>/`` (campaign.yaml and a ChArUco clip for intrinsics), asks the
-Snakemake workflow for the first motion, plays it with the executor on the
-virtual lab, asks the workflow to process the trial (calibrate, sync, track,
+Snakemake workflow for the first motion, plays it on the virtual lab with the
+executor's command (``stringcast execute --backend virtual``), asks the workflow to process the trial (calibrate, sync, track,
 estimate, plan, report; from trial 2 on also the previous estimate's prediction of it,
 ``prediction.json``), plays the next motion, and so on until the lab says the
 tip hit the target or ``max_executions`` is reached.
@@ -32,9 +32,7 @@ from collections.abc import Callable, Iterator, Sequence
 import numpy as np
 import pandas as pd
 
-from stringcast.core import (ConfigError, load_config, load_yaml, read_parquet, resolve_campaign, settings_from_config,
-                             write_yaml)
-from stringcast.execute import execute
+from stringcast.core import ConfigError, load_config, load_yaml, read_parquet, resolve_campaign, write_yaml
 from .calib_clip import write_calibration_clip
 
 
@@ -152,6 +150,24 @@ def folder_in_place(folder: Path) -> Iterator[Path]:
         shutil.rmtree(tmp, ignore_errors=True)
 
 
+def play(motion: Path, out: Path, campaign_yaml: Path, root: Path, given: list[Path], seed: int) -> None:
+    """Play ``motion`` on the virtual lab into ``out`` as the person at the arm does: ``stringcast execute
+    --backend virtual`` (its limit checks, pre- and post-roll), with the config the workflow reads
+    (the project's, then ``given``).
+
+    Raises:
+        RuntimeError: the executor refused the motion or failed (its output is named).
+    """
+    base = Path(root) / "config" / "config.yaml"
+    configs = [a for p in ([base] if base.exists() else []) + list(given) for a in ("--config", str(p))]
+    proc = subprocess.run([sys.executable, "-m", "stringcast.cli", *configs, "execute", str(motion), "--backend",
+                           "virtual", "--campaign", str(campaign_yaml), "--out", str(out), "--seed", str(int(seed))],
+                          capture_output=True, text=True)
+    if proc.returncode:
+        raise RuntimeError(f"stringcast execute {motion} failed (exit {proc.returncode}):\n"
+                           f"{(proc.stdout + proc.stderr)[-3000:]}")
+
+
 def run_campaign(name: str, string: str, target: str, config_path: str | Path | list | None = None,
                  max_executions: int = 5, cores: int = 2, seed: int = 0,
                  root: Path = Path("."), reports: bool = True, keep_frames: bool = True,
@@ -188,7 +204,6 @@ def run_campaign(name: str, string: str, target: str, config_path: str | Path | 
 
     root = Path(root).resolve()
     config, given = campaign_config(root, config_path)
-    settings = settings_from_config(config)
     data, camp_yaml, campaign, timings = _prepare_campaign(root, name, string, target, seed, config)
 
     timings["plan_first_s"] = run_workflow(root, [f"results/{name}/first_motion/motion.csv"], cores, given,
@@ -200,7 +215,7 @@ def run_campaign(name: str, string: str, target: str, config_path: str | Path | 
         if not (trial / "joints.csv").exists():
             t0 = time.perf_counter()
             with folder_in_place(trial) as tmp:
-                execute(motion, "virtual", tmp, camp_yaml, settings.executor, config, seed=seed * 1000 + k)
+                play(motion, tmp, camp_yaml, root, given, seed * 1000 + k)
             timings[f"execute_{k}_s"] = time.perf_counter() - t0
         truth = json.loads((trial / "ground_truth.json").read_text())
         rows.append({"trial": k, "hit": bool(truth["hit"]),
