@@ -213,10 +213,14 @@ def run_campaign(name: str, string: str, target: str, config_path: str | Path | 
     for k in range(1, max_executions + 1):
         trial = data / f"trial_{k}"
         if not (trial / "joints.csv").exists():
+            print(f"[campaign {name}] execution {k}: the virtual lab plays {motion.relative_to(root)}, "
+                  f"simulating the string and filming it ...", flush=True)
             t0 = time.perf_counter()
             with folder_in_place(trial) as tmp:
                 play(motion, tmp, camp_yaml, root, given, seed * 1000 + k)
             timings[f"execute_{k}_s"] = time.perf_counter() - t0
+            print(f"[campaign {name}] execution {k}: played and filmed in {timings[f'execute_{k}_s']:.0f} s "
+                  f"-> {trial.relative_to(root)}", flush=True)
         truth = json.loads((trial / "ground_truth.json").read_text())
         rows.append({"trial": k, "hit": bool(truth["hit"]),
                      "closest_approach_mm": float(truth["closest_approach_mm"])})
