@@ -25,7 +25,7 @@ campaigns; they run only by name (``--only 1 0 ours_no_residual``, or loop.smk's
 the residual correction (and so without its gate on perturbations), the weak class of the family
 being threads (issue 52);
 ``ours_always_perturb`` perturbs the played motion (+-0.5 rad/s) after any miss, as the paper does, instead
-of a wider perturbation or a new motion after a miss over 45 mm; ``ours_w01`` fits with the paper's tip
+of a wider perturbation or a new motion after a miss over 45 mm; ``ours_paper_w`` fits with the paper's tip
 weighting w = 0.1 (the threads' next-motion error, docs/method.md). ``benchmarks.loop_ab`` compares such a run with ours.
 
 A seed ``s`` sets the lab's noise (the campaign's seed: camera noise, joint noise, trigger
@@ -111,7 +111,7 @@ VARIANTS = {
     # methods=...) and left out of loop.json: an A/B of that setting on the same code and campaigns
     "ours_no_residual": {"motion": {"residual_correction": False}},
     "ours_always_perturb": {"motion": {"replan_miss_mm": 0.0}},
-    "ours_w01": {"evaluation": {"w": 0.1}},
+    "ours_paper_w": {"evaluation": {"w": 0.1}},
 }
 PHYSICS = ("mujoco", "elastica")
 MODES = ("state", "video")
