@@ -69,6 +69,11 @@ def trial_steps(campaign: str, k: int, has_calib: bool, workers: int) -> list[St
     data, res = f"data/{campaign}", f"results/{campaign}"
     trial, out = f"{data}/trial_{k}", f"{res}/trial_{k}"
     camp = f"{data}/campaign.yaml"
+    logs = {"calib_views": f"{res}/logs/calib_views.log", "report_trial": f"{res}/logs/report_{k}.log"}
+
+    def _step(rule: str, argv: tuple[str, ...], outputs: tuple[str, ...]) -> Step:
+        return Step(rule, argv, outputs, logs.get(rule, f"{res}/logs/{rule}_{k}.log"))   # the log the rule names
+
     w = {rule: str(min(n, workers)) for rule, n in RULE_WORKERS.items()}
     frames = ("--frames", f"{out}/frames.npy")
     steps = [_step("decode", ("decode", "--trial-dir", trial, "--out", f"{out}/frames.npy"),
@@ -109,13 +114,7 @@ def trial_steps(campaign: str, k: int, has_calib: bool, workers: int) -> list[St
         _step("report_trial", ("report-trial", "--data-dir", trial, "--results-dir", out, "--campaign", camp,
                         "--out", f"{out}/report.html"), (f"{out}/report.html",)),
     ]
-    logs = {"calib_views": f"{res}/logs/calib_views.log", "report_trial": f"{res}/logs/report_{k}.log"}
-    return [Step(s.rule, s.argv, s.outputs, logs.get(s.rule, f"{res}/logs/{s.rule}_{k}.log")) for s in steps]
-
-
-def _step(rule: str, argv: tuple[str, ...], outputs: tuple[str, ...]) -> Step:
-    """A step whose log :func:`trial_steps` names."""
-    return Step(rule, argv, outputs, "")
+    return steps
 
 
 def campaign_step(campaign: str) -> Step:

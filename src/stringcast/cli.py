@@ -259,26 +259,10 @@ def cmd_execute(args):
                  f"(motion from {info['motion_start_s']:.3f} s) -> {args.out}")
 
 
-def lab_module(name: str = "stringcast_lab"):
-    """The virtual lab's module ``name``, for the commands that run the lab (``campaign``,
-    ``calib-clip``): the lab is an extra, so the pipeline's commands run without its simulators.
-
-    Raises:
-        ConfigError: the lab extra (MuJoCo, PyElastica, PyAV) is not installed.
-    """
-    import importlib
-
-    from stringcast.core import ConfigError
-
-    try:
-        return importlib.import_module(name)
-    except ImportError as e:
-        raise ConfigError(f"this command runs the virtual lab, which is not installed ({e}): "
-                          "pip install 'stringcast[lab]'") from e
-
-
 def cmd_calib_clip(args):
-    write_calibration_clip = lab_module().write_calibration_clip
+    from stringcast.execute import lab_module
+
+    write_calibration_clip = lab_module(needed_by="stringcast calib-clip").write_calibration_clip
     path = write_calibration_clip(_campaign(args), _config(args), Path(args.out), int(args.seed))
     print(f"calibration clip -> {path}")
 
@@ -292,7 +276,9 @@ def campaign_config_paths(args) -> list[str]:
 
 
 def cmd_campaign(args):
-    run_campaign = lab_module("stringcast_lab.campaign").run_campaign
+    from stringcast.execute import lab_module
+
+    run_campaign = lab_module("stringcast_lab.campaign", needed_by="stringcast campaign").run_campaign
     run_campaign(args.name, args.string, args.target, config_path=campaign_config_paths(args),
                  max_executions=int(args.max_executions), cores=int(args.cores), seed=int(args.seed),
                  root=Path(args.root))

@@ -34,19 +34,30 @@ from .ur_rtde import UR_JOINTS, URSettings, play_ur
 BACKENDS = ("virtual", "ur-rtde")
 
 
-def virtual_lab_trial():
-    """The ``virtual`` backend's player, :func:`stringcast_lab.run_trial`, imported on demand:
-    the pipeline and the ``ur-rtde`` backend run without the virtual lab's simulators.
+def lab_module(name: str = "stringcast_lab", needed_by: str = "this command"):
+    """The virtual lab's module ``name``, imported on demand: the pipeline, the ``ur-rtde`` backend and
+    every command but the lab's own run without the lab's simulators. ``needed_by`` names who needs it
+    in the error.
 
     Raises:
         ConfigError: the virtual lab (the ``lab`` extra: MuJoCo, PyElastica, PyAV) is not installed.
     """
+    import importlib
+
     try:
-        from stringcast_lab import run_trial
+        return importlib.import_module(name)
     except ImportError as e:
-        raise ConfigError(f"executor: the virtual backend needs the virtual lab, which is not installed "
-                          f"({e}): pip install 'stringcast[lab]'") from e
-    return run_trial
+        raise ConfigError(f"{needed_by} needs the virtual lab, which is not installed ({e}): "
+                          "pip install 'stringcast[lab]'") from e
+
+
+def virtual_lab_trial():
+    """The ``virtual`` backend's player, :func:`stringcast_lab.run_trial` (:func:`lab_module`).
+
+    Raises:
+        ConfigError: the virtual lab is not installed.
+    """
+    return lab_module(needed_by="executor: the virtual backend").run_trial
 
 
 def _copy(src: Path, dst: Path) -> None:
