@@ -20,7 +20,7 @@ camera, lens, codec, light, background, board, arm, calibration set and clocks d
 try:
     import mujoco  # noqa: F401  (the default physics: without it, the lab extra is not installed)
 except ImportError as exc:
-    raise ImportError(f"the virtual lab needs its extra ({exc}): pip install 'stringcast[lab]'") from exc
+    raise ImportError(f"{exc}, the virtual lab's physics engine (the lab extra)") from exc
 
 from .calib_clip import write_calibration_clip
 from .camera import PRESETS, CameraModel, IdealCanvas, Sensor, apply_preset, camera_settings
