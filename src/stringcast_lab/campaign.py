@@ -109,7 +109,14 @@ def campaign_config(root: Path, config_path: str | Path | list | None = None) ->
     base = Path(root).resolve() / "config" / "config.yaml"
     # the project's own file is read anyway; passed again it would change every job's command line
     given = [q for q in (Path(p).resolve() for p in given) if not (base.exists() and q == base.resolve())]
-    return load_config(([base] if base.exists() else []) + given), given
+    return load_config(read_config_files(root, given)), given
+
+
+def read_config_files(root: Path, given: list[Path]) -> list[Path]:
+    """The files the workflow's jobs and the lab read, in order: ``root/config/config.yaml`` (where it
+    is), then ``given`` (:func:`campaign_config`'s second value)."""
+    base = Path(root).resolve() / "config" / "config.yaml"
+    return ([base] if base.exists() else []) + list(given)
 
 
 def _prepare_campaign(root: Path, name: str, string: str, target: str, seed: int,
@@ -158,8 +165,7 @@ def play(motion: Path, out: Path, campaign_yaml: Path, root: Path, given: list[P
     Raises:
         RuntimeError: the executor refused the motion or failed (its output is named).
     """
-    base = Path(root) / "config" / "config.yaml"
-    configs = [a for p in ([base] if base.exists() else []) + list(given) for a in ("--config", str(p))]
+    configs = [a for p in read_config_files(root, given) for a in ("--config", str(p))]
     proc = subprocess.run([sys.executable, "-m", "stringcast.cli", *configs, "execute", str(motion), "--backend",
                            "virtual", "--campaign", str(campaign_yaml), "--out", str(out), "--seed", str(int(seed))],
                           capture_output=True, text=True)
