@@ -4,9 +4,10 @@
 #   snakemake --cores 2 results/demo/trial_1/tracks.parquet   # one stage of one trial
 # The rules are thin: each calls one `stringcast` subcommand; the logic lives in
 # src/stringcast/ and is tested without Snakemake.
-from snakemake.utils import min_version, validate
+from snakemake.exceptions import WorkflowError
+from snakemake.utils import min_version
 
-from stringcast.core import merge_config, typed_overrides
+from stringcast.core import ConfigError, merge_config, typed_overrides, validate
 
 min_version("8.0")
 
@@ -16,7 +17,15 @@ configfile: "config/config.yaml"
 
 # --config 'SECTION={KEY: VALUE}' sets settings, typed as in a config file
 merge_config(config, typed_overrides(workflow.config_settings.config))
-validate(config, "workflow/schemas/config.schema.json")
+# the lab's sections (workflow/schemas/config.schema.json) and the stages' (from their settings classes)
+try:
+    validate(
+        {k: v for k, v in config.items() if k != "_path"},
+        "config.schema.json",
+        "the workflow's config",
+    )
+except ConfigError as exc:
+    raise WorkflowError(f"stringcast: {exc}") from exc
 
 
 report: "workflow/report/workflow.rst"

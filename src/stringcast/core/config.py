@@ -20,10 +20,9 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 import yaml
 
-PARAM_NAMES: tuple[str, ...] = (
-    "k_s", "c_s", "k_h", "c_h", "k_sh", "c_sh", "C_c1", "C_c2", "k_ph", "c_ph",
-)
-"""The ten coefficients of the string model, in the paper's Table 2 order."""
+from .errors import ConfigError
+from .settings import PARAM_NAMES, settings_schema
+
 
 DEFAULT_CONFIG = Path(__file__).resolve().parents[3] / "config" / "config.yaml"
 OURS_CONFIG = DEFAULT_CONFIG.parent / "ours.yaml"
@@ -32,12 +31,13 @@ METHOD_CONFIGS: dict[str, tuple[Path, ...]] = {"paper": (), "ours": (OURS_CONFIG
 """The files each method merges over the config, after any others given."""
 
 
-class ConfigError(ValueError):
-    """A configuration or campaign file is wrong; the message names file and key."""
-
-
 def _schema(name: str) -> dict:
-    return json.loads(resources.files("stringcast.core").joinpath("schemas", name).read_text())
+    """A packaged JSON schema; ``config.schema.json`` with its stage sections made from the settings
+    classes (:func:`.settings.settings_schema`: each setting declared once, there)."""
+    schema = json.loads(resources.files("stringcast.core").joinpath("schemas", name).read_text())
+    if name == "config.schema.json":
+        schema["properties"].update(settings_schema())
+    return schema
 
 
 def schema_problems(doc: Any, schema_name: str, definition: str | None = None) -> list[tuple[str, str]]:

@@ -24,7 +24,7 @@ from types import MappingProxyType
 from typing import Any
 from collections.abc import Mapping
 
-from .config import ConfigError
+from .errors import ConfigError
 
 MODES = ("markerless", "markers")
 """``tracking.mode``: the string's points by arc length, or by the bands at the mass points."""
@@ -34,12 +34,42 @@ OPTIMIZERS = ("random_search", "cmaes", "de")
 PLANNERS = ("paper", "robust")
 
 
-def _f(default, help: str):
-    """A field with its default and its help text (``config/README.md``)."""
+def _f(default, help: str, **schema):
+    """A field with its default, its help text (``config/README.md``) and its JSON-schema constraints
+    (``minimum``, ``enum``, ``items``, ...; the type comes from the annotation: :func:`section_schema`)."""
+    meta = {"help": help, "schema": schema}
     if isinstance(default, Mapping):
         frozen = MappingProxyType(dict(default))
-        return field(default_factory=lambda: frozen, metadata={"help": help})
-    return field(default=default, metadata={"help": help})
+        return field(default_factory=lambda: frozen, metadata=meta)
+    return field(default=default, metadata=meta)
+
+
+_JSON_TYPES = {"float": "number", "int": "integer", "bool": "boolean", "str": "string"}
+
+
+def _json_type(annotation: str):
+    """The JSON-schema type of a settings field's annotation (``float | None`` -> ``["number", "null"]``)."""
+    a = annotation.replace(" ", "")
+    optional = a.endswith("|None")
+    base = a.removesuffix("|None")
+    t = _JSON_TYPES.get(base) or ("array" if base.startswith("tuple") else "object" if base.startswith("Mapping")
+                                  else None)
+    if t is None:
+        raise TypeError(f"no JSON-schema type for the settings annotation {annotation!r}")
+    return [t, "null"] if optional else t
+
+
+def section_schema(cls) -> dict:
+    """The JSON schema of one settings section, made from its class: each field's type (its annotation),
+    constraints (:func:`_f`) and help as the description; no other key. The config's schema
+    (``config.schema.json``) takes its stage sections from here, so a setting is declared once."""
+    props = {}
+    for f in dataclasses.fields(cls):
+        spec = dict(f.metadata.get("schema", {}))
+        spec.setdefault("type", _json_type(str(f.type)))
+        props[f.name] = {**spec, "description": f.metadata.get("help", "")}
+    return {"type": "object", "additionalProperties": False, "description": (cls.__doc__ or "").split("\n")[0],
+            "properties": props}
 
 
 def _frozen(value):
@@ -64,6 +94,26 @@ def _one_of(section: str, name: str, value, allowed: tuple) -> None:
     """Raise ConfigError naming ``section.name`` unless ``value`` is one of ``allowed``."""
     if value not in allowed:
         raise ConfigError(f"{section}.{name} must be one of {', '.join(map(str, allowed))}, got {value!r}")
+
+
+PARAM_NAMES: tuple[str, ...] = (
+    "k_s", "c_s", "k_h", "c_h", "k_sh", "c_sh", "C_c1", "C_c2", "k_ph", "c_ph",
+)
+"""The ten coefficients of the string model, in the paper's Table 2 order."""
+
+_UR_SCHEMA = {"additionalProperties": False, "properties": {
+    "joint_map": {"type": "array", "items": {"type": "integer", "minimum": 0, "maximum": 5}, "minItems": 1,
+                  "maxItems": 6},
+    "sign": {"type": "array", "items": {"enum": [-1, 1]}, "minItems": 1, "maxItems": 6},
+    "offset_deg": {"$ref": "#/$defs/vec3"},
+    "lookahead_time_s": {"type": "number", "minimum": 0.03, "maximum": 0.2},
+    "gain": {"type": "number", "minimum": 100, "maximum": 2000},
+    "servo_speed_rad_s": {"type": "number", "exclusiveMinimum": 0},
+    "servo_acceleration_rad_s2": {"type": "number", "exclusiveMinimum": 0},
+    "settle_s": {"type": "number", "minimum": 0, "maximum": 2},
+    "move_to_start_speed_rad_s": {"type": "number", "exclusiveMinimum": 0, "maximum": 1},
+    "move_to_start_acceleration_rad_s2": {"type": "number", "exclusiveMinimum": 0, "maximum": 2}}}
+"""``executor.ur``'s keys and their bounds (the UR backend's settings)."""
 
 
 class _Section:
@@ -100,14 +150,15 @@ class ModelSettings(_Section):
     """``model``: the string model's integration and the parameter ranges (Table 2)."""
 
     SECTION: typing.ClassVar[str] = "model"
-    dt_s: float = _f(1.0e-4, "integration step of the string model, s")
+    dt_s: float = _f(1.0e-4, "integration step of the string model, s", exclusiveMinimum=0, maximum=0.002)
     psi0_deg: float = _f(0.0, "the string's rest direction in the hand frame, deg")
-    first_mu: float = _f(1.0, "relative masses for the first plan (Table 2 has no mass row)")
+    first_mu: float = _f(1.0, "relative masses for the first plan (Table 2 has no mass row)", exclusiveMinimum=0)
     ranges: Mapping[str, tuple] = _f({
         "k_s": (1.0e+3, 1.0e+6), "c_s": (1.0, 10.0), "k_h": (1.0e-3, 10.0), "c_h": (1.0e-3, 10.0),
         "k_sh": (1.0e-4, 1.0), "c_sh": (1.0e-4, 1.0), "C_c1": (1.0e-6, 10.0), "C_c2": (1.0e-6, 10.0),
         "k_ph": (1.0e-3, 1.0e-2), "c_ph": (1.0e-3, 1.0e-2), "mu": (0.1, 100.0)},
-        "[min, max] of each coefficient (Table 2) and of the relative masses mu; a file may set some")
+        "[min, max] of each coefficient (Table 2) and of the relative masses mu; a file may set some",
+        additionalProperties=False, properties={k: {"$ref": "#/$defs/range"} for k in (*PARAM_NAMES, "mu")})
 
     def __post_init__(self):
         if self.dt_s <= 0:
@@ -119,7 +170,7 @@ class EvaluationSettings(_Section):
     """``evaluation``: the evaluation value E (eqs. 4-6)."""
 
     SECTION: typing.ClassVar[str] = "evaluation"
-    w: float = _f(0.1, "tip weighting of eq. (6): point i counts 1 + w (i - 1) times")
+    w: float = _f(0.1, "tip weighting of eq. (6): point i counts 1 + w (i - 1) times", minimum=0)
 
 
 @dataclass(frozen=True)
@@ -127,29 +178,29 @@ class EstimationSettings(_Section):
     """``estimation``: the parameter search (eqs. 2-3) and what params.json keeps."""
 
     SECTION: typing.ClassVar[str] = "estimation"
-    optimizer: str = _f("random_search", "random_search (eqs. 2-3), cmaes (CMA-ES) or de (SciPy differential evolution)")
-    iterations: int = _f(3000, "candidates evaluated per trial")
-    batch: int = _f(64, "candidates simulated per numba batch")
-    chi0: float = _f(1.0, "eq. (3): the first sampling radius in chi")
-    beta: float = _f(0.998, "eq. (3): the radius shrinks by this factor per sample")
-    seed: int = _f(0, "the search's random seed (with the trial number)")
-    de_popsize: int = _f(8, "SciPy differential evolution population (per dimension)")
-    top_k: int = _f(20, "params.json keeps the best K sets (the robust planner's ensemble)")
-    near_best_tol: float = _f(0.05, "diagnostics: sets within this share of the best E show which parameters are pinned")
-    pinned_spread: float = _f(0.2, "... pinned when they spread over less than this share of Table 2's log range")
-    cmaes_sigma0: float = _f(0.3, "CMA-ES initial step in chi (log-parameter) space, / M")
-    cmaes_popsize: int = _f(0, "CMA-ES population; 0: cma's default (4 + 3 ln D)")
-    cmaes_runs: int = _f(1, "CMA-ES runs sharing the budget: the first from the last estimate, the others from the centre")
+    optimizer: str = _f("random_search", "random_search (eqs. 2-3), cmaes (CMA-ES) or de (SciPy differential evolution)", enum=["random_search", "cmaes", "de"])
+    iterations: int = _f(3000, "candidates evaluated per trial", minimum=1)
+    batch: int = _f(64, "candidates simulated per numba batch", minimum=1)
+    chi0: float = _f(1.0, "eq. (3): the first sampling radius in chi", exclusiveMinimum=0)
+    beta: float = _f(0.998, "eq. (3): the radius shrinks by this factor per sample", exclusiveMinimum=0, maximum=1)
+    seed: int = _f(0, "the search's random seed (with the trial number)", minimum=0)
+    de_popsize: int = _f(8, "SciPy differential evolution population (per dimension)", minimum=1)
+    top_k: int = _f(20, "params.json keeps the best K sets (the robust planner's ensemble)", minimum=1)
+    near_best_tol: float = _f(0.05, "diagnostics: sets within this share of the best E show which parameters are pinned", minimum=0)
+    pinned_spread: float = _f(0.2, "... pinned when they spread over less than this share of Table 2's log range", exclusiveMinimum=0, maximum=1)
+    cmaes_sigma0: float = _f(0.3, "CMA-ES initial step in chi (log-parameter) space, / M", exclusiveMinimum=0)
+    cmaes_popsize: int = _f(0, "CMA-ES population; 0: cma's default (4 + 3 ln D)", minimum=0)
+    cmaes_runs: int = _f(1, "CMA-ES runs sharing the budget: the first from the last estimate, the others from the centre", minimum=1)
     cmaes_options: Mapping[str, Any] = _f({}, "passed on to cma.CMAOptions (e.g. {CSA_dampfac: 0.5}); an unknown name is an error")
-    cmaes_first_look: int = _f(300, "CMA-ES: first evaluate this many eq. (3) samples around chi_best and start at their best (0: off)")
-    compare_after_motion_s: float | None = _f(None, "compare frames up to this long after the arm stops, s (null: the whole joint log, as the paper)")
-    cmaes_first_start: str = _f("centre", "CMA-ES on trial 1 without a first look: from the centre of the box (centre) or from chi_best (best)")
-    verdict_error_share: tuple = _f((0.18, 0.25), "fit verdict: [warn, fail] when the fit's median error over the moving frames exceeds these shares of the string's length")
-    verdict_skill: tuple = _f((0.45, 0.25), "fit verdict: [warn, fail] when the fit explains at most this share of the error of a string carried without swinging (1 - error / that error)")
-    verdict_shift_gain: tuple = _f((0.7, 0.5), "fit verdict: [warn, fail] (clock) when shifting the frames' times by 3 or more frame periods cuts the fit's error to this share")
-    verdict_min_valid_share: float = _f(0.5, "fit verdict: warn (tracking) when a smaller share of the string's points was tracked in the moving frames")
-    verdict_rest_gap_share: float = _f(0.05, "fit verdict: warn (geometry) when a tracked rest point hangs farther from the grasp than the string up to it plus this share of its length")
-    verdict_floor_share: float = _f(0.05, "fit verdict: skill and time shift judge only fits whose median error exceeds this share of the string's length")
+    cmaes_first_look: int = _f(300, "CMA-ES: first evaluate this many eq. (3) samples around chi_best and start at their best (0: off)", minimum=0)
+    compare_after_motion_s: float | None = _f(None, "compare frames up to this long after the arm stops, s (null: the whole joint log, as the paper)", minimum=0)
+    cmaes_first_start: str = _f("centre", "CMA-ES on trial 1 without a first look: from the centre of the box (centre) or from chi_best (best)", enum=["centre", "best"])
+    verdict_error_share: tuple = _f((0.18, 0.25), "fit verdict: [warn, fail] when the fit's median error over the moving frames exceeds these shares of the string's length", items={"type": "number", "minimum": 0}, minItems=2, maxItems=2)
+    verdict_skill: tuple = _f((0.45, 0.25), "fit verdict: [warn, fail] when the fit explains at most this share of the error of a string carried without swinging (1 - error / that error)", items={"type": "number", "minimum": 0}, minItems=2, maxItems=2)
+    verdict_shift_gain: tuple = _f((0.7, 0.5), "fit verdict: [warn, fail] (clock) when shifting the frames' times by 3 or more frame periods cuts the fit's error to this share", items={"type": "number", "minimum": 0}, minItems=2, maxItems=2)
+    verdict_min_valid_share: float = _f(0.5, "fit verdict: warn (tracking) when a smaller share of the string's points was tracked in the moving frames", minimum=0, maximum=1)
+    verdict_rest_gap_share: float = _f(0.05, "fit verdict: warn (geometry) when a tracked rest point hangs farther from the grasp than the string up to it plus this share of its length", minimum=0)
+    verdict_floor_share: float = _f(0.05, "fit verdict: skill and time shift judge only fits whose median error exceeds this share of the string's length", minimum=0)
 
     def __post_init__(self):
         _one_of("estimation", "optimizer", self.optimizer, OPTIMIZERS)
@@ -166,32 +217,32 @@ class MotionSettings(_Section):
     """``motion``: motion generation (Section V) and the planners."""
 
     SECTION: typing.ClassVar[str] = "motion"
-    T_range_s: tuple = _f((0.2, 1.2), "[min, max] motion duration T, s")
-    n_control_points: int = _f(6, "control points of eq. (1)'s Bezier velocity curves")
-    alpha_max_rad_s2: float = _f(40.0, "|alpha_k| of eq. (1), rad/s^2")
-    perturb_rad_s: float = _f(0.5, "later trials: control points moved by up to this, rad/s")
-    flight_window_s: float = _f(0.5, "the tip may hit up to this long after the motion ends, s")
-    max_candidates: int = _f(20000, "candidates searched at most per plan")
-    extra_after_hit: int = _f(200, "keep searching this many candidates after the first hit, take the closest")
+    T_range_s: tuple = _f((0.2, 1.2), "[min, max] motion duration T, s", items={"type": "number", "exclusiveMinimum": 0}, minItems=2, maxItems=2)
+    n_control_points: int = _f(6, "control points of eq. (1)'s Bezier velocity curves", minimum=2, maximum=30)
+    alpha_max_rad_s2: float = _f(40.0, "|alpha_k| of eq. (1), rad/s^2", exclusiveMinimum=0)
+    perturb_rad_s: float = _f(0.5, "later trials: control points moved by up to this, rad/s", minimum=0)
+    flight_window_s: float = _f(0.5, "the tip may hit up to this long after the motion ends, s", minimum=0)
+    max_candidates: int = _f(20000, "candidates searched at most per plan", minimum=1)
+    extra_after_hit: int = _f(200, "keep searching this many candidates after the first hit, take the closest", minimum=0)
     aim_radius_mm: float | None = _f(None, "the first hit that starts extra_after_hit's count must pass this close under "
-                                           "the planning set, mm (null: the target's radius, the paper)")
-    batch: int = _f(64, "candidates simulated per numba batch")
-    seed: int = _f(0, "the planner's random seed (with the trial number)")
-    floor_margin_m: float = _f(0.05, "the hanging string must clear the floor by this at the start posture, m")
-    posture_pool: int = _f(32, "random initial postures tried per batch in the first plan")
+                                           "the planning set, mm (null: the target's radius, the paper)", exclusiveMinimum=0)
+    batch: int = _f(64, "candidates simulated per numba batch", minimum=1)
+    seed: int = _f(0, "the planner's random seed (with the trial number)", minimum=0)
+    floor_margin_m: float = _f(0.05, "the hanging string must clear the floor by this at the start posture, m", minimum=0)
+    posture_pool: int = _f(32, "random initial postures tried per batch in the first plan", minimum=1)
     start_grasp_box_mm: tuple | None = _f(((-200.0, 900.0), (-100.0, 700.0)),
-                                          "start grasp inside [[x_min, x_max], [y_min, y_max]], mm: where the camera sees the hanging string")
-    first_max_strain: float = _f(0.05, "first plan: k_s raised so the hanging string stretches at most this")
-    first_k_s: str = _f("carrying", "first plan's k_s: carrying (the least that keeps first_max_strain) or max (Table 2's)")
-    planner: str = _f("paper", "paper: Section V; robust: prefer motions that hit under most of the estimate's best sets")
-    robust_screen_mm: float = _f(20.0, "robust: only candidates within this of the target edge (best set) are scored on the ensemble, mm")
-    robust_min_share: float = _f(0.0, "robust: the first hit must hit under at least this share of the sets")
+                                          "start grasp inside [[x_min, x_max], [y_min, y_max]], mm: where the camera sees the hanging string", type="array", minItems=2, maxItems=2, items={"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2})
+    first_max_strain: float = _f(0.05, "first plan: k_s raised so the hanging string stretches at most this", exclusiveMinimum=0)
+    first_k_s: str = _f("carrying", "first plan's k_s: carrying (the least that keeps first_max_strain) or max (Table 2's)", enum=["carrying", "max"])
+    planner: str = _f("paper", "paper: Section V; robust: prefer motions that hit under most of the estimate's best sets", enum=["paper", "robust"])
+    robust_screen_mm: float = _f(20.0, "robust: only candidates within this of the target edge (best set) are scored on the ensemble, mm", minimum=0)
+    robust_min_share: float = _f(0.0, "robust: the first hit must hit under at least this share of the sets", minimum=0, maximum=1)
     residual_correction: bool = _f(False, "aim at the target minus the model's error on the played motion's tracked tip")
-    hang_clearance_mm: float = _f(60.0, "the hanging string at the start posture stays this far from the arm's centre lines, mm")
-    replan_miss_mm: float = _f(0.0, "> 0: after a tracked miss larger than this, plan a new motion (0: always perturb, Section V.B), mm")
-    replan_perturb_rad_s: float = _f(0.0, "> 0 (with replan_miss_mm): first try perturbing the played motion by up to this, rad/s")
-    replan_min_share: float = _f(0.9, "that wider perturbation is kept when it hits under at least this share of the ensemble")
-    replan_residual_mm: float = _f(0.0, "> 0 (with residual_correction): no perturbation when the model's tip error on the played motion exceeds this, mm")
+    hang_clearance_mm: float = _f(60.0, "the hanging string at the start posture stays this far from the arm's centre lines, mm", minimum=0)
+    replan_miss_mm: float = _f(0.0, "> 0: after a tracked miss larger than this, plan a new motion (0: always perturb, Section V.B), mm", minimum=0)
+    replan_perturb_rad_s: float = _f(0.0, "> 0 (with replan_miss_mm): first try perturbing the played motion by up to this, rad/s", minimum=0)
+    replan_min_share: float = _f(0.9, "that wider perturbation is kept when it hits under at least this share of the ensemble", minimum=0, maximum=1)
+    replan_residual_mm: float = _f(0.0, "> 0 (with residual_correction): no perturbation when the model's tip error on the played motion exceeds this, mm", minimum=0)
 
     def __post_init__(self):
         _one_of("motion", "planner", self.planner, PLANNERS)
@@ -205,15 +256,15 @@ class ExecutorSettings(_Section):
     """``executor``: playing a motion file (pre- and post-roll, the UR backend)."""
 
     SECTION: typing.ClassVar[str] = "executor"
-    pre_roll_s: float = _f(0.3, "hold the start posture, filmed, before the motion, s")
-    post_roll_s: float = _f(0.6, "hold the end posture after the motion (covers the flight window), s")
-    start_tolerance_rad: float = _f(0.02, "ur-rtde: refuse (or --move-to-start) if the arm is further from the start, rad")
+    pre_roll_s: float = _f(0.3, "hold the start posture, filmed, before the motion, s", minimum=0)
+    post_roll_s: float = _f(0.6, "hold the end posture after the motion (covers the flight window), s", minimum=0)
+    start_tolerance_rad: float = _f(0.02, "ur-rtde: refuse (or --move-to-start) if the arm is further from the start, rad", exclusiveMinimum=0, maximum=0.2)
     ur: Mapping[str, Any] = _f({
         "joint_map": (1, 2, 3), "sign": (-1, -1, -1), "offset_deg": (0.0, 0.0, -90.0), "lookahead_time_s": 0.1,
         "gain": 300, "servo_speed_rad_s": 0.5, "servo_acceleration_rad_s2": 0.5, "settle_s": 0.2,
         "move_to_start_speed_rad_s": 0.3, "move_to_start_acceleration_rad_s2": 0.5},
         "ur-rtde backend: joint_map (UR joint of q1..qJ), sign and offset_deg (q_planar = sign q_ur + offset), "
-        "servoJ lookahead_time_s (0.03-0.2) and gain (100-2000), settle_s, move_to_start speed and acceleration")
+        "servoJ lookahead_time_s (0.03-0.2) and gain (100-2000), settle_s, move_to_start speed and acceleration", **_UR_SCHEMA)
 
 
 @dataclass(frozen=True)
@@ -221,45 +272,45 @@ class TrackingSettings(_Section):
     """``tracking``: markerless (or band-marker) tracking of the string."""
 
     SECTION: typing.ClassVar[str] = "tracking"
-    rest_frames: int = _f(40, "frames before the motion used for the rest state")
-    background_samples: int = _f(31, "frames in the background's temporal median")
-    threshold_low: float = _f(4.0, "hysteresis threshold, low, in units of the local noise sigma")
-    threshold_high: float = _f(8.0, "hysteresis threshold, high, in units of the local noise sigma")
-    smooth_px: float = _f(0.8, "Gaussian smoothing of |I - g B| before thresholding, px")
-    roi_margin_mm: float = _f(120.0, "segment within the string's length plus this of the grasp, mm")
-    grasp_search_mm: float = _f(60.0, "the centreline's walk starts within this of the grasp, mm")
-    grasp_clear_mm: float = _f(15.0, "the first stretch from the grasp, hidden by the fingers, is a circular arc, mm")
-    max_gap_px: float = _f(8.0, "gaps in the skeleton bridged up to this (bridged parts are never valid), px")
-    end_tolerance_mm: float = _f(6.0, "a free end's length may differ from L by this, mm")
-    arc_step_px: float = _f(4.0, "chord length of the centreline's spline, px")
-    overlay_frames: int = _f(6, "frames drawn in tracking_overlay.png")
-    arm_mask_margin_px: float = _f(2.0, "margin around the arm's mask, px")
-    arm_guard_px: float = _f(3.0, "guard band around the arm's mask where the string is not trusted, px")
-    branch_min_px: int = _f(6, "skeleton branches shorter than this are spurs, px")
-    anchor_tol_mm: float = _f(3.0, "a free end is trusted when the length agrees with L within this, mm ...")
-    anchor_tol_px: float = _f(2.0, "... or within this, px")
-    end_sigma_px: float = _f(1.0, "uncertainty of a free end's position, px")
-    scale_sigma: float = _f(0.003, "relative uncertainty of the pixel scale along the string")
-    tip_shortfall_mm: float = _f(0.0, "the visible string ends this short of the tip (a tip that does not show), mm")
-    end_contrast_min: float = _f(0.4, "a free end is clean when its contrast stays above this share ...")
-    end_edge_max: float = _f(0.25, "... and not more than this share of it lies on an occluder's rim")
-    max_missing_frac: float = _f(0.3, "a frame with more than this share of the string missing gives no points")
-    end_touch_mm: float = _f(12.0, "a free end this close to the string's own earlier stretch is not trusted, mm")
-    background_window_s: float | None = _f(None, "background samples only from the motion's first seconds, s (null: all)")
-    background_bursts: int = _f(5, "the background samples are decoded in this many short runs")
-    prefetch_frames: int = _f(48, "frames decoded ahead of the tracker")
-    verdict_min_valid_share: float = _f(0.7, "warn when fewer of the string's points are tracked in the frames judged (the motion's start to the joint log's end)")
-    verdict_segment_excess_mm: float = _f(3.0, "warn when consecutive points lie farther apart than L / n by more (p95), mm")
-    verdict_rest_jitter_mm: float = _f(1.0, "warn when the hanging string's points jitter more (p95 of their deviations at rest), mm")
-    verdict_length_share: float = _f(0.3, "warn naming the string's length_mm when the string seen from the grasp to its free end differs from L by more than this share (median over the frames judged)")
-    verdict_past_roi_share: float = _f(0.05, "warn naming the string's length_mm when the string runs past L + roi_margin_mm from the grasp in more than this share of the frames judged")
-    mode: str = _f("markerless", "markerless: points by arc length from the grasp; markers: a band at each mass point")
-    band_width_mm: float = _f(8.0, "markers: the bands' length along the string, mm")
-    band_contrast_min: float = _f(0.25, "markers: a band's grey differs from the string's by >= this x the string's contrast")
-    band_tolerance: float = _f(0.35, "markers: a band lies within this share of the point spacing of its expected place")
-    band_length_tol: float = _f(0.5, "markers: its measured length within +- this share of band_width_mm")
-    band_polarity: str = _f("auto", "markers: brighter or darker than the string; auto: per frame, whichever gives more bands")
-    band_step_px: float = _f(0.25, "markers: sampling step along the centreline, px")
+    rest_frames: int = _f(40, "frames before the motion used for the rest state", minimum=1)
+    background_samples: int = _f(31, "frames in the background's temporal median", minimum=0)
+    threshold_low: float = _f(4.0, "hysteresis threshold, low, in units of the local noise sigma", minimum=0)
+    threshold_high: float = _f(8.0, "hysteresis threshold, high, in units of the local noise sigma", minimum=0)
+    smooth_px: float = _f(0.8, "Gaussian smoothing of |I - g B| before thresholding, px", minimum=0)
+    roi_margin_mm: float = _f(120.0, "segment within the string's length plus this of the grasp, mm", minimum=0)
+    grasp_search_mm: float = _f(60.0, "the centreline's walk starts within this of the grasp, mm", minimum=0)
+    grasp_clear_mm: float = _f(15.0, "the first stretch from the grasp, hidden by the fingers, is a circular arc, mm", minimum=0)
+    max_gap_px: float = _f(8.0, "gaps in the skeleton bridged up to this (bridged parts are never valid), px", minimum=0)
+    end_tolerance_mm: float = _f(6.0, "a free end's length may differ from L by this, mm", minimum=0)
+    arc_step_px: float = _f(4.0, "chord length of the centreline's spline, px", minimum=0)
+    overlay_frames: int = _f(6, "frames drawn in tracking_overlay.png", minimum=0)
+    arm_mask_margin_px: float = _f(2.0, "margin around the arm's mask, px", minimum=0)
+    arm_guard_px: float = _f(3.0, "guard band around the arm's mask where the string is not trusted, px", minimum=0)
+    branch_min_px: int = _f(6, "skeleton branches shorter than this are spurs, px", minimum=0)
+    anchor_tol_mm: float = _f(3.0, "a free end is trusted when the length agrees with L within this, mm ...", minimum=0)
+    anchor_tol_px: float = _f(2.0, "... or within this, px", minimum=0)
+    end_sigma_px: float = _f(1.0, "uncertainty of a free end's position, px", minimum=0)
+    scale_sigma: float = _f(0.003, "relative uncertainty of the pixel scale along the string", minimum=0)
+    tip_shortfall_mm: float = _f(0.0, "the visible string ends this short of the tip (a tip that does not show), mm", minimum=0)
+    end_contrast_min: float = _f(0.4, "a free end is clean when its contrast stays above this share ...", minimum=0)
+    end_edge_max: float = _f(0.25, "... and not more than this share of it lies on an occluder's rim", minimum=0)
+    max_missing_frac: float = _f(0.3, "a frame with more than this share of the string missing gives no points", minimum=0)
+    end_touch_mm: float = _f(12.0, "a free end this close to the string's own earlier stretch is not trusted, mm", minimum=0)
+    background_window_s: float | None = _f(None, "background samples only from the motion's first seconds, s (null: all)", exclusiveMinimum=0)
+    background_bursts: int = _f(5, "the background samples are decoded in this many short runs", minimum=0)
+    prefetch_frames: int = _f(48, "frames decoded ahead of the tracker", minimum=0)
+    verdict_min_valid_share: float = _f(0.7, "warn when fewer of the string's points are tracked in the frames judged (the motion's start to the joint log's end)", minimum=0, maximum=1)
+    verdict_segment_excess_mm: float = _f(3.0, "warn when consecutive points lie farther apart than L / n by more (p95), mm", minimum=0)
+    verdict_rest_jitter_mm: float = _f(1.0, "warn when the hanging string's points jitter more (p95 of their deviations at rest), mm", minimum=0)
+    verdict_length_share: float = _f(0.3, "warn naming the string's length_mm when the string seen from the grasp to its free end differs from L by more than this share (median over the frames judged)", exclusiveMinimum=0)
+    verdict_past_roi_share: float = _f(0.05, "warn naming the string's length_mm when the string runs past L + roi_margin_mm from the grasp in more than this share of the frames judged", minimum=0, maximum=1)
+    mode: str = _f("markerless", "markerless: points by arc length from the grasp; markers: a band at each mass point", enum=["markerless", "markers"])
+    band_width_mm: float = _f(8.0, "markers: the bands' length along the string, mm", exclusiveMinimum=0)
+    band_contrast_min: float = _f(0.25, "markers: a band's grey differs from the string's by >= this x the string's contrast", exclusiveMinimum=0)
+    band_tolerance: float = _f(0.35, "markers: a band lies within this share of the point spacing of its expected place", exclusiveMinimum=0, maximum=0.5)
+    band_length_tol: float = _f(0.5, "markers: its measured length within +- this share of band_width_mm", exclusiveMinimum=0, maximum=1)
+    band_polarity: str = _f("auto", "markers: brighter or darker than the string; auto: per frame, whichever gives more bands", enum=["auto", "brighter", "darker"])
+    band_step_px: float = _f(0.25, "markers: sampling step along the centreline, px", exclusiveMinimum=0)
 
     def __post_init__(self):
         _one_of("tracking", "mode", self.mode, MODES)
@@ -271,24 +322,24 @@ class SyncSettings(_Section):
     """``sync``: the video's frames on the controller clock."""
 
     SECTION: typing.ClassVar[str] = "sync"
-    method: str = _f("video", "video: the arm in the video against the forward kinematics; trigger: video.yaml's trigger time")
-    search_ms: float = _f(10.0, "fine search +- around the trigger time (or the coarse estimate), ms")
-    step_ms: float = _f(0.25, "fine search step, ms")
-    coarse_step_ms: float = _f(0.5, "coarse search step without a trigger time, ms")
-    strip_samples: int = _f(8, "sample strips across each arm segment")
-    strip_width_samples: int = _f(41, "samples across a strip")
-    strip_margin_mm: float = _f(10.0, "a strip reaches this past the segment's outline, mm")
-    rest_frames: int = _f(5, "frames before the motion that give the still arm's reference")
-    smooth_px: float = _f(1.0, "Gaussian smoothing of the frames, px")
-    board_check_warn_mm: float = _f(20.0, "sync warns when the still arm is seen farther than this from the forward kinematics, mm")
-    min_frame_contrast: float = _f(0.02, "frames whose score varies less than this are left out")
-    min_frames: int = _f(20, "fewer frames than this: no video estimate")
-    segment_agree_ms: float = _f(3.0, "segments whose own peak is farther than this from the others' are left out, ms")
-    recentre_ms: float = _f(1.0, "the fine search recentres until the peak lies within this of the centre, ms")
-    evidence_k: float = _f(3.0, "the video overrules a trigger time only when the arm matches the frames worse at the trigger's offset than at the video's with this many standard errors' confidence (one-sided, frames resampled in blocks); also the margin for an ambiguous peak and the offset's uncertainty")
-    match_warn_px: float = _f(1.0, "warn when the arm-match residual, or the offset's uncertainty times the arm's speed, exceeds this, px")
-    still_speed_share: float = _f(0.05, "a joint log may start after the video or end before it where every joint moves slower than this share of its speed limit (the arm taken as still outside the log)")
-    still_window_s: float = _f(0.02, "the joints' speed at each end of the log is fitted over this span, s")
+    method: str = _f("video", "video: the arm in the video against the forward kinematics; trigger: video.yaml's trigger time", enum=["video", "trigger"])
+    search_ms: float = _f(10.0, "fine search +- around the trigger time (or the coarse estimate), ms", exclusiveMinimum=0)
+    step_ms: float = _f(0.25, "fine search step, ms", exclusiveMinimum=0)
+    coarse_step_ms: float = _f(0.5, "coarse search step without a trigger time, ms", exclusiveMinimum=0)
+    strip_samples: int = _f(8, "sample strips across each arm segment", minimum=2)
+    strip_width_samples: int = _f(41, "samples across a strip", minimum=9)
+    strip_margin_mm: float = _f(10.0, "a strip reaches this past the segment's outline, mm", minimum=0)
+    rest_frames: int = _f(5, "frames before the motion that give the still arm's reference", minimum=1)
+    smooth_px: float = _f(1.0, "Gaussian smoothing of the frames, px", minimum=0)
+    board_check_warn_mm: float = _f(20.0, "sync warns when the still arm is seen farther than this from the forward kinematics, mm", exclusiveMinimum=0)
+    min_frame_contrast: float = _f(0.02, "frames whose score varies less than this are left out", minimum=0)
+    min_frames: int = _f(20, "fewer frames than this: no video estimate", minimum=1)
+    segment_agree_ms: float = _f(3.0, "segments whose own peak is farther than this from the others' are left out, ms", exclusiveMinimum=0)
+    recentre_ms: float = _f(1.0, "the fine search recentres until the peak lies within this of the centre, ms", exclusiveMinimum=0)
+    evidence_k: float = _f(3.0, "the video overrules a trigger time only when the arm matches the frames worse at the trigger's offset than at the video's with this many standard errors' confidence (one-sided, frames resampled in blocks); also the margin for an ambiguous peak and the offset's uncertainty", exclusiveMinimum=0)
+    match_warn_px: float = _f(1.0, "warn when the arm-match residual, or the offset's uncertainty times the arm's speed, exceeds this, px", exclusiveMinimum=0)
+    still_speed_share: float = _f(0.05, "a joint log may start after the video or end before it where every joint moves slower than this share of its speed limit (the arm taken as still outside the log)", exclusiveMinimum=0, maximum=1)
+    still_window_s: float = _f(0.02, "the joints' speed at each end of the log is fitted over this span, s", exclusiveMinimum=0)
 
     def __post_init__(self):
         _one_of("sync", "method", self.method, ("video", "trigger"))
@@ -299,23 +350,23 @@ class BoardCheckSettings(_Section):
     """``board_check``: the still-arm check of the board-to-robot transform."""
 
     SECTION: typing.ClassVar[str] = "board_check"
-    warn_mm: float = _f(5.0, "calibration warns when the still arm is seen farther than this from where the board pose puts it, mm")
-    margin_mm: float = _f(30.0, "profiles across a link reach this past its outline, mm")
-    step_mm: float = _f(0.5, "sampling step along a profile, mm")
-    rows: int = _f(24, "profiles across each link")
-    width_range: tuple = _f((0.6, 1.1), "an edge pair counts when its width is within this share of the link's width")
-    clear_mm: float = _f(10.0, "profiles keep this clear of the joints, mm")
-    min_rows: int = _f(6, "a link with fewer agreeing profiles gives no offset")
-    min_share: float = _f(0.4, "... or with fewer than this share of its profiles agreeing")
-    max_spread_mm: float = _f(2.0, "profiles agree within this, mm")
+    warn_mm: float = _f(5.0, "calibration warns when the still arm is seen farther than this from where the board pose puts it, mm", exclusiveMinimum=0)
+    margin_mm: float = _f(30.0, "profiles across a link reach this past its outline, mm", minimum=0)
+    step_mm: float = _f(0.5, "sampling step along a profile, mm", exclusiveMinimum=0)
+    rows: int = _f(24, "profiles across each link", minimum=2)
+    width_range: tuple = _f((0.6, 1.1), "an edge pair counts when its width is within this share of the link's width", items={"type": "number"}, minItems=2, maxItems=2)
+    clear_mm: float = _f(10.0, "profiles keep this clear of the joints, mm", minimum=0)
+    min_rows: int = _f(6, "a link with fewer agreeing profiles gives no offset", minimum=1)
+    min_share: float = _f(0.4, "... or with fewer than this share of its profiles agreeing", minimum=0, maximum=1)
+    max_spread_mm: float = _f(2.0, "profiles agree within this, mm", minimum=0)
     use_discs: bool = _f(True, "use the joint discs' rims")
-    disc_rays: int = _f(48, "rays around a joint disc")
-    disc_reach_mm: float = _f(35.0, "a disc rim is searched this far around its expected radius, mm")
+    disc_rays: int = _f(48, "rays around a joint disc", minimum=8)
+    disc_reach_mm: float = _f(35.0, "a disc rim is searched this far around its expected radius, mm", minimum=0)
     use_end: bool = _f(True, "use the gripper's end along its axis when the links and discs leave a direction open")
-    end_reach_mm: float = _f(35.0, "the gripper's end is searched this far either side of the outline's end, mm")
+    end_reach_mm: float = _f(35.0, "the gripper's end is searched this far either side of the outline's end, mm", exclusiveMinimum=0)
     use_string: bool = _f(False, "use the hanging string below the grasp")
-    string_rows_mm: tuple = _f((20.0, 140.0), "the string's rows below the grasp, [from, to], mm")
-    string_search_mm: float = _f(40.0, "the string is searched this far either side, mm")
+    string_rows_mm: tuple = _f((20.0, 140.0), "the string's rows below the grasp, [from, to], mm", items={"type": "number"}, minItems=2, maxItems=2)
+    string_search_mm: float = _f(40.0, "the string is searched this far either side, mm", minimum=0)
 
 
 @dataclass(frozen=True)
@@ -323,15 +374,15 @@ class SweepSettings(_Section):
     """``sweep``: the swing plane's mapping and the clock refined by the arm's sweep of the trial."""
 
     SECTION: typing.ClassVar[str] = "sweep"
-    frames: int = _f(40, "frames spread over the trial whose arm links are read (0: no sweep; the calibration and sync pass through)")
-    min_rows: int = _f(200, "fewer agreeing link rows than this: not refined, and the verdict says so")
-    passes: int = _f(3, "at most this many passes, each reading the links at the clock of the last (the rows' clock model is linear)")
-    huber: float = _f(2.0, "the fit's Huber loss scale, in units of the rows' own noise (their median absolute deviation)")
-    tolerance_mm: float = _f(1.0, "the mapping must be known to this over where the string can be (the tracking's median goal), mm")
-    clock_tolerance_ms: float = _f(0.5, "the clock must be known to this (the sync goal), ms")
+    frames: int = _f(40, "frames spread over the trial whose arm links are read (0: no sweep; the calibration and sync pass through)", minimum=0)
+    min_rows: int = _f(200, "fewer agreeing link rows than this: not refined, and the verdict says so", minimum=20)
+    passes: int = _f(3, "at most this many passes, each reading the links at the clock of the last (the rows' clock model is linear)", minimum=1)
+    huber: float = _f(2.0, "the fit's Huber loss scale, in units of the rows' own noise (their median absolute deviation)", exclusiveMinimum=0)
+    tolerance_mm: float = _f(1.0, "the mapping must be known to this over where the string can be (the tracking's median goal), mm", exclusiveMinimum=0)
+    clock_tolerance_ms: float = _f(0.5, "the clock must be known to this (the sync goal), ms", exclusiveMinimum=0)
     fit_lens: bool = _f(True, "also refit k1 and the principal point (within the priors below); the mapping's uncertainty then includes how far that moves it from the homography-only fit")
-    principal_point_prior: float = _f(0.02, "standard deviation of the principal point's move, as a share of the image width (real calibrations: a few per cent)")
-    k1_prior: float = _f(0.02, "standard deviation of k1's move (what fx a few per cent off does to k1 at k1 ~ -0.2)")
+    principal_point_prior: float = _f(0.02, "standard deviation of the principal point's move, as a share of the image width (real calibrations: a few per cent)", exclusiveMinimum=0)
+    k1_prior: float = _f(0.02, "standard deviation of k1's move (what fx a few per cent off does to k1 at k1 ~ -0.2)", exclusiveMinimum=0)
 
     def __post_init__(self):
         if self.frames < 0 or self.passes < 1 or self.min_rows < 20:
@@ -346,19 +397,19 @@ class CalibrationSettings(_Section):
     """``calibration``: the intrinsics from the calib/ shots, and how they are judged."""
 
     SECTION: typing.ClassVar[str] = "calibration"
-    max_candidate_frames: int = _f(240, "a calibration clip is sampled evenly to at most this many frames for board detection")
-    max_views: int = _f(40, "views kept for the fit, chosen for pose diversity")
-    coverage_grid: tuple = _f((8, 6), "columns x rows of the grid over the image in which the views' coverage is counted")
-    min_coverage: float = _f(0.6, "share of the grid's cells, and of each third of the image, that must hold corners")
-    min_tilt_variety_deg: float = _f(10.0, "the views' rms tilt about the weaker image axis must reach this, deg")
-    jackknife_groups: int = _f(10, "the intrinsics' deviations come from refits with each of this many groups of views left out")
-    max_principal_point_sd: float = _f(0.01, "the principal point's standard deviation may reach this share of the image")
-    max_fx_sd: float = _f(0.01, "fx's standard deviation may reach this share of fx")
-    max_distortion_sd: float = _f(0.01, "the distortion's standard deviation at the image's corners may reach this share of the half-diagonal")
-    fail_factor: float = _f(2.0, "fail when, with what can be held held, a standard deviation still exceeds its limit this many times")
-    hold_rms_tol: float = _f(0.05, "a held principal point or k2/k3 that raises the rms by more than this share contradicts the views")
+    max_candidate_frames: int = _f(240, "a calibration clip is sampled evenly to at most this many frames for board detection", minimum=3)
+    max_views: int = _f(40, "views kept for the fit, chosen for pose diversity", minimum=3)
+    coverage_grid: tuple = _f((8, 6), "columns x rows of the grid over the image in which the views' coverage is counted", items={"type": "integer", "minimum": 3}, minItems=2, maxItems=2)
+    min_coverage: float = _f(0.6, "share of the grid's cells, and of each third of the image, that must hold corners", minimum=0, maximum=1)
+    min_tilt_variety_deg: float = _f(10.0, "the views' rms tilt about the weaker image axis must reach this, deg", minimum=0, maximum=90)
+    jackknife_groups: int = _f(10, "the intrinsics' deviations come from refits with each of this many groups of views left out", minimum=3)
+    max_principal_point_sd: float = _f(0.01, "the principal point's standard deviation may reach this share of the image", exclusiveMinimum=0)
+    max_fx_sd: float = _f(0.01, "fx's standard deviation may reach this share of fx", exclusiveMinimum=0)
+    max_distortion_sd: float = _f(0.01, "the distortion's standard deviation at the image's corners may reach this share of the half-diagonal", exclusiveMinimum=0)
+    fail_factor: float = _f(2.0, "fail when, with what can be held held, a standard deviation still exceeds its limit this many times", minimum=1)
+    hold_rms_tol: float = _f(0.05, "a held principal point or k2/k3 that raises the rms by more than this share contradicts the views", exclusiveMinimum=0)
     board_view: bool = _f(True, "the trial's board (in the swing plane) checks the intrinsics and joins the fit as one more view")
-    board_view_ratio: float = _f(2.0, "warn when the trial's board reprojects this many times worse than its own noise and the views'")
+    board_view_ratio: float = _f(2.0, "warn when the trial's board reprojects this many times worse than its own noise and the views'", exclusiveMinimum=1)
 
     def __post_init__(self):
         if self.jackknife_groups < 3:
@@ -371,6 +422,11 @@ SECTION_CLASSES: tuple[type, ...] = (ModelSettings, EvaluationSettings, Estimati
                                      ExecutorSettings, TrackingSettings, SyncSettings, BoardCheckSettings,
                                      CalibrationSettings, SweepSettings)
 """The stages' settings classes, one per config section."""
+
+
+def settings_schema() -> dict:
+    """``{section: its JSON schema}`` of every stage section (:func:`section_schema`)."""
+    return {c.SECTION: section_schema(c) for c in SECTION_CLASSES}
 LAB_SECTIONS: tuple[str, ...] = ("arms", "cameras", "setups", "strings", "targets")
 """Sections that describe the lab; a campaign reads only its own entries (:func:`campaign_sections`)."""
 
