@@ -83,7 +83,8 @@ def one(camp: Path, name: str, overlay: dict, out: Path) -> dict:
         files = [camp / "config" / "config.yaml", d / "overlay.yaml"]
         _cli(["estimate", "--tracks", str(res / "trial_1" / "tracks.parquet"), "--joints",
               str(data / "trial_1" / "joints.csv"), "--campaign", str(data / "campaign.yaml"), "--trial", "1",
-              "--out-params", str(d / "params.json"), "--out-fit", str(d / "fit.parquet")], files)
+              *(a for stage in ("geometry", "clock", "tracking")
+                for a in (f"--{stage}", str(res / "trial_1" / f"{stage}.json"))), "--out-params", str(d / "params.json"), "--out-fit", str(d / "fit.parquet")], files)
         _cli(["predict", "--params", str(d / "params.json"), "--tracks", str(res / "trial_2" / "tracks.parquet"),
               "--joints", str(data / "trial_2" / "joints.csv"), "--campaign", str(data / "campaign.yaml"),
               "--out", str(d / "prediction.json")], files)

@@ -145,7 +145,8 @@ def test_calibrate_refuses_campaign_intrinsics_without_their_views(tmp_path, cap
     not intrinsics silently dropped."""
     from stringcast.cli import main
 
-    code = main(["calibrate", "--trial-dir", str(tmp_path / "trial_1"), "--intrinsics", str(tmp_path / "intrinsics.json"),
+    code = main(["calibrate", "--video", str(tmp_path / "trial_1" / "video.mkv"), "--joints",
+                 str(tmp_path / "trial_1" / "joints.csv"), "--intrinsics", str(tmp_path / "intrinsics.json"),
                  "--campaign", str(tmp_path / "campaign.yaml"), "--out", str(tmp_path / "calibration.json")])
     err = capsys.readouterr().err
     assert code == 2 and "intrinsics.json: campaign intrinsics need the views" in err
@@ -158,7 +159,8 @@ def test_a_job_log_takes_the_output_and_the_terminal_gets_the_error_line(tmp_pat
     from stringcast.cli import main
 
     log = tmp_path / "logs" / "calibrate_1.log"
-    code = main(["--log", str(log), "calibrate", "--trial-dir", str(tmp_path / "trial_1"), "--intrinsics",
+    code = main(["--log", str(log), "calibrate", "--video", str(tmp_path / "trial_1" / "video.mkv"),
+                 "--joints", str(tmp_path / "trial_1" / "joints.csv"), "--intrinsics",
                  str(tmp_path / "intrinsics.json"), "--campaign", str(tmp_path / "campaign.yaml"),
                  "--out", str(tmp_path / "calibration.json")])
     out, err = capfd.readouterr()

@@ -84,24 +84,32 @@ class Project:
         t, r, c = d / "trial_1", d / "res", d / "campaign.yaml"
         head = ["--config", d / "config.yaml", stage]
         frames = ["--frames", r / "frames.npy"] if (r / "frames.npy").exists() else []
+        videos = sorted(p for p in t.glob("video*") if p.name != "video.yaml")   # as the workflow's trial_video
+        video, joints = ["--video", videos[0] if videos else t / "video.mkv"], ["--joints", t / "joints.csv"]
         return head + {
-            "decode": ["--trial-dir", t, "--out", r / "frames_out.npy"],
-            "calibrate": ["--trial-dir", t, "--campaign", c, "--out", r / "calibration_out.json"],
-            "sync": ["--trial-dir", t, "--calibration", r / "calibration.json", "--campaign", c,
-                     "--out", r / "sync_out.json", *frames],
-            "sweep": ["--trial-dir", t, "--calibration", r / "calibration.json", "--sync", r / "sync.json",
+            "decode": [*video, "--out", r / "frames_out.npy"],
+            "calibrate": [*video, *joints, "--campaign", c, "--out", r / "calibration_out.json"],
+            "sync": [*video, *joints, "--video-meta", t / "video.yaml", "--calibration", r / "calibration.json",
+                     "--campaign", c, "--out", r / "sync_out.json", *frames],
+            "sweep": [*video, *joints, "--calibration", r / "calibration.json", "--sync", r / "sync.json",
                       "--campaign", c, "--out-geometry", r / "geometry_out.json", "--out-clock", r / "clock_out.json",
                       *frames],
-            "track": ["--trial-dir", t, "--calibration", r / "geometry.json", "--sync", r / "clock.json",
-                      "--campaign", c, "--out", r / "tracks_out.parquet", *frames],
-            "estimate": ["--tracks", r / "tracks.parquet", "--joints", t / "joints.csv", "--campaign", c,
+            "track": [*video, *joints, "--geometry", r / "geometry.json", "--clock", r / "clock.json",
+                      "--campaign", c, "--out", r / "tracks_out.parquet", "--out-quality", r / "tracking_out.json",
+                      *frames],
+            "estimate": ["--tracks", r / "tracks.parquet", *joints, "--campaign", c, "--geometry", r / "geometry.json",
+                         "--clock", r / "clock.json", "--tracking", r / "tracking.json",
                          "--trial", 1, "--out-params", r / "params_out.json", "--out-fit", r / "fit_out.parquet"],
             "predict": ["--params", r / "params.json", "--tracks", r / "tracks.parquet", "--joints", t / "joints.csv",
                         "--campaign", c, "--out", r / "prediction_out.json"],
             "plan": ["--params", r / "params.json", "--played-motion", t / "motion.json", "--campaign", c,
                      "--out-dir", r / "next"],
             "plan-first": ["--campaign", c, "--out-dir", r / "first"],
-            "report-trial": ["--data-dir", t, "--results-dir", r, "--campaign", c, "--out", r / "report_out.html"],
+            "report-trial": [*video, *joints, "--played-motion", t / "motion.json", "--geometry", r / "geometry.json",
+                             "--clock", r / "clock.json", "--tracks", r / "tracks.parquet", "--tracking",
+                             r / "tracking.json", "--params", r / "params.json", "--fit", r / "fit.parquet",
+                             "--next-motion", r / "motion.csv", "--next-motion-meta", r / "motion.json",
+                             "--campaign", c, "--out", r / "report_out.html"],
         }[stage]
 
 
@@ -429,10 +437,12 @@ def test_a_string_of_another_length_is_named_by_tracking_and_by_estimate(project
     d = project.case("string 5000")
     _campaign(d, lambda c: _set(c, "string", {"length_mm": 5000.0, "n_points": 10, "weights": [], "stiff_sections": []}))
     assert run(project.argv(d, "track"), capsys)[0] == 0
-    reasons = json.loads((d / "res" / "tracking.json").read_text())["verdict"]["reasons"]
+    reasons = json.loads((d / "res" / "tracking_out.json").read_text())["verdict"]["reasons"]
     assert "string.length_mm" in reasons[0] and "more light" not in " ".join(reasons)
-    Project.replace(d / "res" / "tracks.parquet", None)
+    for name in ("tracks.parquet", "tracking.json"):   # estimate reads what tracking wrote
+        Project.replace(d / "res" / name, None)
     (d / "res" / "tracks_out.parquet").rename(d / "res" / "tracks.parquet")
+    (d / "res" / "tracking_out.json").rename(d / "res" / "tracking.json")
     code, err = run(project.argv(d, "estimate"), capsys)
     assert code == 2 and "string.length_mm" in err
 

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from stringcast.check import check_campaign
-from stringcast.core import DataError, claim_results, load_config
+from stringcast.core import DataError, TrialFiles, claim_results, load_config
 
 RULE_WORKERS = {"sync": 4, "sweep": 2, "track": 4}
 """The rules' ``threads`` for the stages that take ``--workers`` (capped at this machine's CPUs)."""
@@ -75,44 +75,52 @@ def trial_steps(campaign: str, k: int, has_calib: bool, workers: int) -> list[St
         return Step(rule, argv, outputs, logs.get(rule, f"{res}/logs/{rule}_{k}.log"))   # the log the rule names
 
     w = {rule: str(min(n, workers)) for rule, n in RULE_WORKERS.items()}
+    raw = TrialFiles.in_folder(trial)           # the files the workflow's trial_video and rules name
+    video, joints = ("--video", str(raw.video)), ("--joints", f"{trial}/joints.csv")
     frames = ("--frames", f"{out}/frames.npy")
-    steps = [_step("decode", ("decode", "--trial-dir", trial, "--out", f"{out}/frames.npy"),
+    geo, clock = f"{out}/geometry.json", f"{out}/clock.json"
+    steps = [_step("decode", ("decode", *video, "--out", f"{out}/frames.npy"),
                    (f"{out}/frames.npy", f"{out}/frames.json"))]
-    calib: tuple[str, ...] = ()
+    calib: tuple[str, ...] = ("--calib-views", "--intrinsics")      # none: the rule's empty inputs
     if has_calib:
         views, intrinsics = f"{res}/calib_views.npz", f"{res}/intrinsics.json"
         calib = ("--calib-views", views, "--intrinsics", intrinsics)
         steps.append(_step("calib_views", ("calib-views", "--calib-dir", f"{data}/calib", "--campaign", camp,
                                           "--out", views, "--out-intrinsics", intrinsics), (views, intrinsics)))
     steps += [
-        _step("calibrate", ("calibrate", "--trial-dir", trial, *calib, "--campaign", camp,
+        _step("calibrate", ("calibrate", *video, *joints, *calib, "--campaign", camp,
                            "--out", f"{out}/calibration.json"), (f"{out}/calibration.json",)),
-        _step("sync", ("sync", "--trial-dir", trial, "--calibration", f"{out}/calibration.json", "--campaign", camp,
-                      "--out", f"{out}/sync.json", *frames, "--workers", w["sync"]), (f"{out}/sync.json",)),
-        _step("sweep", ("sweep", "--trial-dir", trial, "--calibration", f"{out}/calibration.json", "--sync",
-                       f"{out}/sync.json", "--campaign", camp, "--out-geometry", f"{out}/geometry.json",
-                       "--out-clock", f"{out}/clock.json", *frames, "--workers", w["sweep"]),
-             (f"{out}/geometry.json", f"{out}/clock.json")),
-        _step("track", ("track", "--trial-dir", trial, "--calibration", f"{out}/geometry.json", "--sync",
-                       f"{out}/clock.json", "--campaign", camp, "--out", f"{out}/tracks.parquet", "--overlay",
+        _step("sync", ("sync", *video, "--video-meta", f"{trial}/video.yaml", *joints, "--calibration",
+                      f"{out}/calibration.json", "--campaign", camp, "--out", f"{out}/sync.json", *frames,
+                      "--workers", w["sync"]), (f"{out}/sync.json",)),
+        _step("sweep", ("sweep", *video, *joints, "--calibration", f"{out}/calibration.json", "--sync",
+                       f"{out}/sync.json", "--campaign", camp, "--out-geometry", geo, "--out-clock", clock, *frames,
+                       "--workers", w["sweep"]), (geo, clock)),
+        _step("track", ("track", *video, *joints, "--geometry", geo, "--clock", clock, "--campaign", camp,
+                       "--out", f"{out}/tracks.parquet", "--out-quality", f"{out}/tracking.json", "--overlay",
                        f"{out}/tracking_overlay.png", *frames, "--workers", w["track"]),
              (f"{out}/tracks.parquet", f"{out}/tracking.json", f"{out}/tracking_overlay.png")),
     ]
-    prev = ("--prev", f"{res}/trial_{k - 1}/params.json") if k > 1 else ()
-    steps.append(_step("estimate", ("estimate", "--tracks", f"{out}/tracks.parquet", "--joints",
-                                   f"{trial}/joints.csv", "--campaign", camp, *prev, "--trial", str(k),
-                                   "--out-params", f"{out}/params.json", "--out-fit", f"{out}/fit.parquet"),
+    prev = ("--prev", f"{res}/trial_{k - 1}/params.json") if k > 1 else ("--prev",)
+    steps.append(_step("estimate", ("estimate", "--tracks", f"{out}/tracks.parquet", *joints, "--campaign", camp,
+                                   *prev, "--geometry", geo, "--clock", clock, "--tracking", f"{out}/tracking.json",
+                                   "--trial", str(k), "--out-params", f"{out}/params.json", "--out-fit",
+                                   f"{out}/fit.parquet"),
                       (f"{out}/params.json", f"{out}/fit.parquet")))
     if k > 1:
         steps.append(_step("predict", ("predict", "--params", f"{res}/trial_{k - 1}/params.json", "--tracks",
-                                      f"{out}/tracks.parquet", "--joints", f"{trial}/joints.csv", "--campaign",
+                                      f"{out}/tracks.parquet", *joints, "--campaign",
                                       camp, "--out", f"{out}/prediction.json"), (f"{out}/prediction.json",)))
     steps += [
         _step("plan", ("plan", "--params", f"{out}/params.json", "--played-motion", f"{trial}/motion.json",
-                      "--tracks", f"{out}/tracks.parquet", "--joints", f"{trial}/joints.csv", "--campaign", camp,
+                      "--tracks", f"{out}/tracks.parquet", *joints, "--campaign", camp,
                       "--seed", str(k), "--out-dir", out), (f"{out}/motion.csv", f"{out}/motion.json")),
-        _step("report_trial", ("report-trial", "--data-dir", trial, "--results-dir", out, "--campaign", camp,
-                        "--out", f"{out}/report.html"), (f"{out}/report.html",)),
+        _step("report_trial", ("report-trial", *video, *joints, "--played-motion", f"{trial}/motion.json",
+                               "--geometry", geo, "--clock", clock, "--tracks", f"{out}/tracks.parquet",
+                               "--tracking", f"{out}/tracking.json", "--params", f"{out}/params.json",
+                               "--fit", f"{out}/fit.parquet", "--next-motion", f"{out}/motion.csv",
+                               "--next-motion-meta", f"{out}/motion.json", "--campaign", camp,
+                               "--out", f"{out}/report.html"), (f"{out}/report.html",)),
     ]
     return steps
 

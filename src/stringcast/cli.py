@@ -49,9 +49,11 @@ def _config(args):
 
 
 def _campaign(args):
+    """The campaign ``--campaign`` names; its target required, but by a stage that never reads it."""
     from stringcast.core import load_campaign
 
-    return load_campaign(args.campaign, _config(args))
+    optional = args.command in STAGES and not reads_target(args.command)
+    return load_campaign(args.campaign, _config(args), require_target=not optional)
 
 
 def _settings(func, args) -> dict:
@@ -96,6 +98,16 @@ def stage_sections(command: str) -> tuple[str, ...]:
     from stringcast.core import sections_read_from_source
 
     return sections_read_from_source(STAGES[command])
+
+
+TARGET_COMMANDS = ("predict", "plan-first", "plan", "report-trial", "report-campaign")
+"""The workflow subcommands that read the campaign's target: the workflow gives the others its
+campaign.yaml without the target, so that a new target reruns only these."""
+
+
+def reads_target(command: str) -> bool:
+    """Whether a subcommand reads the campaign's target (:data:`TARGET_COMMANDS`)."""
+    return command in TARGET_COMMANDS
 
 
 def _run(command: str, args, *positional, **keywords):
@@ -147,7 +159,7 @@ def cmd_calibrate(args):
         raise DataError(f"{args.intrinsics}: campaign intrinsics need the views they were fitted to "
                         "(--calib-views or a --calib-dir folder)")
     intrinsics = Path(args.intrinsics) if args.intrinsics else None
-    cal = _run("calibrate", args, Path(args.trial_dir), calib, _campaign(args), Path(args.out),
+    cal = _run("calibrate", args, _trial(args), calib, _campaign(args), Path(args.out),
                intrinsics_json=intrinsics)
     bc = (cal.board_check or {}).get("residual_mm")
     extra = "" if bc is None else f", board-to-robot check {bc:.1f} mm"
@@ -158,15 +170,20 @@ def _frames(args) -> Path | None:
     return Path(args.frames) if args.frames else None
 
 
-def cmd_decode(args):
-    from stringcast.core import find_video
+def _trial(args):
+    """The trial's raw files named on the command line (stringcast.core.TrialFiles)."""
+    from stringcast.core import TrialFiles
 
-    video = find_video(Path(args.trial_dir))
-    _LOG.say(f"decode: {video} decoded once -> {_run('decode', args, video, Path(args.out))}")
+    meta = getattr(args, "video_meta", None)
+    return TrialFiles(Path(args.video), Path(args.joints), Path(meta) if meta else None)
+
+
+def cmd_decode(args):
+    _LOG.say(f"decode: {args.video} decoded once -> {_run('decode', args, Path(args.video), Path(args.out))}")
 
 
 def cmd_sync(args):
-    doc = _run("sync", args, Path(args.trial_dir), Path(args.calibration), _campaign(args), Path(args.out),
+    doc = _run("sync", args, _trial(args), Path(args.calibration), _campaign(args), Path(args.out),
                _frames(args), int(args.workers))
     extra = "" if doc.get("time_residual_ms") is None else \
         f", time residual {doc['time_residual_ms']:.2f} ms, arm match residual {doc['residual_mm'] or float('nan'):.1f} mm"
@@ -174,7 +191,7 @@ def cmd_sync(args):
 
 
 def cmd_sweep(args):
-    geo, clock = _run("sweep", args, Path(args.trial_dir), Path(args.calibration), Path(args.sync), _campaign(args),
+    geo, clock = _run("sweep", args, _trial(args), Path(args.calibration), Path(args.sync), _campaign(args),
                       Path(args.out_geometry), Path(args.out_clock), _frames(args), int(args.workers))
     sw = geo.get("sweep", {})
     if sw.get("applied"):
@@ -191,16 +208,20 @@ def cmd_sweep(args):
 def cmd_track(args):
     from stringcast.core import read_json
 
-    df = _run("track", args, Path(args.trial_dir), Path(args.calibration), Path(args.sync), _campaign(args),
-              Path(args.out), Path(args.overlay) if args.overlay else None, _frames(args), int(args.workers))
-    quality = read_json(Path(args.out).with_name("tracking.json"))
+    quality_json = Path(args.out_quality) if args.out_quality else Path(args.out).with_name("tracking.json")
+    df = _run("track", args, _trial(args), Path(args.geometry), Path(args.clock), _campaign(args),
+              Path(args.out), Path(args.overlay) if args.overlay else None, _frames(args), int(args.workers),
+              quality_json)
+    quality = read_json(quality_json)
     _verdict_line("tracking", quality.get("verdict") or {},
                   f"{df['frame'].nunique()} frames, valid share {df['valid'].mean():.3f}", args.out)
 
 
 def cmd_estimate(args):
+    upstream = {"geometry": Path(args.geometry), "clock": Path(args.clock), "tracking": Path(args.tracking)}
     est = _run("estimate", args, Path(args.tracks), Path(args.joints), _campaign(args),
-               Path(args.prev) if args.prev else None, int(args.trial), Path(args.out_params), Path(args.out_fit))
+               Path(args.prev) if args.prev else None, int(args.trial), Path(args.out_params), Path(args.out_fit),
+               upstream=upstream)
     print(f"estimation: E = {est.E_m * 1000:.2f} mm after {est.n_evaluations} evaluations")
     usable = {"ok": "", "warn": "doubtful", "fail": "the estimate is not usable"}[est.verdict.status]
     cause = f"likely cause {est.likely_cause}" if est.likely_cause else ""
@@ -239,7 +260,12 @@ def cmd_plan(args):
 
 
 def cmd_report_trial(args):
-    _run("report-trial", args, Path(args.data_dir), Path(args.results_dir), _campaign(args), Path(args.out))
+    from stringcast.core import TrialFiles, TrialResults
+
+    trial = TrialFiles(Path(args.video), Path(args.joints), played=Path(args.played_motion))
+    results = TrialResults(*(Path(p) for p in (args.geometry, args.clock, args.tracks, args.tracking, args.params,
+                                                args.fit, args.next_motion, args.next_motion_meta)))
+    _run("report-trial", args, trial, results, _campaign(args), Path(args.out))
     _LOG.say(f"trial report -> {args.out}")
 
 

@@ -103,6 +103,8 @@ def test_cli_prints_the_verdict_after_E(trial, settings, campaign, tmp_path, cap
     rc = cli.main(["--config", str(ROOT / "config" / "config.yaml"), "--config", str(tmp_path / "tiny.yaml"),
                    "estimate", "--tracks", str(tmp_path / "tracks.parquet"), "--joints", str(trial / "joints.csv"),
                    "--campaign", str(tmp_path / "campaign.yaml"), "--prev", str(trial / "prev.json"), "--trial", "3",
+                   *(a for stage in ("geometry", "clock", "tracking")     # none written: their verdicts ok
+                     for a in (f"--{stage}", str(tmp_path / f"{stage}.json"))),
                    "--out-params", str(tmp_path / "params.json"), "--out-fit", str(tmp_path / "fit.parquet")])
     lines = capsys.readouterr().out.splitlines()
     assert rc == 0 and lines[0].startswith("estimation: E = ")

@@ -106,11 +106,11 @@ def test_decode_command_writes_the_cache_beside_its_sidecar(tmp_path, capsys):
     trial = tmp_path / "trial_1"
     trial.mkdir()
     frames = _video(trial / "video.mkv", n=5)
-    assert main(["decode", "--trial-dir", str(trial), "--out", str(tmp_path / "r" / "frames.npy")]) == 0
+    assert main(["decode", "--video", str(trial / "video.mkv"), "--out", str(tmp_path / "r" / "frames.npy")]) == 0
     meta = json.loads((tmp_path / "r" / "frames.json").read_text())
     assert meta["frames"] == 5 and meta["source"]["path"].endswith("video.mkv")
     assert np.array_equal(np.load(tmp_path / "r" / "frames.npy")[4], frames[4])
-    assert main(["decode", "--trial-dir", str(tmp_path / "none"), "--out", str(tmp_path / "x.npy")]) == 2
+    assert main(["decode", "--video", str(tmp_path / "none" / "video.mkv"), "--out", str(tmp_path / "x.npy")]) == 2
     assert "none" in capsys.readouterr().err
 
 

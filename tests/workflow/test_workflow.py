@@ -252,6 +252,30 @@ def test_a_setting_on_the_command_line_reruns_exactly_what_reads_it(finished):
 
 
 @pytest.mark.slow
+def test_a_new_target_reruns_only_planning_and_the_reports(finished):
+    """The target reaches only the stages that read it (stringcast.cli.TARGET_COMMANDS): a new
+    target in campaign.yaml plans the motions, the prediction check and the reports again, and
+    leaves calibration, sync, tracking and the estimate as they are."""
+    root, _ = finished
+    path = root / "data" / "e2e" / "campaign.yaml"
+    old = path.read_text()
+    doc = yaml.safe_load(old)
+    assert str(doc["target"]) == "1"
+    try:
+        path.write_text(yaml.safe_dump({**doc, "target": 2}))
+        out = snakemake(root, "-n")
+        reruns = {"plan_first", "plan", "report_trial", "report_campaign"}
+        if (root / "data" / "e2e" / "trial_2").exists():
+            reruns |= {"predict"}
+        assert planned_rules(out) == reruns, out
+    finally:
+        path.write_text(old)
+    out = snakemake(root, "-n")
+    # the old file back, newer than the target's readers' outputs: they rerun, and nothing else
+    assert planned_rules(out) <= reruns, out
+
+
+@pytest.mark.slow
 def test_a_configfile_that_changes_nothing_a_stage_reads_reruns_nothing(finished):
     """A --configfile that restates a default and changes only the virtual lab (which no stage
     reads) leaves every result as it is; one that changes a setting reruns."""

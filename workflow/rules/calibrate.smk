@@ -6,7 +6,7 @@
 rule calib_views:
     input:
         calib="data/{campaign}/calib",
-        campaign=campaign_yaml,
+        campaign=campaign_for("calib-views"),
     output:
         views="results/{campaign}/calib_views.npz",
         intrinsics="results/{campaign}/intrinsics.json",
@@ -19,7 +19,7 @@ rule calib_views:
     params:
         cli=CLI,
         settings=stage_settings("calib-views"),
-        lab=campaign_lab_entries,
+        lab=lab_entries_for("calib-views"),
     shell:
         '{params.cli} --log "{log}" calib-views --calib-dir "{input.calib}" --campaign "{input.campaign}" '
         '--out "{output.views}" --out-intrinsics "{output.intrinsics}"'
@@ -28,10 +28,10 @@ rule calib_views:
 rule calibrate:
     input:
         video=trial_video,
-        meta="data/{campaign}/trial_{trial}/video.yaml",
         joints="data/{campaign}/trial_{trial}/joints.csv",
-        campaign=campaign_yaml,
-        calib=calib_input,
+        campaign=campaign_for("calibrate"),
+        calib_views=calib_views_input,
+        intrinsics=intrinsics_input,
     output:
         "results/{campaign}/trial_{trial}/calibration.json",
     log:
@@ -42,9 +42,9 @@ rule calibrate:
         "../envs/stringcast.yaml"
     params:
         cli=CLI,
-        calib=calib_arg,
         settings=stage_settings("calibrate"),
-        lab=campaign_lab_entries,
+        lab=lab_entries_for("calibrate"),
     shell:
-        '{params.cli} --log "{log}" calibrate --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
-        '{params.calib} --campaign "{input.campaign}" --out "{output}"'
+        '{params.cli} --log "{log}" calibrate --video "{input.video}" --joints "{input.joints}" '
+        "--calib-views {input.calib_views:q} --intrinsics {input.intrinsics:q} "
+        '--campaign "{input.campaign}" --out "{output}"'

@@ -7,10 +7,11 @@ import sys
 import time
 from pathlib import Path
 
+import yaml
 from snakemake.exceptions import WorkflowError
 
 from stringcast.check import check_campaign
-from stringcast.cli import stage_sections
+from stringcast.cli import reads_target, stage_sections
 from stringcast.core import (
     ConfigError,
     DataError,
@@ -21,7 +22,9 @@ from stringcast.core import (
     load_yaml,
     outputs_newer_than,
     settings_from_config,
+    without_target,
     workflow_stamp,
+    write_by_content,
     write_job_config,
 )
 from stringcast.core.lifeline import ENV_PID
@@ -88,11 +91,19 @@ def stage_settings(command):
     return {s: getattr(SETTINGS, s).as_dict() for s in stage_sections(command)}
 
 
-def campaign_lab_entries(wildcards):
-    """The config's entries this campaign resolves to (its arm, set-up, camera, string and
-    target; inline entries as written; stringcast.core.campaign_entries): a rule's params, so
-    that editing one of them reruns that campaign's stages and no other campaign's."""
-    return _lab_entries(wildcards.campaign)
+def lab_entries_for(command):
+    """The params of `stringcast <command>`'s rule: an input function giving the config's
+    entries this campaign resolves to (its arm, set-up, camera and string, and its target if
+    the stage reads it: stringcast.cli.TARGET_COMMANDS; inline entries as written;
+    stringcast.core.campaign_entries), so that editing one of them reruns that campaign's
+    stages that read it and no other campaign's."""
+    keep_target = reads_target(command)
+
+    def entries(wildcards):
+        e = _lab_entries(wildcards.campaign)
+        return {k: v for k, v in e.items() if keep_target or k != "target"}
+
+    return entries
 
 
 @functools.cache
@@ -156,9 +167,35 @@ def checked(campaign):
 
 
 def campaign_yaml(wildcards):
-    """data/<campaign>/campaign.yaml, its campaign checked first (checked)."""
+    """data/<campaign>/campaign.yaml, its campaign checked first (checked): the input of the
+    rules whose stage reads the target (stringcast.cli.TARGET_COMMANDS)."""
     checked(wildcards.campaign)
     return f"data/{wildcards.campaign}/campaign.yaml"
+
+
+def campaign_lab_yaml(wildcards):
+    """The campaign.yaml less its target (stringcast.core.without_target), written by content
+    to results/.stringcast/<campaign>/campaign-<hash>.yaml: the input of the rules whose stage
+    never reads the target, so that a new target reruns only those that do."""
+    checked(wildcards.campaign)
+    return _lab_yaml(wildcards.campaign)
+
+
+@functools.cache
+def _lab_yaml(campaign):
+    doc = load_yaml(Path("data", campaign, "campaign.yaml")) or {}
+    text = "# data/{0}/campaign.yaml less its target, for the stages that do not read it\n{1}".format(
+        campaign, yaml.safe_dump(without_target(doc), sort_keys=True)
+    )
+    return str(
+        write_by_content(text, Path("results", ".stringcast", campaign), "campaign")
+    )
+
+
+def campaign_for(command):
+    """The campaign input of `stringcast <command>`'s rule: campaign_yaml if its stage reads the
+    target (stringcast.cli.TARGET_COMMANDS), else campaign_lab_yaml."""
+    return campaign_yaml if reads_target(command) else campaign_lab_yaml
 
 
 def trials(campaign):
@@ -182,17 +219,20 @@ def trial_video(wildcards):
         return str(d / "video.mkv")
 
 
-def calib_input(wildcards):
-    """The campaign's board views and their intrinsics (rule calib_views), if it has calib/."""
-    d = Path("data", wildcards.campaign, "calib")
-    r = f"results/{wildcards.campaign}"
-    return [f"{r}/calib_views.npz", f"{r}/intrinsics.json"] if d.is_dir() else []
+def calib_views_input(wildcards):
+    """The campaign's board views (rule calib_views), if it has calib/; else none."""
+    return _calib_products(wildcards.campaign)[:1]
 
 
-def calib_arg(wildcards, input):
-    if not input.calib:
-        return ""
-    return f'--calib-views "{input.calib[0]}" --intrinsics "{input.calib[1]}"'
+def intrinsics_input(wildcards):
+    """The campaign's intrinsics fitted to those views (rule calib_views), if it has calib/."""
+    return _calib_products(wildcards.campaign)[1:]
+
+
+def _calib_products(campaign):
+    r = f"results/{campaign}"
+    has = Path("data", campaign, "calib").is_dir()
+    return [f"{r}/calib_views.npz", f"{r}/intrinsics.json"] if has else []
 
 
 def previous_params(wildcards):
@@ -213,10 +253,6 @@ def predicting_params(wildcards):
             "no earlier estimate to predict it"
         )
     return f"results/{wildcards.campaign}/trial_{k - 1}/params.json"
-
-
-def prev_arg(wildcards, input):
-    return f'--prev "{input.prev[0]}"' if input.prev else ""
 
 
 def trial_reports(wildcards):

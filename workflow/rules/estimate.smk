@@ -5,13 +5,12 @@
 rule estimate:
     input:
         tracks="results/{campaign}/trial_{trial}/tracks.parquet",
-        # the earlier stages' verdicts, carried into the fit's (read beside tracks.parquet)
-        verdicts=expand(
-            "results/{{campaign}}/trial_{{trial}}/{stage}.json",
-            stage=("geometry", "clock", "tracking"),
-        ),
+        # the earlier stages' verdicts, carried into the fit's
+        geometry="results/{campaign}/trial_{trial}/geometry.json",
+        clock="results/{campaign}/trial_{trial}/clock.json",
+        tracking="results/{campaign}/trial_{trial}/tracking.json",
         joints="data/{campaign}/trial_{trial}/joints.csv",
-        campaign=campaign_yaml,
+        campaign=campaign_for("estimate"),
         prev=previous_params,
     output:
         params="results/{campaign}/trial_{trial}/params.json",
@@ -25,12 +24,12 @@ rule estimate:
     threads: 8  # capped at --cores when run locally
     params:
         cli=CLI,
-        prev=prev_arg,
         settings=stage_settings("estimate"),
-        lab=campaign_lab_entries,
+        lab=lab_entries_for("estimate"),
     shell:
         'NUMBA_NUM_THREADS={threads} {params.cli} --log "{log}" estimate --tracks "{input.tracks}" '
-        '--joints "{input.joints}" --campaign "{input.campaign}" {params.prev} '
+        '--joints "{input.joints}" --campaign "{input.campaign}" --prev {input.prev:q} '
+        '--geometry "{input.geometry}" --clock "{input.clock}" --tracking "{input.tracking}" '
         '--trial {wildcards.trial} --out-params "{output.params}" --out-fit "{output.fit}"'
 
 
@@ -43,7 +42,7 @@ rule predict:
         params=predicting_params,
         tracks="results/{campaign}/trial_{trial}/tracks.parquet",
         joints="data/{campaign}/trial_{trial}/joints.csv",
-        campaign=campaign_yaml,
+        campaign=campaign_for("predict"),
     output:
         "results/{campaign}/trial_{trial}/prediction.json",
     log:
@@ -55,7 +54,7 @@ rule predict:
     params:
         cli=CLI,
         settings=stage_settings("predict"),
-        lab=campaign_lab_entries,
+        lab=lab_entries_for("predict"),
     shell:
         '{params.cli} --log "{log}" predict --params "{input.params}" --tracks "{input.tracks}" --joints "{input.joints}" '
         '--campaign "{input.campaign}" --out "{output}"'

@@ -4,7 +4,7 @@
 
 rule plan_first:
     input:
-        campaign=campaign_yaml,
+        campaign=campaign_for("plan-first"),
     output:
         csv="results/{campaign}/first_motion/motion.csv",
         json="results/{campaign}/first_motion/motion.json",
@@ -18,7 +18,7 @@ rule plan_first:
     params:
         cli=CLI,
         settings=stage_settings("plan-first"),
-        lab=campaign_lab_entries,
+        lab=lab_entries_for("plan-first"),
     shell:
         'NUMBA_NUM_THREADS={threads} {params.cli} --log "{log}" plan-first --campaign "{input.campaign}" '
         '--out-dir "results/{wildcards.campaign}/first_motion"'
@@ -30,7 +30,7 @@ rule plan:
         played="data/{campaign}/trial_{trial}/motion.json",
         tracks="results/{campaign}/trial_{trial}/tracks.parquet",
         joints="data/{campaign}/trial_{trial}/joints.csv",
-        campaign=campaign_yaml,
+        campaign=campaign_for("plan"),
     output:
         csv="results/{campaign}/trial_{trial}/motion.csv",
         json="results/{campaign}/trial_{trial}/motion.json",
@@ -44,7 +44,7 @@ rule plan:
     params:
         cli=CLI,
         settings=stage_settings("plan"),
-        lab=campaign_lab_entries,
+        lab=lab_entries_for("plan"),
     shell:
         'NUMBA_NUM_THREADS={threads} {params.cli} --log "{log}" plan --params "{input.params}" --played-motion "{input.played}" '
         '--tracks "{input.tracks}" --joints "{input.joints}" --campaign "{input.campaign}" --seed {wildcards.trial} '

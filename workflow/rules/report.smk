@@ -3,16 +3,18 @@
 
 rule report_trial:
     input:
-        calibration="results/{campaign}/trial_{trial}/geometry.json",
-        sync="results/{campaign}/trial_{trial}/clock.json",
+        geometry="results/{campaign}/trial_{trial}/geometry.json",
+        clock="results/{campaign}/trial_{trial}/clock.json",
         tracks="results/{campaign}/trial_{trial}/tracks.parquet",
         tracking="results/{campaign}/trial_{trial}/tracking.json",
         video=trial_video,
         params="results/{campaign}/trial_{trial}/params.json",
         fit="results/{campaign}/trial_{trial}/fit.parquet",
-        motion="results/{campaign}/trial_{trial}/motion.json",
+        motion="results/{campaign}/trial_{trial}/motion.csv",
+        motion_meta="results/{campaign}/trial_{trial}/motion.json",
         joints="data/{campaign}/trial_{trial}/joints.csv",
-        campaign=campaign_yaml,
+        played="data/{campaign}/trial_{trial}/motion.json",
+        campaign=campaign_for("report-trial"),
     output:
         report(
             "results/{campaign}/trial_{trial}/report.html",
@@ -28,17 +30,19 @@ rule report_trial:
     params:
         cli=CLI,
         settings=stage_settings("report-trial"),
-        lab=campaign_lab_entries,
+        lab=lab_entries_for("report-trial"),
     shell:
-        '{params.cli} --log "{log}" report-trial --data-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
-        '--results-dir "results/{wildcards.campaign}/trial_{wildcards.trial}" '
+        '{params.cli} --log "{log}" report-trial --video "{input.video}" --joints "{input.joints}" '
+        '--played-motion "{input.played}" --geometry "{input.geometry}" --clock "{input.clock}" '
+        '--tracks "{input.tracks}" --tracking "{input.tracking}" --params "{input.params}" --fit "{input.fit}" '
+        '--next-motion "{input.motion}" --next-motion-meta "{input.motion_meta}" '
         '--campaign "{input.campaign}" --out "{output}"'
 
 
 rule report_campaign:
     input:
         trial_reports,
-        campaign=campaign_yaml,
+        campaign=campaign_for("report-campaign"),
     output:
         report(
             "results/{campaign}/report.html",
@@ -54,7 +58,7 @@ rule report_campaign:
     params:
         cli=CLI,
         settings=stage_settings("report-campaign"),
-        lab=campaign_lab_entries,
+        lab=lab_entries_for("report-campaign"),
     shell:
         '{params.cli} --log "{log}" report-campaign --data-dir "data/{wildcards.campaign}" '
         '--results-dir "results/{wildcards.campaign}" --campaign "{input.campaign}" '

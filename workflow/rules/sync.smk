@@ -6,11 +6,10 @@ rule sync:
     input:
         video=trial_video,
         frames="results/{campaign}/trial_{trial}/frames.npy",
-        frames_meta="results/{campaign}/trial_{trial}/frames.json",
         meta="data/{campaign}/trial_{trial}/video.yaml",
         joints="data/{campaign}/trial_{trial}/joints.csv",
         calibration="results/{campaign}/trial_{trial}/calibration.json",
-        campaign=campaign_yaml,
+        campaign=campaign_for("sync"),
     output:
         "results/{campaign}/trial_{trial}/sync.json",
     log:
@@ -23,10 +22,10 @@ rule sync:
     params:
         cli=CLI,
         settings=stage_settings("sync"),
-        lab=campaign_lab_entries,
+        lab=lab_entries_for("sync"),
     shell:
-        '{params.cli} --log "{log}" sync --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
-        '--calibration "{input.calibration}" --campaign "{input.campaign}" '
+        '{params.cli} --log "{log}" sync --video "{input.video}" --video-meta "{input.meta}" '
+        '--joints "{input.joints}" --calibration "{input.calibration}" --campaign "{input.campaign}" '
         '--out "{output}" --frames "{input.frames}" --workers {threads}'
 
 
@@ -38,11 +37,10 @@ rule sweep:
     input:
         video=trial_video,
         frames="results/{campaign}/trial_{trial}/frames.npy",
-        frames_meta="results/{campaign}/trial_{trial}/frames.json",
         joints="data/{campaign}/trial_{trial}/joints.csv",
         calibration="results/{campaign}/trial_{trial}/calibration.json",
         sync="results/{campaign}/trial_{trial}/sync.json",
-        campaign=campaign_yaml,
+        campaign=campaign_for("sweep"),
     output:
         geometry="results/{campaign}/trial_{trial}/geometry.json",
         clock="results/{campaign}/trial_{trial}/clock.json",
@@ -56,8 +54,8 @@ rule sweep:
     params:
         cli=CLI,
         settings=stage_settings("sweep"),
-        lab=campaign_lab_entries,
+        lab=lab_entries_for("sweep"),
     shell:
-        '{params.cli} --log "{log}" sweep --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
+        '{params.cli} --log "{log}" sweep --video "{input.video}" --joints "{input.joints}" '
         '--calibration "{input.calibration}" --sync "{input.sync}" --campaign "{input.campaign}" '
         '--out-geometry "{output.geometry}" --out-clock "{output.clock}" --frames "{input.frames}" --workers {threads}'

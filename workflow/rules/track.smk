@@ -6,11 +6,10 @@ rule track:
     input:
         video=trial_video,
         frames="results/{campaign}/trial_{trial}/frames.npy",
-        frames_meta="results/{campaign}/trial_{trial}/frames.json",
         joints="data/{campaign}/trial_{trial}/joints.csv",
-        calibration="results/{campaign}/trial_{trial}/geometry.json",
-        sync="results/{campaign}/trial_{trial}/clock.json",
-        campaign=campaign_yaml,
+        geometry="results/{campaign}/trial_{trial}/geometry.json",
+        clock="results/{campaign}/trial_{trial}/clock.json",
+        campaign=campaign_for("track"),
     output:
         tracks="results/{campaign}/trial_{trial}/tracks.parquet",
         quality="results/{campaign}/trial_{trial}/tracking.json",
@@ -29,9 +28,9 @@ rule track:
     params:
         cli=CLI,
         settings=stage_settings("track"),
-        lab=campaign_lab_entries,
+        lab=lab_entries_for("track"),
     shell:
-        '{params.cli} --log "{log}" track --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
-        '--calibration "{input.calibration}" --sync "{input.sync}" '
-        '--campaign "{input.campaign}" --out "{output.tracks}" --overlay "{output.overlay}" '
+        '{params.cli} --log "{log}" track --video "{input.video}" --joints "{input.joints}" '
+        '--geometry "{input.geometry}" --clock "{input.clock}" --campaign "{input.campaign}" '
+        '--out "{output.tracks}" --out-quality "{output.quality}" --overlay "{output.overlay}" '
         '--frames "{input.frames}" --workers {threads}'

@@ -20,5 +20,4 @@ rule decode:
         cli=CLI,
         settings=stage_settings("decode"),
     shell:
-        '{params.cli} --log "{log}" decode --trial-dir "data/{wildcards.campaign}/trial_{wildcards.trial}" '
-        '--out "{output.frames}"'
+        '{params.cli} --log "{log}" decode --video "{input.video}" --out "{output.frames}"'

@@ -41,7 +41,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from stringcast.core import (BoardCheckSettings, CalibrationSettings, DataError, Verdict, find_video,
+from stringcast.core import (BoardCheckSettings, CalibrationSettings, DataError, TrialFiles, Verdict,
                              read_joint_table)
 from stringcast.video import open_video
 
@@ -158,7 +158,7 @@ def median_frame(video, n: int = 5) -> np.ndarray:
     return np.median(np.stack(frames), axis=0).astype(video.dtype)
 
 
-def run_calibration(trial_dir: str | Path, calib_dir: str | Path | None, campaign, out_json: str | Path,
+def run_calibration(trial: TrialFiles | str | Path, calib_dir: str | Path | None, campaign, out_json: str | Path,
                     n_median: int = 5, intrinsics_json: str | Path | None = None, *, board_check: BoardCheckSettings,
                     calibration: CalibrationSettings = CalibrationSettings()) -> Calibration:
     """Calibrate one trial and write ``calibration.json`` (reproducibly: :func:`~stringcast.calibrate.calib_views.single_threaded_opencv`).
@@ -173,6 +173,8 @@ def run_calibration(trial_dir: str | Path, calib_dir: str | Path | None, campaig
     file, a warning above ``board_check.warn_mm``). The file's ``verdict`` gathers them.
 
     Args:
+        trial: the trial's video and joint log (:class:`~stringcast.core.TrialFiles`; a folder: its
+            files by the data contract's names).
         intrinsics_json: the campaign's views' own intrinsics, fitted once
             (``intrinsics.json`` of :func:`~stringcast.calibrate.calib_views.write_campaign_intrinsics`),
             read instead of refitted; None: fitted here. The result is the same.
@@ -187,7 +189,7 @@ def run_calibration(trial_dir: str | Path, calib_dir: str | Path | None, campaig
             (the file is named).
     """
     with single_threaded_opencv():
-        return _run_calibration(Path(trial_dir), calib_dir, campaign, out_json, n_median, board_check, calibration,
+        return _run_calibration(TrialFiles.of(trial), calib_dir, campaign, out_json, n_median, board_check, calibration,
                                 intrinsics_json)
 
 
@@ -218,11 +220,11 @@ def _intrinsics(calib_dir: Path, board, campaign, image: np.ndarray, detection, 
     return intr, quality, check, verdict
 
 
-def _run_calibration(trial_dir: Path, calib_dir, campaign, out_json, n_median: int,
+def _run_calibration(trial: TrialFiles, calib_dir, campaign, out_json, n_median: int,
                      board_check: BoardCheckSettings, st: CalibrationSettings, intrinsics_json=None) -> Calibration:
     setup = campaign.setup
     board = setup.board.make()
-    vpath = find_video(trial_dir)
+    vpath = trial.video
     with open_video(vpath) as video:
         img = median_frame(video, n_median)
     source = f"{vpath} (median of the first {n_median} frames)"
@@ -243,7 +245,7 @@ def _run_calibration(trial_dir: Path, calib_dir, campaign, out_json, n_median: i
         verdict = verdict.add("warn", f"only {cal.n_corners} of {n_all} board corners used: the board is partly "
                                       "hidden; clear the view of the board")
     spread = _intrinsics_spread(img, board, setup.board_to_robot, cal, quality, detection, source)
-    board_doc, verdict = _board_check(trial_dir, img, cal, campaign, board_check, verdict, spread)
+    board_doc, verdict = _board_check(trial.joints, img, cal, campaign, board_check, verdict, spread)
     warnings = list(verdict.reasons)
     if intr is not None and intr.views_rejected:
         warnings.append(f"intrinsics: {intr.views_rejected} calibration views rejected (reprojection outliers)")
@@ -282,12 +284,11 @@ def _weak_intrinsics(verdict: Verdict) -> str | None:
     return None
 
 
-def _board_check(trial_dir: Path, rest_image: np.ndarray, cal: Calibration, campaign, board_check: BoardCheckSettings,
+def _board_check(joints: Path, rest_image: np.ndarray, cal: Calibration, campaign, board_check: BoardCheckSettings,
                  verdict: Verdict, spread=None) -> tuple[dict | None, Verdict]:
     """The board-to-robot check at the joint log's first (rest) posture (None without a
     joints.csv), with the intrinsics' ``spread`` to tell their error from the board pose's
     (:func:`~stringcast.calibrate.board_check.check_board_to_robot`), and the verdict with what it found."""
-    joints = trial_dir / "joints.csv"
     if not joints.exists():
         return None, verdict.add("warn", f"{joints} missing: the board-to-robot transform was not checked against the arm")
     _, q = read_joint_table(joints, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)

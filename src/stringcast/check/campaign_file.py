@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 from collections.abc import Mapping
 
-from stringcast.core import (ArmSpec, BoardSpec, Campaign, ConfigError, SetupSpec, StringSpec, TargetSpec, load_yaml,
+from stringcast.core import (NO_TARGET, ArmSpec, BoardSpec, Campaign, ConfigError, SetupSpec, StringSpec, TargetSpec, load_yaml,
                              resolve_campaign, schema_problems, target_reach_problem)
 from .problem import Problem, from_error, kind_of, guarded_with, problem, show
 
@@ -216,6 +216,8 @@ def _check(path: Path, config: Mapping, name: str) -> tuple[list[Problem], Campa
         return [problem(p, f"expected a mapping with keys string and target, got {kind_of(doc)}",
                         value=None if doc is None else show(doc))], None, None
     out = schema_findings(dict(doc), p, "campaign.schema.json")
+    if "target" not in doc:      # the schema lets the workflow's target-free copy pass; a campaign needs one
+        out.append(problem(p, NO_TARGET, "target"))
     flagged = {q.field for q in out}
     entries = {}
     for key, table in ENTRIES:

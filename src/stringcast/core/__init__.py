@@ -6,10 +6,10 @@ from .arm import (JointLimitError, assert_within_limits, check_limits, forward_k
                   motion_start, motion_window)
 from .config import (DEFAULT_CONFIG, METHOD_CONFIGS, OURS_CONFIG, PARAM_NAMES, ConfigError, load_config, load_yaml,
                      merge_config, model_ranges, schema_problems, typed_overrides, validate)
-from .specs import (REACH_MARGIN, ArmSpec, BoardSpec, Campaign, SetupSpec, StringSpec, TargetSpec, campaign_entries,
-                    load_campaign, resolve_campaign, target_reach_problem)
+from .specs import (NO_TARGET, REACH_MARGIN, ArmSpec, BoardSpec, Campaign, SetupSpec, StringSpec, TargetSpec, campaign_entries,
+                    load_campaign, resolve_campaign, target_reach_problem, without_target)
 from .files import (TRACK_COLUMNS, DataError, atomic_path, find_video, read_json, read_parquet, read_parquet_columns,
-                    read_video_meta, tracks_arrays, trial_result, write_job_config, write_json, write_parquet,
+                    read_video_meta, tracks_arrays, trial_result, TrialFiles, TrialResults, write_by_content, write_job_config, write_json, write_parquet,
                     write_text, write_yaml)
 from .joint_log import (check_joint_coverage, check_joint_header, check_motion_timing, end_speed_shares, joint_log_span,
                         read_joint_table, read_motion_sidecar, write_joint_table)
@@ -29,14 +29,14 @@ __all__ = [
     "motion_start", "motion_window",
     "DEFAULT_CONFIG", "METHOD_CONFIGS", "OURS_CONFIG", "PARAM_NAMES", "ConfigError", "load_config", "load_yaml",
     "merge_config", "model_ranges", "schema_problems", "typed_overrides", "validate",
-    "REACH_MARGIN", "ArmSpec", "BoardSpec", "Campaign", "SetupSpec", "StringSpec", "TargetSpec", "campaign_entries",
-    "load_campaign", "resolve_campaign", "target_reach_problem",
+    "NO_TARGET", "REACH_MARGIN", "ArmSpec", "BoardSpec", "Campaign", "SetupSpec", "StringSpec", "TargetSpec", "campaign_entries",
+    "load_campaign", "resolve_campaign", "target_reach_problem", "without_target",
     "TRACK_COLUMNS", "DataError", "atomic_path", "check_joint_coverage", "check_joint_header", "check_motion_timing",
     "end_speed_shares",
     "find_video", "joint_log_span", "read_joint_table", "read_json", "read_motion_sidecar", "read_parquet",
     "read_parquet_columns",
     "read_video_meta",
-    "tracks_arrays", "trial_result", "write_job_config", "write_joint_table", "write_json", "write_parquet", "write_text", "write_yaml",
+    "tracks_arrays", "trial_result", "TrialFiles", "TrialResults", "write_by_content", "write_job_config", "write_joint_table", "write_json", "write_parquet", "write_text", "write_yaml",
     "MODES", "POLARITIES", "SECTION_CLASSES", "BoardCheckSettings", "CalibrationSettings", "EstimationSettings",
     "EvaluationSettings", "ExecutorSettings", "ModelSettings", "MotionSettings", "Settings", "SweepSettings",
     "SyncSettings",

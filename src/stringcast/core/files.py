@@ -10,6 +10,7 @@ import json
 import os
 import tempfile
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 from collections.abc import Iterator, Mapping
@@ -191,6 +192,79 @@ def find_video(trial_dir: str | Path) -> Path:
     return cands[0]
 
 
+@dataclass(frozen=True)
+class TrialFiles:
+    """A trial's raw files, as a stage reads them (``docs/data_contract.md``).
+
+    The workflow names each file on the stage's command line (``--video``, ``--video-meta``,
+    ``--joints``); :meth:`in_folder` finds them by the data contract's names, for a person or a
+    script that names the trial's folder.
+
+    Attributes:
+        video: the video: a ``video.<ext>`` container, a ``video/`` frame folder or a ``.cihx``.
+        joints: ``joints.csv``, the joint log (t_s, q1_rad .. qJ_rad).
+        video_meta: ``video.yaml`` (fps, trigger_time_s, ...); None for a stage that does not read it.
+        played: the played motion's ``motion.json`` (its T_s and predicted closest approach); None
+            for a stage that does not read it.
+    """
+
+    video: Path
+    joints: Path
+    video_meta: Path | None = None
+    played: Path | None = None
+
+    @classmethod
+    def in_folder(cls, trial_dir: str | Path) -> TrialFiles:
+        """``data/<campaign>/trial_<k>``'s files: :func:`find_video`, ``joints.csv``, ``video.yaml``,
+        ``motion.json``.
+
+        Raises:
+            DataError: the folder holds no video.
+        """
+        d = Path(trial_dir)
+        return cls(find_video(d), d / "joints.csv", d / "video.yaml", d / "motion.json")
+
+    @classmethod
+    def of(cls, trial: TrialFiles | str | Path) -> TrialFiles:
+        """``trial`` itself, or the files of the trial folder it names (:meth:`in_folder`)."""
+        return trial if isinstance(trial, TrialFiles) else cls.in_folder(trial)
+
+    @property
+    def name(self) -> str:
+        """The trial as messages name it: the video's folder (a frame folder's parent)."""
+        return str(self.joints.parent)
+
+
+@dataclass(frozen=True)
+class TrialResults:
+    """One trial's products that the reports read (``docs/data_contract.md``), each file named.
+
+    Attributes:
+        geometry: ``geometry.json`` (the sweep's mapping; ``calibration.json`` where it has none).
+        clock: ``clock.json`` (the sweep's clock; ``sync.json`` where it has none).
+        tracks: ``tracks.parquet``. tracking: ``tracking.json`` (the tracking's verdict).
+        params: ``params.json`` (the estimate and the fit's verdict). fit: ``fit.parquet``.
+        motion: the next motion's ``motion.csv``. motion_meta: its ``motion.json``.
+    """
+
+    geometry: Path
+    clock: Path
+    tracks: Path
+    tracking: Path
+    params: Path
+    fit: Path
+    motion: Path
+    motion_meta: Path
+
+    @classmethod
+    def in_folder(cls, results_dir: str | Path) -> TrialResults:
+        """``results/<campaign>/trial_<k>``'s files by the data contract's names (:func:`trial_result` for
+        the geometry and the clock)."""
+        d = Path(results_dir)
+        return cls(trial_result(d, "geometry")[1], trial_result(d, "clock")[1], d / "tracks.parquet",
+                   d / "tracking.json", d / "params.json", d / "fit.parquet", d / "motion.csv", d / "motion.json")
+
+
 def _numbers(column, name: str, source) -> np.ndarray:
     """A table column as float64 (N,); DataError naming ``source`` and the column where it is not numeric."""
     try:
@@ -243,19 +317,28 @@ __all__ = ["BEFORE_SWEEP", "TRACK_COLUMNS", "DataError", "atomic_path", "find_vi
            "write_parquet", "write_text", "write_yaml"]
 
 
-def write_job_config(config: Mapping, folder: str | Path = "results/.stringcast") -> Path:
-    """The config a workflow run holds (its config files merged, ``--config`` overrides included), as
-    one YAML file for its jobs to read (``$STRINGCAST_CONFIG``): ``<folder>/config-<sha256[:12]>.yaml``,
-    named by its content and written atomically where it is not there yet, so that runs with the
-    same config share it and a job started by Slurm, which parses the Snakefile again, finds it.
+def write_by_content(text: str, folder: str | Path, stem: str, suffix: str = ".yaml") -> Path:
+    """``text`` as ``<folder>/<stem>-<sha256[:12]><suffix>``, named by its content and written atomically
+    where it is not there yet: a workflow's input whose time changes only when its content does, which a
+    job that Slurm starts (parsing the Snakefile again) finds as written.
 
     Returns:
         The file's path (as ``folder`` gives it).
     """
     import hashlib
 
-    text = yaml.safe_dump(_jsonable(dict(config)), sort_keys=True)
-    path = Path(folder) / f"config-{hashlib.sha256(text.encode()).hexdigest()[:12]}.yaml"
+    path = Path(folder) / f"{stem}-{hashlib.sha256(text.encode()).hexdigest()[:12]}{suffix}"
     if not path.is_file():
         write_text(path, text)
     return path
+
+
+def write_job_config(config: Mapping, folder: str | Path = "results/.stringcast") -> Path:
+    """The config a workflow run holds (its config files merged, ``--config`` overrides included), as
+    one YAML file for its jobs to read (``$STRINGCAST_CONFIG``): ``<folder>/config-<sha256[:12]>.yaml``
+    (:func:`write_by_content`), so that runs with the same config share it.
+
+    Returns:
+        The file's path (as ``folder`` gives it).
+    """
+    return write_by_content(yaml.safe_dump(_jsonable(dict(config)), sort_keys=True), folder, "config")

@@ -208,14 +208,14 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign,
     tracks = read_parquet(tracks_parquet, TRACK_COLUMNS)
     t_j, q_j = read_joint_table(joints_csv, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
     problem_settings = dict(model=model, evaluation=evaluation, estimation=estimation, tracking=tracking)
-    problem = build_problem_explained(tracks, t_j, q_j, campaign, tracks_parquet, **problem_settings)
+    if upstream is None:
+        upstream = dict(trial_result(Path(tracks_parquet).parent, stage) for stage in UPSTREAM)
+    problem = build_problem_explained(tracks, t_j, q_j, campaign, tracks_parquet, upstream, **problem_settings)
     prev = read_json(prev_params_json, mapping=True) if prev_params_json else None
     chi0 = start_chi(prev, campaign.string, model, motion, str(prev_params_json))
     k = max(1, int(trial_index))
     seed = int(estimation.seed) + k
     est = estimate(problem, model, estimation, chi0, k, seed)
-    if upstream is None:
-        upstream = dict(trial_result(Path(tracks_parquet).parent, stage) for stage in UPSTREAM)
     sim = simulate_fit(problem, model, est.chi)
     figures, verdict, cause = judge_fit(problem, sim, campaign.string.length, motion_window(t_j, q_j)[1],
                                         est.E_m * 1000, estimation, read_verdicts(upstream), read_sweep_bounds(upstream))

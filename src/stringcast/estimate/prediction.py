@@ -132,7 +132,7 @@ def run_prediction(params_json: Path, tracks_parquet: Path, joints_csv: Path, ca
     # every frame the log covers (the fit's compare_after_motion_s does not apply); E's w is not used
     compare_all = dataclasses.replace(EstimationSettings(), compare_after_motion_s=None)
     problem = build_problem_explained(read_parquet(tracks_parquet, TRACK_COLUMNS), t_j, q_j, campaign, tracks_parquet,
-                                      model=model, evaluation=EvaluationSettings(), estimation=compare_all,
+                                      {}, model=model, evaluation=EvaluationSettings(), estimation=compare_all,
                                       tracking=tracking)
     try:
         t_end = motion_window(t_j, q_j)[1] + float(motion.flight_window_s)

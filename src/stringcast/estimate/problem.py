@@ -21,13 +21,13 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
 import numpy as np
 import pandas as pd
 
 from stringcast.core import (Campaign, DataError, EstimationSettings, EvaluationSettings, ModelSettings,
-                             TrackingSettings, hand_pose, motion_start, motion_window, tracks_arrays, trial_result)
+                             TrackingSettings, hand_pose, motion_start, motion_window, tracks_arrays)
 from stringcast.model import decode
 from stringcast.model import fill_rest_pose, simulate_batch
 from .evaluation import evaluation_value, per_point_errors
@@ -155,14 +155,13 @@ def build_problem(tracks_df: pd.DataFrame, t_joints: np.ndarray, q_joints: np.nd
         w=float(evaluation.w), fallback_points=tuple(fallback), t_motion_start=t_move)
 
 
-def upstream_causes(results_dir: str | Path, stages: tuple[str, ...] = ("geometry", "clock", "tracking")) -> str:
-    """The first reason of each earlier stage (``<stage>.json`` beside the tracks,
-    :func:`~stringcast.core.trial_result`) whose verdict is not ok, joined for an error message
-    (``""`` where none is, or a file cannot be read): why a problem could not be built, in the words
-    of the stage that saw it (a string of another length than the campaign's: tracking's)."""
+def upstream_causes(upstream: Mapping[str, str | Path]) -> str:
+    """The first reason of each earlier stage (``{stage: its JSON file}``: geometry, clock, tracking)
+    whose verdict is not ok, joined for an error message (``""`` where none is, or a file cannot be
+    read): why a problem could not be built, in the words of the stage that saw it (a string of another
+    length than the campaign's: tracking's)."""
     said = []
-    for stage in stages:
-        _, path = trial_result(results_dir, stage)
+    for stage, path in upstream.items():
         try:
             verdict = json.loads(Path(path).read_text()).get("verdict") or {}
         except (OSError, ValueError, AttributeError):
@@ -174,13 +173,14 @@ def upstream_causes(results_dir: str | Path, stages: tuple[str, ...] = ("geometr
 
 
 def build_problem_explained(tracks_df: pd.DataFrame, t_joints: np.ndarray, q_joints: np.ndarray,
-                            campaign: Campaign, source: str | Path, **settings) -> EstimationProblem:
+                            campaign: Campaign, source: str | Path, upstream: Mapping[str, str | Path],
+                            **settings) -> EstimationProblem:
     """:func:`build_problem` on ``source`` (a tracks.parquet), whose DataError carries the earlier stages'
-    reasons (:func:`upstream_causes`) where they say why no problem could be built."""
+    reasons (:func:`upstream_causes` of ``upstream``) where they say why no problem could be built."""
     try:
         return build_problem(tracks_df, t_joints, q_joints, campaign, **settings, source=str(source))
     except DataError as exc:
-        raise DataError(f"{exc}{upstream_causes(Path(source).parent)}") from exc
+        raise DataError(f"{exc}{upstream_causes(upstream)}") from exc
 
 
 def _simulate(problem: EstimationProblem, coeffs: np.ndarray, mu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -28,8 +28,8 @@ import pandas as pd
 from stringcast import __version__
 from stringcast.calibrate import Calibration
 from stringcast.core import (PARAM_NAMES, TRACK_COLUMNS, Campaign, DataError, ModelSettings, MotionSettings, Settings,
-                             Verdict, find_video, hand_pose, model_ranges, motion_start, read_joint_table, read_json,
-                             read_parquet, tracks_arrays, trial_result, worst, write_text)
+                             TrialFiles, TrialResults, Verdict, hand_pose, model_ranges, motion_start, read_joint_table,
+                             read_json, read_parquet, tracks_arrays, worst, write_text)
 from . import figures as figs
 from .provenance import provenance
 from .strip import frame_strip, strip_data_uri
@@ -72,19 +72,21 @@ def _fmt(x, spec=".2f", unit=""):
     return f"{x:{spec}}{unit}"
 
 
-def _motion_window(data_dir: Path, motion: MotionSettings, arm) -> tuple[float, float, dict]:
-    t, q = read_joint_table(data_dir / "joints.csv", n_joints=arm.n_joints, arm_name=arm.name)
-    played = read_json(data_dir / "motion.json") if (data_dir / "motion.json").exists() else {}
+def _motion_window(trial: TrialFiles, motion: MotionSettings, arm) -> tuple[float, float, dict]:
+    t, q = read_joint_table(trial.joints, n_joints=arm.n_joints, arm_name=arm.name)
+    played = read_json(trial.played) if trial.played is not None and trial.played.exists() else {}
     t0 = motion_start(t, q)
     T = float(played.get("T_s", t[-1] - t0))
     return t0, t0 + T + float(motion.flight_window_s), played
 
 
-def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, out: Path, *,
+def write_trial_report(trial: TrialFiles | Path, results: TrialResults | Path, campaign: Campaign, out: Path, *,
                        settings: Settings) -> None:
     """Write ``results/<campaign>/trial_<k>/report.html`` from that trial's outputs.
 
-    ``settings``: every stage's (:class:`~stringcast.core.Settings`): the page names the method
+    ``trial``: the trial's raw files (:class:`~stringcast.core.TrialFiles`: the video, the joint log and
+    the played motion.json; a folder: by the data contract's names). ``results``: its products
+    (:class:`~stringcast.core.TrialResults`; a folder: by name). ``settings``: every stage's (:class:`~stringcast.core.Settings`): the page names the method
     they make (:mod:`.provenance`), and reads Table 2's ranges (``model``) and the flight
     window (``motion``).
 
@@ -92,9 +94,10 @@ def write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, ou
         DataError: a required result file is missing or malformed (named).
     """
     try:
-        _write_trial_report(Path(data_dir), Path(results_dir), campaign, Path(out), settings)
+        results = results if isinstance(results, TrialResults) else TrialResults.in_folder(results)
+        _write_trial_report(TrialFiles.of(trial), results, campaign, Path(out), settings)
     except MALFORMED as exc:
-        raise DataError(f"{results_dir}: a result file the trial report reads is malformed "
+        raise DataError(f"{Path(out).parent}: a result file the trial report reads is malformed "
                         f"({type(exc).__name__}: {exc})") from exc
 
 
@@ -102,19 +105,20 @@ MALFORMED = (KeyError, TypeError, ValueError, IndexError, AttributeError)
 """What a result file of the wrong shape raises as the reports read it (a DataError for the user)."""
 
 
-def _write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, out: Path, settings: Settings) -> None:
+def _write_trial_report(trial: TrialFiles, res: TrialResults, campaign: Campaign, out: Path,
+                        settings: Settings) -> None:
     """:func:`write_trial_report`'s work."""
     n = campaign.string.n_points
-    params = read_json(results_dir / "params.json", mapping=True)
-    calib_stage, calib_json = trial_result(results_dir, "geometry")  # the sweep's, when the trial has one
-    sync_stage, sync_json = trial_result(results_dir, "clock")
+    params = read_json(res.params, mapping=True)
+    # the sweep's geometry.json / clock.json, or (results made before the sweep) calibration.json / sync.json
+    calib_stage, calib_json = Path(res.geometry).stem, res.geometry
+    sync_stage, sync_json = Path(res.clock).stem, res.clock
     calib, sync = read_json(calib_json, mapping=True), read_json(sync_json, mapping=True)
-    nxt = read_json(results_dir / "motion.json", mapping=True)
-    tracks = read_parquet(results_dir / "tracks.parquet", TRACK_COLUMNS)
-    fit = read_parquet(results_dir / "fit.parquet")
-    t_j, q_j = read_joint_table(data_dir / "joints.csv", n_joints=campaign.arm.n_joints,
-                                 arm_name=campaign.arm.name)
-    t0, t1, played = _motion_window(data_dir, settings.motion, campaign.arm)
+    nxt = read_json(res.motion_meta, mapping=True)
+    tracks = read_parquet(res.tracks, TRACK_COLUMNS)
+    fit = read_parquet(res.fit)
+    t_j, q_j = read_joint_table(trial.joints, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
+    t0, t1, played = _motion_window(trial, settings.motion, campaign.arm)
     tgt = campaign.target.xy
     t_tr, xy_tr, valid = _tracked(tracks, n)
     d_meas, _ = closest_approach(t_tr, xy_tr[:, n], tgt, t0, t1)
@@ -125,7 +129,7 @@ def _write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, o
                 "src": figs.tip_paths(tip_fit["t_s"].to_numpy(), tip_fit[["x_tracked_m", "y_tracked_m"]].to_numpy(),
                                       tip_fit["t_s"].to_numpy(), tip_fit[["x_sim_m", "y_sim_m"]].to_numpy(),
                                       tgt, campaign.target.radius)}]
-    t_n, q_n = read_joint_table(results_dir / "motion.csv", n_joints=campaign.arm.n_joints,
+    t_n, q_n = read_joint_table(res.motion, n_joints=campaign.arm.n_joints,
                                  arm_name=campaign.arm.name)
     figures.append({"id": "fig-arm-paths", "caption": "Grasp-point paths of the motion played in this trial "
                     "(measured joints) and of the next motion (paper Fig. 8b).",
@@ -134,7 +138,7 @@ def _write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, o
                                           tgt, campaign.target.radius)})
     model_figures, values, lo, hi, diagnostics = _parameter_figures(params, settings.model)
     figures += model_figures
-    strip = frame_strip(find_video(data_dir), Calibration.from_json(calib_json), tracks, fit,
+    strip = frame_strip(trial.video, Calibration.from_json(calib_json), tracks, fit,
                         campaign.string.length)
     figures.append({"id": "fig-overlay", "caption": "Frames of the motion with the tracked points (green circles; "
                     "red: the grasp from forward kinematics) and the model's points simulated with the estimate "
@@ -149,12 +153,12 @@ def _write_trial_report(data_dir: Path, results_dir: Path, campaign: Campaign, o
                     f"(T = {nxt.get('T_s', float('nan')):.3f} s).", "src": figs.joint_curves(t_n, q_n)})
 
     summary = _trial_summary(params, diagnostics, valid, d_meas, campaign, played, nxt)
-    tracking = results_dir / "tracking.json"
+    tracking = Path(res.tracking)
     verdicts = stage_verdicts({calib_stage: calib, sync_stage: sync,
                                "tracking": read_json(tracking) if tracking.exists() else None, "fit": params})
     warnings = [str(w) for w in calib.get("warnings", [])] + [str(w) for w in [params.get("message")] if w]
     cal_rows = _calibration_rows(calib, sync)
-    ctx = _common(campaign, f"Campaign {campaign.name}, trial {results_dir.name.split('_')[-1]}", settings)
+    ctx = _common(campaign, f"Campaign {campaign.name}, trial {Path(out).parent.name.split('_')[-1]}", settings)
     ctx.update(summary=summary, warnings=warnings, figures=figures, calib=cal_rows, verdicts=verdicts,
                params=[(k, v, a, b) for k, v, a, b in zip(PARAM_NAMES, values, lo, hi)])
     write_text(out, _env().get_template("trial.html.j2").render(**ctx))
@@ -335,7 +339,8 @@ def _write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign
             continue
         params = read_json(rd / "params.json", mapping=True)
         tracks = read_parquet(rd / "tracks.parquet")
-        t0, t1, played = _motion_window(dd, motion, campaign.arm)
+        t0, t1, played = _motion_window(TrialFiles(Path(), dd / "joints.csv", played=dd / "motion.json"), motion,
+                                        campaign.arm)
         t, xy, valid = _tracked(tracks, n)
         d, _ = closest_approach(t, xy[:, n], campaign.target.xy, t0, t1)
         window = (t >= t0) & (t <= t1)

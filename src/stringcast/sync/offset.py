@@ -65,9 +65,9 @@ from stringcast.core import (
     DataError,
     SyncSettings,
     Verdict,
+    TrialFiles,
     check_joint_coverage,
     end_speed_shares,
-    find_video,
     read_joint_table,
     read_video_meta,
     write_json,
@@ -100,19 +100,19 @@ def _check_log_starts_still(t_j: np.ndarray, q_j: np.ndarray, arm, joints_csv: P
                         "motion; the log must start with the arm still, before the motion or at its start")
 
 
-def _video_doc(trial_dir: Path, calibration_json, campaign, meta: dict, video_yaml: Path, t_j: np.ndarray,
+def _video_doc(trial: TrialFiles, calibration_json, campaign, meta: dict, video_yaml: Path, t_j: np.ndarray,
                q_j: np.ndarray, sync: SyncSettings, board_check: BoardCheckSettings,
                frames_npy: Path | None = None, workers: int = 1) -> tuple[dict, list[str]]:
     """``sync.json``'s fields from the video (``frames_npy``: its decoded frames, if given) and the trigger time,
     if any, and the warnings besides the choice's."""
     if calibration_json is None:
-        raise DataError(f"{trial_dir}: sync.method 'video' needs the trial's calibration.json")
-    _check_log_starts_still(t_j, q_j, campaign.arm, trial_dir / "joints.csv", sync)
+        raise DataError(f"{trial.name}: sync.method 'video' needs the trial's calibration.json")
+    _check_log_starts_still(t_j, q_j, campaign.arm, trial.joints, sync)
     trigger = meta.get("trigger_time_s")
     cal = Calibration.from_json(calibration_json)
     est, failure = None, None
     fps = float(meta["fps"])
-    with open_trial_video(find_video(trial_dir), frames_npy, fps=fps) as video:
+    with open_trial_video(trial.video, frames_npy, fps=fps) as video:
         warns = check_frame_count(video, meta, video_yaml)
         video.fps = fps   # video.yaml's, which every later stage's frame times use (a container's own is warned of)
         try:
@@ -165,13 +165,14 @@ def _rate_cause(video, cal, campaign, t_j, q_j, sync: SyncSettings, board_check:
     return "" if found is None else ": " + rate_reason(found, float(video.fps), video_yaml)
 
 
-def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaign, out_json: str | Path | None = None,
+def run_sync(trial: TrialFiles | str | Path, calibration_json: str | Path | None, campaign, out_json: str | Path | None = None,
              frames_npy: str | Path | None = None, workers: int = 1, *, sync: SyncSettings,
              board_check: BoardCheckSettings) -> dict:
     """Write ``sync.json`` for one trial (see the module docstring for its keys).
 
     Args:
-        trial_dir: ``data/<campaign>/trial_<k>`` with ``video.yaml``, the video and ``joints.csv``.
+        trial: the trial's video, ``video.yaml`` and ``joints.csv`` (:class:`~stringcast.core.TrialFiles`;
+            a folder: its files by the data contract's names).
         calibration_json: the trial's ``calibration.json`` (needed by ``method: video``).
         campaign: :class:`~stringcast.core.specs.Campaign` (the arm, with its outline and speed limits).
         out_json: where to write ``sync.json`` (None: not written).
@@ -188,23 +189,25 @@ def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaig
             time, or a joint log that misses part of the motion (it starts or ends with the arm
             moving where the frames need it; ``joints.csv`` named).
     """
-    trial_dir = Path(trial_dir)
-    video_yaml = trial_dir / "video.yaml"
+    trial = TrialFiles.of(trial)
+    if trial.video_meta is None:
+        raise DataError(f"{trial.name}: sync reads the trial's video.yaml, and none was given")
+    video_yaml = trial.video_meta
     meta = read_video_meta(video_yaml)
     doc = {"fps": float(meta["fps"]), "frames": int(meta["frames"]), "trigger_time_s": meta.get("trigger_time_s")}
-    joints_csv = trial_dir / "joints.csv"
+    joints_csv = trial.joints
     t_j, q_j = read_joint_table(joints_csv, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
     if sync.method == "trigger":
         doc.update(_trigger_doc(meta, video_yaml), verdict=Verdict())
-        with open_trial_video(find_video(trial_dir), None if frames_npy is None else Path(frames_npy),
+        with open_trial_video(trial.video, None if frames_npy is None else Path(frames_npy),
                               fps=doc["fps"]) as video:   # the frame count every later stage's times rest on
             warns = check_frame_count(video, meta, video_yaml)
     else:
-        est_doc, warns = _video_doc(trial_dir, calibration_json, campaign, meta, video_yaml, t_j, q_j, sync,
+        est_doc, warns = _video_doc(trial, calibration_json, campaign, meta, video_yaml, t_j, q_j, sync,
                                     board_check, None if frames_npy is None else Path(frames_npy), workers)
         doc.update(est_doc)
     if not math.isfinite(doc["offset_s"]):
-        raise DataError(f"{trial_dir}: sync produced a non-finite offset")
+        raise DataError(f"{trial.name}: sync produced a non-finite offset")
     doc["joint_log"] = check_joint_coverage(
         t_j, doc["offset_s"] + np.arange(doc["frames"]) / doc["fps"], joints_csv, q_joints=q_j,
         qd_max=campaign.arm.qd_max, still_share=sync.still_speed_share, still_window_s=sync.still_window_s)
@@ -214,8 +217,8 @@ def run_sync(trial_dir: str | Path, calibration_json: str | Path | None, campaig
     doc["verdict"], doc["warnings"] = verdict.as_dict(), list(verdict.reasons)
     for w in doc["warnings"]:   # an ok verdict's reasons are notes (an overruled trigger, recorded)
         if not verdict.ok:
-            warnings.warn(f"{trial_dir}: {w}", stacklevel=2)
-        print(f"sync {'note' if verdict.ok else 'warning'}: {trial_dir}: {w}", file=sys.stderr)
+            warnings.warn(f"{trial.name}: {w}", stacklevel=2)
+        print(f"sync {'note' if verdict.ok else 'warning'}: {trial.name}: {w}", file=sys.stderr)
     if out_json is not None:
         write_json(out_json, doc)
     return doc

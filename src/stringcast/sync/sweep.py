@@ -69,7 +69,7 @@ import numpy as np
 from .clock import frame_times
 from stringcast.calibrate import (PARAMETERS, Calibration, board_corner_points, mapping_standard_error,
                                   refine_mapping, sweep_rows)
-from stringcast.core import (BoardCheckSettings, DataError, SweepSettings, Verdict, find_video, forward_kinematics,
+from stringcast.core import (BoardCheckSettings, DataError, SweepSettings, TrialFiles, Verdict, forward_kinematics,
                              read_joint_table, read_json, write_json)
 from stringcast.video import open_trial_video
 
@@ -146,14 +146,15 @@ def _passed_through(calibration, sync_doc, reason):
     return geo, clock
 
 
-def run_sweep(trial_dir: str | Path, calibration_json: str | Path, sync_json: str | Path, campaign,
+def run_sweep(trial: TrialFiles | str | Path, calibration_json: str | Path, sync_json: str | Path, campaign,
               out_geometry: str | Path | None = None, out_clock: str | Path | None = None,
               frames_npy: str | Path | None = None, workers: int = 1, *, sweep: SweepSettings,
               board_check: BoardCheckSettings) -> tuple[dict, dict]:
     """Refine one trial's mapping and clock by the arm's sweep; write ``geometry.json`` and ``clock.json``.
 
     Args:
-        trial_dir: ``data/<campaign>/trial_<k>`` with the video and ``joints.csv``.
+        trial: the trial's video and ``joints.csv`` (:class:`~stringcast.core.TrialFiles`; a folder: its
+            files by the data contract's names).
         calibration_json, sync_json: the trial's ``calibration.json`` and ``sync.json``.
         campaign: :class:`~stringcast.core.specs.Campaign` (the arm's outline, the board, the string).
         out_geometry, out_clock: where to write them (None: not written).
@@ -169,9 +170,9 @@ def run_sweep(trial_dir: str | Path, calibration_json: str | Path, sync_json: st
         DataError: unreadable inputs, or a calibration under which no point the string can reach
             is in the image (the files named).
     """
-    trial_dir = Path(trial_dir)
+    trial = TrialFiles.of(trial)
     calibration, sync_doc = Calibration.from_json(calibration_json), read_json(sync_json, mapping=True)
-    t_j, q_j = read_joint_table(trial_dir / "joints.csv", n_joints=campaign.arm.n_joints)
+    t_j, q_j = read_joint_table(trial.joints, n_joints=campaign.arm.n_joints)
     t_frames = frame_times(sync_doc)
     if sweep.frames == 0 or calibration.K is None or not calibration.corner_ids:
         why = ("switched off (sweep.frames: 0)" if sweep.frames == 0
@@ -180,10 +181,10 @@ def run_sweep(trial_dir: str | Path, calibration_json: str | Path, sync_json: st
     else:
         points = reach_points(campaign, q_j, calibration)
         if len(points) == 0:
-            raise DataError(f"{calibration_json}: no swing-plane point the string can reach (from {trial_dir}/joints.csv)"
+            raise DataError(f"{calibration_json}: no swing-plane point the string can reach (from {trial.joints})"
                             " maps into the image")
         keep = np.unique(np.linspace(0, len(t_frames) - 1, sweep.frames).astype(int))
-        frames = read_frames(find_video(trial_dir), keep, None if frames_npy is None else Path(frames_npy))
+        frames = read_frames(trial.video, keep, None if frames_npy is None else Path(frames_npy))
         corners = board_corner_points(calibration, campaign.setup.board.make())
         fit, rows = _fit(calibration, frames, campaign, t_frames, t_j, q_j, corners, sweep, board_check, workers)
         if fit is None:
@@ -193,7 +194,7 @@ def run_sweep(trial_dir: str | Path, calibration_json: str | Path, sync_json: st
             geo, clock = _refined_docs(calibration, sync_doc, fit, rows, points, corners, sweep)
     for name, doc, out in (("geometry", geo, out_geometry), ("clock", clock, out_clock)):
         for r in doc["verdict"]["reasons"]:
-            print(f"sweep {name} {doc['verdict']['status']}: {trial_dir}: {r}", file=sys.stderr)
+            print(f"sweep {name} {doc['verdict']['status']}: {trial.name}: {r}", file=sys.stderr)
         if out is not None:
             write_json(out, doc)
     return geo, clock

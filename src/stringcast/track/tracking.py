@@ -66,7 +66,7 @@ from stringcast.core import TrackingSettings, forward_kinematics, joints_at, mot
 from .arm_mask import draw_arm_mask
 from .background import background_samples, build_background
 from stringcast.calibrate import Calibration
-from stringcast.core import (DataError, find_video, joint_log_span, read_joint_table, read_json, write_json,
+from stringcast.core import (DataError, TrialFiles, joint_log_span, read_joint_table, read_json, write_json,
                              write_parquet)
 from .frame_tracker import FrameTracker
 from .parallel import track_frames
@@ -106,13 +106,15 @@ def inside_image(cal: Calibration, xy: np.ndarray) -> np.ndarray:
     return inside.reshape(xy.shape[:-1])
 
 
-def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, overlay_png=None, frames_npy=None,
-                 workers: int = 1, *, tracking: TrackingSettings) -> pd.DataFrame:
-    """Track the string in one trial; write ``tracks.parquet``, ``tracking.json`` beside it (the
-    tracking's self-measures and verdict, :mod:`stringcast.track.quality`) and the overlay PNG.
+def run_tracking(trial: TrialFiles | str | Path, calibration_json, sync_json, campaign, out_parquet, overlay_png=None,
+                 frames_npy=None, workers: int = 1, quality_json: str | Path | None = None, *,
+                 tracking: TrackingSettings) -> pd.DataFrame:
+    """Track the string in one trial; write ``tracks.parquet``, ``tracking.json`` (the tracking's
+    self-measures and verdict, :mod:`stringcast.track.quality`) and the overlay PNG.
 
     Args:
-        trial_dir: holds the video (``files.find_video``) and ``joints.csv``.
+        trial: the trial's video and ``joints.csv`` (:class:`~stringcast.core.TrialFiles`; a folder: its
+            files by the data contract's names).
         calibration_json, sync_json: this trial's ``calibration.json`` and ``sync.json``.
         campaign: the resolved campaign (arm, string length L and n).
         out_parquet: where to write ``tracks.parquet``.
@@ -121,6 +123,7 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
             instead of decoding the video; None: decode it (the background's frames a second time).
         workers: processes that track frames side by side, from ``frames_npy`` only (a video being
             decoded is tracked in this process, as it is decoded); the same result for any number.
+        quality_json: where to write ``tracking.json`` (None: beside ``out_parquet``).
         tracking: tracking settings (:class:`~stringcast.core.TrackingSettings`).
 
     Returns:
@@ -131,13 +134,13 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
         DataError: missing or malformed inputs (named), or a frame count or image size that
             disagrees with ``sync.json`` / ``calibration.json``.
     """
-    trial_dir = Path(trial_dir)
+    trial = TrialFiles.of(trial)
     st = tracking
     cal = Calibration.from_json(calibration_json)
     sync = read_json(sync_json, mapping=True)
-    t_j, q_j = read_joint_table(trial_dir / "joints.csv", n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
+    t_j, q_j = read_joint_table(trial.joints, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
     arm, n = campaign.arm, campaign.string.n_points
-    vpath = find_video(trial_dir)
+    vpath = trial.video
     video = open_trial_video(vpath, frames_npy)
     if (video.width, video.height) != tuple(cal.image_size):
         raise DataError(f"{video.path}: frames are {video.width}x{video.height}, {calibration_json} is for "
@@ -200,7 +203,7 @@ def run_tracking(trial_dir, calibration_json, sync_json, campaign, out_parquet, 
         "valid": valid.ravel(),
     })
     write_parquet(out_parquet, df)
-    write_json(Path(out_parquet).with_name("tracking.json"),
+    write_json(Path(out_parquet).with_name("tracking.json") if quality_json is None else quality_json,
                tracking_quality(df, mismatch, campaign.string.length, n, judged, rest, st, past_roi, off_image,
                                 campaign.string_setting, _scale_note(cal, campaign)))
     if overlay_png is not None:
