@@ -2,7 +2,7 @@
 
 Every campaign under ``--field`` (default ``../shared/field``: a folder per campaign, laid out as the
 data contract asks, and ``lab.yaml`` beside them describing that lab's arm, camera and board) is run
-by the project's own workflow, with ``config/config.yaml``, that ``lab.yaml`` and ``config/ours.yaml``,
+by the project's own workflow, with ``config/config.yaml`` and that ``lab.yaml`` (ours: the settings' defaults),
 up to every trial's fit and next motion. No ground truth is read: a field recording has none.
 
 Per trial, from the pipeline's own files: the fit's skill (the share of the tracked motion it
@@ -96,7 +96,7 @@ def run(field: Path, work: Path, cores: int) -> dict:
             targets.append(f"results/{name}/{trial.name}/motion.csv")
     t0 = time.perf_counter()
     cmd = [sys.executable, "-m", "snakemake", "--cores", str(cores), "--directory", str(work),
-           "--configfile", *configs, str(ROOT / "config" / "ours.yaml"), "--keep-going", *targets]
+           *(("--configfile", *configs) if configs else ()), "--keep-going", *targets]
     proc = subprocess.run(cmd, cwd=work, text=True, capture_output=True)
     trials = {}
     for tgt in targets:
@@ -104,8 +104,8 @@ def run(field: Path, work: Path, cores: int) -> dict:
         trials[str(Path(tgt).parent.relative_to("results"))] = trial_figures(res)
     return {"campaigns": names, "trials": trials, "workflow_exit_status": proc.returncode,
             "workflow_tail": proc.stdout[-2000:] + proc.stderr[-2000:] if proc.returncode else "",
-            "seconds": time.perf_counter() - t0, "method": "ours (config/ours.yaml)",
-            "configs": ["config/config.yaml", *configs, "config/ours.yaml"]}
+            "seconds": time.perf_counter() - t0, "method": "ours (the settings' defaults)",
+            "configs": ["config/config.yaml", *configs]}
 
 
 def main(argv=None) -> int:

@@ -39,17 +39,15 @@ from benchmarks.loop_summary import bootstrap_ci
 
 SECTIONS = ("model", "evaluation", "estimation")
 """The config sections an estimate reads that a variant may set (ours' motion settings plan, not fit)."""
-PAPER = {"estimation": {"optimizer": "random_search"}, "evaluation": {"w": 0.1}}
-
-
 def variants(extra: dict[str, Path]) -> dict[str, dict]:
-    """{name: config overlay}: the paper's estimator, ours (``config/ours.yaml``) and ``extra``'s files.
+    """{name: config overlay}: the paper's estimator (``config/paper.yaml``'s estimate sections), ours
+    (the settings' defaults: no overlay) and ``extra``'s files.
 
     Raises:
         FileNotFoundError: an overlay file is missing.
     """
-    ours = yaml.safe_load((ROOT / "config" / "ours.yaml").read_text())
-    out = {"paper": PAPER, "ours": {k: v for k, v in ours.items() if k in SECTIONS}}
+    paper = yaml.safe_load((ROOT / "config" / "paper.yaml").read_text())
+    out = {"paper": {k: v for k, v in paper.items() if k in SECTIONS}, "ours": {}}
     for name, path in extra.items():
         out[name] = yaml.safe_load(Path(path).read_text()) or {}
     return out

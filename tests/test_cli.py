@@ -9,7 +9,7 @@ import yaml
 
 from stringcast_lab.campaign import campaign_config
 from stringcast.cli import build_parser, campaign_config_paths
-from stringcast.core import DEFAULT_CONFIG, OURS_CONFIG, load_config
+from stringcast.core import DEFAULT_CONFIG, PAPER_CONFIG, Settings, load_config
 from stringcast.core.settings import settings_from_config
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -47,32 +47,39 @@ def _leaves(doc: dict, prefix=()):
             yield prefix + (k,), v
 
 
-def test_method_ours_merges_config_ours_yaml_last():
+def test_ours_is_the_default_and_method_paper_merges_config_paper_yaml_last():
     parser = build_parser()
+    for command in (["campaign", "c"], ["next", "data/c/trial_1"]):
+        assert parser.parse_args(command).method == "ours"
     args = parser.parse_args(["campaign", "c"])
-    assert args.method == "paper" and campaign_config_paths(args) == []
-    args = parser.parse_args(["--config", "mine.yaml", "campaign", "c", "--method", "ours"])
-    assert campaign_config_paths(args) == ["mine.yaml", str(OURS_CONFIG)]
-    assert OURS_CONFIG == ROOT / "config" / "ours.yaml"
+    assert campaign_config_paths(args) == []
+    args = parser.parse_args(["--config", "mine.yaml", "campaign", "c", "--method", "paper"])
+    assert campaign_config_paths(args) == ["mine.yaml", str(PAPER_CONFIG)]
+    assert PAPER_CONFIG == ROOT / "config" / "paper.yaml"
 
-    args = parser.parse_args(["campaign", "c", "--method", "ours"])
+    args = parser.parse_args(["campaign", "c", "--method", "paper"])
     config, given = campaign_config(ROOT, campaign_config_paths(args))
-    assert given == [OURS_CONFIG.resolve()]   # what Snakemake gets as --configfile
-    paper = load_config(DEFAULT_CONFIG)
-    ours = yaml.safe_load(OURS_CONFIG.read_text())
-    for path, value in _leaves(ours):
+    assert given == [PAPER_CONFIG.resolve()]   # what Snakemake gets as --configfile
+    ours = load_config(DEFAULT_CONFIG)
+    paper = yaml.safe_load(PAPER_CONFIG.read_text())
+    for path, value in _leaves(paper):
         got = config
         for k in path:
             got = got[k]
         assert got == value, path
-    s_ours, s_paper = settings_from_config(config), settings_from_config(paper)
-    assert s_paper.estimation.optimizer != ours["estimation"]["optimizer"] == s_ours.estimation.optimizer
-    # everything ours.yaml does not set is the paper's
-    assert config["targets"] == paper["targets"] and s_ours.model.ranges["k_s"] == s_paper.model.ranges["k_s"]
+    s_paper, s_ours = settings_from_config(config), settings_from_config(ours)
+    assert s_ours == Settings()                   # ours: the defaults, config.yaml sets none
+    # the paper's method as the paper wrote it: eqs. (2)-(3), Table 2's ranges, w = 0.1, Section V
+    assert (s_paper.estimation.optimizer, s_paper.evaluation.w, s_paper.motion.planner) == \
+        ("random_search", 0.1, "paper")
+    assert s_paper.model.ranges["k_ph"] == (1e-3, 1e-2) and s_paper.model.ranges["c_ph"] == (1e-3, 1e-2)
+    assert (s_paper.motion.replan_miss_mm, s_paper.motion.residual_correction) == (0.0, False)
+    # everything paper.yaml does not set is ours
+    assert config["targets"] == ours["targets"] and s_ours.model.ranges["k_s"] == s_paper.model.ranges["k_s"]
     assert s_ours.tracking == s_paper.tracking and s_ours.model.ranges["k_ph"] != s_paper.model.ranges["k_ph"]
-    config_paper, given_paper = campaign_config(ROOT, campaign_config_paths(parser.parse_args(["campaign", "c"])))
-    assert given_paper == [] and {k: v for k, v in config_paper.items() if k != "_path"} == \
-        {k: v for k, v in paper.items() if k != "_path"}
+    config_ours, given_ours = campaign_config(ROOT, campaign_config_paths(parser.parse_args(["campaign", "c"])))
+    assert given_ours == [] and {k: v for k, v in config_ours.items() if k != "_path"} == \
+        {k: v for k, v in ours.items() if k != "_path"}
 
 
 def test_config_readme_lists_every_setting_as_the_code_defines_it():

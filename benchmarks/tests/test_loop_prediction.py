@@ -28,14 +28,14 @@ def test_only_paper_campaigns_with_a_second_trial_of_the_asked_physics_and_seeds
     assert [c.name for c, *_ in campaigns(tmp_path, ["mujoco"], [4])] == ["loop_mujoco_state_s5_seed4_paper"]
 
 
-def test_variants_take_ours_estimator_from_ours_yaml_and_not_its_planner(tmp_path):
-    ours = yaml.safe_load((ROOT / "config" / "ours.yaml").read_text())
+def test_variants_take_the_papers_estimator_from_paper_yaml_and_not_its_planner(tmp_path):
+    paper = yaml.safe_load((ROOT / "config" / "paper.yaml").read_text())
     extra = tmp_path / "w.yaml"
     extra.write_text("evaluation: {w: 0.5}\n")
     var = variants({"w05": extra})
     assert list(var) == ["paper", "ours", "w05"]
-    assert var["paper"]["estimation"]["optimizer"] == "random_search" and var["paper"]["evaluation"]["w"] == 0.1
-    assert var["ours"]["estimation"] == ours["estimation"] and "motion" not in var["ours"]
+    assert var["paper"]["estimation"] == paper["estimation"] and var["paper"]["evaluation"]["w"] == 0.1
+    assert "motion" not in var["paper"] and var["ours"] == {}   # ours: the defaults
     assert var["w05"] == {"evaluation": {"w": 0.5}}
     with pytest.raises(FileNotFoundError):
         variants({"x": tmp_path / "missing.yaml"})

@@ -295,7 +295,7 @@ def cmd_calib_clip(args):
 
 def campaign_config_paths(args) -> list[str]:
     """The config files ``stringcast campaign`` merges over the project's config/config.yaml, in
-    order: each ``--config``, then ``--method``'s file (ours: config/ours.yaml) last."""
+    order: each ``--config``, then ``--method``'s file (paper: config/paper.yaml; ours sets none) last."""
     from stringcast.core import METHOD_CONFIGS
 
     return (config_paths(args) or []) + [str(c) for c in METHOD_CONFIGS[args.method]]

@@ -199,17 +199,17 @@ def _add_planning_and_tools(add) -> None:
     sp.add_argument("--seed", default=0, help="seed of the campaign (campaign.yaml) and of the virtual lab's "
                                               "noise in each execution")
     sp.add_argument("--root", default=".", help="project folder holding Snakefile, data/ and results/")
-    sp.add_argument("--method", choices=list(METHOD_CONFIGS), default="paper",
-                    help="paper: the config as given (config/config.yaml: the paper's method); ours: "
-                         "config/ours.yaml merged over it, after any --config")
+    sp.add_argument("--method", choices=list(METHOD_CONFIGS), default="ours",
+                    help="ours: the config as given (ours is the settings' defaults); paper: the paper's method, "
+                         "config/paper.yaml merged over it, after any --config")
 
     sp = add("next", "one trial's stages in this process, in the workflow's order, to its next motion.csv: "
                      "decode, calibrate, sync, sweep, track, estimate, predict, plan, reports (the same files "
                      "and logs as the workflow's rules)")
     sp.add_argument("trial_dir", help="<project>/data/<campaign>/trial_<k>: the trial just played and filmed; "
                                       "results go to <project>/results/<campaign>/trial_<k>/")
-    sp.add_argument("--method", choices=list(METHOD_CONFIGS), default="paper",
-                    help="paper: the config as given; ours: config/ours.yaml merged over it, after any --config. "
+    sp.add_argument("--method", choices=list(METHOD_CONFIGS), default="ours",
+                    help="ours: the config as given; paper: config/paper.yaml merged over it, after any --config. "
                          "The config, as the workflow reads it: <project>/config/config.yaml, then each --config")
 
     sp = add("check", "check every raw file of a campaign before any decode (campaign.yaml, calib/, each "

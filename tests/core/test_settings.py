@@ -84,11 +84,12 @@ def test_digest_is_of_the_settings_not_the_files(config):
     assert settings_digest(other) != settings_digest(Settings())
 
 
-def test_ours_yaml_is_read_by_the_same_classes():
-    from stringcast.core import DEFAULT_CONFIG, OURS_CONFIG
+def test_paper_yaml_is_read_by_the_same_classes():
+    from stringcast.core import DEFAULT_CONFIG, PAPER_CONFIG
 
-    s = settings_from_config(load_config([DEFAULT_CONFIG, OURS_CONFIG]))
-    assert s.estimation.optimizer == "cmaes" and s.evaluation.w == 1.0 and s.motion.first_k_s == "max"
+    s = settings_from_config(load_config([DEFAULT_CONFIG, PAPER_CONFIG]))
+    assert s.estimation.optimizer == "random_search" and s.evaluation.w == 0.1 and s.motion.first_k_s == "carrying"
+    assert Settings().estimation.optimizer == "cmaes" and Settings().motion.planner == "robust"   # ours
 
 
 def test_each_setting_is_declared_once_and_the_schema_is_made_from_it():

@@ -6,25 +6,26 @@ import subprocess
 import pytest
 
 from stringcast.report import provenance as prov
-from stringcast.core import DEFAULT_CONFIG, OURS_CONFIG, load_config
+from stringcast.core import DEFAULT_CONFIG, PAPER_CONFIG, load_config
 from stringcast.core.settings import EstimationSettings, settings_from_config
 from stringcast.report import write_campaign_report
 
 
 def test_provenance_names_the_method_commit_and_versions():
-    paper = settings_from_config(load_config(DEFAULT_CONFIG))
-    p = prov.provenance(paper)
+    ours = settings_from_config(load_config(DEFAULT_CONFIG))
+    p = prov.provenance(ours)
     assert set(p) == {"method", "settings_digest", "commit", "versions"}
-    assert p["method"] == "the paper's method"
+    assert p["method"] == "ours"
     assert re.fullmatch(r"[0-9a-f]{40}(-dirty)?|unknown", p["commit"]), p["commit"]
     assert list(p["versions"]) == ["stringcast", "numpy", "numba", "scipy", "opencv", "pandas", "snakemake",
                                    "mujoco", "cma"]
     assert all(v for v in p["versions"].values()) and p["versions"]["numpy"] != "not installed"
 
-    assert prov.provenance(settings_from_config(load_config([DEFAULT_CONFIG, OURS_CONFIG])))["method"] == "ours"
+    paper = prov.provenance(settings_from_config(load_config([DEFAULT_CONFIG, PAPER_CONFIG])))
+    assert paper["method"] == "the paper's method"
 
-    # a file that sets a setting to its default, or changes only the virtual lab, is still the
-    # paper's method (the settings are compared, not the files)
+    # a file that sets a setting to its default, or changes only the virtual lab, is still ours
+    # (the settings are compared, not the files)
     config = load_config(DEFAULT_CONFIG)
     explicit = dict(copy.deepcopy(config), estimation={"iterations": EstimationSettings().iterations},
                     lab={**config["lab"], "scene_seed": 12})
@@ -57,8 +58,8 @@ def test_git_commit_dirty_only_for_tracked_changes(tmp_path):
     assert prov.git_commit.__wrapped__(sub) == "unknown"
 
 
-@pytest.mark.parametrize("files,method", [((DEFAULT_CONFIG,), "the paper&#39;s method"),
-                                          ((DEFAULT_CONFIG, OURS_CONFIG), "ours")])
+@pytest.mark.parametrize("files,method", [((DEFAULT_CONFIG,), "ours"),
+                                          ((DEFAULT_CONFIG, PAPER_CONFIG), "the paper&#39;s method")])
 def test_campaign_page_footer_shows_provenance(tmp_path, files, method):
     from stringcast.core import resolve_campaign
 

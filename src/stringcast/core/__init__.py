@@ -4,7 +4,7 @@ the bad file).
 """
 from .arm import (JointLimitError, assert_within_limits, check_limits, forward_kinematics, hand_pose, joints_at,
                   motion_start, motion_window)
-from .config import (DEFAULT_CONFIG, METHOD_CONFIGS, OURS_CONFIG, PARAM_NAMES, ConfigError, load_config, load_yaml,
+from .config import (DEFAULT_CONFIG, METHOD_CONFIGS, PAPER_CONFIG, PARAM_NAMES, ConfigError, load_config, load_yaml,
                      merge_config, model_ranges, schema_problems, typed_overrides, validate)
 from .specs import (NO_TARGET, REACH_MARGIN, ArmSpec, BoardSpec, Campaign, SetupSpec, StringSpec, TargetSpec, campaign_entries,
                     load_campaign, resolve_campaign, target_reach_problem, without_target)
@@ -27,7 +27,7 @@ from .lazy import lazy_exports
 __all__ = [
     "JointLimitError", "assert_within_limits", "check_limits", "forward_kinematics", "hand_pose", "joints_at",
     "motion_start", "motion_window",
-    "DEFAULT_CONFIG", "METHOD_CONFIGS", "OURS_CONFIG", "PARAM_NAMES", "ConfigError", "load_config", "load_yaml",
+    "DEFAULT_CONFIG", "METHOD_CONFIGS", "PAPER_CONFIG", "PARAM_NAMES", "ConfigError", "load_config", "load_yaml",
     "merge_config", "model_ranges", "schema_problems", "typed_overrides", "validate",
     "NO_TARGET", "REACH_MARGIN", "ArmSpec", "BoardSpec", "Campaign", "SetupSpec", "StringSpec", "TargetSpec", "campaign_entries",
     "load_campaign", "resolve_campaign", "target_reach_problem", "without_target",

@@ -25,9 +25,10 @@ from .settings import PARAM_NAMES, settings_schema
 
 
 DEFAULT_CONFIG = Path(__file__).resolve().parents[3] / "config" / "config.yaml"
-OURS_CONFIG = DEFAULT_CONFIG.parent / "ours.yaml"
-"""Ours' settings, merged over the config (the paper's method) by ``--method ours``."""
-METHOD_CONFIGS: dict[str, tuple[Path, ...]] = {"paper": (), "ours": (OURS_CONFIG,)}
+PAPER_CONFIG = DEFAULT_CONFIG.parent / "paper.yaml"
+"""The paper's method, as the paper wrote it, merged over the config (ours: the settings' defaults) by
+``--method paper``."""
+METHOD_CONFIGS: dict[str, tuple[Path, ...]] = {"ours": (), "paper": (PAPER_CONFIG,)}
 """The files each method merges over the config, after any others given."""
 
 

@@ -2,7 +2,7 @@
 
 ``config/config.yaml`` describes the lab (arms, cameras, set-ups, strings, targets, and the
 virtual lab's hidden physics); the stages' settings default to the classes below, which are
-the paper's method. A config file (``--configfile``) sets any of them, section by section;
+ours (``config/paper.yaml`` sets the paper's method, the baseline: ``--method paper``). A config file (``--configfile``) sets any of them, section by section;
 :func:`settings_from_config` builds every section once from the merged, schema-validated
 config, and refuses a key no class knows. ``config/README.md`` lists every setting with its
 default and meaning (made from these classes by ``stringcast settings --markdown``).
@@ -156,7 +156,7 @@ class ModelSettings(_Section):
     ranges: Mapping[str, tuple] = _f({
         "k_s": (1.0e+3, 1.0e+6), "c_s": (1.0, 10.0), "k_h": (1.0e-3, 10.0), "c_h": (1.0e-3, 10.0),
         "k_sh": (1.0e-4, 1.0), "c_sh": (1.0e-4, 1.0), "C_c1": (1.0e-6, 10.0), "C_c2": (1.0e-6, 10.0),
-        "k_ph": (1.0e-3, 1.0e-2), "c_ph": (1.0e-3, 1.0e-2), "mu": (0.1, 100.0)},
+        "k_ph": (1.0e-3, 1.0), "c_ph": (1.0e-3, 1.0), "mu": (0.1, 100.0)},
         "[min, max] of each coefficient (Table 2) and of the relative masses mu; a file may set some",
         additionalProperties=False, properties={k: {"$ref": "#/$defs/range"} for k in (*PARAM_NAMES, "mu")})
 
@@ -170,7 +170,7 @@ class EvaluationSettings(_Section):
     """``evaluation``: the evaluation value E (eqs. 4-6)."""
 
     SECTION: typing.ClassVar[str] = "evaluation"
-    w: float = _f(0.1, "tip weighting of eq. (6): point i counts 1 + w (i - 1) times", minimum=0)
+    w: float = _f(1.0, "tip weighting of eq. (6): point i counts 1 + w (i - 1) times", minimum=0)
 
 
 @dataclass(frozen=True)
@@ -178,7 +178,7 @@ class EstimationSettings(_Section):
     """``estimation``: the parameter search (eqs. 2-3) and what params.json keeps."""
 
     SECTION: typing.ClassVar[str] = "estimation"
-    optimizer: str = _f("random_search", "random_search (eqs. 2-3), cmaes (CMA-ES) or de (SciPy differential evolution)", enum=["random_search", "cmaes", "de"])
+    optimizer: str = _f("cmaes", "random_search (eqs. 2-3), cmaes (CMA-ES) or de (SciPy differential evolution)", enum=["random_search", "cmaes", "de"])
     iterations: int = _f(3000, "candidates evaluated per trial", minimum=1)
     batch: int = _f(64, "candidates simulated per numba batch", minimum=1)
     chi0: float = _f(1.0, "eq. (3): the first sampling radius in chi", exclusiveMinimum=0)
@@ -190,7 +190,7 @@ class EstimationSettings(_Section):
     pinned_spread: float = _f(0.2, "... pinned when they spread over less than this share of Table 2's log range", exclusiveMinimum=0, maximum=1)
     cmaes_sigma0: float = _f(0.3, "CMA-ES initial step in chi (log-parameter) space, / M", exclusiveMinimum=0)
     cmaes_popsize: int = _f(0, "CMA-ES population; 0: cma's default (4 + 3 ln D)", minimum=0)
-    cmaes_runs: int = _f(1, "CMA-ES runs sharing the budget: the first from the last estimate, the others from the centre", minimum=1)
+    cmaes_runs: int = _f(2, "CMA-ES runs sharing the budget: the first from the last estimate, the others from the centre", minimum=1)
     cmaes_options: Mapping[str, Any] = _f({}, "passed on to cma.CMAOptions (e.g. {CSA_dampfac: 0.5}); an unknown name is an error")
     cmaes_first_look: int = _f(300, "CMA-ES: first evaluate this many eq. (3) samples around chi_best and start at their best (0: off)", minimum=0)
     compare_after_motion_s: float | None = _f(None, "compare frames up to this long after the arm stops, s (null: the whole joint log, as the paper)", minimum=0)
@@ -233,16 +233,16 @@ class MotionSettings(_Section):
     start_grasp_box_mm: tuple | None = _f(((-200.0, 900.0), (-100.0, 700.0)),
                                           "start grasp inside [[x_min, x_max], [y_min, y_max]], mm: where the camera sees the hanging string", type="array", minItems=2, maxItems=2, items={"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2})
     first_max_strain: float = _f(0.05, "first plan: k_s raised so the hanging string stretches at most this", exclusiveMinimum=0)
-    first_k_s: str = _f("carrying", "first plan's k_s: carrying (the least that keeps first_max_strain) or max (Table 2's)", enum=["carrying", "max"])
-    planner: str = _f("paper", "paper: Section V; robust: prefer motions that hit under most of the estimate's best sets", enum=["paper", "robust"])
+    first_k_s: str = _f("max", "first plan's k_s: carrying (the least that keeps first_max_strain) or max (Table 2's)", enum=["carrying", "max"])
+    planner: str = _f("robust", "paper: Section V; robust: prefer motions that hit under most of the estimate's best sets", enum=["paper", "robust"])
     robust_screen_mm: float = _f(20.0, "robust: only candidates within this of the target edge (best set) are scored on the ensemble, mm", minimum=0)
     robust_min_share: float = _f(0.0, "robust: the first hit must hit under at least this share of the sets", minimum=0, maximum=1)
-    residual_correction: bool = _f(False, "aim at the target minus the model's error on the played motion's tracked tip")
+    residual_correction: bool = _f(True, "aim at the target minus the model's error on the played motion's tracked tip")
     hang_clearance_mm: float = _f(60.0, "the hanging string at the start posture stays this far from the arm's centre lines, mm", minimum=0)
-    replan_miss_mm: float = _f(0.0, "> 0: after a tracked miss larger than this, plan a new motion (0: always perturb, Section V.B), mm", minimum=0)
-    replan_perturb_rad_s: float = _f(0.0, "> 0 (with replan_miss_mm): first try perturbing the played motion by up to this, rad/s", minimum=0)
+    replan_miss_mm: float = _f(45.0, "> 0: after a tracked miss larger than this, plan a new motion (0: always perturb, Section V.B), mm", minimum=0)
+    replan_perturb_rad_s: float = _f(1.0, "> 0 (with replan_miss_mm): first try perturbing the played motion by up to this, rad/s", minimum=0)
     replan_min_share: float = _f(0.9, "that wider perturbation is kept when it hits under at least this share of the ensemble", minimum=0, maximum=1)
-    replan_residual_mm: float = _f(0.0, "> 0 (with residual_correction): no perturbation when the model's tip error on the played motion exceeds this, mm", minimum=0)
+    replan_residual_mm: float = _f(50.0, "> 0 (with residual_correction): no perturbation when the model's tip error on the played motion exceeds this, mm", minimum=0)
 
     def __post_init__(self):
         _one_of("motion", "planner", self.planner, PLANNERS)

@@ -2,9 +2,9 @@
 
 :func:`provenance` gives, for the settings the stages ran with (:class:`~stringcast.core.Settings`):
 
-* ``method``: ``the paper's method`` when they are the defaults (``config/config.yaml``
-  sets none), ``ours`` when they are ``config/ours.yaml``'s (``stringcast campaign --method
-  ours``), else ``custom settings <digest>``. A file that sets a setting to its default means
+* ``method``: ``ours`` when they are the defaults (``config/config.yaml`` sets none), ``the
+  paper's method`` when they are ``config/paper.yaml``'s (``--method paper``), else ``custom
+  settings <digest>``. A file that sets a setting to its default means
   the same method as one that leaves it out, and what only the virtual lab reads (``lab``)
   is not part of it;
 * ``settings_digest``: :func:`~stringcast.core.settings_digest`, the first 12 hex digits of
@@ -22,7 +22,7 @@ from importlib import metadata
 from pathlib import Path
 
 from stringcast import __version__
-from stringcast.core import (DEFAULT_CONFIG, OURS_CONFIG, ConfigError, Settings, load_yaml, settings_digest,
+from stringcast.core import (DEFAULT_CONFIG, PAPER_CONFIG, ConfigError, Settings, load_yaml, settings_digest,
                              settings_from_config)
 
 PROJECT_ROOT = DEFAULT_CONFIG.parents[1]
@@ -37,12 +37,12 @@ LIBRARIES: dict[str, tuple[str, ...]] = {
 
 
 def method(settings: Settings) -> str:
-    """``the paper's method``, ``ours`` or ``custom settings <digest>`` (module doc)."""
+    """``ours``, ``the paper's method`` or ``custom settings <digest>`` (module doc)."""
     if settings == Settings():
-        return "the paper's method"
+        return "ours"
     try:
-        if settings == settings_from_config(load_yaml(OURS_CONFIG)):
-            return "ours"
+        if settings == settings_from_config(load_yaml(PAPER_CONFIG)):
+            return "the paper's method"
     except ConfigError:  # no config/ beside the code (an installed package): nothing to compare with
         pass
     return f"custom settings {settings_digest(settings)}"
