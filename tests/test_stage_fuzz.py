@@ -26,7 +26,10 @@ from conftest import tiny_lab_trial
 from stringcast.cli import main
 
 QUICK = {"estimation": {"iterations": 64, "batch": 32},
-         "motion": {"max_candidates": 128, "extra_after_hit": 8, "batch": 32, "posture_pool": 4},
+         # plan without the played trial's tracks (no residual correction, no tracked miss): the tiny trial was
+         # played from joint angles, not from a motion file (plan-first's stands in for it)
+         "motion": {"max_candidates": 128, "extra_after_hit": 8, "batch": 32, "posture_pool": 4,
+                    "residual_correction": False, "replan_miss_mm": 0.0},
          "sync": {"method": "trigger"}}
 """Settings that keep a stage's search short: the cases test what a stage does with its input."""
 

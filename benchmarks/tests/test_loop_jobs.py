@@ -153,11 +153,14 @@ def test_a_family_run_draws_every_material_class_and_joins_loop_json(config, tmp
 
 def test_a_variant_is_ours_with_one_setting_changed(config):
     """``ours_no_residual`` is ours without the residual correction, and loop.json's spec refuses it."""
-    ours = method_config(config, "ours", 0, "mujoco", "state")
-    variant = method_config(config, "ours_no_residual", 0, "mujoco", "state")
-    assert ours["motion"]["residual_correction"] is True and variant["motion"]["residual_correction"] is False
-    variant["motion"].pop("residual_correction"), ours["motion"].pop("residual_correction")
-    assert ours == variant
+    from dataclasses import replace
+
+    from stringcast.core import settings_from_config
+
+    ours = settings_from_config(method_config(config, "ours", 0, "mujoco", "state"))
+    variant = settings_from_config(method_config(config, "ours_no_residual", 0, "mujoco", "state"))
+    assert ours.motion.residual_correction is True and variant.motion.residual_correction is False
+    assert replace(variant, motion=replace(variant.motion, residual_correction=True)) == ours
     with pytest.raises(ValueError, match="method ours_no_residual"):
         Spec(methods=("ours_no_residual",))
 

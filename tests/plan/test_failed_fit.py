@@ -48,7 +48,8 @@ def test_cli_plan_warns_on_a_failed_fit(tmp_path, campaign, played, capsys):
     (tmp_path / "campaign.yaml").write_text(yaml.safe_dump({"string": 1, "target": 1}))
     small = {"motion": {"max_candidates": 256, "extra_after_hit": 16, "batch": 64, "posture_pool": 8}}
     (tmp_path / "small.yaml").write_text(yaml.safe_dump(small))
-    rc = cli.main(["--config", str(ROOT / "config" / "config.yaml"), "--config", str(tmp_path / "small.yaml"),
+    rc = cli.main(["--config", str(ROOT / "config" / "config.yaml"), "--config", str(ROOT / "config" / "paper.yaml"),
+                   "--config", str(tmp_path / "small.yaml"),
                    "plan", "--params", str(tmp_path / "params.json"), "--played-motion", str(tmp_path / "m1.json"),
                    "--campaign", str(tmp_path / "campaign.yaml"), "--out-dir", str(tmp_path / "next"), "--seed", "1"])
     lines = capsys.readouterr().out.splitlines()

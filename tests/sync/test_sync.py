@@ -186,7 +186,7 @@ def test_bad_inputs_name_the_file(lab_trial, settings, tmp_path):
     d = _with_video_yaml(root, trial, "bad_fps", fps=-1)
     with pytest.raises(DataError, match="video.yaml"):
         run_sync(d, root / "calibration.json", campaign, **_kw(settings))
-    with pytest.raises(DataError, match="not found"):
+    with pytest.raises(DataError, match="nope: no video"):
         run_sync(tmp_path / "nope", root / "calibration.json", campaign, **_kw(settings))
     with pytest.raises(DataError, match="fps"):
         frame_times({"offset_s": 0.0, "fps": 0.0, "frames": 3})
