@@ -119,7 +119,8 @@ def trial_steps(campaign: str, k: int, has_calib: bool, workers: int) -> list[St
                                "--geometry", geo, "--clock", clock, "--tracks", f"{out}/tracks.parquet",
                                "--tracking", f"{out}/tracking.json", "--params", f"{out}/params.json",
                                "--fit", f"{out}/fit.parquet", "--next-motion", f"{out}/motion.csv",
-                               "--next-motion-meta", f"{out}/motion.json", "--campaign", camp,
+                               "--next-motion-meta", f"{out}/motion.json", "--prediction",
+                               *((f"{out}/prediction.json",) if k > 1 else ()), "--campaign", camp,
                                "--out", f"{out}/report.html"), (f"{out}/report.html",)),
     ]
     return steps

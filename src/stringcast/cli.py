@@ -264,7 +264,8 @@ def cmd_report_trial(args):
 
     trial = TrialFiles(Path(args.video), Path(args.joints), played=Path(args.played_motion))
     results = TrialResults(*(Path(p) for p in (args.geometry, args.clock, args.tracks, args.tracking, args.params,
-                                                args.fit, args.next_motion, args.next_motion_meta)))
+                                                args.fit, args.next_motion, args.next_motion_meta)),
+                           prediction=Path(args.prediction) if args.prediction else None)
     _run("report-trial", args, trial, results, _campaign(args), Path(args.out))
     _LOG.say(f"trial report -> {args.out}")
 

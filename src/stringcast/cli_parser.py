@@ -163,6 +163,8 @@ def _add_planning_and_tools(add) -> None:
                        ("fit", "fit.parquet"), ("next-motion", "next motion.csv"),
                        ("next-motion-meta", "next motion's motion.json")):
         sp.add_argument(f"--{name}", required=True, help=f"the trial's {what}")
+    sp.add_argument("--prediction", nargs="?", help="the trial's prediction.json (the previous estimate's check on "
+                                                    "this motion); none for trial 1")
     sp.add_argument("--campaign", required=True, help=campaign_help)
     sp.add_argument("--out", required=True, help="report.html to write")
 

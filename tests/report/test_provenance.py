@@ -76,7 +76,7 @@ def test_campaign_page_footer_shows_provenance(tmp_path, files, method):
 
 def test_the_campaign_table_s_fit_cell_names_the_verdict_and_its_cause():
     """Issue 52: a failed fit shows on the campaign page, with its likely cause; an ok fit names none."""
-    from stringcast.report.pages import _fit_cell
+    from stringcast.report.campaign_page import _fit_cell
 
     assert _fit_cell({"verdict": {"status": "fail", "reasons": ["x"], "likely_cause": "model"}}) == \
         {"fit_status": "fail", "fit_cause": "model"}

@@ -13,7 +13,7 @@ from stringcast.estimate import run_estimation
 from stringcast.model import parameters as prm
 from stringcast.plan import planning as pn
 from stringcast.report import write_trial_report
-from stringcast.report.pages import stage_verdicts
+from stringcast.report.verdicts import stage_verdicts
 from tests.estimate.test_estimation import CHI_TRUE, _stage_settings, make_trial
 
 

@@ -255,6 +255,13 @@ def predicting_params(wildcards):
     return f"results/{wildcards.campaign}/trial_{k - 1}/params.json"
 
 
+def prediction_input(wildcards):
+    """Trial k's prediction check (rule predict) for its page; none for trial 1."""
+    if int(wildcards.trial) <= 1:
+        return []
+    return [f"results/{wildcards.campaign}/trial_{wildcards.trial}/prediction.json"]
+
+
 def trial_reports(wildcards):
     return [
         f"results/{wildcards.campaign}/trial_{k}/report.html"

@@ -14,6 +14,7 @@ rule report_trial:
         motion_meta="results/{campaign}/trial_{trial}/motion.json",
         joints="data/{campaign}/trial_{trial}/joints.csv",
         played="data/{campaign}/trial_{trial}/motion.json",
+        prediction=prediction_input,
         campaign=campaign_for("report-trial"),
     output:
         report(
@@ -36,6 +37,8 @@ rule report_trial:
         '--played-motion "{input.played}" --geometry "{input.geometry}" --clock "{input.clock}" '
         '--tracks "{input.tracks}" --tracking "{input.tracking}" --params "{input.params}" --fit "{input.fit}" '
         '--next-motion "{input.motion}" --next-motion-meta "{input.motion_meta}" '
+        "--prediction {input.prediction:q} "
+        '
         '--campaign "{input.campaign}" --out "{output}"'
 
 

@@ -245,6 +245,7 @@ class TrialResults:
         tracks: ``tracks.parquet``. tracking: ``tracking.json`` (the tracking's verdict).
         params: ``params.json`` (the estimate and the fit's verdict). fit: ``fit.parquet``.
         motion: the next motion's ``motion.csv``. motion_meta: its ``motion.json``.
+        prediction: ``prediction.json``, the previous estimate's check on this trial (None: trial 1).
     """
 
     geometry: Path
@@ -255,14 +256,17 @@ class TrialResults:
     fit: Path
     motion: Path
     motion_meta: Path
+    prediction: Path | None = None
 
     @classmethod
     def in_folder(cls, results_dir: str | Path) -> TrialResults:
         """``results/<campaign>/trial_<k>``'s files by the data contract's names (:func:`trial_result` for
         the geometry and the clock)."""
         d = Path(results_dir)
+        pred = d / "prediction.json"
         return cls(trial_result(d, "geometry")[1], trial_result(d, "clock")[1], d / "tracks.parquet",
-                   d / "tracking.json", d / "params.json", d / "fit.parquet", d / "motion.csv", d / "motion.json")
+                   d / "tracking.json", d / "params.json", d / "fit.parquet", d / "motion.csv", d / "motion.json",
+                   pred if pred.is_file() else None)
 
 
 def _numbers(column, name: str, source) -> np.ndarray:

@@ -57,7 +57,8 @@ def tip_prediction_error(problem: EstimationProblem, coeffs: np.ndarray, mu: np.
         dict: ``median_mm``, ``p95_mm``, ``max_mm`` (None without a compared frame, or after a
         blow-up), ``frames`` (in the window), ``valid_frames`` (with a tracked tip),
         ``valid_share``, ``window_s`` [motion start, closest approach] s,
-        ``tracked_closest_approach_mm``, ``blew_up`` (the model left its valid range).
+        ``tracked_closest_approach_mm``, ``blew_up`` (the model left its valid range), ``tip_path``
+        (the compared frames' ``t_s``, ``tracked_mm`` and ``predicted_mm`` tips, :func:`_tip_path`).
 
     Raises:
         ValueError: ``coeffs`` not (10,), ``mu`` not (n,) or ``target_xy`` not (2,).
@@ -87,7 +88,23 @@ def tip_prediction_error(problem: EstimationProblem, coeffs: np.ndarray, mu: np.
     return {"median_mm": figures[0], "p95_mm": figures[1], "max_mm": figures[2], "frames": int(window.sum()),
             "valid_frames": int(use.sum()), "valid_share": float(use.sum() / max(1, window.sum())),
             "window_s": [float(t0), float(t[i_close])], "tracked_closest_approach_mm": float(d_target[i_close] * 1000),
-            "blew_up": blew_up}
+            "blew_up": blew_up, "tip_path": _tip_path(t, tip, model_tip, use)}
+
+
+TIP_PATH_POINTS = 300
+"""``prediction.json``'s ``tip_path`` keeps at most this many frames (for the trial page's figure)."""
+
+
+def _tip_path(t: np.ndarray, tip: np.ndarray, model_tip: np.ndarray, use: np.ndarray) -> dict:
+    """The compared frames' times (s), tracked and predicted tips (mm), at most :data:`TIP_PATH_POINTS`
+    of them, evenly spread; non-finite values (a blow-up) as None."""
+    idx = np.flatnonzero(use)
+    idx = idx[np.unique(np.linspace(0, len(idx) - 1, min(len(idx), TIP_PATH_POINTS)).astype(int))] if len(idx) else idx
+
+    def mm(xy):
+        return [[float(v) * 1000 if np.isfinite(v) else None for v in row] for row in np.asarray(xy)[idx]]
+
+    return {"t_s": [float(x) for x in t[idx]], "tracked_mm": mm(tip), "predicted_mm": mm(model_tip)}
 
 
 def prediction_verdict(figures: dict) -> Verdict:

@@ -69,11 +69,14 @@ def arm_paths(paths: dict, target_xy, radius, title="Arm tip (grasp) paths (Fig.
     return to_data_uri(fig)
 
 
-def parameters(names, values, lo, hi, spread=None, title="Estimated parameters against Table 2 (Fig. 11)"):
+def parameters(names, values, lo, hi, spread=None, title="Estimated parameters against Table 2 (Fig. 11)",
+               at_bound=None):
     """names (P,), values/lo/hi (P,): log-axis bars of each range with the estimate.
 
     spread: optional name -> (min, max, status) of the near-best parameter sets
     (``params.json`` diagnostics), drawn as a bar, green when pinned, orange when loose.
+    at_bound: optional (P,) ``"lower"``/``"upper"``/``""`` (:func:`stringcast.report.verdicts.at_bounds`):
+    an estimate at a bound of its range is ringed in red and its name marked.
     """
     fig, ax = plt.subplots(figsize=(7, 0.35 * len(names) + 1.2))
     y = np.arange(len(names))[::-1]
@@ -90,8 +93,14 @@ def parameters(names, values, lo, hi, spread=None, title="Estimated parameters a
             shown.add(label)
         ax.plot(v, yi, "o", color="tab:blue", label=None if "est" in shown else "estimate")
         shown.add("est")
+    flags = list(at_bound) if at_bound is not None else [""] * len(names)
+    for yi, v, flag in zip(y, values, flags):
+        if flag:
+            ax.plot(v, yi, "o", ms=13, mfc="none", mec="tab:red", mew=2,
+                    label=None if "bound" in shown else "at a bound of its range")
+            shown.add("bound")
     ax.set_yticks(y)
-    ax.set_yticklabels(names)
+    ax.set_yticklabels([f"{n} (at {f} bound)" if f else n for n, f in zip(names, flags)])
     ax.set_xscale("log")
     ax.set_title(title)
     ax.grid(axis="x", alpha=0.3)

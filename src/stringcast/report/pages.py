@@ -1,12 +1,16 @@
-"""Self-contained HTML reports: one page per trial, one per campaign.
+"""Self-contained HTML reports: the trial page (the campaign page: :mod:`.campaign_page`).
 
 Figures are inlined as PNG data URIs (``report_figures``), the page is rendered
 with Jinja2 from ``templates/``. The trial page shows the paper's figures for the
 trial (Fig. 8a tip paths, Fig. 8b arm paths, Fig. 11 parameters, Table 4 masses),
 E over the search, a frame strip with tracked and simulated points, how often each
-point was tracked, calibration and sync, and the next motion. At its top a banner gives the
-verdicts the stages wrote (calibration.json, sync.json, tracking.json if there is one, and the
-fit's in params.json: ok green, warn amber, fail red) with their reasons; a next motion planned
+point was tracked, calibration and sync, and the next motion. At its top a box gives the
+verdicts the stages wrote (geometry.json, clock.json, tracking.json, and the fit's in
+params.json: ok green, warn amber, fail red), one line per stage with its first reason, each
+reason once on the page, the others folded (:func:`.verdicts.verdict_box`); then the prediction
+check (``prediction.json``: the previous estimate driven by this trial's joints, against its tracked
+tip), the next motion's predicted closest approach with its spread over the estimate's near-best
+sets, and the coefficients and masses at a bound of their range flagged. A next motion planned
 on a failed fit says so instead of "predicted hit". Every page ends with what
 produced it (:mod:`stringcast.report.provenance`: the method, the git commit, the library versions).
 
@@ -28,10 +32,11 @@ import pandas as pd
 from stringcast import __version__
 from stringcast.calibrate import Calibration
 from stringcast.core import (PARAM_NAMES, TRACK_COLUMNS, Campaign, DataError, ModelSettings, MotionSettings, Settings,
-                             TrialFiles, TrialResults, Verdict, hand_pose, model_ranges, motion_start, read_joint_table,
-                             read_json, read_parquet, tracks_arrays, worst, write_text)
+                             TrialFiles, TrialResults, hand_pose, model_ranges, motion_start, read_joint_table,
+                             read_json, read_parquet, tracks_arrays, write_text)
 from . import figures as figs
 from .provenance import provenance
+from .verdicts import at_bounds, reason_key, verdict_box
 from .strip import frame_strip, strip_data_uri
 
 
@@ -136,7 +141,7 @@ def _write_trial_report(trial: TrialFiles, res: TrialResults, campaign: Campaign
                     "src": figs.arm_paths({"played (measured)": hand_pose(campaign.arm, q_j)[:, :2],
                                            "next motion": hand_pose(campaign.arm, q_n)[:, :2]},
                                           tgt, campaign.target.radius)})
-    model_figures, values, lo, hi, diagnostics = _parameter_figures(params, settings.model)
+    model_figures, values, lo, hi, diagnostics, bounds = _parameter_figures(params, settings.model)
     figures += model_figures
     strip = frame_strip(trial.video, Calibration.from_json(calib_json), tracks, fit,
                         campaign.string.length)
@@ -152,22 +157,34 @@ def _write_trial_report(trial: TrialFiles, res: TrialResults, campaign: Campaign
     figures.append({"id": "fig-next-motion", "caption": "Next motion: joint angles and velocities "
                     f"(T = {nxt.get('T_s', float('nan')):.3f} s).", "src": figs.joint_curves(t_n, q_n)})
 
-    summary = _trial_summary(params, diagnostics, valid, d_meas, campaign, played, nxt)
+    prediction = read_json(res.prediction, mapping=True) if res.prediction is not None else None
+    if prediction and prediction.get("tip_path"):
+        path = prediction["tip_path"]
+        t_p = np.asarray(path["t_s"], float)
+        figures.insert(1, {"id": "fig-prediction", "caption": "Prediction check: the previous trial's estimate "
+                           "driven by this trial's measured joints (the model's tip) against the tracked tip, from "
+                           "the motion's start to the tip's closest approach: what the planner relied on.",
+                           "src": figs.tip_paths(t_p, np.asarray(path["tracked_mm"], float) / 1000, t_p,
+                                                 np.asarray(path["predicted_mm"], float) / 1000, tgt,
+                                                 campaign.target.radius, title="Prediction check")})
+    summary = _trial_summary(params, diagnostics, valid, d_meas, campaign, played, nxt, bounds[1])
     tracking = Path(res.tracking)
-    verdicts = stage_verdicts({calib_stage: calib, sync_stage: sync,
-                               "tracking": read_json(tracking) if tracking.exists() else None, "fit": params})
-    warnings = [str(w) for w in calib.get("warnings", [])] + [str(w) for w in [params.get("message")] if w]
+    box = verdict_box({calib_stage: calib, sync_stage: sync,
+                       "tracking": read_json(tracking) if tracking.exists() else None, "fit": params})
+    notes = [str(w) for w in calib.get("warnings", [])] + [str(w) for w in [params.get("message")] if w]
+    warnings = list(dict.fromkeys(w for w in notes if reason_key(w) not in box["said"]))   # each said once
     cal_rows = _calibration_rows(calib, sync)
     ctx = _common(campaign, f"Campaign {campaign.name}, trial {Path(out).parent.name.split('_')[-1]}", settings)
-    ctx.update(summary=summary, warnings=warnings, figures=figures, calib=cal_rows, verdicts=verdicts,
-               params=[(k, v, a, b) for k, v, a, b in zip(PARAM_NAMES, values, lo, hi)])
+    ctx.update(summary=summary, warnings=warnings, figures=figures, calib=cal_rows, verdicts=box,
+               prediction=_prediction_rows(prediction),
+               params=[(k, v, a, b, f) for k, v, a, b, f in zip(PARAM_NAMES, values, lo, hi, bounds[0])])
     write_text(out, _env().get_template("trial.html.j2").render(**ctx))
 
 
-def _parameter_figures(params: dict, model: ModelSettings) -> tuple[list, list, np.ndarray, np.ndarray, dict]:
+def _parameter_figures(params: dict, model: ModelSettings) -> tuple[list, list, np.ndarray, np.ndarray, dict, tuple]:
     """The estimate's figures: coefficients within Table 2's ranges (Fig. 11), masses (Table 4), E over
-    the search. Returns them, the coefficients in PARAM_NAMES order, the ranges (lo, hi) and the
-    estimate's diagnostics."""
+    the search. Returns them, the coefficients in PARAM_NAMES order, the ranges (lo, hi), the
+    estimate's diagnostics and which coefficients and masses sit at a bound (:func:`.verdicts.at_bounds`)."""
     figures = []
     lo, hi, (mu_lo, mu_hi) = model_ranges(model)
     coeffs = params["coefficients"]
@@ -178,9 +195,13 @@ def _parameter_figures(params: dict, model: ModelSettings) -> tuple[list, list, 
     figures.append({"id": "fig-params", "caption": "Estimated coefficients on log axes within Table 2's ranges "
                     "(paper Fig. 11), with the range of the parameter sets whose E is within "
                     f"{diagnostics.get('near_best_tol', 0.05) * 100:.0f} % of the best: a short "
-                    "(green) bar means this motion pins the parameter down, a long (orange) one that it does not.",
-                    "src": figs.parameters(list(PARAM_NAMES), values, lo, hi, diag)})
+                    "(green) bar means this motion pins the parameter down, a long (orange) one that it does not. "
+                    "A red ring: the estimate sits at a bound of its range, where the range, not the footage, "
+                    "decided it.",
+                    "src": figs.parameters(list(PARAM_NAMES), values, lo, hi, diag,
+                                           at_bound=at_bounds(values, lo, hi, [], (mu_lo, mu_hi))[0])})
     mu = np.asarray(params["mu"], float)
+    bounds = at_bounds(values, lo, hi, mu, (mu_lo, mu_hi))
     figures.append({"id": "fig-masses", "caption": "Estimated relative mass per point (paper Table 4); orange: "
                     "points where a weight or stiff section is known to sit.",
                     "src": figs.masses(mu, params.get("special_points", []))})
@@ -188,12 +209,13 @@ def _parameter_figures(params: dict, model: ModelSettings) -> tuple[list, list, 
     if hist.get("evaluations"):
         figures.append({"id": "fig-search", "caption": f"Best E over the search ({params.get('optimizer')}).",
                         "src": figs.search_history(hist["evaluations"], np.asarray(hist["best_E_mm"], dtype=float) / 1000)})
-    return figures, values, lo, hi, diagnostics
+    return figures, values, lo, hi, diagnostics, bounds
 
 
 def _trial_summary(params: dict, diagnostics: dict, valid: np.ndarray, d_meas: float, campaign: Campaign,
-                   played: dict, nxt: dict) -> list[tuple[str, str]]:
-    """The trial page's summary rows: the estimate, the tracking, the measured and predicted approaches."""
+                   played: dict, nxt: dict, masses_at_bound: dict) -> list[tuple[str, str]]:
+    """The trial page's summary rows: the estimate, the tracking, the measured and predicted approaches
+    (the next motion's with its spread over the estimate's near-best sets, :func:`_spread`)."""
     summary = [("E (eqs. 4-6)", _fmt(params.get("E_mm"), ".2f", " mm")),
                ("optimizer, evaluations", f"{params.get('optimizer')}, {params.get('evaluations')}"),
                ("estimation time", _fmt(params.get("seconds"), ".1f", " s")),
@@ -203,7 +225,17 @@ def _trial_summary(params: dict, diagnostics: dict, valid: np.ndarray, d_meas: f
                ("measured closest approach of the tip", _fmt(d_meas * 1000, ".1f", " mm")),
                ("measured hit", "yes" if d_meas <= campaign.target.radius else "no"),
                ("played motion: predicted closest approach", _fmt(played.get("closest_approach_mm"), ".1f", " mm")),
-               ("next motion: predicted closest approach", _fmt(nxt.get("closest_approach_mm"), ".1f", " mm"))]
+               ("next motion: predicted closest approach (the best set)",
+                _fmt(nxt.get("closest_approach_mm"), ".1f", " mm"))]
+    spread = _spread(nxt, campaign.target.radius * 1000)
+    if spread:
+        summary.append(("next motion: predicted closest approach over the estimate's near-best sets", spread))
+    m = masses_at_bound
+    if m["lower"] or m["upper"]:
+        all_low = m["lower"] == m["n"]
+        summary.append(("mass points at a bound of their range", f"{m['lower']} at the lower, {m['upper']} at the "
+                        f"upper of {m['n']}" + (": every mass at its least, as a fit that cannot follow the "
+                                                "string does" if all_low else "")))
     if nxt.get("planned_on_failed_fit"):
         summary.append(("next motion", "planned on a failed fit: its predicted closest approach is not to be "
                                        "trusted (see the fit's verdict at the top)"))
@@ -219,32 +251,33 @@ def _trial_summary(params: dict, diagnostics: dict, valid: np.ndarray, d_meas: f
     return summary
 
 
-def stage_verdicts(docs: dict) -> dict:
-    """The page's verdict banner from each stage's JSON document (None: the stage wrote no file).
+def _spread(nxt: dict, radius_mm: float) -> str:
+    """The next motion's closest approach under each of the estimate's near-best sets (the robust
+    planner's ensemble, ``motion.json``'s ``ensemble_d_min_mm``): median, 10-90 % range and the share
+    of sets under which it hits; "" where the plan scored none."""
+    d = np.asarray(nxt.get("ensemble_d_min_mm") or [], float)
+    d = d[np.isfinite(d)]
+    if not len(d):
+        return ""
+    share = nxt.get("ensemble_hit_share")
+    share = float(np.mean(d <= radius_mm)) if share is None else float(share)
+    return (f"{np.median(d):.1f} mm (10-90 %: {np.percentile(d, 10):.1f}-{np.percentile(d, 90):.1f} mm over "
+            f"{len(d)} sets); hits under {share:.0%} of them")
 
-    Args:
-        docs: stage name -> its JSON (calibration.json, sync.json, tracking.json, params.json) or None.
 
-    Returns:
-        {"status": the worst status, "rows": [{"stage", "status", "reasons", "cause"}]}: one row per
-        document given; a document without a ``"verdict"`` has status "not judged". Raises nothing:
-        a malformed verdict is shown as not judged.
-    """
-    rows, judged = [], []
-    for stage, doc in docs.items():
-        if doc is None:
-            continue
-        raw = doc.get("verdict") if isinstance(doc, dict) else None
-        try:
-            v = Verdict.from_dict(raw) if raw else None
-        except (ValueError, TypeError, AttributeError):
-            v = None
-        if v is not None:
-            judged.append(v)
-        rows.append({"stage": stage, "status": v.status if v else "not judged", "reasons": list(v.reasons) if v else [],
-                     "cause": str(raw.get("likely_cause") or "") if isinstance(raw, dict) else ""})
-    status = worst(*judged).status if judged else "not judged"
-    return {"status": status, "rows": rows}
+def _prediction_rows(prediction: dict | None) -> list[tuple[str, str]]:
+    """The prediction check's rows (``prediction.json``), or [] where the trial has none (trial 1)."""
+    if not prediction:
+        return []
+    status = (prediction.get("verdict") or {}).get("status", "not judged")
+    reasons = (prediction.get("verdict") or {}).get("reasons") or []
+    rows = [("tip error of the previous estimate on this motion, median / p95",
+             f"{_fmt(prediction.get('median_mm'), '.1f')} / {_fmt(prediction.get('p95_mm'), '.1f', ' mm')}"),
+            ("frames compared (tip tracked / all)", f"{prediction.get('valid_frames')} / {prediction.get('frames')}"),
+            ("tracked closest approach in that window", _fmt(prediction.get("tracked_closest_approach_mm"), ".1f",
+                                                            " mm")),
+            ("verdict", status + (f": {reasons[0]}" if reasons else ""))]
+    return rows
 
 
 def _calibration_rows(calib: dict, sync: dict) -> list[tuple[str, str]]:
@@ -281,82 +314,3 @@ def _calibration_rows(calib: dict, sync: dict) -> list[tuple[str, str]]:
     if sync.get("note"):
         cal_rows.append(("sync note", sync["note"]))
     return cal_rows
-
-
-def _stage_times(results: Path) -> tuple[list, list]:
-    """Wall seconds per rule from Snakemake's ``benchmark:`` files, per trial."""
-    rows: dict[str, dict] = {}
-    stages: list[str] = []
-    for f in sorted((results / "benchmarks").glob("*.tsv")):
-        stem = f.stem
-        stage, _, k = stem.rpartition("_")
-        if not k.isdigit():
-            stage, k = stem, "-"
-        try:
-            s = float(pd.read_csv(f, sep="\t")["s"].iloc[0])
-        except Exception:  # a benchmark file being written by a running job
-            continue
-        if stage not in stages:
-            stages.append(stage)
-        rows.setdefault(k, {})[stage] = f"{s:.1f}"
-    return sorted(rows.items(), key=lambda kv: (not kv[0].isdigit(), int(kv[0]) if kv[0].isdigit() else 0)), stages
-
-
-def write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign, out: Path, *,
-                          settings: Settings) -> None:
-    """Write ``results/<campaign>/report.html``: one row per execution (paper Table 3).
-
-    ``settings``: every stage's: the page names the method they make (:mod:`.provenance`) and
-    reads the flight window (``motion``).
-
-    Raises:
-        DataError: a result file that is missing or malformed (named).
-    """
-    try:
-        _write_campaign_report(Path(data_dir), Path(results_dir), campaign, Path(out), settings)
-    except MALFORMED as exc:
-        raise DataError(f"{results_dir}: a result file the campaign report reads is malformed "
-                        f"({type(exc).__name__}: {exc})") from exc
-
-
-def _fit_cell(params: dict) -> dict:
-    """The campaign table's fit cell from a trial's ``params.json``: ``fit_status`` (ok, warn, fail or
-    "not judged") and ``fit_cause`` (the likely cause where not ok, else "")."""
-    row = stage_verdicts({"fit": params})["rows"][0]
-    return {"fit_status": row["status"], "fit_cause": row["cause"] if row["status"] in ("warn", "fail") else ""}
-
-
-def _write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign, out: Path,
-                           settings: Settings) -> None:
-    """:func:`write_campaign_report`'s work."""
-    motion = settings.motion
-    rows, tips = [], {}
-    n = campaign.string.n_points
-    trials = sorted(int(p.name.split("_")[1]) for p in data_dir.glob("trial_*") if p.name.split("_")[1].isdigit())
-    for k in trials:
-        dd, rd = data_dir / f"trial_{k}", results_dir / f"trial_{k}"
-        if not (rd / "params.json").exists():
-            continue
-        params = read_json(rd / "params.json", mapping=True)
-        tracks = read_parquet(rd / "tracks.parquet")
-        t0, t1, played = _motion_window(TrialFiles(Path(), dd / "joints.csv", played=dd / "motion.json"), motion,
-                                        campaign.arm)
-        t, xy, valid = _tracked(tracks, n)
-        d, _ = closest_approach(t, xy[:, n], campaign.target.xy, t0, t1)
-        window = (t >= t0) & (t <= t1)
-        tips[f"execution {k}"] = xy[window, n]
-        row = {"trial": k, "E_mm": _fmt(params.get("E_mm")), "measured_mm": _fmt(d * 1000, ".1f"),
-               "predicted_mm": _fmt(played.get("closest_approach_mm"), ".1f"),
-               "hit_measured": bool(d <= campaign.target.radius),
-               "tip_valid_pct": _fmt(float(valid[window, n].mean()) * 100 if window.any() else None, ".0f"),
-               **_fit_cell(params), "played_on_failed_fit": bool(played.get("planned_on_failed_fit"))}
-        rows.append(row)
-    figures = []
-    if tips:
-        figures.append({"id": "fig-campaign-tips", "caption": "Tracked tip path of each execution during the "
-                        "motion and flight window.", "src": figs.campaign_tips(tips, campaign.target.xy,
-                                                                                 campaign.target.radius)})
-    timings, stages = _stage_times(results_dir)
-    ctx = _common(campaign, f"Campaign {campaign.name}", settings)
-    ctx.update(rows=rows, figures=figures, timings=timings, stages=stages)
-    write_text(out, _env().get_template("campaign.html.j2").render(**ctx))
