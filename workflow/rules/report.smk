@@ -38,7 +38,6 @@ rule report_trial:
         '--tracks "{input.tracks}" --tracking "{input.tracking}" --params "{input.params}" --fit "{input.fit}" '
         '--next-motion "{input.motion}" --next-motion-meta "{input.motion_meta}" '
         "--prediction {input.prediction:q} "
-        '
         '--campaign "{input.campaign}" --out "{output}"'
 
 
