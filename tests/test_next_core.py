@@ -75,3 +75,17 @@ def test_next_names_a_missing_earlier_estimate(tmp_path, capsys):
 def test_next_refuses_a_folder_that_is_not_a_trial(tmp_path, capsys):
     assert main(["next", str(tmp_path)]) == 2
     assert "not a trial folder" in "".join(capsys.readouterr())
+
+
+def test_a_trial_folder_is_placed_by_its_path_links_kept(tmp_path):
+    """``stringcast next`` finds the project and campaign from the path as given: a campaign folder linked
+    into data/ (a recording kept elsewhere) belongs to this project; a folder outside data/ is refused."""
+    from stringcast.chain import trial_location
+    from stringcast.core import DataError
+
+    (tmp_path / "store" / "c" / "trial_2").mkdir(parents=True)
+    (tmp_path / "project" / "data").mkdir(parents=True)
+    (tmp_path / "project" / "data" / "c").symlink_to(tmp_path / "store" / "c")
+    assert trial_location(tmp_path / "project" / "data" / "c" / "trial_2") == (tmp_path / "project", "c", 2)
+    with pytest.raises(DataError, match="not a trial folder"):
+        trial_location(tmp_path / "store" / "c" / "trial_2")

@@ -49,7 +49,7 @@ def trial_location(trial_dir: str | Path) -> tuple[Path, str, int]:
     Raises:
         DataError: the folder is not a trial folder of a project's ``data/``.
     """
-    d = Path(trial_dir).resolve()
+    d = Path(os.path.abspath(trial_dir))   # links kept: a campaign folder linked into data/ is in this project
     suffix = d.name.partition("_")[2]
     if not (d.name.startswith("trial_") and suffix.isdigit() and d.parent.parent.name == "data"):
         raise DataError(f"{trial_dir}: not a trial folder: expected <project>/data/<campaign>/trial_<k> "
