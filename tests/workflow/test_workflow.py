@@ -104,7 +104,7 @@ def test_campaign_end_to_end(tmp_path, finished):
     assert "trial_1/report.html" in html and "<table" in html
     # each execution's fit verdict, with its cause where not ok, in the campaign's table
     v = params["verdict"]
-    assert f'class="l fit-{v["status"]}">{v["status"]}' in html
+    assert f'class="l verdict-fit"><span class="badge {v["status"]}"' in html
     assert (f"(likely cause: {v['likely_cause']})" in html) == (v["status"] != "ok")
     trial_html = (res / "trial_1" / "report.html").read_text()
     assert 'id="fig-valid"' in trial_html and "ground truth" not in trial_html.lower()
@@ -243,7 +243,7 @@ def test_a_setting_on_the_command_line_reruns_exactly_what_reads_it(finished):
     out = snakemake(root, "-n", "--config", "evaluation={w: 0.5}")
     assert planned_rules(out) == reruns, out
     written = [yaml.safe_load(p.read_text()) for p in (root / "results" / ".stringcast").glob("config-*.yaml")]
-    w = [(c.get("evaluation") or {}).get("w") for c in written]    # None: the default (0.1)
+    w = [(c.get("evaluation") or {}).get("w") for c in written]    # None: the default
     assert 0.5 in w and None in w
     bad = subprocess.run([sys.executable, "-m", "snakemake", "-n", "--cores", "1", "--directory", str(root),
                           "--config", "evaluation={ww: 0.5}"], cwd=root, capture_output=True, text=True)
@@ -281,7 +281,7 @@ def test_a_configfile_that_changes_nothing_a_stage_reads_reruns_nothing(finished
     reads) leaves every result as it is; one that changes a setting reruns."""
     root, _ = finished
     noop = root / "config" / "noop.yaml"
-    noop.write_text(yaml.safe_dump({"evaluation": {"w": 0.1}, "estimation": {"optimizer": "random_search"},
+    noop.write_text(yaml.safe_dump({"evaluation": {"w": 1.0}, "estimation": {"optimizer": "cmaes"},   # ours' defaults
                                     "lab": {"scene_seed": 12}}))
     out = snakemake(root, "-n", "--configfile", str(noop))
     assert "Nothing to be done" in out or not planned_rules(out), out
