@@ -24,6 +24,7 @@ import numpy as np
 
 from stringcast.core import Campaign, ConfigError, DataError, atomic_path, write_json
 from .background import gain_map, render_background, warp_board
+from .settings import LabSettings
 from .camera import CameraModel, IdealCanvas, Sensor, camera_settings
 from .draw import supersample_homography
 from .look import scene_look
@@ -38,7 +39,7 @@ def calibration_settings(config: Mapping) -> dict:
         ConfigError: unknown keys; fewer than 1 shot; tilts outside [0, 80) or min > max; spans
             outside (0, 1] or min > max; a region that is not 0 <= u0 < u1 <= 1, 0 <= v0 < v1 <= 1.
     """
-    c = dict((config.get("lab", {}) or {}).get("calibration", {}) or {})
+    c = dict(LabSettings.from_config(config).calibration)
     unknown = set(c) - set(CALIBRATION_DEFAULTS)
     if unknown:
         raise ConfigError(f"lab.calibration: unknown keys {sorted(unknown)} (known: {sorted(CALIBRATION_DEFAULTS)})")
@@ -125,7 +126,7 @@ def write_calibration_clip(campaign: Campaign, config: Mapping, out_dir: str | P
     n = int(calib["shots"] if n_frames is None else n_frames)
     rng = np.random.default_rng(int(seed) + 7919)
     Sensor.seed(int(seed) + 7919)
-    scene_seed = int((config.get("lab", {}) or {}).get("scene_seed", 11))
+    scene_seed = LabSettings.from_config(config).scene_seed
     look = scene_look(config)
     cam = CameraModel.from_config(campaign.setup.camera, config)
     canvas = IdealCanvas.for_camera(cam)

@@ -34,6 +34,7 @@ import cv2
 import numpy as np
 
 from stringcast.core import ConfigError
+from .settings import LabSettings
 
 CAMERA_DEFAULTS = {
     "distance_mm": 2500.0,
@@ -74,7 +75,7 @@ PRESETS = {
 
 def camera_settings(config: Mapping) -> dict:
     """``lab.camera`` merged over :data:`CAMERA_DEFAULTS` (unknown keys are an error)."""
-    lab = (config.get("lab", {}) or {}).get("camera", {}) or {}
+    lab = LabSettings.from_config(config).camera
     unknown = set(lab) - set(CAMERA_DEFAULTS)
     if unknown:
         raise ConfigError(f"lab.camera: unknown keys {sorted(unknown)}")
@@ -83,7 +84,7 @@ def camera_settings(config: Mapping) -> dict:
 
 def presets(config: Mapping) -> dict:
     """:data:`PRESETS` updated with ``lab.presets`` (a preset there replaces the built-in one)."""
-    extra = (config.get("lab", {}) or {}).get("presets", {}) or {}
+    extra = LabSettings.from_config(config).presets
     if not isinstance(extra, Mapping):
         raise ConfigError("lab.presets: expected a mapping of preset name -> settings")
     return {**PRESETS, **extra}

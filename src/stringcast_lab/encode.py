@@ -32,6 +32,7 @@ import cv2
 import numpy as np
 
 from stringcast.core import ConfigError, DataError
+from .settings import LabSettings
 
 CODECS = {"ffv1": ".mkv", "mjpeg": ".avi", "h264": ".mp4"}
 VIDEO_DEFAULTS = {"codec": "ffv1", "colour": False, "mjpeg_quality": 90, "h264_crf": 23, "h264_preset": "fast"}
@@ -43,7 +44,7 @@ def video_settings(config: Mapping) -> dict:
     Raises:
         ConfigError: unknown keys, an unknown codec, quality outside 1..100 or CRF outside 0..51.
     """
-    v = dict((config.get("lab", {}) or {}).get("video", {}) or {})
+    v = dict(LabSettings.from_config(config).video)
     unknown = set(v) - set(VIDEO_DEFAULTS)
     if unknown:
         raise ConfigError(f"lab.video: unknown keys {sorted(unknown)} (known: {sorted(VIDEO_DEFAULTS)})")

@@ -21,6 +21,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from stringcast.core import ConfigError
+from .settings import LabSettings
 from .draw import ARM_WIDTHS_M, GRIPPER_WIDTH_M, JOINT_RADII_M, REFLECTANCE
 
 BACKGROUNDS = ("clutter", "plain", "blotchy")
@@ -120,9 +121,9 @@ def scene_look(config: Mapping) -> SceneLook:
     Raises:
         ConfigError: unknown keys or materials, values out of range.
     """
-    lab = config.get("lab", {}) or {}
-    look = dict(lab.get("look", {}) or {})
-    colour = bool((lab.get("video", {}) or {}).get("colour", False))
+    lab = LabSettings.from_config(config)
+    look = dict(lab.look)
+    colour = bool(lab.video.get("colour", False))
     unknown = set(look) - LOOK_KEYS
     if unknown:
         raise ConfigError(f"lab.look: unknown keys {sorted(unknown)} (known: {sorted(LOOK_KEYS)})")

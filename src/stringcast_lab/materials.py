@@ -174,13 +174,14 @@ def draw_material(seed: int, kind: str | None = None) -> Material:
                     grasp_stiffness=0.0 if pivot else k_clamp, grasp_damping=c_g)
 
 
-def lab_material(lab: Mapping) -> Material | None:
-    """The material ``lab.material`` names ({seed: int, class: optional str}), or None.
+def lab_material(lab) -> Material | None:
+    """The material ``lab.material`` names ({seed: int, class: optional str}), or None (``lab``: the lab's
+    :class:`~.settings.LabSettings`, or the ``lab:`` mapping).
 
     Raises:
         ConfigError: ``lab.material`` is not a mapping with an integer ``seed`` (and known keys).
     """
-    spec = lab.get("material")
+    spec = lab.get("material") if isinstance(lab, Mapping) else lab.material
     if spec is None:
         return None
     if not isinstance(spec, Mapping) or not isinstance(spec.get("seed"), (int, np.integer)) \

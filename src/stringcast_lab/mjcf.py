@@ -15,6 +15,7 @@ from collections.abc import Mapping
 
 from stringcast.core import Campaign, ConfigError
 
+from .settings import LabSettings
 from .materials import lab_material
 
 #: Defaults for ``lab.strings.<type>`` keys (SI after conversion).
@@ -135,8 +136,8 @@ class StringPhysics:
             ConfigError: unknown keys, bad values or a bad ``lab.material``.
         """
 
-        lab = config.get("lab", {}) or {}
-        table = lab.get("strings", {}) or {}
+        lab = LabSettings.from_config(config)
+        table = lab.strings
         vals = dict(STRING_DEFAULTS)
         vals.update(table.get("default", {}) or {})
         if campaign.string_id is not None:
@@ -154,11 +155,11 @@ class StringPhysics:
         if unknown:
             raise ConfigError(f"lab.strings: unknown keys {sorted(unknown)} (known: {sorted(STRING_DEFAULTS)})")
         s = campaign.string
-        n_links = int(lab.get("links_per_point", 3)) * s.n_points
+        n_links = lab.links_per_point * s.n_points
         clay = vals["clay_diameter_mm"] / 1000
         pipe_d = vals["pipe_diameter_mm"] / 1000
         pipe_rho = vals["pipe_density_g_per_m"] / 1000
-        air = lab.get("air", {}) or {}
+        air = lab.air
         return cls(
             length=s.length, n_links=n_links, density=vals["density_g_per_m"] / 1000,
             diameter=vals["diameter_mm"] / 1000, bending_EI=float(vals["bending_EI"]),

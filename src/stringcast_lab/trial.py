@@ -40,6 +40,7 @@ from .physics import simulate
 from .recording import command_arrays
 from .rod import simulate_rod
 from .scene import FrameRenderer, StringLook
+from .settings import PHYSICS, LabSettings
 from .truth import physics_truth, verdict, write_points
 
 __all__ = ["FFV1Writer", "build_renderer", "motion_end", "run_trial", "string_bands"]
@@ -47,8 +48,8 @@ __all__ = ["FFV1Writer", "build_renderer", "motion_end", "run_trial", "string_ba
 TRIGGER_DELAY_S = (0.02, 0.08)
 
 
-def _lab(config: Mapping) -> dict:
-    return dict(config.get("lab", {}) or {})
+def _lab(config: Mapping) -> LabSettings:
+    return LabSettings.from_config(config)
 
 
 def _fps(campaign: Campaign) -> float:
@@ -58,20 +59,16 @@ def _fps(campaign: Campaign) -> float:
     return float(cam["fps"])
 
 
-JOINT_LOGS = ("full", "at_motion_start")
-PHYSICS = ("mujoco", "elastica")
-
-
-def lab_physics(lab: Mapping):
+def lab_physics(lab: LabSettings | Mapping):
     """The simulate function ``lab.physics`` names: ``mujoco`` (default, :func:`.physics.simulate`,
     the capsule chain) or ``elastica`` (:func:`.rod.simulate_rod`, the Cosserat rod; PyElastica is
     imported when it builds a rod); both take
     (phys, arm, t_cmd, q_cmd, timestep, servo_lag_s, settle_s, progress) and return a Recording.
 
     Raises:
-        ConfigError: any other value.
+        ConfigError: any other value (``lab``: the settings, or the ``lab:`` mapping).
     """
-    name = lab.get("physics", "mujoco")
+    name = (lab if isinstance(lab, LabSettings) else LabSettings.from_config({"lab": lab})).physics
     if name == "mujoco":
         return simulate
     if name == "elastica":
@@ -90,7 +87,7 @@ def string_bands(config: Mapping, n_points: int, phys: StringPhysics) -> dict:
     Raises:
         ConfigError: unknown keys or values out of range.
     """
-    bands = _lab(config).get("string_bands")
+    bands = _lab(config).string_bands
     if not bands:
         return {}
     bands = dict(bands)
@@ -107,7 +104,7 @@ def string_bands(config: Mapping, n_points: int, phys: StringPhysics) -> dict:
 def build_renderer(campaign: Campaign, config: Mapping, phys: StringPhysics | None = None) -> FrameRenderer:
     """The trial camera's :class:`FrameRenderer` (same scene, light and camera as :func:`run_trial`)."""
     phys = phys or StringPhysics.from_campaign(campaign, config)
-    scene_seed = int(_lab(config).get("scene_seed", 11))
+    scene_seed = _lab(config).scene_seed
     scene = scene_look(config)
     cam = CameraModel.from_config(campaign.setup.camera, config)
     canvas = IdealCanvas.for_camera(cam)
@@ -155,7 +152,7 @@ def run_trial(t_cmd: np.ndarray, q_cmd: np.ndarray, campaign: Campaign, config: 
     arm = campaign.arm
     t_cmd, q_cmd = command_arrays(t_cmd, q_cmd, arm.n_joints, "run_trial")
     lab = _lab(config)
-    render = _render(lab)
+    render = lab.render
     video = video_settings(config)
     ss = np.random.SeedSequence(int(seed))
     rng_trig, rng_joint, rng_noise = (np.random.default_rng(s) for s in ss.spawn(3))
@@ -163,9 +160,8 @@ def run_trial(t_cmd: np.ndarray, q_cmd: np.ndarray, campaign: Campaign, config: 
 
     # -- physics ---------------------------------------------------------------
     phys = StringPhysics.from_campaign(campaign, config)
-    lpp = int(lab.get("links_per_point", 3))
-    rec = lab_physics(lab)(phys, arm, t_cmd, q_cmd, float(lab.get("timestep_s", 5e-5)),
-                           float(lab.get("servo_lag_s", 0.008)), float(lab.get("settle_s", 0.3)), progress=True)
+    lpp = lab.links_per_point
+    rec = lab_physics(lab)(phys, arm, t_cmd, q_cmd, lab.timestep_s, lab.servo_lag_s, lab.settle_s, progress=True)
     wall_physics = time.perf_counter() - wall0
     log_start = _write_joint_log(out_dir / "joints.csv", rec, t_cmd, q_cmd, lab, rng_joint, motion_start_s,
                                  arm.controller_rate)
@@ -212,18 +208,6 @@ def run_trial(t_cmd: np.ndarray, q_cmd: np.ndarray, campaign: Campaign, config: 
     return truth
 
 
-def _render(lab: Mapping) -> bool:
-    """``lab.render`` (default true): whether the trial is filmed (module doc).
-
-    Raises:
-        ConfigError: a value that is not a boolean.
-    """
-    render = lab.get("render", True)
-    if not isinstance(render, bool):
-        raise ConfigError(f"lab.render = {render!r}: expected true or false")
-    return render
-
-
 def _truth_rows(rec, t_frames: np.ndarray, n: int, lpp: int) -> list:
     """Ground-truth rows at the exposure centres ``t_frames`` (F,) s, filmed or not: per frame
     (frame, t_s, point, x_m, y_m), each (n + 1,): the string's n + 1 points, every ``lpp``-th link end."""
@@ -232,27 +216,23 @@ def _truth_rows(rec, t_frames: np.ndarray, n: int, lpp: int) -> list:
             for k, (tc, p) in enumerate(zip(t_frames, pts))]
 
 
-def _write_joint_log(path: Path, rec, t_cmd: np.ndarray, q_cmd: np.ndarray, lab: Mapping,
+def _write_joint_log(path: Path, rec, t_cmd: np.ndarray, q_cmd: np.ndarray, lab: LabSettings,
                      rng_joint: np.random.Generator, motion_start_s: float, rate: float) -> float:
     """Write ``joints.csv``: the arm's true joints at t_cmd (K,) s plus N(0, lab.joint_noise_rad) noise,
     and the commands q_cmd (K, J) rad; with ``lab.joint_log: at_motion_start`` only the rows from
     ``motion_start_s`` on (half a controller period's tolerance). Returns the log's first time, s.
 
-    Raises:
-        ConfigError: an unknown ``lab.joint_log``.
     """
-    mode = str(lab.get("joint_log", "full"))
-    if mode not in JOINT_LOGS:
-        raise ConfigError(f"lab.joint_log = {mode!r}: expected one of {list(JOINT_LOGS)}")
+    mode = lab.joint_log
     q_true = rec.arm_at(t_cmd)
-    q_meas = q_true + rng_joint.normal(0, float(lab.get("joint_noise_rad", 2e-4)), q_true.shape)
+    q_meas = q_true + rng_joint.normal(0, lab.joint_noise_rad, q_true.shape)
     keep = (t_cmd >= motion_start_s - 0.5 / rate) if mode == "at_motion_start" else np.ones(len(t_cmd), bool)
     write_joint_table(path, t_cmd[keep], q_meas[keep],
                       {f"q{j + 1}_cmd_rad": q_cmd[keep, j] for j in range(q_cmd.shape[1])})
     return float(t_cmd[keep][0])
 
 
-def _frame_clock(settings: Mapping, fps: float, t_end: float, lab: Mapping,
+def _frame_clock(settings: Mapping, fps: float, t_end: float, lab: LabSettings,
                  rng_trig: np.random.Generator) -> tuple[float, float, float | None, int]:
     """The camera's clock: exposure s, the true trigger time s (U(TRIGGER_DELAY_S), frame 0's
     exposure centre), the trigger time video.yaml states (off by U(+-lab.trigger_error_s) +
@@ -269,10 +249,10 @@ def _frame_clock(settings: Mapping, fps: float, t_end: float, lab: Mapping,
     n_frames = int(math.floor((t_end - exposure / 2 - t_trigger) * fps + 1e-9)) + 1
     if n_frames < 1:
         raise ValueError(f"run_trial: the log ({t_end:.3f} s) is shorter than the camera's trigger delay")
-    trigger_error = float(lab.get("trigger_error_s", 0.002))
+    trigger_error = lab.trigger_error_s
     t_trigger_written = t_trigger + float(rng_trig.uniform(-trigger_error, trigger_error))
-    t_trigger_written += float(lab.get("trigger_offset_s", 0.0))
-    if not bool(lab.get("trigger_written", True)):
+    t_trigger_written += lab.trigger_offset_s
+    if not lab.trigger_written:
         t_trigger_written = None
     return exposure, t_trigger, t_trigger_written, n_frames
 
