@@ -11,7 +11,8 @@ import dataclasses
 import inspect
 import typing
 
-from .settings import SECTION_CLASSES, Settings, _plain
+from .section import plain
+from .settings import SECTION_CLASSES, Settings
 
 
 def _settings_parameters(func) -> dict[str, type]:
@@ -106,7 +107,7 @@ def markdown_table() -> str:
                 "| setting | default | meaning |", "| --- | --- | --- |"]
         for f in dataclasses.fields(c):
             value = getattr(c(), f.name)
-            text = yaml.safe_dump(_plain(value), default_flow_style=True, width=1000, sort_keys=False).strip()
+            text = yaml.safe_dump(plain(value), default_flow_style=True, width=1000, sort_keys=False).strip()
             text = text.removesuffix("\n...").removesuffix("...").strip()
             out.append(f"| `{f.name}` | `{text}` | {f.metadata.get('help', '')} |")
         out.append("")

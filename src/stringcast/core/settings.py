@@ -17,14 +17,14 @@ stages convert on use, as they did when the settings were a dict.
 """
 from __future__ import annotations
 
-import dataclasses
 import typing
 from dataclasses import dataclass, field
-from types import MappingProxyType
 from typing import Any
 from collections.abc import Mapping
 
 from .errors import ConfigError
+from .section import Section, one_of, section_schema
+from .section import setting as _f
 
 MODES = ("markerless", "markers")
 """``tracking.mode``: the string's points by arc length, or by the bands at the mass points."""
@@ -32,68 +32,6 @@ POLARITIES = ("auto", "brighter", "darker")
 """``tracking.band_polarity``: a band brighter or darker than the string, or whichever gives more."""
 OPTIMIZERS = ("random_search", "cmaes", "de")
 PLANNERS = ("paper", "robust")
-
-
-def _f(default, help: str, **schema):
-    """A field with its default, its help text (``config/README.md``) and its JSON-schema constraints
-    (``minimum``, ``enum``, ``items``, ...; the type comes from the annotation: :func:`section_schema`)."""
-    meta = {"help": help, "schema": schema}
-    if isinstance(default, Mapping):
-        frozen = MappingProxyType(dict(default))
-        return field(default_factory=lambda: frozen, metadata=meta)
-    return field(default=default, metadata=meta)
-
-
-_JSON_TYPES = {"float": "number", "int": "integer", "bool": "boolean", "str": "string"}
-
-
-def _json_type(annotation: str):
-    """The JSON-schema type of a settings field's annotation (``float | None`` -> ``["number", "null"]``)."""
-    a = annotation.replace(" ", "")
-    optional = a.endswith("|None")
-    base = a.removesuffix("|None")
-    t = _JSON_TYPES.get(base) or ("array" if base.startswith("tuple") else "object" if base.startswith("Mapping")
-                                  else None)
-    if t is None:
-        raise TypeError(f"no JSON-schema type for the settings annotation {annotation!r}")
-    return [t, "null"] if optional else t
-
-
-def section_schema(cls) -> dict:
-    """The JSON schema of one settings section, made from its class: each field's type (its annotation),
-    constraints (:func:`_f`) and help as the description; no other key. The config's schema
-    (``config.schema.json``) takes its stage sections from here, so a setting is declared once."""
-    props = {}
-    for f in dataclasses.fields(cls):
-        spec = dict(f.metadata.get("schema", {}))
-        spec.setdefault("type", _json_type(str(f.type)))
-        props[f.name] = {**spec, "description": f.metadata.get("help", "")}
-    return {"type": "object", "additionalProperties": False, "description": (cls.__doc__ or "").split("\n")[0],
-            "properties": props}
-
-
-def _frozen(value):
-    """Lists become tuples and mappings read-only, recursively (a setting cannot be changed)."""
-    if isinstance(value, Mapping):
-        return MappingProxyType({k: _frozen(v) for k, v in value.items()})
-    if isinstance(value, (list, tuple)):
-        return tuple(_frozen(v) for v in value)
-    return value
-
-
-def _plain(value):
-    """The inverse of :func:`_frozen`: dicts and lists, for JSON, YAML and Snakemake params."""
-    if isinstance(value, Mapping):
-        return {k: _plain(v) for k, v in value.items()}
-    if isinstance(value, tuple):
-        return [_plain(v) for v in value]
-    return value
-
-
-def _one_of(section: str, name: str, value, allowed: tuple) -> None:
-    """Raise ConfigError naming ``section.name`` unless ``value`` is one of ``allowed``."""
-    if value not in allowed:
-        raise ConfigError(f"{section}.{name} must be one of {', '.join(map(str, allowed))}, got {value!r}")
 
 
 PARAM_NAMES: tuple[str, ...] = (
@@ -116,37 +54,8 @@ _UR_SCHEMA = {"additionalProperties": False, "properties": {
 """``executor.ur``'s keys and their bounds (the UR backend's settings)."""
 
 
-class _Section:
-    """Shared behaviour of the settings classes: built from a config section, and back."""
-
-    SECTION: typing.ClassVar[str] = ""
-
-    @classmethod
-    def from_mapping(cls, d: Mapping | None):
-        """The section's settings: ``d`` (the config's section, may be None) over the defaults.
-
-        Raises:
-            ConfigError: a key this section does not have, naming it and the section.
-        """
-        d = dict(d or {})
-        names = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(d) - names)
-        if unknown:
-            raise ConfigError(f"{cls.SECTION}: unknown setting(s) {', '.join(unknown)} "
-                              f"(known: {', '.join(sorted(names))})")
-        defaults = cls()
-        for k, v in d.items():  # a mapping-valued setting is merged over its default, key by key
-            if isinstance(v, Mapping) and isinstance(getattr(defaults, k), Mapping):
-                d[k] = {**getattr(defaults, k), **v}
-        return cls(**{k: _frozen(v) for k, v in d.items()})
-
-    def as_dict(self) -> dict:
-        """The settings as plain data (lists, dicts), every key present."""
-        return {f.name: _plain(getattr(self, f.name)) for f in dataclasses.fields(self)}
-
-
 @dataclass(frozen=True)
-class ModelSettings(_Section):
+class ModelSettings(Section):
     """``model``: the string model's integration and the parameter ranges (Table 2)."""
 
     SECTION: typing.ClassVar[str] = "model"
@@ -166,7 +75,7 @@ class ModelSettings(_Section):
 
 
 @dataclass(frozen=True)
-class EvaluationSettings(_Section):
+class EvaluationSettings(Section):
     """``evaluation``: the evaluation value E (eqs. 4-6)."""
 
     SECTION: typing.ClassVar[str] = "evaluation"
@@ -174,7 +83,7 @@ class EvaluationSettings(_Section):
 
 
 @dataclass(frozen=True)
-class EstimationSettings(_Section):
+class EstimationSettings(Section):
     """``estimation``: the parameter search (eqs. 2-3) and what params.json keeps."""
 
     SECTION: typing.ClassVar[str] = "estimation"
@@ -203,7 +112,7 @@ class EstimationSettings(_Section):
     verdict_floor_share: float = _f(0.05, "fit verdict: skill and time shift judge only fits whose median error exceeds this share of the string's length", minimum=0)
 
     def __post_init__(self):
-        _one_of("estimation", "optimizer", self.optimizer, OPTIMIZERS)
+        one_of("estimation", "optimizer", self.optimizer, OPTIMIZERS)
         pairs = {"verdict_error_share": 1, "verdict_skill": -1, "verdict_shift_gain": -1}
         for name, order in pairs.items():
             pair = tuple(getattr(self, name))
@@ -213,7 +122,7 @@ class EstimationSettings(_Section):
 
 
 @dataclass(frozen=True)
-class MotionSettings(_Section):
+class MotionSettings(Section):
     """``motion``: motion generation (Section V) and the planners."""
 
     SECTION: typing.ClassVar[str] = "motion"
@@ -245,14 +154,14 @@ class MotionSettings(_Section):
     replan_residual_mm: float = _f(50.0, "> 0 (with residual_correction): no perturbation when the model's tip error on the played motion exceeds this, mm", minimum=0)
 
     def __post_init__(self):
-        _one_of("motion", "planner", self.planner, PLANNERS)
-        _one_of("motion", "first_k_s", self.first_k_s, ("carrying", "max"))
+        one_of("motion", "planner", self.planner, PLANNERS)
+        one_of("motion", "first_k_s", self.first_k_s, ("carrying", "max"))
         if self.aim_radius_mm is not None and not float(self.aim_radius_mm) > 0:
             raise ConfigError(f"motion.aim_radius_mm: > 0 mm or null; got {self.aim_radius_mm}")
 
 
 @dataclass(frozen=True)
-class ExecutorSettings(_Section):
+class ExecutorSettings(Section):
     """``executor``: playing a motion file (pre- and post-roll, the UR backend)."""
 
     SECTION: typing.ClassVar[str] = "executor"
@@ -268,7 +177,7 @@ class ExecutorSettings(_Section):
 
 
 @dataclass(frozen=True)
-class TrackingSettings(_Section):
+class TrackingSettings(Section):
     """``tracking``: markerless (or band-marker) tracking of the string."""
 
     SECTION: typing.ClassVar[str] = "tracking"
@@ -313,12 +222,12 @@ class TrackingSettings(_Section):
     band_step_px: float = _f(0.25, "markers: sampling step along the centreline, px", exclusiveMinimum=0)
 
     def __post_init__(self):
-        _one_of("tracking", "mode", self.mode, MODES)
-        _one_of("tracking", "band_polarity", self.band_polarity, POLARITIES)
+        one_of("tracking", "mode", self.mode, MODES)
+        one_of("tracking", "band_polarity", self.band_polarity, POLARITIES)
 
 
 @dataclass(frozen=True)
-class SyncSettings(_Section):
+class SyncSettings(Section):
     """``sync``: the video's frames on the controller clock."""
 
     SECTION: typing.ClassVar[str] = "sync"
@@ -342,11 +251,11 @@ class SyncSettings(_Section):
     still_window_s: float = _f(0.02, "the joints' speed at each end of the log is fitted over this span, s", exclusiveMinimum=0)
 
     def __post_init__(self):
-        _one_of("sync", "method", self.method, ("video", "trigger"))
+        one_of("sync", "method", self.method, ("video", "trigger"))
 
 
 @dataclass(frozen=True)
-class BoardCheckSettings(_Section):
+class BoardCheckSettings(Section):
     """``board_check``: the still-arm check of the board-to-robot transform."""
 
     SECTION: typing.ClassVar[str] = "board_check"
@@ -370,7 +279,7 @@ class BoardCheckSettings(_Section):
 
 
 @dataclass(frozen=True)
-class SweepSettings(_Section):
+class SweepSettings(Section):
     """``sweep``: the swing plane's mapping and the clock refined by the arm's sweep of the trial."""
 
     SECTION: typing.ClassVar[str] = "sweep"
@@ -393,7 +302,7 @@ class SweepSettings(_Section):
 
 
 @dataclass(frozen=True)
-class CalibrationSettings(_Section):
+class CalibrationSettings(Section):
     """``calibration``: the intrinsics from the calib/ shots, and how they are judged."""
 
     SECTION: typing.ClassVar[str] = "calibration"
