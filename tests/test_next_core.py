@@ -56,12 +56,27 @@ def test_next_runs_a_recorded_trial_to_its_next_motion(field_project, capsys):
     assert motion[0].startswith("t_s,q1_rad") and len(motion) > 100
     params = json.loads((res / "trial_1" / "params.json").read_text())
     assert params["verdict"]["status"] in ("ok", "warn", "fail") and params["fit_check"]
+    assert params["optimizer"] == "cmaes"                          # ours, the default
     plan = json.loads((res / "trial_1" / "motion.json").read_text())
+    assert plan["planner"] == "robust"
     assert plan["planned_on_failed_fit"] == (params["verdict"]["status"] == "fail")
     assert (res / "report.html").is_file() and (res / "logs" / "track_1.log").is_file()
     assert f"next motion -> {res / 'trial_1' / 'motion.csv'}" in out
     # the raw files are only read
     assert {p: p.stat().st_mtime_ns for p in (root / "data").rglob("*") if p.is_file()} == before
+
+
+def test_next_method_paper_runs_the_papers_method(tmp_path, capsys):
+    """``--method paper``: config/paper.yaml over the config: the random search of eqs. (2)-(3), w = 0.1
+    and the Section V planner (the pages name custom settings: the budgets here are small)."""
+    root = project(tmp_path / "project")
+    code = main(["--config", str(FIELD / "lab.yaml"), "--config", str(root / "small.yaml"), "next",
+                 str(root / "data" / "field_1" / "trial_1"), "--method", "paper"])
+    assert code == 0, capsys.readouterr().out
+    res = root / "results" / "field_1" / "trial_1"
+    params = json.loads((res / "params.json").read_text())
+    assert params["optimizer"] == "random_search" and params["evaluations"] == SMALL["estimation"]["iterations"]
+    assert json.loads((res / "motion.json").read_text())["planner"] == "paper"
 
 
 def test_next_names_a_missing_earlier_estimate(tmp_path, capsys):
