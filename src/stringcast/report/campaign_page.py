@@ -18,14 +18,15 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from stringcast.core import Campaign, DataError, Settings, TrialFiles, read_json, read_parquet, write_text
+from stringcast.core import (Campaign, DataError, Settings, TrialFiles, read_json, read_parquet, trial_result,
+                             write_text)
 from . import figures as figs
 from .pages import MALFORMED, _common, _env, _fmt, _motion_window, _tracked, closest_approach
 from .verdicts import stage_verdicts
 
-STAGES = (("geometry", "calibration"), ("clock", "sync"), ("tracking", None), ("fit", None))
-"""The campaign table's verdict columns: each stage's file, and the one it refines (read where the
-trial has no sweep)."""
+STAGES = ("geometry", "clock", "tracking", "fit")
+"""The campaign table's verdict columns (geometry and clock: the files they refine where the trial has
+no sweep, :func:`stringcast.core.trial_result`; fit: params.json's verdict)."""
 
 
 def _stage_times(results: Path) -> tuple[list, list]:
@@ -75,10 +76,8 @@ def stage_cells(results: Path, params: dict) -> list[dict]:
     """The verdict columns of one execution (:data:`STAGES`): ``[{"stage", "status", "reason"}]`` (the
     status "not run" where the stage wrote no file; the first reason where it is not ok)."""
     cells = []
-    for stage, before in STAGES:
-        path = results / f"{stage}.json"
-        if not path.is_file() and before:
-            path = results / f"{before}.json"
+    for stage in STAGES:
+        path = trial_result(results, stage)[1]
         doc = params if stage == "fit" else (read_json(path) if path.is_file() else None)
         rows = stage_verdicts({stage: doc})["rows"]
         if not rows:
@@ -152,5 +151,5 @@ def _write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign
     timings, stages = _stage_times(results_dir)
     ctx = _common(campaign, f"Campaign {campaign.name}", settings)
     ctx.update(rows=rows, figures=figures, timings=timings, stages=stages, next_motion=next_motion,
-               verdict_stages=[s for s, _ in STAGES])
+               verdict_stages=STAGES)
     write_text(out, _env().get_template("campaign.html.j2").render(**ctx))
