@@ -32,6 +32,10 @@ POLARITIES = ("auto", "brighter", "darker")
 """``tracking.band_polarity``: a band brighter or darker than the string, or whichever gives more."""
 OPTIMIZERS = ("random_search", "cmaes", "de")
 PLANNERS = ("paper", "robust")
+FIRST_K_S = ("carrying", "max")
+"""``motion.first_k_s``: the least k_s that keeps the hanging strain, or Table 2's largest."""
+SYNC_METHODS = ("video", "trigger")
+"""``sync.method``: the arm in the video, or video.yaml's trigger time."""
 
 
 PARAM_NAMES: tuple[str, ...] = (
@@ -87,7 +91,7 @@ class EstimationSettings(Section):
     """``estimation``: the parameter search (eqs. 2-3) and what params.json keeps."""
 
     SECTION: typing.ClassVar[str] = "estimation"
-    optimizer: str = _f("cmaes", "random_search (eqs. 2-3), cmaes (CMA-ES) or de (SciPy differential evolution)", enum=["random_search", "cmaes", "de"])
+    optimizer: str = _f("cmaes", "random_search (eqs. 2-3), cmaes (CMA-ES) or de (SciPy differential evolution)", enum=list(OPTIMIZERS))
     iterations: int = _f(3000, "candidates evaluated per trial", minimum=1)
     batch: int = _f(64, "candidates simulated per numba batch", minimum=1)
     chi0: float = _f(1.0, "eq. (3): the first sampling radius in chi", exclusiveMinimum=0)
@@ -142,8 +146,8 @@ class MotionSettings(Section):
     start_grasp_box_mm: tuple | None = _f(((-200.0, 900.0), (-100.0, 700.0)),
                                           "start grasp inside [[x_min, x_max], [y_min, y_max]], mm: where the camera sees the hanging string", type="array", minItems=2, maxItems=2, items={"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2})
     first_max_strain: float = _f(0.05, "first plan: k_s raised so the hanging string stretches at most this", exclusiveMinimum=0)
-    first_k_s: str = _f("max", "first plan's k_s: carrying (the least that keeps first_max_strain) or max (Table 2's)", enum=["carrying", "max"])
-    planner: str = _f("robust", "paper: Section V; robust: prefer motions that hit under most of the estimate's best sets", enum=["paper", "robust"])
+    first_k_s: str = _f("max", "first plan's k_s: carrying (the least that keeps first_max_strain) or max (Table 2's)", enum=list(FIRST_K_S))
+    planner: str = _f("robust", "paper: Section V; robust: prefer motions that hit under most of the estimate's best sets", enum=list(PLANNERS))
     robust_screen_mm: float = _f(20.0, "robust: only candidates within this of the target edge (best set) are scored on the ensemble, mm", minimum=0)
     robust_min_share: float = _f(0.0, "robust: the first hit must hit under at least this share of the sets", minimum=0, maximum=1)
     residual_correction: bool = _f(True, "aim at the target minus the model's error on the played motion's tracked tip")
@@ -155,7 +159,7 @@ class MotionSettings(Section):
 
     def __post_init__(self):
         one_of("motion", "planner", self.planner, PLANNERS)
-        one_of("motion", "first_k_s", self.first_k_s, ("carrying", "max"))
+        one_of("motion", "first_k_s", self.first_k_s, FIRST_K_S)
         if self.aim_radius_mm is not None and not float(self.aim_radius_mm) > 0:
             raise ConfigError(f"motion.aim_radius_mm: > 0 mm or null; got {self.aim_radius_mm}")
 
@@ -213,12 +217,12 @@ class TrackingSettings(Section):
     verdict_rest_jitter_mm: float = _f(1.0, "warn when the hanging string's points jitter more (p95 of their deviations at rest), mm", minimum=0)
     verdict_length_share: float = _f(0.3, "warn naming the string's length_mm when the string seen from the grasp to its free end differs from L by more than this share (median over the frames judged)", exclusiveMinimum=0)
     verdict_past_roi_share: float = _f(0.05, "warn naming the string's length_mm when the string runs past L + roi_margin_mm from the grasp in more than this share of the frames judged", minimum=0, maximum=1)
-    mode: str = _f("markerless", "markerless: points by arc length from the grasp; markers: a band at each mass point", enum=["markerless", "markers"])
+    mode: str = _f("markerless", "markerless: points by arc length from the grasp; markers: a band at each mass point", enum=list(MODES))
     band_width_mm: float = _f(8.0, "markers: the bands' length along the string, mm", exclusiveMinimum=0)
     band_contrast_min: float = _f(0.25, "markers: a band's grey differs from the string's by >= this x the string's contrast", exclusiveMinimum=0)
     band_tolerance: float = _f(0.35, "markers: a band lies within this share of the point spacing of its expected place", exclusiveMinimum=0, maximum=0.5)
     band_length_tol: float = _f(0.5, "markers: its measured length within +- this share of band_width_mm", exclusiveMinimum=0, maximum=1)
-    band_polarity: str = _f("auto", "markers: brighter or darker than the string; auto: per frame, whichever gives more bands", enum=["auto", "brighter", "darker"])
+    band_polarity: str = _f("auto", "markers: brighter or darker than the string; auto: per frame, whichever gives more bands", enum=list(POLARITIES))
     band_step_px: float = _f(0.25, "markers: sampling step along the centreline, px", exclusiveMinimum=0)
 
     def __post_init__(self):
@@ -231,7 +235,7 @@ class SyncSettings(Section):
     """``sync``: the video's frames on the controller clock."""
 
     SECTION: typing.ClassVar[str] = "sync"
-    method: str = _f("video", "video: the arm in the video against the forward kinematics; trigger: video.yaml's trigger time", enum=["video", "trigger"])
+    method: str = _f("video", "video: the arm in the video against the forward kinematics; trigger: video.yaml's trigger time", enum=list(SYNC_METHODS))
     search_ms: float = _f(10.0, "fine search +- around the trigger time (or the coarse estimate), ms", exclusiveMinimum=0)
     step_ms: float = _f(0.25, "fine search step, ms", exclusiveMinimum=0)
     coarse_step_ms: float = _f(0.5, "coarse search step without a trigger time, ms", exclusiveMinimum=0)
@@ -251,7 +255,7 @@ class SyncSettings(Section):
     still_window_s: float = _f(0.02, "the joints' speed at each end of the log is fitted over this span, s", exclusiveMinimum=0)
 
     def __post_init__(self):
-        one_of("sync", "method", self.method, ("video", "trigger"))
+        one_of("sync", "method", self.method, SYNC_METHODS)
 
 
 @dataclass(frozen=True)
