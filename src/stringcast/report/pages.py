@@ -192,6 +192,8 @@ def _parameter_figures(params: dict, model: ModelSettings) -> tuple[list, list, 
     diagnostics = params.get("diagnostics") or {}
     diag = {d["name"]: (10 ** d["log10_min"], 10 ** d["log10_max"], d["status"])
             for d in diagnostics.get("parameters", []) if d.get("name") in PARAM_NAMES}
+    mu = np.asarray(params["mu"], float)
+    bounds = at_bounds(values, lo, hi, mu, (mu_lo, mu_hi))
     figures.append({"id": "fig-params", "caption": "Estimated coefficients on log axes within Table 2's ranges "
                     "(paper Fig. 11), with the range of the parameter sets whose E is within "
                     f"{diagnostics.get('near_best_tol', 0.05) * 100:.0f} % of the best: a short "
@@ -199,9 +201,7 @@ def _parameter_figures(params: dict, model: ModelSettings) -> tuple[list, list, 
                     "A red ring: the estimate sits at a bound of its range, where the range, not the footage, "
                     "decided it.",
                     "src": figs.parameters(list(PARAM_NAMES), values, lo, hi, diag,
-                                           at_bound=at_bounds(values, lo, hi, [], (mu_lo, mu_hi))[0])})
-    mu = np.asarray(params["mu"], float)
-    bounds = at_bounds(values, lo, hi, mu, (mu_lo, mu_hi))
+                                           at_bound=bounds[0])})
     figures.append({"id": "fig-masses", "caption": "Estimated relative mass per point (paper Table 4); orange: "
                     "points where a weight or stiff section is known to sit.",
                     "src": figs.masses(mu, params.get("special_points", []))})
