@@ -76,7 +76,8 @@ def trial_steps(campaign: str, k: int, has_calib: bool, workers: int) -> list[St
 
     w = {rule: str(min(n, workers)) for rule, n in RULE_WORKERS.items()}
     raw = TrialFiles.in_folder(trial)           # the files the workflow's trial_video and rules name
-    video, joints = ("--video", str(raw.video)), ("--joints", f"{trial}/joints.csv")
+    video, joints = ("--video", str(raw.video)), ("--joints", str(raw.joints))
+    played = ("--played-motion", str(raw.played))
     frames = ("--frames", f"{out}/frames.npy")
     geo, clock = f"{out}/geometry.json", f"{out}/clock.json"
     steps = [_step("decode", ("decode", *video, "--out", f"{out}/frames.npy"),
@@ -90,7 +91,7 @@ def trial_steps(campaign: str, k: int, has_calib: bool, workers: int) -> list[St
     steps += [
         _step("calibrate", ("calibrate", *video, *joints, *calib, "--campaign", camp,
                            "--out", f"{out}/calibration.json"), (f"{out}/calibration.json",)),
-        _step("sync", ("sync", *video, "--video-meta", f"{trial}/video.yaml", *joints, "--calibration",
+        _step("sync", ("sync", *video, "--video-meta", str(raw.video_meta), *joints, "--calibration",
                       f"{out}/calibration.json", "--campaign", camp, "--out", f"{out}/sync.json", *frames,
                       "--workers", w["sync"]), (f"{out}/sync.json",)),
         _step("sweep", ("sweep", *video, *joints, "--calibration", f"{out}/calibration.json", "--sync",
@@ -112,10 +113,10 @@ def trial_steps(campaign: str, k: int, has_calib: bool, workers: int) -> list[St
                                       f"{out}/tracks.parquet", *joints, "--campaign",
                                       camp, "--out", f"{out}/prediction.json"), (f"{out}/prediction.json",)))
     steps += [
-        _step("plan", ("plan", "--params", f"{out}/params.json", "--played-motion", f"{trial}/motion.json",
+        _step("plan", ("plan", "--params", f"{out}/params.json", *played,
                       "--tracks", f"{out}/tracks.parquet", *joints, "--campaign", camp,
                       "--seed", str(k), "--out-dir", out), (f"{out}/motion.csv", f"{out}/motion.json")),
-        _step("report_trial", ("report-trial", *video, *joints, "--played-motion", f"{trial}/motion.json",
+        _step("report_trial", ("report-trial", *video, *joints, *played,
                                "--geometry", geo, "--clock", clock, "--tracks", f"{out}/tracks.parquet",
                                "--tracking", f"{out}/tracking.json", "--params", f"{out}/params.json",
                                "--fit", f"{out}/fit.parquet", "--next-motion", f"{out}/motion.csv",

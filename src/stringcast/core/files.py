@@ -231,7 +231,7 @@ class TrialFiles:
 
     @property
     def name(self) -> str:
-        """The trial as messages name it: the video's folder (a frame folder's parent)."""
+        """The trial as messages name it: the folder of its joint log (the trial's folder)."""
         return str(self.joints.parent)
 
 
