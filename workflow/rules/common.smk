@@ -108,13 +108,23 @@ def lab_entries_for(command):
 
 @functools.cache
 def _lab_entries(campaign):
-    """campaign_lab_entries, read once per campaign (every rule of every trial asks)."""
-    path = Path("data", campaign, "campaign.yaml")
+    """lab_entries_for's entries, read once per campaign (every rule of every trial asks)."""
+    path, doc = _campaign_doc(campaign)
     try:
-        e = campaign_entries(load_yaml(path) or {}, config, path)
+        e = campaign_entries(doc, config, path)
     except (ConfigError, KeyError) as exc:
         raise WorkflowError(f"stringcast: {path}: {exc}") from exc
     return {k: (v[1] if isinstance(v, tuple) else v) for k, v in e.items()}
+
+
+@functools.cache
+def _campaign_doc(campaign):
+    """(path, mapping) of data/<campaign>/campaign.yaml, read once per run."""
+    path = Path("data", campaign, "campaign.yaml")
+    try:
+        return path, load_yaml(path) or {}
+    except ConfigError as exc:
+        raise WorkflowError(f"stringcast: {path}: {exc}") from exc
 
 
 def campaigns():
@@ -183,7 +193,7 @@ def campaign_lab_yaml(wildcards):
 
 @functools.cache
 def _lab_yaml(campaign):
-    doc = load_yaml(Path("data", campaign, "campaign.yaml")) or {}
+    doc = _campaign_doc(campaign)[1]
     text = "# data/{0}/campaign.yaml less its target, for the stages that do not read it\n{1}".format(
         campaign, yaml.safe_dump(without_target(doc), sort_keys=True)
     )
