@@ -183,8 +183,9 @@ def test_cmaes_reaches_a_corner_optimum(settings):
 
 def test_cmaes_runs_share_the_budget(settings):
     """cmaes_runs = 2: at M = 1 both runs start at the centre; at M = 2 the first refines chi_best
-    with sigma0 / 2 and the second starts at the centre again with sigma0. Each run converges on
-    its half of the budget, and the best of both is the estimate."""
+    with sigma0 / 2 and the second starts at the centre again with sigma0. The runs step side by
+    side (each generation both populations in one batch), each converges on its half of the budget,
+    and the best of both is the estimate."""
     corner = np.r_[np.ones(6), np.zeros(6)]
     estimation = _est(settings, optimizer="cmaes", iterations=1200, batch=32, cmaes_runs=2, cmaes_first_look=0)
     pop = 4 + int(3 * np.log(12))
@@ -193,14 +194,19 @@ def test_cmaes_runs_share_the_budget(settings):
         est = es.estimate(_problem_stub(), settings.model, estimation, np.full(12, 0.2), M, seed=0, objective=rec)
         cand = np.concatenate(rec.calls)
         assert len(cand) == 1200 and est.E_m < 1e-6
-        second = n_first + (1200 - n_first) // 2 // pop * pop   # first candidate of run 2
-        E = np.sum((cand - corner) ** 2, axis=1)
-        assert E[:second].min() < 1e-6 and E[second:].min() < 1e-6                        # each run converged
-        assert np.abs(cand[n_first:n_first + pop].mean(axis=0) - start).mean() < 0.15, M  # run 1's start
-        assert np.abs(cand[second:second + pop].mean(axis=0) - 0.5).mean() < 0.15, M      # run 2: the centre
-        assert np.abs(cand[second - pop:second].mean(axis=0) - corner).mean() < 0.15      # not where run 1 ended
-        spread = np.abs(cand[n_first:n_first + pop] - start).mean()
-        assert spread < (0.3 / M) and spread > 0.3 / M / 4, (M, spread)                  # step sigma0 / M
+        rounds = (1200 - n_first) // 2 // pop                       # generations of each run
+        calls = [len(c) for c in rec.calls]
+        assert calls[int(n_first > 0):][:rounds] == [2 * pop] * rounds   # both populations in each batch
+        steps = cand[n_first:n_first + 2 * pop * rounds].reshape(rounds, 2, pop, 12)
+        run1, run2 = steps[:, 0], steps[:, 1]
+        E1, E2 = (np.sum((r - corner) ** 2, axis=2) for r in (run1, run2))
+        assert E1.min() < 1e-6 and E2.min() < 1e-6                                 # each run converged
+        assert np.abs(run1[0].mean(axis=0) - start).mean() < 0.15, M                 # run 1's start
+        assert np.abs(run2[0].mean(axis=0) - 0.5).mean() < 0.15, M                   # run 2: the centre
+        spread = np.abs(run1[0] - start).mean()
+        assert spread < (0.3 / M) and spread > 0.3 / M / 4, (M, spread)              # step sigma0 / M
+        spread2 = np.abs(run2[0] - 0.5).mean()
+        assert spread2 > 0.3 / 4, (M, spread2)                                       # run 2: the full step
 
 
 def test_partly_blown_up_search_says_so(settings):

@@ -29,7 +29,7 @@ its E and the search history. ``estimation`` is the estimation settings
   estimate): it is evaluated first and CMA-ES starts at the centre of the box
   (``cmaes_first_start: best`` starts at chi_best instead); later trials start at
   chi_best; (c) when CMA-ES converges with budget left it restarts from the best
-  point; (d) ``cmaes_runs`` runs share the budget (default 1): the first from chi_best (at
+  point; (d) ``cmaes_runs`` runs (default 2) share the budget and step side by side: the first from chi_best (at
   M = 1 the centre), the others from the centre with the full step. Candidates that blow up
   are told a finite worst value; (e) ``cmaes_first_look`` = L > 0: the first L candidates are
   eq. (3) at m = 0 around chi_best (chi_best itself, then chi_best + chi0 / M RAND(-1, 1)
@@ -119,14 +119,19 @@ def random_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: 
 
 def cmaes_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: np.random.Generator,
                  estimation: EstimationSettings) -> None:
-    """CMA-ES (``cma.CMAEvolutionStrategy``, ask/tell) in [0, 1]^D (module doc); one generation per batch
-    (a population larger than ``batch`` is evaluated in chunks of ``batch``). Restarts from the best
+    """CMA-ES (``cma.CMAEvolutionStrategy``, ask/tell) in [0, 1]^D (module doc). Restarts from the best
     point with the initial step when CMA-ES stops early (converged) and budget is left.
 
-    ``cmaes_runs`` (default 1) runs share the budget equally: the first from chi_best with the
+    ``cmaes_runs`` (default 2) runs share the budget equally: the first from chi_best with the
     step sigma0 / M (at M = 1 from the centre), the others from the centre with sigma0, so that
     a later trial can leave the basin an earlier one settled in (E is multi-modal: on the lab
-    strings a run ends in a weak-hand-spring basin about one time in three)."""
+    strings a run ends in a weak-hand-spring basin about one time in three).
+
+    The runs are independent, so they step side by side: each generation, every run's population
+    is simulated in one batch (chunks of ``batch``), which fills the batch kernel's blocks and
+    cores (:func:`stringcast.model.batch_kernels.simulate_batch_kernel`) where one population of
+    11 leaves a block of 16 lanes part empty and one core idle. Each run draws its seeds from its
+    own generator (``rng.spawn``), so its path is the same however the runs are stepped."""
     d = len(chi_best)
     options = cma_options(estimation)
     sigma0 = float(estimation.cmaes_sigma0)
@@ -142,13 +147,33 @@ def cmaes_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: n
         rec(first[None])  # chi_best is evaluated, but not an estimate yet: start at the centre
         first = np.full(d, 0.5)
     starts = [(first, sigma0 / M)] + [(np.full(d, 0.5), sigma0)] * (runs - 1)
-    results = []
-    for r, (x0, s0) in enumerate(starts):
-        keep = rec.remaining - rec.remaining // (runs - r)      # budget left for the later runs
-        results.append((*_cma_run(rec, x0, s0, popsize, batch, rng, keep, options), s0))
+    share = rec.remaining // runs
+    quotas = [share] * (runs - 1) + [rec.remaining - share * (runs - 1)]
+    gens = [_cma_run(x0, s0, popsize, quota, child, options)
+            for (x0, s0), quota, child in zip(starts, quotas, rng.spawn(runs))]
+    results = [(np.inf, x0, s0) for x0, s0 in starts]
+    asked = {}
+    for r, gen in enumerate(gens):
+        _advance(gen, None, r, asked, results, starts)
+    while asked:
+        order = sorted(asked)
+        xs = np.concatenate([asked[r] for r in order])
+        E = np.concatenate([rec(xs[a:a + batch]) for a in range(0, len(xs), batch)])
+        for r, part in zip(order, np.split(E, np.cumsum([len(asked[r]) for r in order])[:-1])):
+            _advance(gens[r], part, r, asked, results, starts)
     _, best, s0 = min(results, key=lambda x: x[0])
     while rec.remaining > 0:  # spend the rest (< popsize, or after a stop) around the best run's best point
         rec(np.clip(best + (s0 / 4) * rng.standard_normal((min(batch, rec.remaining), d)), 0.0, 1.0))
+
+
+def _advance(gen, E, r: int, asked: dict, results: list, starts: list) -> None:
+    """Tell run ``r`` its population's E (None: start it); keep what it asks next in ``asked``, or its
+    best (E, point, sigma0) in ``results`` once it is done."""
+    try:
+        asked[r] = gen.send(E)
+    except StopIteration as done:
+        asked.pop(r, None)
+        results[r] = (*done.value, starts[r][1])
 
 
 def cma_options(estimation: EstimationSettings) -> dict:
@@ -167,24 +192,26 @@ def cma_options(estimation: EstimationSettings) -> dict:
     return dict(options)
 
 
-def _cma_run(rec: Recorder, x0: np.ndarray, sigma0: float, popsize: int, batch: int, rng: np.random.Generator,
-             keep: int, options: Mapping | None = None) -> tuple[float, np.ndarray]:
-    """One CMA-ES run from x0 until ``keep`` evaluations of the budget are left; returns its best (E, point).
+def _cma_run(x0: np.ndarray, sigma0: float, popsize: int, quota: int, rng: np.random.Generator,
+             options: Mapping | None = None):
+    """One CMA-ES run from x0 over ``quota`` evaluations, as a generator: it yields each population
+    clipped to [0, 1] ((popsize, D)), is sent its E ((popsize,), m), and returns its best (E, point).
     ``options`` (checked by :func:`cma_options`) override the defaults below. CMA-ES restarts from the
     best point, with sigma0, when it stops."""
     import cma
 
     best = (np.inf, x0)
-    while rec.remaining - keep >= popsize:
+    while quota >= popsize:
         es = cma.CMAEvolutionStrategy(x0, sigma0, {
             "popsize": popsize, "seed": int(rng.integers(1, 2**31 - 1)),
             "verbose": -9, "tolfun": 1e-12, "tolx": 1e-6, **(options or {})})
         if es.stop():
             break
-        while rec.remaining - keep >= popsize and not es.stop():
+        while quota >= popsize and not es.stop():
             xs = np.asarray(es.ask())
             inside = np.clip(xs, 0.0, 1.0)
-            E = np.concatenate([rec(inside[a:a + batch]) for a in range(0, popsize, batch)])
+            E = np.asarray((yield inside), float)
+            quota -= len(E)
             finite = E[np.isfinite(E)]
             worst = (2.0 * finite.max() + 1.0) if finite.size else 1e6
             fit = np.where(np.isfinite(E), E, worst) * (1.0 + np.sum((xs - inside) ** 2, axis=1))
