@@ -9,7 +9,8 @@ the same files (``tests/workflow/test_workflow.py`` compares them) and Snakemake
 ``next`` wrote as its own on a later batch run. Snakemake stays the tool for reprocessing many
 trials, for profiles and for Slurm; ``next`` needs neither it nor a server.
 
-The step list mirrors ``workflow/rules/*.smk``: a change to a rule's command line is a change here.
+The steps' input files come from the contract the rules are checked against
+(:mod:`stringcast.core.ports`); their outputs and other options mirror ``workflow/rules/*.smk``.
 """
 from __future__ import annotations
 
@@ -21,6 +22,7 @@ from pathlib import Path
 
 from stringcast.check import check_campaign
 from stringcast.core import DataError, TrialFiles, claim_results, load_config
+from stringcast.core.ports import input_argv, trial_inputs
 
 RULE_WORKERS = {"sync": 4, "sweep": 2, "track": 4}
 """The rules' ``threads`` for the stages that take ``--workers`` (capped at this machine's CPUs)."""
@@ -60,69 +62,46 @@ def trial_location(trial_dir: str | Path) -> tuple[Path, str, int]:
 
 
 def trial_steps(campaign: str, k: int, has_calib: bool, workers: int) -> list[Step]:
-    """The steps that make trial ``k``'s results, as the workflow's rules run them.
+    """The steps that make trial ``k``'s results, as the workflow's rules run them: each command's
+    input files from :data:`stringcast.core.ports.INPUTS` (:func:`~stringcast.core.ports.input_argv`),
+    its outputs and other options as its rule writes them.
 
     Args:
         campaign, k: the trial (``data/<campaign>/trial_<k>``). has_calib: the campaign has ``calib/``.
         workers: the most worker processes a stage may use.
     """
-    data, res = f"data/{campaign}", f"results/{campaign}"
-    trial, out = f"{data}/trial_{k}", f"{res}/trial_{k}"
-    camp = f"{data}/campaign.yaml"
+    res, out = f"results/{campaign}", f"results/{campaign}/trial_{k}"
     logs = {"calib_views": f"{res}/logs/calib_views.log", "report_trial": f"{res}/logs/report_{k}.log"}
-
-    def _step(rule: str, argv: tuple[str, ...], outputs: tuple[str, ...]) -> Step:
-        return Step(rule, argv, outputs, logs.get(rule, f"{res}/logs/{rule}_{k}.log"))   # the log the rule names
-
+    # the files the workflow's rules name (the video found as its trial_video finds it)
+    files = trial_inputs(campaign, k, TrialFiles.in_folder(f"data/{campaign}/trial_{k}"), has_calib)
     w = {rule: str(min(n, workers)) for rule, n in RULE_WORKERS.items()}
-    raw = TrialFiles.in_folder(trial)           # the files the workflow's trial_video and rules name
-    video, joints = ("--video", str(raw.video)), ("--joints", str(raw.joints))
-    played = ("--played-motion", str(raw.played))
-    frames = ("--frames", f"{out}/frames.npy")
-    geo, clock = f"{out}/geometry.json", f"{out}/clock.json"
-    steps = [_step("decode", ("decode", *video, "--out", f"{out}/frames.npy"),
-                   (f"{out}/frames.npy", f"{out}/frames.json"))]
-    calib: tuple[str, ...] = ("--calib-views", "--intrinsics")      # none: the rule's empty inputs
+
+    def _step(rule: str, rest: tuple[str, ...], outputs: tuple[str, ...]) -> Step:
+        command = rule.replace("_", "-")
+        return Step(rule, (command, *input_argv(command, files), *rest), outputs,
+                    logs.get(rule, f"{res}/logs/{rule}_{k}.log"))   # the log the rule names
+
+    geo, clock = files["geometry"], files["clock"]
+    steps = [_step("decode", ("--out", files["frames"]), (files["frames"], f"{out}/frames.json"))]
     if has_calib:
-        views, intrinsics = f"{res}/calib_views.npz", f"{res}/intrinsics.json"
-        calib = ("--calib-views", views, "--intrinsics", intrinsics)
-        steps.append(_step("calib_views", ("calib-views", "--calib-dir", f"{data}/calib", "--campaign", camp,
-                                          "--out", views, "--out-intrinsics", intrinsics), (views, intrinsics)))
+        views, intrinsics = files["calib_views"], files["intrinsics"]
+        steps.append(_step("calib_views", ("--out", views, "--out-intrinsics", intrinsics), (views, intrinsics)))
+    tracked = (files["tracks"], files["tracking"], f"{out}/tracking_overlay.png")
     steps += [
-        _step("calibrate", ("calibrate", *video, *joints, *calib, "--campaign", camp,
-                           "--out", f"{out}/calibration.json"), (f"{out}/calibration.json",)),
-        _step("sync", ("sync", *video, "--video-meta", str(raw.video_meta), *joints, "--calibration",
-                      f"{out}/calibration.json", "--campaign", camp, "--out", f"{out}/sync.json", *frames,
-                      "--workers", w["sync"]), (f"{out}/sync.json",)),
-        _step("sweep", ("sweep", *video, *joints, "--calibration", f"{out}/calibration.json", "--sync",
-                       f"{out}/sync.json", "--campaign", camp, "--out-geometry", geo, "--out-clock", clock, *frames,
-                       "--workers", w["sweep"]), (geo, clock)),
-        _step("track", ("track", *video, *joints, "--geometry", geo, "--clock", clock, "--campaign", camp,
-                       "--out", f"{out}/tracks.parquet", "--out-quality", f"{out}/tracking.json", "--overlay",
-                       f"{out}/tracking_overlay.png", *frames, "--workers", w["track"]),
-             (f"{out}/tracks.parquet", f"{out}/tracking.json", f"{out}/tracking_overlay.png")),
+        _step("calibrate", ("--out", files["calibration"]), (files["calibration"],)),
+        _step("sync", ("--out", files["sync"], "--workers", w["sync"]), (files["sync"],)),
+        _step("sweep", ("--out-geometry", geo, "--out-clock", clock, "--workers", w["sweep"]), (geo, clock)),
+        _step("track", ("--out", tracked[0], "--out-quality", tracked[1], "--overlay", tracked[2],
+                        "--workers", w["track"]), tracked),
+        _step("estimate", ("--trial", str(k), "--out-params", files["params"], "--out-fit", files["fit"]),
+              (files["params"], files["fit"])),
     ]
-    prev = ("--prev", f"{res}/trial_{k - 1}/params.json") if k > 1 else ("--prev",)
-    steps.append(_step("estimate", ("estimate", "--tracks", f"{out}/tracks.parquet", *joints, "--campaign", camp,
-                                   *prev, "--geometry", geo, "--clock", clock, "--tracking", f"{out}/tracking.json",
-                                   "--trial", str(k), "--out-params", f"{out}/params.json", "--out-fit",
-                                   f"{out}/fit.parquet"),
-                      (f"{out}/params.json", f"{out}/fit.parquet")))
     if k > 1:
-        steps.append(_step("predict", ("predict", "--params", f"{res}/trial_{k - 1}/params.json", "--tracks",
-                                      f"{out}/tracks.parquet", *joints, "--campaign",
-                                      camp, "--out", f"{out}/prediction.json"), (f"{out}/prediction.json",)))
+        steps.append(_step("predict", ("--out", files["prediction"]), (files["prediction"],)))
+    motion = (files["next_motion"], files["next_motion_meta"])
     steps += [
-        _step("plan", ("plan", "--params", f"{out}/params.json", *played,
-                      "--tracks", f"{out}/tracks.parquet", *joints, "--campaign", camp,
-                      "--seed", str(k), "--out-dir", out), (f"{out}/motion.csv", f"{out}/motion.json")),
-        _step("report_trial", ("report-trial", *video, *joints, *played,
-                               "--geometry", geo, "--clock", clock, "--tracks", f"{out}/tracks.parquet",
-                               "--tracking", f"{out}/tracking.json", "--params", f"{out}/params.json",
-                               "--fit", f"{out}/fit.parquet", "--next-motion", f"{out}/motion.csv",
-                               "--next-motion-meta", f"{out}/motion.json", "--prediction",
-                               *((f"{out}/prediction.json",) if k > 1 else ()), "--campaign", camp,
-                               "--out", f"{out}/report.html"), (f"{out}/report.html",)),
+        _step("plan", ("--seed", str(k), "--out-dir", out), motion),
+        _step("report_trial", ("--out", f"{out}/report.html"), (f"{out}/report.html",)),
     ]
     return steps
 

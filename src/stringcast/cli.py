@@ -111,9 +111,17 @@ def reads_target(command: str) -> bool:
 
 
 def _run(command: str, args, *positional, **keywords):
-    """Run ``command``'s stage on ``positional`` (its own order), ``keywords`` and the settings it takes."""
+    """Run ``command``'s stage on ``positional`` (its own order), ``keywords``, the settings it takes and,
+    by name, each of the command's inputs that it takes and the handler did not pass
+    (:func:`stringcast.core.ports.stage_inputs`: a new input needs no handler)."""
+    import inspect
+
+    from stringcast.core.ports import stage_inputs
+
     func = stage_entry(command)
-    return func(*positional, **keywords, **_settings(func, args))
+    settings = _settings(func, args)
+    bound = {**inspect.signature(func).bind_partial(*positional, **keywords).arguments, **settings}
+    return func(*positional, **keywords, **stage_inputs(func, command, args, bound), **settings)
 
 
 _LOG = JobLog()

@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 
 from stringcast.core import METHOD_CONFIGS
+from stringcast.core.ports import HELP, INPUTS, add_input_options
 
 
 class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
@@ -33,6 +34,8 @@ def build_parser(handlers: dict, description: str) -> argparse.ArgumentParser:
     def add(name, help_):
         sp = sub.add_parser(name, help=help_, description=help_, formatter_class=_HelpFormatter)
         sp.set_defaults(func=handlers[name])
+        if name in INPUTS:
+            add_input_options(sp, name)
         return sp
 
     _add_analysis_commands(add)
@@ -40,96 +43,52 @@ def build_parser(handlers: dict, description: str) -> argparse.ArgumentParser:
     return p
 
 
-CAMPAIGN_HELP = "data/<campaign>/campaign.yaml: the campaign's string, target, arm and set-up"
+CAMPAIGN_HELP = HELP["campaign"]
 SEED_HELP = "random seed of {}"
-VIDEO_HELP = "the trial's video: video.<ext>, a video/ folder of frames, or video.cihx (docs/data_contract.md)"
-
-
-def _trial_files(sp, meta: bool) -> None:
-    """The trial's raw files a stage reads (stringcast.core.TrialFiles): --video, --joints, and --video-meta."""
-    sp.add_argument("--video", required=True, help=VIDEO_HELP)
-    sp.add_argument("--joints", required=True, help="the trial's joints.csv (t_s, q1_rad .. qJ_rad)")
-    if meta:
-        sp.add_argument("--video-meta", required=True, help="the trial's video.yaml (fps, frames, trigger_time_s)")
 
 
 def _add_analysis_commands(add) -> None:
-    """calib-views, calibrate, sync, sweep, track, estimate, predict: one trial's analysis, stage by stage (the rules call them)."""
-    campaign_help = CAMPAIGN_HELP
-    frames_help = "the trial's frames.npy (`stringcast decode`), read instead of decoding the video"
+    """decode, calib-views, calibrate, sync, sweep, track, estimate, predict: one trial's analysis, stage by
+    stage (the rules call them). Their input files' options come from :data:`stringcast.core.ports.INPUTS`."""
     sp = add("decode", "decode the trial's video once -> frames.npy (+ frames.json), read by sync, "
-                                   "sweep and track")
-    sp.add_argument("--video", required=True, help=VIDEO_HELP)
+                       "sweep and track")
     sp.add_argument("--out", required=True, help="frames.npy to write: (F, H, W) grey frames")
 
     sp = add("calib-views", "find the ChArUco board's views in a campaign's calib/ once -> calib_views.npz")
-    sp.add_argument("--calib-dir", required=True, help="data/<campaign>/calib/: ChArUco clip or images")
-    sp.add_argument("--campaign", required=True, help=campaign_help)
     sp.add_argument("--out", required=True, help="calib_views.npz to write (the views' corners, for calibrate)")
     sp.add_argument("--out-intrinsics", help="intrinsics.json to write as well: the views' own intrinsics, fitted "
                                              "and judged once for every trial's calibrate")
 
     sp = add("calibrate", "ChArUco calibration of one trial -> calibration.json")
-    _trial_files(sp, meta=False)
     sp.add_argument("--calib-dir", help="data/<campaign>/calib/: ChArUco clip or views for the camera intrinsics; "
                                         "if not given or not a folder, the board's homography only")
-    sp.add_argument("--calib-views", nargs="?", help="the campaign's calib_views.npz (its board views, found once); "
-                                                     "read instead of searching the calib folder")
-    sp.add_argument("--intrinsics", nargs="?", help="the campaign's intrinsics.json (fitted to those views once by the "
-                                         "calib_views rule); read instead of refitting them (the same result)")
-    sp.add_argument("--campaign", required=True, help=campaign_help)
     sp.add_argument("--out", required=True, help="calibration.json to write (intrinsics, board pose, px errors)")
 
     sp = add("sync", "video-to-controller clock offset -> sync.json")
-    _trial_files(sp, meta=True)
-    sp.add_argument("--calibration", required=True, help="the trial's calibration.json")
-    sp.add_argument("--campaign", required=True, help=campaign_help)
     sp.add_argument("--out", required=True, help="sync.json to write (offset in s: controller time of frame 0)")
-    sp.add_argument("--frames", help=frames_help)
     sp.add_argument("--workers", default=1, help="processes matching frames side by side (with --frames)")
 
     sp = add("sweep", "the mapping and the clock refined by the arm's sweep -> geometry.json, clock.json")
-    _trial_files(sp, meta=False)
-    sp.add_argument("--calibration", required=True, help="the trial's calibration.json")
-    sp.add_argument("--sync", required=True, help="the trial's sync.json")
-    sp.add_argument("--campaign", required=True, help=campaign_help)
     sp.add_argument("--out-geometry", required=True, help="geometry.json to write (calibration.json's schema, refined)")
     sp.add_argument("--out-clock", required=True, help="clock.json to write (sync.json's schema, the offset corrected)")
-    sp.add_argument("--frames", help=frames_help)
     sp.add_argument("--workers", default=1, help="processes reading the frames' link rows side by side")
 
     sp = add("track", "markerless tracking -> tracks.parquet, tracking.json")
-    _trial_files(sp, meta=False)
-    sp.add_argument("--geometry", required=True, help="the trial's geometry.json (or calibration.json)")
-    sp.add_argument("--clock", required=True, help="the trial's clock.json (or sync.json)")
-    sp.add_argument("--campaign", required=True, help=campaign_help)
     sp.add_argument("--out", required=True, help="tracks.parquet to write: frame, t_s, point, x_m, y_m, valid "
                                                  "(m, robot frame; point 0 the grasp)")
     sp.add_argument("--out-quality", help="tracking.json to write: the tracking's self-measures and verdict "
                                           "(default: beside --out)")
     sp.add_argument("--overlay", help="tracking_overlay.png to write (tracked points on frames); "
                                       "if not given, none")
-    sp.add_argument("--frames", help=frames_help)
     sp.add_argument("--workers", default=1, help="processes tracking frames side by side (with --frames)")
 
     sp = add("estimate", "fit the model's parameters -> params.json, fit.parquet")
-    sp.add_argument("--tracks", required=True, help="the trial's tracks.parquet")
-    sp.add_argument("--joints", required=True, help="the trial's joints.csv (t_s, q1_rad .. qJ_rad)")
-    sp.add_argument("--campaign", required=True, help=campaign_help)
-    sp.add_argument("--prev", nargs="?", help="previous trial's params.json (chi_best of eq. 3); none for trial 1")
-    for stage, what in (("geometry", "geometry.json (or calibration.json)"), ("clock", "clock.json (or sync.json)"),
-                        ("tracking", "tracking.json")):
-        sp.add_argument(f"--{stage}", required=True, help=f"the trial's {what}: its verdict joins the fit's")
     sp.add_argument("--trial", required=True, help="trial index k = executions so far (M of eq. 3)")
     sp.add_argument("--out-params", required=True, help="params.json to write: coefficients, masses, E in mm")
     sp.add_argument("--out-fit", required=True, help="fit.parquet to write: tracked and simulated points per "
                                                      "frame (m)")
 
     sp = add("predict", "the previous trial's estimate predicting this trial's tip -> prediction.json")
-    sp.add_argument("--params", required=True, help="the previous trial's params.json (the estimate that predicts)")
-    sp.add_argument("--tracks", required=True, help="this trial's tracks.parquet (the tip compared)")
-    sp.add_argument("--joints", required=True, help="this trial's joints.csv (the measured joints that drive the model)")
-    sp.add_argument("--campaign", required=True, help=campaign_help)
     sp.add_argument("--out", required=True, help="prediction.json to write: the tip's error, mm (median, p95), "
                                                  "frames compared, verdict")
 
@@ -141,37 +100,19 @@ def _add_planning_and_tools(add) -> None:
     plan_seed_help = seed_help.format("the planner's search (beside the config's motion.seed)")
 
     sp = add("plan-first", "first motion with Table 2's minimum parameters")
-    sp.add_argument("--campaign", required=True, help=campaign_help)
     sp.add_argument("--out-dir", required=True, help="folder for motion.csv (t_s, q1_rad ..) and motion.json")
     sp.add_argument("--seed", default=0, help=plan_seed_help)
 
-    sp = add("plan", "next motion from estimated parameters")
-    sp.add_argument("--params", required=True, help="the trial's params.json (the estimate)")
-    sp.add_argument("--played-motion", required=True, help="motion.json of the motion just played")
-    sp.add_argument("--tracks", help="tracks.parquet of the played trial (motion.residual_correction)")
-    sp.add_argument("--joints", help="joints.csv of the played trial (motion.residual_correction)")
-    sp.add_argument("--campaign", required=True, help=campaign_help)
+    sp = add("plan", "next motion from estimated parameters (--tracks and --joints: motion.residual_correction)")
     sp.add_argument("--out-dir", required=True, help="folder for the next motion's motion.csv and motion.json")
     sp.add_argument("--seed", default=0, help=plan_seed_help)
 
     sp = add("report-trial", "self-contained HTML page for one trial")
-    sp.add_argument("--video", required=True, help=VIDEO_HELP)
-    sp.add_argument("--joints", required=True, help="the trial's joints.csv (t_s, q1_rad .. qJ_rad)")
-    sp.add_argument("--played-motion", required=True, help="motion.json of the motion played in this trial")
-    for name, what in (("geometry", "geometry.json (or calibration.json)"), ("clock", "clock.json (or sync.json)"),
-                       ("tracks", "tracks.parquet"), ("tracking", "tracking.json"), ("params", "params.json"),
-                       ("fit", "fit.parquet"), ("next-motion", "next motion.csv"),
-                       ("next-motion-meta", "next motion's motion.json")):
-        sp.add_argument(f"--{name}", required=True, help=f"the trial's {what}")
-    sp.add_argument("--prediction", nargs="?", help="the trial's prediction.json (the previous estimate's check on "
-                                                    "this motion); none for trial 1")
-    sp.add_argument("--campaign", required=True, help=campaign_help)
     sp.add_argument("--out", required=True, help="report.html to write")
 
     sp = add("report-campaign", "campaign page: one row per execution")
     sp.add_argument("--data-dir", required=True, help="data/<campaign>")
     sp.add_argument("--results-dir", required=True, help="results/<campaign>")
-    sp.add_argument("--campaign", required=True, help=campaign_help)
     sp.add_argument("--out", required=True, help="report.html to write")
 
     sp = add("execute", "play a motion file on an arm and record the next trial's raw files")

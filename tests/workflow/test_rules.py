@@ -77,3 +77,26 @@ def test_no_rule_passes_a_trial_folder_to_a_stage():
         if name in READS_FOLDERS:
             continue
         assert "--trial-dir" not in rule.get("shell", "") and "--data-dir" not in rule.get("shell", ""), name
+
+
+def _command(shell: str) -> str | None:
+    """The stringcast subcommand a rule's shell runs (the word after ``--log "{log}"``)."""
+    m = re.search(r'--log "\{log\}" ([\w-]+)', shell)
+    return m.group(1) if m else None
+
+
+@pytest.mark.parametrize("name", sorted(rules()))
+def test_each_rule_passes_its_commands_inputs_under_their_one_name(name):
+    """The contract (stringcast.core.ports.INPUTS) and the rules agree: a rule passes every input of
+    its command, each as ``--<name> {input.<name>}``, and no input file the contract does not list."""
+    from stringcast.core.ports import INPUTS
+
+    shell = rules()[name].get("shell", "")
+    command = _command(shell)
+    if command not in INPUTS:
+        pytest.skip(f"rule {name} runs no stage command")
+    passed = re.findall(r'(--[\w-]+) "?\{input\.(\w+)(?::q)?\}', shell)
+    for flag, input_name in passed:
+        assert flag == "--" + input_name.replace("_", "-"), f"rule {name}: {flag} passes input.{input_name}"
+    got, listed = sorted(n for _, n in passed), sorted(p.name for p in INPUTS[command])
+    assert got == listed, f"rule {name} passes {got}, the contract lists {listed}"

@@ -5,7 +5,7 @@
 
 rule calib_views:
     input:
-        calib="data/{campaign}/calib",
+        calib_dir="data/{campaign}/calib",
         campaign=campaign_for("calib-views"),
     output:
         views="results/{campaign}/calib_views.npz",
@@ -21,7 +21,7 @@ rule calib_views:
         settings=stage_settings("calib-views"),
         lab=lab_entries_for("calib-views"),
     shell:
-        '{params.cli} --log "{log}" calib-views --calib-dir "{input.calib}" --campaign "{input.campaign}" '
+        '{params.cli} --log "{log}" calib-views --calib-dir "{input.calib_dir}" --campaign "{input.campaign}" '
         '--out "{output.views}" --out-intrinsics "{output.intrinsics}"'
 
 

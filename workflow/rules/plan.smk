@@ -27,7 +27,7 @@ rule plan_first:
 rule plan:
     input:
         params="results/{campaign}/trial_{trial}/params.json",
-        played="data/{campaign}/trial_{trial}/motion.json",
+        played_motion="data/{campaign}/trial_{trial}/motion.json",
         tracks="results/{campaign}/trial_{trial}/tracks.parquet",
         joints="data/{campaign}/trial_{trial}/joints.csv",
         campaign=campaign_for("plan"),
@@ -46,6 +46,6 @@ rule plan:
         settings=stage_settings("plan"),
         lab=lab_entries_for("plan"),
     shell:
-        'NUMBA_NUM_THREADS={threads} {params.cli} --log "{log}" plan --params "{input.params}" --played-motion "{input.played}" '
+        'NUMBA_NUM_THREADS={threads} {params.cli} --log "{log}" plan --params "{input.params}" --played-motion "{input.played_motion}" '
         '--tracks "{input.tracks}" --joints "{input.joints}" --campaign "{input.campaign}" --seed {wildcards.trial} '
         '--out-dir "results/{wildcards.campaign}/trial_{wildcards.trial}"'

@@ -10,10 +10,10 @@ rule report_trial:
         video=trial_video,
         params="results/{campaign}/trial_{trial}/params.json",
         fit="results/{campaign}/trial_{trial}/fit.parquet",
-        motion="results/{campaign}/trial_{trial}/motion.csv",
-        motion_meta="results/{campaign}/trial_{trial}/motion.json",
+        next_motion="results/{campaign}/trial_{trial}/motion.csv",
+        next_motion_meta="results/{campaign}/trial_{trial}/motion.json",
         joints="data/{campaign}/trial_{trial}/joints.csv",
-        played="data/{campaign}/trial_{trial}/motion.json",
+        played_motion="data/{campaign}/trial_{trial}/motion.json",
         prediction=prediction_input,
         campaign=campaign_for("report-trial"),
     output:
@@ -34,9 +34,9 @@ rule report_trial:
         lab=lab_entries_for("report-trial"),
     shell:
         '{params.cli} --log "{log}" report-trial --video "{input.video}" --joints "{input.joints}" '
-        '--played-motion "{input.played}" --geometry "{input.geometry}" --clock "{input.clock}" '
+        '--played-motion "{input.played_motion}" --geometry "{input.geometry}" --clock "{input.clock}" '
         '--tracks "{input.tracks}" --tracking "{input.tracking}" --params "{input.params}" --fit "{input.fit}" '
-        '--next-motion "{input.motion}" --next-motion-meta "{input.motion_meta}" '
+        '--next-motion "{input.next_motion}" --next-motion-meta "{input.next_motion_meta}" '
         "--prediction {input.prediction:q} "
         '--campaign "{input.campaign}" --out "{output}"'
 

@@ -6,7 +6,7 @@ rule sync:
     input:
         video=trial_video,
         frames="results/{campaign}/trial_{trial}/frames.npy",
-        meta="data/{campaign}/trial_{trial}/video.yaml",
+        video_meta="data/{campaign}/trial_{trial}/video.yaml",
         joints="data/{campaign}/trial_{trial}/joints.csv",
         calibration="results/{campaign}/trial_{trial}/calibration.json",
         campaign=campaign_for("sync"),
@@ -24,7 +24,7 @@ rule sync:
         settings=stage_settings("sync"),
         lab=lab_entries_for("sync"),
     shell:
-        '{params.cli} --log "{log}" sync --video "{input.video}" --video-meta "{input.meta}" '
+        '{params.cli} --log "{log}" sync --video "{input.video}" --video-meta "{input.video_meta}" '
         '--joints "{input.joints}" --calibration "{input.calibration}" --campaign "{input.campaign}" '
         '--out "{output}" --frames "{input.frames}" --workers {threads}'
 
