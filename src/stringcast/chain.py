@@ -22,7 +22,7 @@ from pathlib import Path
 
 from stringcast.check import check_campaign
 from stringcast.core import DataError, TrialFiles, claim_results, load_config
-from stringcast.core.ports import input_argv, trial_inputs
+from stringcast.core import input_argv, trial_inputs
 
 RULE_WORKERS = {"sync": 4, "sweep": 2, "track": 4}
 """The rules' ``threads`` for the stages that take ``--workers`` (capped at this machine's CPUs)."""

@@ -116,7 +116,7 @@ def _run(command: str, args, *positional, **keywords):
     (:func:`stringcast.core.ports.stage_inputs`: a new input needs no handler)."""
     import inspect
 
-    from stringcast.core.ports import stage_inputs
+    from stringcast.core import stage_inputs
 
     func = stage_entry(command)
     settings = _settings(func, args)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import argparse
 
 from stringcast.core import METHOD_CONFIGS
-from stringcast.core.ports import HELP, INPUTS, add_input_options
+from stringcast.core import INPUT_HELP, INPUTS, add_input_options
 
 
 class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
@@ -43,7 +43,7 @@ def build_parser(handlers: dict, description: str) -> argparse.ArgumentParser:
     return p
 
 
-CAMPAIGN_HELP = HELP["campaign"]
+CAMPAIGN_HELP = INPUT_HELP["campaign"]
 SEED_HELP = "random seed of {}"
 
 

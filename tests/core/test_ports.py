@@ -71,5 +71,5 @@ def test_every_input_has_a_file_and_a_help_line():
     for command, inputs in ports.INPUTS.items():
         assert len({p.name for p in inputs}) == len(inputs), command
         for p in inputs:
-            assert p.of in ports.FILES or p.of in ports.RAW, (command, p.name)
+            assert p.of in ports.PRODUCT_FILES or p.of in ports.RAW_FILES, (command, p.name)
             assert p.text, (command, p.name)

@@ -89,7 +89,7 @@ def _command(shell: str) -> str | None:
 def test_each_rule_passes_its_commands_inputs_under_their_one_name(name):
     """The contract (stringcast.core.ports.INPUTS) and the rules agree: a rule passes every input of
     its command, each as ``--<name> {input.<name>}``, and no input file the contract does not list."""
-    from stringcast.core.ports import INPUTS
+    from stringcast.core import INPUTS
 
     shell = rules()[name].get("shell", "")
     command = _command(shell)

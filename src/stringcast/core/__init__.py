@@ -23,6 +23,8 @@ from .joblog import INTERNAL_ERROR_STATUS, TRACEBACK_DIR_ENV, JobLog, internal_e
 from .lifeline import start_lifeline, workflow_stamp
 from .runlock import RunConflict, claim_results, outputs_newer_than
 from .lazy import lazy_exports
+from .ports import (INPUT_HELP, INPUTS, PRODUCT_FILES, RAW_FILES, Port, add_input_options, input_argv, stage_inputs,
+                    trial_inputs)
 
 __all__ = [
     "JointLimitError", "assert_within_limits", "check_limits", "forward_kinematics", "hand_pose", "joints_at",
@@ -46,4 +48,6 @@ __all__ = [
     "claim_results", "outputs_newer_than",
     "markdown_table", "sections_read", "sections_read_from_source", "settings_digest", "settings_from_config",
     "stage_kwargs",
+    "INPUT_HELP", "INPUTS", "PRODUCT_FILES", "RAW_FILES", "Port", "add_input_options", "input_argv", "stage_inputs",
+    "trial_inputs",
 ]

@@ -26,7 +26,7 @@ from pathlib import Path
 TRIAL_RESULT = "results/{campaign}/trial_{trial}/"
 """A trial's products' folder (``{trial}``: k, or k - 1 for an input from the previous trial)."""
 
-FILES: dict[str, str] = {
+PRODUCT_FILES: dict[str, str] = {
     "campaign": "data/{campaign}/campaign.yaml",
     "calib_dir": "data/{campaign}/calib",
     "calib_views": "results/{campaign}/calib_views.npz",
@@ -46,11 +46,11 @@ FILES: dict[str, str] = {
 }
 """Each product's file, relative to the project root, by its one name (the rules' patterns)."""
 
-RAW = {"video": "video", "joints": "joints", "video_meta": "video_meta", "played_motion": "played"}
+RAW_FILES = {"video": "video", "joints": "joints", "video_meta": "video_meta", "played_motion": "played"}
 """The trial's raw files: their names here, and the :class:`~stringcast.core.files.TrialFiles` field
 that finds each in ``data/<campaign>/trial_<k>``."""
 
-HELP = {
+INPUT_HELP = {
     "video": "the trial's video: video.<ext>, a video/ folder of frames, or video.cihx (docs/data_contract.md)",
     "joints": "the trial's joints.csv (t_s, q1_rad .. qJ_rad)",
     "video_meta": "the trial's video.yaml (fps, frames, trigger_time_s)",
@@ -83,12 +83,12 @@ class Port:
 
     Attributes:
         name: the rule's input name, the option (``--`` + name with ``-`` for ``_``) and the stage
-            parameter it binds; a product of :data:`FILES` or :data:`RAW` unless ``product`` says which.
+            parameter it binds; a product of :data:`PRODUCT_FILES` or :data:`RAW_FILES` unless ``product`` says which.
         optional: the option takes no file where there is none (``nargs="?"``: the rule passes
             ``--<name> {input.<name>:q}``, empty for trial 1 or a campaign without ``calib/``).
         previous: the file is the previous trial's (k - 1), not this trial's.
         product: the product's name, where the input's own name differs (estimate's ``prev``).
-        help: the option's help; default :data:`HELP` of the product.
+        help: the option's help; default :data:`INPUT_HELP` of the product.
     """
 
     name: str
@@ -104,13 +104,13 @@ class Port:
 
     @property
     def of(self) -> str:
-        """The product this input is (its :data:`FILES` or :data:`RAW` key)."""
+        """The product this input is (its :data:`PRODUCT_FILES` or :data:`RAW_FILES` key)."""
         return self.product or self.name
 
     @property
     def text(self) -> str:
         """The option's help line."""
-        return self.help or HELP[self.of]
+        return self.help or INPUT_HELP[self.of]
 
 
 def _ports(*names: str, optional: tuple[str, ...] = (), **special: Port) -> tuple[Port, ...]:
@@ -178,11 +178,11 @@ def trial_inputs(campaign: str, k: int, raw, has_calib: bool) -> dict[str, str |
     Args:
         raw: the trial's :class:`~stringcast.core.files.TrialFiles` (its video found by name).
     """
-    paths: dict[str, str | None] = {name: str(getattr(raw, field)) for name, field in RAW.items()}
-    for name, pattern in FILES.items():
+    paths: dict[str, str | None] = {name: str(getattr(raw, field)) for name, field in RAW_FILES.items()}
+    for name, pattern in PRODUCT_FILES.items():
         paths[name] = pattern.format(campaign=campaign, trial=k)
     if k > 1:
-        paths.update({f"previous {n}": pattern.format(campaign=campaign, trial=k - 1) for n, pattern in FILES.items()})
+        paths.update({f"previous {n}": pattern.format(campaign=campaign, trial=k - 1) for n, pattern in PRODUCT_FILES.items()})
     else:
         paths["prediction"] = None
     if not has_calib:
