@@ -51,8 +51,8 @@ from stringcast.model import decode, start_chi
 from .diagnostics import best_k, checked, diagnostics
 from .fitcheck import fit_figures
 from .optimizers import OPTIMIZERS, Recorder
-from .problem import (EstimationProblem, build_problem_explained, make_objective,
-                      point_errors, simulate_fit)
+from .problem import (EstimationProblem, build_problem, make_objective, point_errors, simulate_fit,
+                      upstream_causes)
 from .verdict import fit_verdict, sweep_bounds
 
 UPSTREAM = ("geometry", "clock", "tracking")
@@ -178,12 +178,87 @@ def estimate(problem: EstimationProblem, model: ModelSettings, estimation: Estim
 # ---------------------------------------------------------------------------
 # Stage entry point
 # ---------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Fit:
+    """One trial's fit, in memory (:func:`fit_tracks`).
+
+    Attributes:
+        estimate: the :class:`Estimate`, its ``verdict`` and ``likely_cause`` judged.
+        problem: the trial's :class:`~stringcast.estimate.problem.EstimationProblem` (the frames compared,
+            the rest state, the hand's path).
+        simulation: the model at the estimate over the compared frames: (positions (F, n, 2) m, stayed valid).
+        fit_check: the fit's figures (:func:`~stringcast.estimate.fitcheck.fit_figures`: skill, point error,
+            best time shift, ...).
+        chi_start: (D,) chi_best of eq. (3) the search started from. executions: M of eq. (3).
+    """
+
+    estimate: Estimate
+    problem: EstimationProblem
+    simulation: tuple
+    fit_check: dict
+    chi_start: np.ndarray
+    executions: int
+
+
+def fit_tracks(tracks: pd.DataFrame, t_j: np.ndarray, q_j: np.ndarray, campaign: Campaign,
+               previous: Mapping | None = None, executions: int = 1, *, model: ModelSettings,
+               evaluation: EvaluationSettings, estimation: EstimationSettings, motion: MotionSettings,
+               tracking: TrackingSettings, verdicts: Mapping[str, Verdict] | None = None,
+               bounds: Mapping | None = None, source: str = "tracks", previous_name: str = "previous") -> Fit:
+    """Fit the model to one trial's tracked points, in memory (paper Section VI, eqs. 2-6; no file read or written).
+
+    Parameters
+    ----------
+    tracks : DataFrame
+        ``frame, t_s, point, x_m, y_m, valid`` ((n + 1) rows per frame, m in the robot frame).
+    t_j, q_j : ndarray, (K,) and (K, J)
+        The measured joint log, s and rad (it drives the model's hand).
+    campaign : Campaign
+        The resolved campaign (string, arm).
+    previous : mapping, optional
+        The previous trial's ``params.json`` document: chi_best of eq. (3); None for trial 1 (the first
+        plan's set).
+    executions : int
+        M of eq. (3), the executions so far (>= 1); the search's seed is ``estimation.seed + M``.
+    model, evaluation, estimation, motion, tracking : settings
+        The stage's settings objects (:class:`~stringcast.core.ModelSettings`, ...).
+    verdicts : mapping of str to Verdict, optional
+        The earlier stages' verdicts (geometry, clock, tracking), carried by the fit's.
+    bounds : mapping, optional
+        The sweep's stated bounds (:func:`~stringcast.estimate.verdict.sweep_bounds`).
+    source, previous_name : str
+        How messages name the tracks and the previous estimate.
+
+    Returns
+    -------
+    Fit
+        The estimate with its verdict, the problem, the simulation at the estimate and the fit check.
+
+    Raises
+    ------
+    DataError
+        No problem can be built from the tracks (too few valid points, no rest frames, ...), or a
+        malformed previous estimate.
+    ConfigError
+        Bad optimizer settings.
+    """
+    problem = build_problem(tracks, t_j, q_j, campaign, model=model, evaluation=evaluation, estimation=estimation,
+                            tracking=tracking, source=str(source))
+    chi0 = start_chi(previous, campaign.string, model, motion, previous_name)
+    k = max(1, int(executions))
+    est = estimate(problem, model, estimation, chi0, k, int(estimation.seed) + k)
+    sim = simulate_fit(problem, model, est.chi)
+    figures, verdict, cause = judge_fit(problem, sim, campaign.string.length, motion_window(t_j, q_j)[1],
+                                        est.E_m * 1000, estimation, dict(verdicts or {}), bounds)
+    return Fit(replace(est, verdict=verdict, likely_cause=cause), problem, sim, figures, np.asarray(chi0), k)
+
+
 def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign,
                    prev_params_json: Path | None, trial_index: int, out_params_json: Path,
                    out_fit_parquet: Path, *, model: ModelSettings,
                    evaluation: EvaluationSettings, estimation: EstimationSettings, motion: MotionSettings,
                    tracking: TrackingSettings, upstream: Mapping[str, Path] | None = None) -> Estimate:
-    """Estimate the parameters of one trial and write ``params.json`` and ``fit.parquet``.
+    """Estimate the parameters of one trial (:func:`fit_tracks`) and write ``params.json`` and ``fit.parquet``.
 
     Args:
         tracks_parquet, joints_csv: the trial's tracked points and measured joint log.
@@ -202,25 +277,31 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign,
         The :class:`Estimate`, with the fit's ``verdict`` and ``likely_cause``.
 
     Raises:
-        DataError: unreadable or inconsistent inputs (named), or an earlier stage's malformed verdict.
+        DataError: unreadable or inconsistent inputs (named; where no problem can be built, with the
+            earlier stages' reasons), or an earlier stage's malformed verdict.
         ConfigError: bad optimizer settings.
     """
     tracks = read_parquet(tracks_parquet, TRACK_COLUMNS)
     t_j, q_j = read_joint_table(joints_csv, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
-    problem_settings = dict(model=model, evaluation=evaluation, estimation=estimation, tracking=tracking)
     if upstream is None:
         upstream = dict(trial_result(Path(tracks_parquet).parent, stage) for stage in UPSTREAM)
-    problem = build_problem_explained(tracks, t_j, q_j, campaign, tracks_parquet, upstream, **problem_settings)
     prev = read_json(prev_params_json, mapping=True) if prev_params_json else None
-    chi0 = start_chi(prev, campaign.string, model, motion, str(prev_params_json))
-    k = max(1, int(trial_index))
-    seed = int(estimation.seed) + k
-    est = estimate(problem, model, estimation, chi0, k, seed)
-    sim = simulate_fit(problem, model, est.chi)
-    figures, verdict, cause = judge_fit(problem, sim, campaign.string.length, motion_window(t_j, q_j)[1],
-                                        est.E_m * 1000, estimation, read_verdicts(upstream), read_sweep_bounds(upstream))
-    est = replace(est, verdict=verdict, likely_cause=cause)
+    settings = dict(model=model, evaluation=evaluation, estimation=estimation, motion=motion, tracking=tracking)
+    try:
+        fit = fit_tracks(tracks, t_j, q_j, campaign, prev, trial_index, **settings, verdicts=read_verdicts(upstream),
+                         bounds=read_sweep_bounds(upstream), source=str(tracks_parquet),
+                         previous_name=str(prev_params_json))
+    except DataError as exc:
+        raise DataError(f"{exc}{upstream_causes(upstream)}") from exc
+    write_json(out_params_json, params_document(fit, campaign, model, estimation))
+    write_parquet(out_fit_parquet, fit_table(tracks, fit.problem, fit.simulation, campaign.string.n_points))
+    return fit.estimate
 
+
+def params_document(fit: Fit, campaign: Campaign, model: ModelSettings, estimation: EstimationSettings) -> dict:
+    """``params.json``'s document for ``fit`` (docs/data_contract.md): the coefficients and masses, E, the
+    search's history, the best sets (``top``), the diagnostics, the fit check and the verdict."""
+    est, problem, k = fit.estimate, fit.problem, fit.executions
     _, mu_groups_all = decode(est.top_chi, model, np.arange(problem.n_groups))
     top = [{"E_mm": e * 1000, "coefficients": dict(zip(PARAM_NAMES, c)), "mu_groups": m, "chi": x}
            for e, c, m, x in zip(est.top_E, decode(est.top_chi, model, problem.mass_groups)[0], mu_groups_all,
@@ -230,7 +311,7 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign,
     log_lo = np.log10(np.concatenate([lo, np.full(problem.n_groups, mlo)]))
     log_hi = np.log10(np.concatenate([hi, np.full(problem.n_groups, mhi)]))
     diag = diagnostics(est.chi_evaluated, est.E_evaluated, log_lo, log_hi, names, estimation)
-    write_json(out_params_json, {
+    return {
         "coefficients": dict(zip(PARAM_NAMES, est.coeffs)), "mu": est.mu, "mu_groups": mu_groups_all[0],
         "mass_groups": problem.mass_groups, "special_points": campaign.string.special_points(),
         "E_mm": est.E_m * 1000, "E_i_mm": est.E_i * 1000,
@@ -238,13 +319,11 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign,
                     "best_E_mm": [e * 1000 for e in est.history["best_E_m"]]},
         "optimizer": est.optimizer, "seed": est.seed, "evaluations": est.n_evaluations,
         "blown_up": est.n_blown_up, "seconds": est.seconds, "M": k, "chi": est.chi,
-        "chi_start": chi0, "chi_names": names, "top": top, "diagnostics": diag, "message": est.message,
-        "verdict": {**verdict.as_dict(), "likely_cause": cause}, "fit_check": figures,
+        "chi_start": fit.chi_start, "chi_names": names, "top": top, "diagnostics": diag, "message": est.message,
+        "verdict": {**est.verdict.as_dict(), "likely_cause": est.likely_cause}, "fit_check": fit.fit_check,
         "t_motion_start_s": problem.t_motion_start,
         "t_sim_start_s": problem.frame_t[0], "frames_compared": len(problem.frame_t),
-        "rest_fallback_points": list(problem.fallback_points), "dt_s": problem.dt})
-    write_parquet(out_fit_parquet, fit_table(tracks, problem, sim, campaign.string.n_points))
-    return est
+        "rest_fallback_points": list(problem.fallback_points), "dt_s": problem.dt}
 
 
 def judge_fit(problem: EstimationProblem, sim: tuple[np.ndarray, bool], length_m: float, t_stop: float, E_mm: float,

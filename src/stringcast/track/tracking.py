@@ -57,6 +57,7 @@ Settings: tracking settings (:class:`~stringcast.core.TrackingSettings`).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -106,16 +107,143 @@ def inside_image(cal: Calibration, xy: np.ndarray) -> np.ndarray:
     return inside.reshape(xy.shape[:-1])
 
 
-def run_tracking(trial: TrialFiles | str | Path, calibration_json, sync_json, campaign, out_parquet, overlay_png=None,
+@dataclass(frozen=True)
+class TrackedVideo:
+    """What :func:`track_video` finds in a video.
+
+    Attributes:
+        table: the long table ``frame, t_s, point, x_m, y_m, valid`` ((n + 1) rows per frame; m in
+            the robot frame; point 0 the grasp; invalid points NaN), ``tracks.parquet``'s content.
+        quality: the tracking's self-measures and verdict (:func:`~stringcast.track.quality.tracking_quality`),
+            ``tracking.json``'s content.
+        shown: the frames kept for the overlay: (frame index, image (H, W), centreline px, points px,
+            valid), empty unless asked for.
+        m_per_px: the image scale near the grasp at the end of the log, m / px.
+    """
+
+    table: pd.DataFrame
+    quality: dict
+    shown: list = field(default_factory=list)
+    m_per_px: float = float("nan")
+
+
+def track_video(video, calibration: Calibration, frame_times_s: np.ndarray, t_j: np.ndarray, q_j: np.ndarray,
+                campaign, *, tracking: TrackingSettings, fps: float | None = None, joint_log: dict | None = None,
+                workers: int = 1, overlay: bool = False) -> TrackedVideo:
+    """Track the string in a video already open, in memory (the module doc's steps 1-6).
+
+    Parameters
+    ----------
+    video : VideoReader
+        The trial's frames (:func:`~stringcast.video.open_trial_video`; a
+        :class:`~stringcast.video.CachedVideo` is read by ``workers`` processes side by side, any other
+        reader is tracked as it decodes, with a second reader of its path for the background).
+    calibration : Calibration
+        The trial's mapping (``geometry.json`` or ``calibration.json``), for ``video``'s image size.
+    frame_times_s : ndarray, (F,)
+        Each frame's time on the controller clock, s (:func:`~stringcast.sync.frame_times`).
+    t_j, q_j : ndarray, (K,) and (K, J)
+        The joint log, s and rad.
+    campaign : Campaign
+        The resolved campaign (arm, string length L, n points).
+    tracking : TrackingSettings
+    fps : float, optional
+        The clock's frame rate, frames / s (``sync.json``'s ``fps``); default ``video.fps``.
+    joint_log : dict, optional
+        ``sync.json``'s ``joint_log`` (an extended log: the arm known outside its span).
+    workers : int
+        Processes tracking frames side by side (a :class:`~stringcast.video.CachedVideo` only);
+        the same result for any number.
+    overlay : bool
+        Keep ``tracking.overlay_frames`` frames for the overlay figure.
+
+    Returns
+    -------
+    TrackedVideo
+        The tracked points, the tracking's verdict and the overlay's frames.
+    """
+    st, cal = tracking, calibration
+    t = np.asarray(frame_times_s, float)
+    arm, n, F = campaign.arm, campaign.string.n_points, len(t)
+    lo, hi = joint_log_span(t_j, joint_log)   # an extended log: the arm still outside it
+    in_log = (t >= lo) & (t <= hi)
+    half = 0.5 / float(fps or video.fps)  # the arm at the start, middle and end of each frame period
+    jpx = np.stack([_joint_px(cal, arm, joints_at(t + dt, t_j, q_j)) for dt in (-half, 0.0, half)], axis=1)
+    scale = float(np.median(cal.m_per_px(jpx[:, 1, -1])))
+    judged, rest = frames_judged(t, in_log, _motion_span(t_j, q_j)[0], hi)   # the frames tracking.json judges
+    frames = None if isinstance(video, CachedVideo) else prefetch(video, int(st.prefetch_frames))  # runs ahead
+    tracker, win = _tracker(video, cal, t, t_j, q_j, in_log, jpx, scale, np.nonzero(rest)[0], campaign, st, workers)
+    xy = np.full((F, n + 1, 2), np.nan)
+    valid = np.zeros((F, n + 1), bool)
+    mismatch = np.full(F, np.nan)
+    past_roi, off_image = np.zeros(F, bool), np.zeros(F, bool)
+    xy[:, 0] = forward_kinematics(arm, joints_at(t, t_j, q_j))[:, -1]  # point 0: the grasp
+    valid[:, 0] = in_log
+    xy[~in_log, 0] = np.nan
+    shows = set(np.round(np.linspace(win[0], win[-1], int(st.overlay_frames))).astype(int)) if overlay else set()
+    shown = []
+    for k, ft, frame in track_frames(tracker, video, frames, jpx, np.flatnonzero(in_log), shows, workers):
+        xy[k, 1:], valid[k, 1:], mismatch[k] = ft.positions, ft.valid, ft.length_mismatch_m
+        past_roi[k], off_image[k] = ft.past_roi, ft.off_image
+        if frame is not None:
+            shown.append((k, frame, ft.path_px, cal.robot_to_pixel(np.nan_to_num(xy[k])), valid[k].copy()))
+    valid[:, 1:] &= inside_image(cal, xy[:, 1:])   # a point outside the image is never valid (nor its position)
+    xy[:, 1:][~valid[:, 1:]] = np.nan
+    df = pd.DataFrame({
+        "frame": np.repeat(np.arange(F), n + 1).astype(np.int64),
+        "t_s": np.repeat(t, n + 1),
+        "point": np.tile(np.arange(n + 1), F).astype(np.int64),
+        "x_m": xy[..., 0].ravel(), "y_m": xy[..., 1].ravel(),
+        "valid": valid.ravel(),
+    })
+    quality = tracking_quality(df, mismatch, campaign.string.length, n, judged, rest, st, past_roi, off_image,
+                               campaign.string_setting, _scale_note(cal, campaign))
+    return TrackedVideo(df, quality, shown, scale)
+
+
+def _motion_span(t_j: np.ndarray, q_j: np.ndarray) -> tuple[float, float]:
+    """The arm's motion window (s), or the log's span where the arm never moves."""
+    try:
+        return motion_window(t_j, q_j)
+    except ValueError:  # the arm never moves
+        return float(t_j[0]), float(t_j[-1])
+
+
+def _tracker(video, cal: Calibration, t: np.ndarray, t_j, q_j, in_log, jpx, scale: float, rest: np.ndarray,
+             campaign, st: TrackingSettings, workers: int) -> tuple[FrameTracker, np.ndarray]:
+    """The frame tracker over the background of ``video`` (step 1; ``rest``: the still frames before the
+    motion, indices), and the motion's frames (indices)."""
+    t_start, t_end = _motion_span(t_j, q_j)
+    win = np.nonzero((t >= t_start) & (t <= t_end + 0.1) & in_log)[0]
+    if len(win) < 9:
+        win = np.arange(len(t))
+    span = st.background_window_s   # None: the whole motion window (the string hangs still in a short one)
+    early = win if span is None else win[t[win] <= t[win[0]] + span]
+    bwin = early if len(early) >= 9 else win
+    samples = background_samples(bwin, int(st.background_samples), int(st.background_bursts))
+    pre = rest[-int(st.rest_frames):]
+    cached = isinstance(video, CachedVideo)
+    second = video if cached else open_trial_video(video.path)  # decoding: the main pass runs ahead
+    try:
+        bg, noise = build_background(second, samples.astype(int), pre, lambda k: draw_arm_mask(
+            (video.height, video.width), jpx[k], campaign.arm, st, scale, grow_px=2.0), workers if cached else 1)
+    finally:
+        if second is not video:
+            second.close()
+    return FrameTracker(bg, noise, cal, campaign, st), win
+
+
+def run_tracking(trial: TrialFiles | str | Path, geometry_json, clock_json, campaign, out_parquet, overlay_png=None,
                  frames_npy=None, workers: int = 1, quality_json: str | Path | None = None, *,
                  tracking: TrackingSettings) -> pd.DataFrame:
-    """Track the string in one trial; write ``tracks.parquet``, ``tracking.json`` (the tracking's
-    self-measures and verdict, :mod:`stringcast.track.quality`) and the overlay PNG.
+    """Track the string in one trial (:func:`track_video`); write ``tracks.parquet``, ``tracking.json``
+    (the tracking's self-measures and verdict, :mod:`stringcast.track.quality`) and the overlay PNG.
 
     Args:
         trial: the trial's video and ``joints.csv`` (:class:`~stringcast.core.TrialFiles`; a folder: its
             files by the data contract's names).
-        calibration_json, sync_json: this trial's ``calibration.json`` and ``sync.json``.
+        geometry_json, clock_json: this trial's ``geometry.json`` and ``clock.json`` (or, before the
+            sweep, ``calibration.json`` and ``sync.json``).
         campaign: the resolved campaign (arm, string length L and n).
         out_parquet: where to write ``tracks.parquet``.
         overlay_png: if given, a strip of ``overlay_frames`` frames with the tracked points.
@@ -132,80 +260,28 @@ def run_tracking(trial: TrialFiles | str | Path, calibration_json, sync_json, ca
 
     Raises:
         DataError: missing or malformed inputs (named), or a frame count or image size that
-            disagrees with ``sync.json`` / ``calibration.json``.
+            disagrees with the clock / the geometry.
     """
     trial = TrialFiles.of(trial)
-    st = tracking
-    cal = Calibration.from_json(calibration_json)
-    sync = read_json(sync_json, mapping=True)
+    cal = Calibration.from_json(geometry_json)
+    clock = read_json(clock_json, mapping=True)
     t_j, q_j = read_joint_table(trial.joints, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
-    arm, n = campaign.arm, campaign.string.n_points
-    vpath = trial.video
-    video = open_trial_video(vpath, frames_npy)
-    if (video.width, video.height) != tuple(cal.image_size):
-        raise DataError(f"{video.path}: frames are {video.width}x{video.height}, {calibration_json} is for "
-                        f"{cal.image_size[0]}x{cal.image_size[1]}")
-    F = video.n_frames
-    if "frames" in sync and int(sync["frames"]) != F:
-        raise DataError(f"{video.path}: {F} frames, but {sync_json} (from video.yaml) says {sync['frames']}")
-    t = frame_times(sync, F)
-    lo, hi = joint_log_span(t_j, sync.get("joint_log"))   # an extended log: the arm still outside it
-    in_log = (t >= lo) & (t <= hi)
-    half = 0.5 / float(sync["fps"])  # the arm at the start, middle and end of each frame period
-    jpx = np.stack([_joint_px(cal, arm, joints_at(t + dt, t_j, q_j)) for dt in (-half, 0.0, half)], axis=1)
-    scale = float(np.median(cal.m_per_px(jpx[:, 1, -1])))
+    video = open_trial_video(trial.video, frames_npy)
     try:
-        t_start, t_end = motion_window(t_j, q_j)
-    except ValueError:  # the arm never moves
-        t_start, t_end = t_j[0], t_j[-1]
-    win = np.nonzero((t >= t_start) & (t <= t_end + 0.1) & in_log)[0]
-    if len(win) < 9:
-        win = np.arange(F)
-    span = st.background_window_s   # None: the whole motion window (the string hangs still in a short one)
-    early = win if span is None else win[t[win] <= t[win[0]] + span]
-    bwin = early if len(early) >= 9 else win
-    samples = background_samples(bwin, int(st.background_samples), int(st.background_bursts))
-    judged, rest = frames_judged(t, in_log, t_start, hi)   # the frames tracking.json judges: all the later stages use
-    pre = np.nonzero(rest)[0][-int(st.rest_frames):]
-    frames = None if isinstance(video, CachedVideo) else prefetch(video, int(st.prefetch_frames))
-    second = video if frames is None else open_trial_video(vpath, frames_npy)  # decoding: the main pass runs ahead
-    try:
-        bg, noise = build_background(second, samples.astype(int), pre, lambda k: draw_arm_mask(
-            (video.height, video.width), jpx[k], campaign.arm, st, scale, grow_px=2.0),
-            workers if isinstance(video, CachedVideo) else 1)
+        if (video.width, video.height) != tuple(cal.image_size):
+            raise DataError(f"{video.path}: frames are {video.width}x{video.height}, {geometry_json} is for "
+                            f"{cal.image_size[0]}x{cal.image_size[1]}")
+        F = video.n_frames
+        if "frames" in clock and int(clock["frames"]) != F:
+            raise DataError(f"{video.path}: {F} frames, but {clock_json} (from video.yaml) says {clock['frames']}")
+        found = track_video(video, cal, frame_times(clock, F), t_j, q_j, campaign, tracking=tracking,
+                            fps=float(clock["fps"]), joint_log=clock.get("joint_log"), workers=workers,
+                            overlay=overlay_png is not None)
     finally:
-        if second is not video:
-            second.close()
-    tracker = FrameTracker(bg, noise, cal, campaign, st)
-
-    xy = np.full((F, n + 1, 2), np.nan)
-    valid = np.zeros((F, n + 1), bool)
-    mismatch = np.full(F, np.nan)
-    past_roi, off_image = np.zeros(F, bool), np.zeros(F, bool)
-    xy[:, 0] = forward_kinematics(arm, joints_at(t, t_j, q_j))[:, -1]  # point 0: the grasp
-    valid[:, 0] = in_log
-    xy[~in_log, 0] = np.nan
-    shows = set(np.round(np.linspace(win[0], win[-1], int(st.overlay_frames))).astype(int)) if overlay_png else set()
-    shown = []
-    for k, ft, frame in track_frames(tracker, video, frames, jpx, np.flatnonzero(in_log), shows, workers):
-        xy[k, 1:], valid[k, 1:], mismatch[k] = ft.positions, ft.valid, ft.length_mismatch_m
-        past_roi[k], off_image[k] = ft.past_roi, ft.off_image
-        if frame is not None:
-            shown.append((k, frame, ft.path_px, cal.robot_to_pixel(np.nan_to_num(xy[k])), valid[k].copy()))
-    video.close()
-    valid[:, 1:] &= inside_image(cal, xy[:, 1:])   # a point outside the image is never valid (nor its position)
-    xy[:, 1:][~valid[:, 1:]] = np.nan
-    df = pd.DataFrame({
-        "frame": np.repeat(np.arange(F), n + 1).astype(np.int64),
-        "t_s": np.repeat(t, n + 1),
-        "point": np.tile(np.arange(n + 1), F).astype(np.int64),
-        "x_m": xy[..., 0].ravel(), "y_m": xy[..., 1].ravel(),
-        "valid": valid.ravel(),
-    })
-    write_parquet(out_parquet, df)
-    write_json(Path(out_parquet).with_name("tracking.json") if quality_json is None else quality_json,
-               tracking_quality(df, mismatch, campaign.string.length, n, judged, rest, st, past_roi, off_image,
-                                campaign.string_setting, _scale_note(cal, campaign)))
+        video.close()
+    write_parquet(out_parquet, found.table)
+    write_json(Path(out_parquet).with_name("tracking.json") if quality_json is None else quality_json, found.quality)
     if overlay_png is not None:
-        write_overlay(overlay_png, shown, t, scale, campaign.string.length)
-    return df
+        write_overlay(overlay_png, found.shown, found.table["t_s"].to_numpy()[::campaign.string.n_points + 1],
+                      found.m_per_px, campaign.string.length)
+    return found.table
