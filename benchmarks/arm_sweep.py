@@ -38,7 +38,7 @@ def run_setup(seed: int, string_type: int, config: dict, work: Path, n_frames: i
     from stringcast.calibrate import Calibration
     from stringcast.calibrate import board_corner_points, refine_mapping, sweep_rows
     from stringcast.core import find_video, read_json, resolve_campaign, settings_from_config
-    from stringcast.core.joint_log import read_joint_table
+    from stringcast.core import read_joint_table
     from stringcast_lab import apply_setup, draw_setup
     from stringcast.sync import frame_times
     from stringcast.sync.sweep import read_frames

@@ -53,7 +53,7 @@ def header(name: str, quick: bool) -> dict:
 
 def write(name: str, doc: dict) -> Path:
     """Write results/bench/<name>.json atomically and return its path."""
-    from stringcast.core.files import write_json
+    from stringcast.core import write_json
 
     path = BENCH_DIR / f"{name}.json"
     write_json(path, doc)
@@ -63,10 +63,10 @@ def write(name: str, doc: dict) -> Path:
 def film_first_motion(string_type: int, config: dict, work: Path, seed: int, calib_dir: Path | None = None):
     """Plan a campaign's first motion for ``string_type`` (target 1), play it on the lab and
     calibrate the trial: returns (campaign, d, trial) with ``d/calibration.json`` written."""
-    from stringcast.calibrate.calibration import run_calibration
+    from stringcast.api import run_calibration
     from stringcast.core import resolve_campaign, settings_from_config, stage_kwargs
-    from stringcast.execute.executor import execute
-    from stringcast.plan.planning import run_first_plan
+    from stringcast.api import execute
+    from stringcast.api import run_first_plan
 
     campaign = resolve_campaign({"string": string_type, "target": 1}, config, f"bench_{string_type}")
     settings = settings_from_config(config)

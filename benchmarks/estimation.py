@@ -97,7 +97,7 @@ def _sync_and_track(trial: Path, d: Path, campaign, settings) -> None:
     """Sync, sweep and track a calibrated trial (``d/calibration.json``) into ``d``, as the workflow does."""
     from stringcast.core import stage_kwargs
     from stringcast.sync import run_sweep, run_sync
-    from stringcast.track.tracking import run_tracking
+    from stringcast.api import run_tracking
 
     run_sync(trial, d / "calibration.json", campaign, d / "sync.json", **stage_kwargs(run_sync, settings))
     run_sweep(trial, d / "calibration.json", d / "sync.json", campaign, d / "geometry.json", d / "clock.json",
@@ -110,10 +110,10 @@ def prepare_next(campaign, d: Path, config: dict, settings, calib_dir: Path, see
     """The next motion, planned from ``d``'s default estimate (``params_<default optimizer>.json``),
     played on the lab, calibrated, synced and tracked into ``d/next`` (reused if there). Returns
     ``d/next``: tracks.parquet and trial_2/joints.csv."""
-    from stringcast.calibrate.calibration import run_calibration
+    from stringcast.api import run_calibration
     from stringcast.core import stage_kwargs
-    from stringcast.execute.executor import execute
-    from stringcast.plan.planning import run_plan
+    from stringcast.api import execute
+    from stringcast.api import run_plan
 
     nxt = d / "next"
     if (nxt / "tracks.parquet").exists() and (nxt / "trial_2" / "joints.csv").exists():
@@ -133,7 +133,7 @@ def predict_next(campaign, d: Path, nxt: Path, settings, tags: list[str]) -> dic
     """Each estimate ``d/params_<tag>.json`` predicting the next trial in ``nxt`` (module doc): per tag
     :func:`stringcast.estimate.prediction.run_prediction`'s figures, or ``error`` when it cannot."""
     from stringcast.core import DataError, stage_kwargs
-    from stringcast.estimate.prediction import run_prediction
+    from stringcast.api import run_prediction
 
     out = {}
     for tag in tags:
@@ -166,7 +166,7 @@ def prediction_summary(per: dict) -> dict:
 
 def _estimate(campaign, d: Path, settings, optimizer: str | None, tag: str, seed_offset: int = 0):
     from stringcast.core import stage_kwargs
-    from stringcast.estimate.estimation import run_estimation
+    from stringcast.api import run_estimation
 
     estimation = dataclasses.replace(settings.estimation, seed=int(settings.estimation.seed) + seed_offset,
                                      **({} if optimizer is None else {"optimizer": optimizer}))
@@ -184,9 +184,9 @@ def evals_to_reach(trace: np.ndarray, level: float) -> int | None:
 def ruggedness(campaign, d: Path, settings, chi_star: np.ndarray, seed: int = 0) -> dict:
     """E around ``chi_star`` (module doc): {"steps", "E_ratio" (dirs, steps), "basin_radius_chi",
     "pocket" (per radius), "dt_halved_mm"}."""
-    from stringcast.estimate.problem import build_problem, make_objective
-    from stringcast.core.files import TRACK_COLUMNS, read_parquet
-    from stringcast.core.joint_log import read_joint_table
+    from stringcast.api import build_problem, make_objective
+    from stringcast.core import TRACK_COLUMNS, read_parquet
+    from stringcast.core import read_joint_table
 
     t_j, q_j = read_joint_table(d / "trial_1" / "joints.csv", n_joints=campaign.arm.n_joints,
                                  arm_name=campaign.arm.name)
@@ -217,7 +217,7 @@ def dt_halved(problem, model, chi_star: np.ndarray) -> dict:
     """How far the model's points move when dt is halved, at chi_star: the largest distance over the
     points (mm) between the runs at dt and dt / 2, at 25, 50, 75 and 100 % of the compared window.
     Large late values say the late frames compare the film with the integrator's chaos, not physics."""
-    from stringcast.estimate.problem import simulate_fit
+    from stringcast.api import simulate_fit
 
     p1, _ = simulate_fit(problem, model, chi_star)
     p2, _ = simulate_fit(dataclasses.replace(problem, dt=problem.dt / 2), model, chi_star)
@@ -263,7 +263,7 @@ def one_string(campaign, d: Path, settings, cmaes_seeds: int = 1) -> dict:
     out["cmaes_evals_to_paper_E"] = int(med) if np.isfinite(med) else None
     out["cmaes_eval_ratio"] = med / len(paper) if np.isfinite(med) else None
     out["cmaes_seeds"] = {"evals_to_paper_E": cma_reach, "final_E_mm": [float(tr[-1]) for tr in cma_runs]}
-    from stringcast.core.files import read_json
+    from stringcast.core import read_json
 
     out["frames_compared"] = read_json(d / f"params_{default}.json")["frames_compared"]
     out["ruggedness"] = ruggedness(campaign, d, settings, np.asarray(runs["random_search"].chi, float))

@@ -53,8 +53,8 @@ def first_shot(case: tuple) -> dict:
     """Plan and play one case's first motion; its record (the lab's closest approach and hit)."""
     physics, k, seed, variant, overlay, work = case
     from stringcast.core import load_config, read_json, resolve_campaign, settings_from_config, stage_kwargs
-    from stringcast.execute.executor import execute
-    from stringcast.plan.planning import run_first_plan
+    from stringcast.api import execute
+    from stringcast.api import run_first_plan
 
     cfg = variant_config(load_config(), variant, overlay, seed, physics)
     name = f"{physics}_{variant}_s{k}_seed{seed}"

@@ -41,7 +41,7 @@ FRAME_S, JOINT_S = 1e-3, 2e-3
 def _motion(campaign, settings, seed: int, work: Path) -> tuple[np.ndarray, np.ndarray]:
     """Ours' first motion for ``campaign`` with 0.3 s of rest before and 0.6 s of hold after: (t, q)."""
     from stringcast.core import stage_kwargs
-    from stringcast.plan.planning import run_first_plan
+    from stringcast.api import run_first_plan
 
     run_first_plan(campaign, work / "motion.csv", work / "motion.json", seed=seed,
                    **stage_kwargs(run_first_plan, settings))
@@ -58,7 +58,7 @@ def _motion(campaign, settings, seed: int, work: Path) -> tuple[np.ndarray, np.n
 def one_run(physics: str, i: int, config: dict, work: Path) -> dict:
     """Draw i on ``physics`` (module doc): the run's identity and :func:`string_response`'s figures."""
     from stringcast.core import hand_pose, merge_config, resolve_campaign, settings_from_config
-    from stringcast.estimate.inertia import string_response
+    from stringcast.api import string_response
     from stringcast_lab.materials import KINDS, apply_material, draw_material
     from stringcast_lab.mjcf import StringPhysics
     from stringcast_lab.trial import lab_physics

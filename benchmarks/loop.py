@@ -194,7 +194,7 @@ def method_config(config: dict, method: str, seed: int, physics: str = "mujoco",
 def project_root(path: Path, cfg: dict) -> Path:
     """A project root at ``path``: the repo's Snakefile and workflow/ linked, ``cfg`` as
     config/config.yaml (written atomically). Returns the config file's path."""
-    from stringcast.core.files import write_yaml
+    from stringcast.core import write_yaml
 
     (path / "config").mkdir(parents=True, exist_ok=True)
     for name in ("Snakefile", "workflow"):
@@ -219,7 +219,7 @@ def check_physics(truth_json: Path, physics: str) -> None:
     Raises:
         DataError: naming the file and both physics.
     """
-    from stringcast.core.files import DataError, read_json
+    from stringcast.core import DataError, read_json
 
     ran = read_json(truth_json).get("physics", "mujoco")
     if ran != physics:
@@ -249,7 +249,7 @@ def predictions(root: Path, name: str, n: int, cores: int, workflow_args, hook) 
     mode synthesized by ``hook``). Returns (one dict per step, seconds); a step whose job failed
     has ``error``."""
     from stringcast_lab.campaign import run_workflow
-    from stringcast.core.files import read_json
+    from stringcast.core import read_json
 
     if n < 2:
         return [], 0.0
@@ -294,7 +294,7 @@ def run_one(string_type: int, seed: int, method: str, config: dict, work: Path, 
     """
     from benchmarks.loop_state import WORKFLOW_ARGS, error_model
     from stringcast_lab.campaign import run_campaign
-    from stringcast.core.files import DataError, read_json, write_json
+    from stringcast.core import DataError, read_json, write_json
 
     root = run_dir(work, string_type, seed, method, physics, mode, family)
     name, done = root.name, root / "run.json"
@@ -359,7 +359,7 @@ def run(quick: bool = False, spec: Spec | None = None, work: Path | None = None,
         DataError: (state mode) the error model's files are missing.
     """
     from stringcast.core import load_config
-    from stringcast.core.files import write_text
+    from stringcast.core import write_text
 
     config = load_config()
     spec = spec or (Spec(types=(1, 5), seeds=(0,)) if quick else Spec())

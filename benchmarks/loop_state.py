@@ -99,7 +99,7 @@ def error_model(string_type: int, source_dir: Path) -> ErrorModel:
     Raises:
         DataError: a file missing (named, with how to make it) or lacking those keys.
     """
-    from stringcast.core.files import DataError, read_json
+    from stringcast.core import DataError, read_json
 
     tp = Path(source_dir) / "tracking.json"
     if not tp.exists():

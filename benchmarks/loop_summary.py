@@ -309,7 +309,7 @@ def family_into(loop_json: Path, doc: dict, spec, materials: dict) -> dict:
     (:func:`benchmarks.loop_summary.summarize`'s keys, ``fit_skill``), the draws (type, seed, material)
     and whether the family run is complete, and ``materials`` (each seed's ``lab.material``); another
     physics' family entry and the rest of loop.json as they were (a fresh one if none)."""
-    from stringcast.core.files import read_json
+    from stringcast.core import read_json
 
     base = read_json(loop_json) if loop_json.exists() else header("loop", False)
     family = dict(base.get("family") or {})    # another physics' family entry stays (a run per engine)

@@ -34,7 +34,7 @@ def _case(duration: float):
     """Mid-range Table 2 coefficients, a 2 Hz swinging hand, the hanging start."""
     from stringcast.core import model_ranges, settings_from_config
     from stringcast.core import load_config
-    from stringcast.model.string_model import hanging_equilibrium
+    from stringcast.api import hanging_equilibrium
 
     lo, hi, _ = model_ranges(settings_from_config(load_config()).model)
     coeffs = np.sqrt(lo * hi)
@@ -60,7 +60,7 @@ def model_rates(duration: float, batch: int, repeats: int) -> dict:
     import numba
 
     from stringcast.model.lockstep import LANES
-    from stringcast.model.string_model import closest_approach_batch, simulate_batch
+    from stringcast.api import closest_approach_batch, simulate_batch
 
     coeffs, mu, hand_t, hand, p0 = _case(duration)
     sample_t = np.arange(0.0, duration, 0.002)
@@ -139,7 +139,7 @@ def paired_ratio(duration: float, batch: int, ref_duration: float, pairs: int) -
     from 1.4 to 2.2 M point-steps/s between runs here), and a pair sees the same machine."""
     import numba
 
-    from stringcast.model.string_model import simulate_batch
+    from stringcast.api import simulate_batch
 
     coeffs, mu, hand_t, hand, p0 = _case(duration)
     sample_t = np.arange(0.0, duration, 0.002)

@@ -41,7 +41,7 @@ def _sync_case(trial: Path, calibration_json: Path, campaign, settings, out: Pat
     """run_sync on ``trial`` with ``video.yaml``'s trigger time set to ``trigger_s`` (None: withheld), with the
     sync, tracking and board-check sections of ``settings`` (:class:`stringcast.core.Settings`)."""
     from stringcast.core import stage_kwargs
-    from stringcast.core.files import DataError
+    from stringcast.core import DataError
     from stringcast.sync import run_sweep, run_sync
 
     meta = yaml.safe_load((trial / "video.yaml").read_text())
@@ -72,10 +72,10 @@ def _sync_case(trial: Path, calibration_json: Path, campaign, settings, out: Pat
 
 
 def run(quick: bool = False) -> dict:
-    from stringcast.calibrate.calibration import run_calibration
+    from stringcast.api import run_calibration
     from stringcast.core import settings_from_config
     from stringcast.core import load_config
-    from stringcast.core.files import read_json
+    from stringcast.core import read_json
 
     config = load_config()
     settings = settings_from_config(config)

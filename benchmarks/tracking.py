@@ -45,7 +45,7 @@ from benchmarks.common import (
 
 
 def _decode_fps(video: Path) -> float:
-    from stringcast.video.container import open_video
+    from stringcast.api import open_video
 
     t0 = time.perf_counter()
     n = sum(1 for _ in open_video(video))
@@ -58,7 +58,7 @@ def track_string(string_type: int, config: dict, settings, calib_dir: Path, work
     from stringcast_lab.campaign import tracking_errors
     from stringcast.core import resolve_campaign, stage_kwargs
     from stringcast.sync import run_sweep, run_sync
-    from stringcast.track.tracking import run_tracking
+    from stringcast.api import run_tracking
     from stringcast.video import write_frame_cache
 
     d = work / f"string_{string_type}"

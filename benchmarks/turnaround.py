@@ -140,7 +140,7 @@ def _decode_seconds(video: Path) -> tuple[float, int]:
 
 def run(quick: bool = False, work: Path | None = None, repeats: int | None = None, cores: int = 2) -> dict:
     repeats = repeats or 1
-    from stringcast.core.files import find_video
+    from stringcast.core import find_video
 
     with tempfile.TemporaryDirectory(prefix="bench_turnaround_") as tmp:
         root = _project(Path(work) if work else Path(tmp))

@@ -8,6 +8,7 @@ import yaml
 
 from stringcast import cli
 from stringcast.core import PARAM_NAMES, read_json, write_json
+from stringcast.plan import next_motion as nm
 from stringcast.plan import planning as pn
 from tests.conftest import ROOT
 
@@ -32,7 +33,7 @@ def played(tmp_path, settings, campaign):
 def test_plan_on_a_failed_fit_is_marked(tmp_path, campaign, played, verdict):
     s, doc = played
     write_json(tmp_path / "params.json", doc if verdict is None else {**doc, "verdict": verdict})
-    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, tmp_path / "m2.csv",
+    res = nm.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, tmp_path / "m2.csv",
                       tmp_path / "m2.json", seed=1, model=s.model, motion=s.motion)
     out = read_json(tmp_path / "m2.json")
     failed = verdict is FAILED

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from stringcast.plan import motion as mo
+from stringcast.plan import next_motion as nm
 from stringcast.plan import planning as pn
 from stringcast.core.arm import check_limits
 from stringcast.core import PARAM_NAMES, ConfigError, resolve_campaign
@@ -103,7 +104,7 @@ def test_next_plan_keeps_posture_and_T(tmp_path, campaign, small):
     first = pn.search(campaign, small.model, small.motion, coeffs, mu, rng)
     pn.write_motion(first, campaign, small.motion, coeffs, mu, 0, tmp_path / "m1.csv", tmp_path / "m1.json", "first")
     write_json(tmp_path / "params.json", {"coefficients": dict(zip(PARAM_NAMES, coeffs * 2)), "mu": mu * 3})
-    nxt = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, tmp_path / "m2.csv", tmp_path / "m2.json", seed=1, model=small.model, motion=small.motion)
+    nxt = nm.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, tmp_path / "m2.csv", tmp_path / "m2.json", seed=1, model=small.model, motion=small.motion)
     a, b = first.motion, nxt.motion
     assert b.T == a.T and np.allclose(b.q0, a.q0)
     diff = b.control_points - a.control_points
@@ -149,10 +150,10 @@ def test_played_motion_without_control_points_is_refused(tmp_path, campaign, sma
     coeffs, mu = _first(small, campaign.string)
     write_json(tmp_path / "params.json", {"coefficients": dict(zip(PARAM_NAMES, coeffs)), "mu": mu})
     with pytest.raises(DataError, match="played.json"):
-        pn.run_plan(tmp_path / "params.json", tmp_path / "played.json", campaign, tmp_path / "m.csv", tmp_path / "m.json", model=small.model, motion=small.motion)
+        nm.run_plan(tmp_path / "params.json", tmp_path / "played.json", campaign, tmp_path / "m.csv", tmp_path / "m.json", model=small.model, motion=small.motion)
     write_json(tmp_path / "bad_params.json", {"coefficients": {"k_s": 1.0}, "mu": mu})
     with pytest.raises(DataError, match="bad_params.json"):
-        pn.run_plan(tmp_path / "bad_params.json", tmp_path / "played.json", campaign, tmp_path / "m.csv", tmp_path / "m.json", model=small.model, motion=small.motion)
+        nm.run_plan(tmp_path / "bad_params.json", tmp_path / "played.json", campaign, tmp_path / "m.csv", tmp_path / "m.json", model=small.model, motion=small.motion)
     assert not (tmp_path / "m.csv").exists()
 
 
@@ -180,7 +181,7 @@ def test_robust_plan_scores_the_ensemble(tmp_path, campaign, small):
     ens_c, ens_mu = _ensemble(small, campaign)
     write_json(tmp_path / "params.json", _params_doc(ens_c, ens_mu, campaign))
     cfg = _with(small, planner="robust", max_candidates=256, extra_after_hit=64, robust_screen_mm=200.0)
-    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, tmp_path / "m2.csv", tmp_path / "m2.json", seed=1, model=cfg.model, motion=cfg.motion)
+    res = nm.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, tmp_path / "m2.csv", tmp_path / "m2.json", seed=1, model=cfg.model, motion=cfg.motion)
     assert res.planner == "robust" and res.ensemble_d_min.shape == (4,)
     pl = pn.Predictor(campaign, cfg.model, cfg.motion, ens_c[0], ens_mu[0])
     hand_t, hand = pl.hand_trajectory(res.motion.q)
@@ -198,7 +199,7 @@ def test_robust_plan_scores_the_ensemble(tmp_path, campaign, small):
     assert doc["ensemble_hit_share"] == pytest.approx(res.hit_share)
     assert doc["ensemble_margin_mm"] == pytest.approx(res.margin * 1000)
     # the paper's planner (default) ignores the ensemble and writes no ensemble figures
-    res_p = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, tmp_path / "m3.csv", tmp_path / "m3.json", seed=1, model=small.model, motion=small.motion)
+    res_p = nm.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, tmp_path / "m3.csv", tmp_path / "m3.json", seed=1, model=small.model, motion=small.motion)
     assert res_p.planner == "paper" and res_p.hit_share is None
     assert read_json(tmp_path / "m3.json")["ensemble_hit_share"] is None
 
@@ -294,7 +295,7 @@ def test_robust_needs_the_ensemble(tmp_path, campaign, small):
     write_json(tmp_path / "params.json", {"coefficients": dict(zip(PARAM_NAMES, coeffs)), "mu": mu})
     cfg = _with(small, planner="robust")
     with pytest.raises(DataError, match="params.json.*top"):
-        pn.run_plan(tmp_path / "params.json", tmp_path / "played.json", campaign, tmp_path / "m.csv", tmp_path / "m.json", model=cfg.model, motion=cfg.motion)
+        nm.run_plan(tmp_path / "params.json", tmp_path / "played.json", campaign, tmp_path / "m.csv", tmp_path / "m.json", model=cfg.model, motion=cfg.motion)
     with pytest.raises(ConfigError, match="motion.planner"):   # refused as the settings are built
         cfg = _with(cfg, planner="magic")
-        pn.run_plan(tmp_path / "params.json", tmp_path / "played.json", campaign, tmp_path / "m.csv", tmp_path / "m.json", model=cfg.model, motion=cfg.motion)
+        nm.run_plan(tmp_path / "params.json", tmp_path / "played.json", campaign, tmp_path / "m.csv", tmp_path / "m.json", model=cfg.model, motion=cfg.motion)

@@ -7,6 +7,7 @@ import pandas as pd
 import pytest
 
 from stringcast.plan import motion as mo
+from stringcast.plan import next_motion as nm
 from stringcast.plan import planning as pn
 from stringcast.execute.executor import build_command
 from stringcast.core.files import DataError, write_json, write_parquet
@@ -117,7 +118,7 @@ def test_planner_aims_the_model_at_the_corrected_target(tmp_path, settings, camp
         "point": np.tile(np.arange(n + 1), len(ft)), "x_m": xy[..., 0].ravel(), "y_m": xy[..., 1].ravel(),
         "valid": np.ones(len(ft) * (n + 1), bool)}))
     write_json(tmp_path / "params.json", {"coefficients": dict(zip(pn.PARAM_NAMES, coeffs)), "mu": mu})
-    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, tmp_path / "m2.csv",
+    res = nm.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, tmp_path / "m2.csv",
                       tmp_path / "m2.json", seed=1, tracks_parquet=tmp_path / "tracks.parquet",
                       joints_csv=tmp_path / "joints.csv", model=model,
                       motion=(motion := replace(motion, residual_correction=True)))
@@ -128,27 +129,27 @@ def test_planner_aims_the_model_at_the_corrected_target(tmp_path, settings, camp
     d, *_ = closest_approach_batch(coeffs, mu, hand_t, hand[None], [0], p0[None], pl.l0, pl.psi0, pl.dt, 0.0,
                                    res.motion.T + pl.flight, campaign.target.xy - offset)
     assert d[0] == pytest.approx(res.d_min, abs=2e-3) and d[0] <= campaign.target.radius
-    doc = pn.read_json(tmp_path / "m2.json")
+    doc = nm.read_json(tmp_path / "m2.json")
     assert doc["played_observed_miss_mm"] > 0 and doc["residual_correction"]["sets"] == 1
     # a tracked miss beyond replan_miss_mm: a new motion from scratch (a new posture or T), no correction
     motion = replace(motion, replan_miss_mm=1.0)
-    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, tmp_path / "m4.csv",
+    res = nm.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, tmp_path / "m4.csv",
                       tmp_path / "m4.json", seed=1, tracks_parquet=tmp_path / "tracks.parquet",
                       joints_csv=tmp_path / "joints.csv", model=model, motion=motion)
     assert "replan_miss_mm" in res.message and res.residual is None
     assert res.motion.T != m1.T or not np.allclose(res.motion.q0, m1.q0)
     # replan_perturb_rad_s: first a wider, corrected perturbation of the played motion (its posture and T)
     motion = replace(motion, replan_perturb_rad_s=1.0)
-    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, tmp_path / "m5.csv",
+    res = nm.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, tmp_path / "m5.csv",
                       tmp_path / "m5.json", seed=1, tracks_parquet=tmp_path / "tracks.parquet",
                       joints_csv=tmp_path / "joints.csv", model=model, motion=motion)
     assert res.hit and "perturbed by +-1 rad/s" in res.message and res.residual is not None
     assert res.motion.T == m1.T and np.allclose(res.motion.q0, m1.q0)
-    assert [pn.read_json(tmp_path / f"m{k}.json")["origin"] for k in (2, 4, 5)] == \
+    assert [nm.read_json(tmp_path / f"m{k}.json")["origin"] for k in (2, 4, 5)] == \
         ["perturbation", "new", "wide_perturbation"]
     # ... but not twice in a row: a played wide perturbation that missed so gets the new motion
-    write_json(tmp_path / "m1w.json", {**pn.read_json(tmp_path / "m1.json"), "origin": "wide_perturbation"})
-    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1w.json", campaign, tmp_path / "m5w.csv",
+    write_json(tmp_path / "m1w.json", {**nm.read_json(tmp_path / "m1.json"), "origin": "wide_perturbation"})
+    res = nm.run_plan(tmp_path / "params.json", tmp_path / "m1w.json", campaign, tmp_path / "m5w.csv",
                       tmp_path / "m5w.json", seed=1, tracks_parquet=tmp_path / "tracks.parquet",
                       joints_csv=tmp_path / "joints.csv", model=model, motion=motion)
     assert "after a wide perturbation: a new motion" in res.message and res.origin == "new"
@@ -157,19 +158,19 @@ def test_planner_aims_the_model_at_the_corrected_target(tmp_path, settings, camp
     # to a 5 mm target)
     motion = replace(motion, replan_perturb_rad_s=1e-6, max_candidates=256)
     small_target = dataclasses.replace(campaign, target=dataclasses.replace(campaign.target, radius=0.005))
-    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", small_target, tmp_path / "m6.csv",
+    res = nm.run_plan(tmp_path / "params.json", tmp_path / "m1.json", small_target, tmp_path / "m6.csv",
                       tmp_path / "m6.json", seed=1, tracks_parquet=tmp_path / "tracks.parquet",
                       joints_csv=tmp_path / "joints.csv", model=model, motion=motion)
     assert "hits under 0% of the sets (< 90%)" in res.message and "a new motion" in res.message
     assert res.residual is None and (res.motion.T != m1.T or not np.allclose(res.motion.q0, m1.q0))
     # a model further off the played tip (41 mm) than replan_residual_mm: no perturbation, a new motion
     motion = replace(motion, replan_miss_mm=0.0, replan_residual_mm=30.0)
-    res = pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, tmp_path / "m7.csv",
+    res = nm.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, tmp_path / "m7.csv",
                       tmp_path / "m7.json", seed=1, tracks_parquet=tmp_path / "tracks.parquet",
                       joints_csv=tmp_path / "joints.csv", model=model, motion=motion)
     assert "relies on a model 41 mm off" in res.message and "a new motion" in res.message
     assert res.residual is None and (res.motion.T != m1.T or not np.allclose(res.motion.q0, m1.q0))
     # without the trial's files the correction cannot be made, and says so
     with pytest.raises(pn.ConfigError, match="residual_correction"):
-        pn.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, tmp_path / "m3.csv",
+        nm.run_plan(tmp_path / "params.json", tmp_path / "m1.json", campaign, tmp_path / "m3.csv",
                     tmp_path / "m3.json", seed=1, model=model, motion=motion)

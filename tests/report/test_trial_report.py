@@ -11,6 +11,7 @@ from stringcast.core import PARAM_NAMES, read_json, write_json
 from stringcast.core.files import write_parquet
 from stringcast.estimate import run_estimation
 from stringcast.model import parameters as prm
+from stringcast.plan import next_motion as nm
 from stringcast.plan import planning as pn
 from stringcast.report import write_trial_report
 from stringcast.report.verdicts import stage_verdicts
@@ -42,7 +43,7 @@ def _trial(tmp_path, settings, campaign, dx):
     coeffs, mu0 = pn.first_parameters(model=s.model, motion=s.motion, string=campaign.string)
     first = pn.search(campaign, s.model, s.motion, coeffs, mu0, np.random.default_rng(5))
     pn.write_motion(first, campaign, s.motion, coeffs, mu0, 0, data / "motion.csv", data / "motion.json", "first")
-    pn.run_plan(res / "params.json", data / "motion.json", campaign, res / "motion.csv", res / "motion.json", seed=1,
+    nm.run_plan(res / "params.json", data / "motion.json", campaign, res / "motion.csv", res / "motion.json", seed=1,
                 model=s.model, motion=s.motion)
     return data, res
 

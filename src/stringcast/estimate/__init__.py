@@ -2,7 +2,10 @@
 search (the paper's random search, CMA-ES, differential evolution) and its diagnostics; and
 the next-motion prediction error (an estimate predicting the next trial, :mod:`.prediction`).
 """
-from .estimation import run_estimation
+from .estimation import Fit, fit_tracks, run_estimation
+from .inertia import string_response
 from .prediction import run_prediction
+from .problem import build_problem, make_objective, simulate_fit
 
-__all__ = ["run_estimation", "run_prediction"]
+__all__ = ["Fit", "build_problem", "fit_tracks", "make_objective", "run_estimation", "run_prediction", "simulate_fit",
+           "string_response"]

@@ -52,8 +52,9 @@ from an initial posture q0):
   and loop measurements behind the numbers are in docs/method.md ("Replan after a miss over 45 mm").
 
 The model's predictions (equilibrium, closest approach, tip path) are
-:class:`stringcast.plan.prediction.Predictor`'s. Stage entry points: :func:`run_first_plan`
-and :func:`run_plan` write ``motion.csv`` and its ``motion.json`` sidecar
+:class:`stringcast.plan.prediction.Predictor`'s. Stage entry points: :func:`run_first_plan` here
+and :func:`~stringcast.plan.next_motion.run_plan` (the next motion, with the replan rules above; in memory
+:func:`~stringcast.plan.next_motion.plan_next`) write ``motion.csv`` and its ``motion.json`` sidecar
 (:func:`write_motion`).
 """
 from __future__ import annotations
@@ -63,14 +64,12 @@ from pathlib import Path
 
 import numpy as np
 
-from stringcast.core import (Campaign, ConfigError, ModelSettings, MotionSettings, PARAM_NAMES, read_json,
-                             write_joint_table, write_json)
-from stringcast.model import ensemble_parameters, first_parameters, planned_parameters
-from .motion import Motion, read_motion_json, time_grid
+from stringcast.core import (Campaign, ConfigError, ModelSettings, MotionSettings, PARAM_NAMES, write_joint_table,
+                             write_json)
+from stringcast.model import first_parameters
+from .motion import Motion, time_grid
 from .search import draw_candidates, keep_best, residual_correction, start_postures
 from .prediction import Predictor
-from stringcast.core import TRACK_COLUMNS, read_joint_table, read_parquet_columns
-from .residual import observed_miss, observed_tip
 
 
 @dataclass(frozen=True)
@@ -277,109 +276,4 @@ def run_first_plan(campaign: Campaign, out_csv: Path, out_json: Path, seed: int 
     coeffs, mu = first_parameters(model=model, motion=motion, string=campaign.string)
     result = replace(search(campaign, model, motion, coeffs, mu, _rng(motion, seed)), origin="first")
     write_motion(result, campaign, motion, coeffs, mu, seed, out_csv, out_json, "first")
-    return result
-
-
-def _replan(campaign: Campaign, model: ModelSettings, motion: MotionSettings, coeffs: np.ndarray, mu: np.ndarray,
-            seed: int, previous: Motion,
-            ensemble: tuple[np.ndarray, np.ndarray] | None, observed: tuple | None, why: str,
-            wide: float = 0.0) -> PlanResult:
-    """A new motion instead of the perturbation (module doc, "Replan"), after ``why``; first, when
-    ``wide`` > 0, the played motion perturbed by up to ``wide`` rad/s, kept when its best candidate hits
-    under at least ``motion.replan_min_share`` of the ensemble (the planning set alone without one) and
-    the model's error on the played motion is within ``motion.replan_residual_mm``."""
-    if wide > 0:
-        result = search(campaign, model, replace(motion, perturb_rad_s=wide), coeffs, mu, _rng(motion, seed),
-                        previous=previous, ensemble=ensemble, observed=observed)
-        share = result.hit_share if ensemble is not None else float(result.hit)   # search sets it with an ensemble
-        need = float(motion.replan_min_share)
-        too_far = _residual_too_large(result, motion)
-        if share >= need and not too_far:
-            return _with_message(replace(result, origin="wide_perturbation"),
-                                 f"{why}: the played motion perturbed by +-{wide:g} rad/s "
-                                 f"(hits under {share:.0%} of the sets)")
-        why += f"; its +-{wide:g} rad/s perturbation " + (too_far or f"hits under {share:.0%} of the sets "
-                                                           f"(< {need:.0%})")
-    result = replace(search(campaign, model, motion, coeffs, mu, _rng(motion, seed), ensemble=ensemble), origin="new")
-    return _with_message(result, f"{why}: a new motion (random posture and T), not a perturbation of the played one")
-
-
-def _with_message(result: PlanResult, text: str) -> PlanResult:
-    """``result`` with ``text`` put before its own message."""
-    return replace(result, message="; ".join([text] + [result.message] * bool(result.message)))
-
-
-def _residual_too_large(result: PlanResult, motion: MotionSettings) -> str:
-    """Why the residual correction is not to be trusted ("" when it is, or there is none): the model's
-    tip error on the played motion (median over the motion) beyond ``motion.replan_residual_mm`` (> 0)."""
-    limit = float(motion.replan_residual_mm)
-    size = None if result.residual is None else result.residual["median_mm"]
-    if limit > 0 and size is not None and size > limit:
-        return f"relies on a model {size:.0f} mm off the played motion's tip (median; > replan_residual_mm {limit:.0f})"
-    return ""
-
-
-def run_plan(params_json: Path, played_motion_json: Path, campaign: Campaign, out_csv: Path, out_json: Path,
-             seed: int = 0, tracks_parquet: Path | None = None, joints_csv: Path | None = None, *,
-             model: ModelSettings, motion: MotionSettings) -> PlanResult:
-    """Next motion (Section V.B): the played motion's posture and T, perturbed control points, estimated parameters.
-
-    With ``motion.planner: robust`` the candidates are also scored under params.json's
-    ``top`` ensemble (module doc); motion.json then carries ``ensemble_hit_share``,
-    ``ensemble_margin_mm`` and ``ensemble_d_min_mm``. With ``motion.residual_correction``
-    the played trial's ``tracks_parquet`` and ``joints_csv`` correct every prediction
-    (:mod:`stringcast.plan.residual`); motion.json's ``residual_correction`` says how. With
-    ``motion.replan_miss_mm`` > 0 and a tracked miss beyond it, the next motion is a wider
-    perturbation (``motion.replan_perturb_rad_s``) if the ensemble agrees on it, else a new
-    search (:func:`search` without ``previous``); motion.json's ``played_observed_miss_mm``
-    is that miss; a played wide perturbation (motion.json ``origin``) that missed so is not
-    perturbed again. With ``motion.replan_residual_mm`` > 0 no perturbation is played on a model
-    further than that off the played motion's tracked tip (the new search instead). On a fit
-    whose params.json verdict is ``fail`` it still plans (the person decides) and says so:
-    motion.json's ``planned_on_failed_fit`` is true, ``failed_fit`` that verdict, and the
-    message begins "planned on a failed fit".
-
-    Raises:
-        DataError: unreadable params.json (or, robust, one without ``top``), a played
-            motion.json without q0_rad, T_s, control_points_rad_s, or (residual correction)
-            unreadable tracks or a joint log that is not the played motion.
-        ConfigError: residual correction without the trial's files.
-    """
-    params = read_json(params_json, mapping=True)
-    failed_fit = params.get("verdict") if (params.get("verdict") or {}).get("status") == "fail" else None
-    coeffs, mu = planned_parameters(n_points=campaign.string.n_points, params=params, source=str(params_json))
-    previous = read_motion_json(played_motion_json, campaign.arm.n_joints, campaign.arm.controller_rate)
-    ensemble = ensemble_parameters(n_points=campaign.string.n_points, params=params, source=str(params_json)) \
-        if motion.planner == "robust" else None
-    residual, replan_mm = bool(motion.residual_correction), float(motion.replan_miss_mm)
-    observed, miss = None, float("nan")
-    if residual or replan_mm > 0:
-
-        if tracks_parquet is None or joints_csv is None:
-            raise ConfigError("motion.residual_correction and motion.replan_miss_mm need the played trial's "
-                              "tracks.parquet and joints.csv")
-        t_j, q_j = read_joint_table(joints_csv, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
-        observed = observed_tip(read_parquet_columns(tracks_parquet, TRACK_COLUMNS), t_j, q_j, previous.q,
-                                campaign.string.n_points, campaign.arm.controller_rate, str(tracks_parquet))
-        miss = observed_miss(*observed[:3], campaign.target.xy, previous.T + float(motion.flight_window_s))
-    observed = observed if residual else None
-    if replan_mm > 0 and miss * 1000 > replan_mm:
-        why = f"the tracked tip missed by {miss * 1000:.0f} mm (> replan_miss_mm {replan_mm:.0f})"
-        wide = float(motion.replan_perturb_rad_s)
-        if wide > 0 and read_json(played_motion_json, mapping=True).get("origin") == "wide_perturbation":
-            wide, why = 0.0, why + " after a wide perturbation"
-        result = _replan(campaign, model, motion, coeffs, mu, seed, previous, ensemble, observed, why, wide)
-    else:
-        result = replace(search(campaign, model, motion, coeffs, mu, _rng(motion, seed), previous=previous,
-                                ensemble=ensemble, observed=observed), origin="perturbation")
-        too_far = _residual_too_large(result, motion)
-        if too_far:
-            result = _replan(campaign, model, motion, coeffs, mu, seed, previous, ensemble, observed,
-                             "the perturbation " + too_far)
-    if failed_fit is not None:
-        cause = failed_fit.get("likely_cause") or "not named"
-        result = _with_message(result, f"planned on a failed fit (likely cause: {cause}): the estimate is not "
-                                       "usable, so neither is this motion's predicted outcome")
-    write_motion(result, campaign, motion, coeffs, mu, seed, out_csv, out_json, "next",
-                 observed_miss_mm=miss * 1000 if np.isfinite(miss) else None, failed_fit=failed_fit)
     return result

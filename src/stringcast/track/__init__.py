@@ -1,6 +1,6 @@
 """Markerless (or band-marker) tracking of the string: background, segmentation,
 centreline from the grasp, mass points by arc length in the robot frame.
 """
-from .tracking import run_tracking
+from .tracking import TrackedVideo, run_tracking, track_video
 
-__all__ = ["run_tracking"]
+__all__ = ["TrackedVideo", "run_tracking", "track_video"]
