@@ -230,8 +230,10 @@ def run_campaign(name: str, string: str, target: str, config_path: str | Path | 
         truth = json.loads((trial / "ground_truth.json").read_text())
         rows.append({"trial": k, "hit": bool(truth["hit"]),
                      "closest_approach_mm": float(truth["closest_approach_mm"])})
+        floor = truth.get("floor_clearance_mm")
+        why = f" (the string or the arm below the floor by {-floor:.1f} mm)" if floor is not None and floor < 0 else ""
         print(f"[campaign {name}] execution {k}: lab tip closest approach "
-              f"{truth['closest_approach_mm']:.1f} mm -> {'HIT' if truth['hit'] else 'miss'}", flush=True)
+              f"{truth['closest_approach_mm']:.1f} mm -> {'HIT' if truth['hit'] else 'miss'}{why}", flush=True)
         if truth["hit"] and not reports:
             break
         if before_processing is not None:
