@@ -89,11 +89,24 @@ def __dir__() -> list:
 
 
 def default_settings(config: dict | None = None):
-    """Every stage's settings (:class:`~stringcast.core.Settings`) from ``config`` (a merged config,
-    :func:`load_config`), default the project's ``config/config.yaml`` over the settings' defaults.
+    """Every stage's settings from a config.
 
-    Raises:
-        ConfigError: an invalid config (named).
+    Parameters
+    ----------
+    config : dict, optional
+        A merged config (:func:`load_config`); default the project's ``config/config.yaml`` over the
+        settings' defaults.
+
+    Returns
+    -------
+    Settings
+        :class:`~stringcast.core.Settings`: one frozen settings object per stage (``s.tracking``,
+        ``s.estimation``, ...).
+
+    Raises
+    ------
+    ConfigError
+        An invalid config (named).
     """
     return settings_from_config(config if config is not None else load_config())
 

@@ -182,14 +182,22 @@ def estimate(problem: EstimationProblem, model: ModelSettings, estimation: Estim
 class Fit:
     """One trial's fit, in memory (:func:`fit_tracks`).
 
-    Attributes:
-        estimate: the :class:`Estimate`, its ``verdict`` and ``likely_cause`` judged.
-        problem: the trial's :class:`~stringcast.estimate.problem.EstimationProblem` (the frames compared,
-            the rest state, the hand's path).
-        simulation: the model at the estimate over the compared frames: (positions (F, n, 2) m, stayed valid).
-        fit_check: the fit's figures (:func:`~stringcast.estimate.fitcheck.fit_figures`: skill, point error,
-            best time shift, ...).
-        chi_start: (D,) chi_best of eq. (3) the search started from. executions: M of eq. (3).
+    Attributes
+    ----------
+    estimate : Estimate
+        The estimate, its ``verdict`` and ``likely_cause`` judged.
+    problem : EstimationProblem
+        The trial's problem (:mod:`stringcast.estimate.problem`: the frames compared, the rest state, the
+        hand's path).
+    simulation : tuple of (ndarray, (F, n, 2); bool)
+        The model at the estimate over the compared frames, m, and whether it stayed valid.
+    fit_check : dict
+        The fit's figures (:func:`~stringcast.estimate.fitcheck.fit_figures`: ``skill``, the point error in
+        mm, the best time shift, ...).
+    chi_start : ndarray, (D,)
+        chi_best of eq. (3), the search's start.
+    executions : int
+        M of eq. (3).
     """
 
     estimate: Estimate
@@ -260,26 +268,41 @@ def run_estimation(tracks_parquet: Path, joints_csv: Path, campaign: Campaign,
                    tracking: TrackingSettings, upstream: Mapping[str, Path] | None = None) -> Estimate:
     """Estimate the parameters of one trial (:func:`fit_tracks`) and write ``params.json`` and ``fit.parquet``.
 
-    Args:
-        tracks_parquet, joints_csv: the trial's tracked points and measured joint log.
-        prev_params_json: the previous trial's ``params.json`` (chi_best of eq. 3) or None.
-        trial_index: k >= 1, the number of executions so far (M of eq. 3); seed = estimation.seed + k.
-        model, evaluation, estimation, tracking: the settings of the search and its problem
-            (:class:`~stringcast.core.ModelSettings`, :class:`~stringcast.core.EvaluationSettings`,
-            :class:`~stringcast.core.EstimationSettings`, :class:`~stringcast.core.TrackingSettings`).
-        motion: motion settings (:class:`~stringcast.core.MotionSettings`): without ``prev_params_json``
-            the search starts at the first plan's set (``first_k_s``, ``first_max_strain``).
-        upstream: the earlier stages' JSON files by stage (:data:`UPSTREAM`) whose ``"verdict"`` the
-            fit's verdict carries; default: ``<stage>.json`` beside ``tracks_parquet`` (a missing file
-            or key is ok).
+    Parameters
+    ----------
+    tracks_parquet, joints_csv : Path
+        The trial's tracked points and measured joint log.
+    campaign : Campaign
+        The resolved campaign (string, arm).
+    prev_params_json : Path or None
+        The previous trial's ``params.json`` (chi_best of eq. 3); None for trial 1.
+    trial_index : int
+        k >= 1, the number of executions so far (M of eq. 3); seed = ``estimation.seed`` + k.
+    out_params_json, out_fit_parquet : Path
+        ``params.json`` and ``fit.parquet`` to write (docs/data_contract.md).
+    model, evaluation, estimation, tracking : settings
+        The settings of the search and its problem (:class:`~stringcast.core.ModelSettings`,
+        :class:`~stringcast.core.EvaluationSettings`, :class:`~stringcast.core.EstimationSettings`,
+        :class:`~stringcast.core.TrackingSettings`).
+    motion : MotionSettings
+        Without ``prev_params_json`` the search starts at the first plan's set (``first_k_s``,
+        ``first_max_strain``).
+    upstream : mapping of str to Path, optional
+        The earlier stages' JSON files by stage (:data:`UPSTREAM`) whose ``"verdict"`` the fit's verdict
+        carries; default: ``<stage>.json`` beside ``tracks_parquet`` (a missing file or key is ok).
 
-    Returns:
-        The :class:`Estimate`, with the fit's ``verdict`` and ``likely_cause``.
+    Returns
+    -------
+    Estimate
+        With the fit's ``verdict`` and ``likely_cause``.
 
-    Raises:
-        DataError: unreadable or inconsistent inputs (named; where no problem can be built, with the
-            earlier stages' reasons), or an earlier stage's malformed verdict.
-        ConfigError: bad optimizer settings.
+    Raises
+    ------
+    DataError
+        Unreadable or inconsistent inputs (named; where no problem can be built, with the earlier stages'
+        reasons), or an earlier stage's malformed verdict.
+    ConfigError
+        Bad optimizer settings.
     """
     tracks = read_parquet(tracks_parquet, TRACK_COLUMNS)
     t_j, q_j = read_joint_table(joints_csv, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)

@@ -225,16 +225,35 @@ def inertial_response(frame_t: np.ndarray, tracked: np.ndarray, valid: np.ndarra
 
 
 def string_response(frame_t, tracked, valid, hand_t, hand) -> dict:
-    """:func:`inertial_response` of the chords to the points :func:`chord_points` names, and their medians.
+    """Does the tracked string feel its grasp's acceleration? :func:`inertial_response` of the chords to the
+    points :func:`chord_points` names, and their medians (docs/method.md, "The field recording").
 
-    Args:
-        as :func:`inertial_response`, without ``point``.
+    Parameters
+    ----------
+    frame_t : ndarray, (F,)
+        Frame times on the controller clock, s, increasing.
+    tracked : ndarray, (F, n, 2)
+        The tracked points 1..n, m in the robot frame.
+    valid : ndarray of bool, (F, n)
+        Which tracked points are valid.
+    hand_t : ndarray, (K,)
+        The hand's sample times, s, increasing.
+    hand : ndarray, (K, 3)
+        The grasp's x and y (m) and the hand's angle (rad), from the forward kinematics.
 
-    Returns:
-        ``{"inertia_share", "rotation_coupling", "swing_period_s", "fit_r2", "excitation", "points",
-        "per_point"}``: the medians over the points whose share is stated (None where none is),
-        ``fit_r2`` and ``excitation`` of the first point, ``points`` (1-based) the share was stated for,
-        and ``per_point`` each chord's share, coupling, ``fit_r2`` and standard error by point (1-based).
+    Returns
+    -------
+    dict
+        ``inertia_share`` (the acceleration term's gain over a pendulum's; 1 for a string in air),
+        ``rotation_coupling``, ``swing_period_s`` (s): medians over the points whose share is stated
+        (None where none is); ``fit_r2`` and ``excitation`` of the first point; ``points`` (1-based) the
+        share was stated for; ``per_point``: each chord's share, coupling, ``fit_r2`` and standard error
+        by point (1-based).
+
+    Raises
+    ------
+    ValueError
+        The arrays' shapes disagree (:func:`inertial_response`).
     """
     n = np.asarray(tracked).shape[1]
     rows = {pt: inertial_response(frame_t, tracked, valid, hand_t, hand, pt) for pt in chord_points(n)}

@@ -127,21 +127,33 @@ def run_prediction(params_json: Path, tracks_parquet: Path, joints_csv: Path, ca
                    motion: MotionSettings) -> dict:
     """Write ``prediction.json``: trial k's estimate predicting trial k + 1 (module doc).
 
-    Args:
-        params_json: trial k's ``params.json`` (the estimate).
-        tracks_parquet, joints_csv: trial k + 1's tracked points and measured joint log.
-        campaign: the resolved campaign (string, target, arm).
-        out_json: ``prediction.json`` to write.
-        model: the model's step and rest direction (:class:`~stringcast.core.ModelSettings`).
-        tracking: ``rest_frames``, the rest state's frames (:class:`~stringcast.core.TrackingSettings`).
-        motion: ``flight_window_s``, the hit window after the arm stops (:class:`~stringcast.core.MotionSettings`).
+    Parameters
+    ----------
+    params_json : Path
+        Trial k's ``params.json`` (the estimate).
+    tracks_parquet, joints_csv : Path
+        Trial k + 1's tracked points and measured joint log.
+    campaign : Campaign
+        The resolved campaign (string, target, arm).
+    out_json : Path
+        ``prediction.json`` to write.
+    model : ModelSettings
+        The model's step and rest direction.
+    tracking : TrackingSettings
+        ``rest_frames``, the rest state's frames.
+    motion : MotionSettings
+        ``flight_window_s``, the hit window after the arm stops, s.
 
-    Returns:
-        The document written: :func:`tip_prediction_error`'s figures, ``params``, ``tracks``,
-        ``verdict``.
+    Returns
+    -------
+    dict
+        The document written: :func:`tip_prediction_error`'s figures (the tip's error, mm: median, p95;
+        frames compared), ``params``, ``tracks``, ``verdict``.
 
-    Raises:
-        DataError: unreadable or inconsistent inputs (named), or no tracked tip in the window.
+    Raises
+    ------
+    DataError
+        Unreadable or inconsistent inputs (named), or no tracked tip in the window.
     """
     n = campaign.string.n_points
     coeffs, mu = planned_parameters(n, read_json(params_json, mapping=True), str(params_json))

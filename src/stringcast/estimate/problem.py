@@ -97,18 +97,33 @@ def build_problem(tracks_df: pd.DataFrame, t_joints: np.ndarray, q_joints: np.nd
                   source: str = "tracks.parquet") -> EstimationProblem:
     """Assemble the estimation problem from tracked points and the measured joint log.
 
-    Args:
-        tracks_df: long table ``frame, t_s, point, x_m, y_m, valid`` (t_s on the controller clock).
-        t_joints: (K,) s; q_joints: (K, J) rad, the measured joint log.
-        model, evaluation, estimation, tracking: the settings read (:class:`~stringcast.core.ModelSettings`:
-            ``dt_s``, ``psi0_deg``; :class:`~stringcast.core.EvaluationSettings`: ``w``;
-            :class:`~stringcast.core.EstimationSettings`: ``compare_after_motion_s``;
-            :class:`~stringcast.core.TrackingSettings`: ``rest_frames``).
+    Parameters
+    ----------
+    tracks_df : DataFrame
+        Long table ``frame, t_s, point, x_m, y_m, valid`` ((n + 1) rows per frame; t_s s on the controller
+        clock, x_m and y_m m in the robot frame, point 0 the grasp).
+    t_joints, q_joints : ndarray, (K,) and (K, J)
+        The measured joint log, s and rad.
+    campaign : Campaign
+        The resolved campaign (the string's n points and rest length, the arm).
+    model, evaluation, estimation, tracking : settings
+        The settings read (:class:`~stringcast.core.ModelSettings`: ``dt_s``, ``psi0_deg``;
+        :class:`~stringcast.core.EvaluationSettings`: ``w``; :class:`~stringcast.core.EstimationSettings`:
+        ``compare_after_motion_s``; :class:`~stringcast.core.TrackingSettings`: ``rest_frames``).
+    source : str
+        How messages name the tracks.
 
-    Raises:
-        DataError: missing columns, a log that never moves, fewer than 3 frames at
-            rest before the motion, fewer than 2 frames overlapping the joint log, or
-            no valid tracked point to compare.
+    Returns
+    -------
+    EstimationProblem
+        The frames compared, the tracked points and their validity, the hand's path from the forward
+        kinematics and the rest state the model starts from.
+
+    Raises
+    ------
+    DataError
+        Missing columns, a log that never moves, fewer than 3 frames at rest before the motion, fewer
+        than 2 frames overlapping the joint log, or no valid tracked point to compare.
     """
     s, arm = campaign.string, campaign.arm
     n = s.n_points
@@ -190,8 +205,21 @@ def _simulate(problem: EstimationProblem, coeffs: np.ndarray, mu: np.ndarray) ->
 
 
 def make_objective(problem: EstimationProblem, model: ModelSettings) -> Callable[[np.ndarray], np.ndarray]:
-    """E (eqs. 4-6) of a batch: chi (B, D) -> E (B,) in m, +inf where the simulation blew up; chi decoded
-    over the model settings' ranges (:class:`~stringcast.core.ModelSettings`)."""
+    """The evaluation value E (eqs. 4-6) of a batch of parameter sets, as a function of chi.
+
+    Parameters
+    ----------
+    problem : EstimationProblem
+        The trial's problem (:func:`build_problem`).
+    model : ModelSettings
+        The ranges chi is decoded over (eq. 2, :class:`~stringcast.core.ModelSettings`).
+
+    Returns
+    -------
+    callable
+        ``objective(chi)``: chi ndarray, (B, D) in [0, 1] (the ten coefficients, mu_others, one mu per
+        special point) -> E ndarray, (B,) m; +inf where the simulation blew up.
+    """
 
     def objective(chi: np.ndarray) -> np.ndarray:
         coeffs, mu = decode(chi, model, problem.mass_groups)
@@ -204,7 +232,24 @@ def make_objective(problem: EstimationProblem, model: ModelSettings) -> Callable
 
 
 def simulate_fit(problem: EstimationProblem, model: ModelSettings, chi: np.ndarray) -> tuple[np.ndarray, bool]:
-    """Simulated points (F, n, 2) at ``problem.frame_t`` for one chi, and whether the run stayed valid."""
+    """The model at one parameter set along the trial's hand path.
+
+    Parameters
+    ----------
+    problem : EstimationProblem
+        The trial's problem (:func:`build_problem`).
+    model : ModelSettings
+        The ranges chi is decoded over (eq. 2).
+    chi : ndarray, (D,)
+        The parameter set's exponents in [0, 1].
+
+    Returns
+    -------
+    positions : ndarray, (F, n, 2)
+        The simulated points at ``problem.frame_t``, m in the robot frame (NaN from a blow-up on).
+    ok : bool
+        Whether the run stayed valid.
+    """
 
     coeffs, mu = decode(np.atleast_2d(chi), model, problem.mass_groups)
     pos, ok = _simulate(problem, np.ascontiguousarray(coeffs), np.ascontiguousarray(mu))

@@ -102,29 +102,48 @@ def _scalars(l0, dt, max_stretch):
 
 def simulate_batch(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, sample_t,
                    *, g: float = G, max_stretch: float = 3.0):
-    """Simulate B candidates of the string model and sample them at given times.
+    """Simulate B candidates of the string model (docs/string_model.md, the paper's CG model) and sample
+    them at given times.
 
-    Args:
-        coeffs: (B, 10) coefficients, ``config.PARAM_NAMES`` order (Table 2 units).
-        mu: (B, n) relative masses of points 1..n.
-        hand_t: (K,) s, strictly increasing sample times of the hand trajectories.
-        hand: (H, K, 3) hand trajectories (x m, y m, phi_h rad); linearly
-            interpolated at each substep, first/last sample held outside hand_t.
-        hand_idx: (B,) int, the hand trajectory candidate b uses.
-        p_init: (H, n, 2) m, positions of points 1..n at rest (v = 0) at sample_t[0].
-        l0: rest segment length, m. psi0: rest direction of the string in the hand
-            frame, rad. dt: time step, s.
-        sample_t: (F,) s, increasing; the simulation starts at sample_t[0].
-        g: gravity, m/s^2 along -y (keyword; 0 for tests). max_stretch: blow-up
-            threshold, segment length / l0.
+    Parameters
+    ----------
+    coeffs : ndarray, (B, 10)
+        Coefficients, ``config.PARAM_NAMES`` order (Table 2 units).
+    mu : ndarray, (B, n)
+        Relative masses of points 1..n.
+    hand_t : ndarray, (K,)
+        Strictly increasing sample times of the hand trajectories, s.
+    hand : ndarray, (H, K, 3)
+        Hand trajectories (x m, y m, phi_h rad); linearly interpolated at each substep, the first and
+        last sample held outside ``hand_t``.
+    hand_idx : ndarray of int, (B,)
+        The hand trajectory candidate b uses.
+    p_init : ndarray, (H, n, 2)
+        Positions of points 1..n at rest (v = 0) at ``sample_t[0]``, m.
+    l0 : float
+        Rest segment length, m.
+    psi0 : float
+        Rest direction of the string in the hand frame, rad.
+    dt : float
+        Time step, s.
+    sample_t : ndarray, (F,)
+        Sample times, s, non-decreasing; the simulation starts at ``sample_t[0]``.
+    g : float
+        Gravity, m/s^2 along -y (0 for tests).
+    max_stretch : float
+        Blow-up threshold, segment length / l0.
 
-    Returns:
-        pos: (B, F, n, 2) float64 positions at sample_t (linear interpolation between
-        the substeps around each sample; NaN after a blow-up), ok: (B,) bool.
+    Returns
+    -------
+    pos : ndarray, (B, F, n, 2)
+        Positions at ``sample_t``, m (linear between the substeps around each sample; NaN after a blow-up).
+    ok : ndarray of bool, (B,)
+        Whether each candidate stayed valid.
 
-    Raises:
-        ValueError: for inconsistent shapes or non-finite/negative inputs (never
-        for a blow-up, which gives ok = False).
+    Raises
+    ------
+    ValueError
+        Inconsistent shapes or non-finite / negative inputs (never for a blow-up, which gives ok = False).
     """
     n = np.shape(p_init)[-2] if np.ndim(p_init) == 3 else -1
     c, m = _batch(coeffs, mu, n)
@@ -141,10 +160,34 @@ def simulate_batch(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, sam
 
 def simulate(coeffs, mu, hand_t, hand, p_init, l0, psi0, dt, sample_t, *, g: float = G,
              max_stretch: float = 3.0):
-    """Single candidate of :func:`simulate_batch`.
+    """One candidate of :func:`simulate_batch`.
 
-    Args: coeffs (10,), mu (n,), hand_t (K,), hand (K, 3), p_init (n, 2), rest as there.
-    Returns: pos (F, n, 2) m, ok bool.
+    Parameters
+    ----------
+    coeffs : ndarray, (10,)
+        Coefficients, ``config.PARAM_NAMES`` order (Table 2 units).
+    mu : ndarray, (n,)
+        Relative masses of points 1..n.
+    hand_t : ndarray, (K,)
+        Hand sample times, s.
+    hand : ndarray, (K, 3)
+        The hand trajectory (x m, y m, phi_h rad).
+    p_init : ndarray, (n, 2)
+        Positions at rest at ``sample_t[0]``, m.
+    l0, psi0, dt, sample_t, g, max_stretch
+        As in :func:`simulate_batch`.
+
+    Returns
+    -------
+    pos : ndarray, (F, n, 2)
+        Positions at ``sample_t``, m (NaN after a blow-up).
+    ok : bool
+        Whether the run stayed valid.
+
+    Raises
+    ------
+    ValueError
+        As :func:`simulate_batch`.
     """
     pos, ok = simulate_batch(np.atleast_2d(coeffs), np.atleast_2d(mu), hand_t,
                              np.asarray(hand, float)[None], np.zeros(1, np.int64),
@@ -162,24 +205,46 @@ def closest_approach_batch(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0,
     The distance is from the target to the segment between consecutive substep tip
     positions, so a fast tip cannot jump over the target.
 
-    Args:
-        coeffs: (10,) or (B, 10); mu: (n,) or (B, n) (broadcast to the batch).
-        hand_t (K,), hand (H, K, 3), hand_idx (B,), p_init (H, n, 2): as in
-            :func:`simulate_batch`. t_start < t_end: s.
-        target_xy: (2,) m, a fixed target; or (P, S, 2) m, moving targets sampled every
-            ``target_dt`` s from t_start (linear between samples, held beyond them), candidate
-            b taking path ``target_idx[b]`` (default 0): the residual-corrected target
-            of :mod:`stringcast.plan.residual`.
-        floor_y: unused here (the caller compares min_y with it); kept for the API.
+    Parameters
+    ----------
+    coeffs : ndarray, (10,) or (B, 10)
+        Coefficients (Table 2 units), broadcast to the batch.
+    mu : ndarray, (n,) or (B, n)
+        Relative masses, broadcast to the batch.
+    hand_t, hand, hand_idx, p_init : ndarray, (K,), (H, K, 3), (B,) and (H, n, 2)
+        As in :func:`simulate_batch`.
+    l0, psi0, dt : float
+        As in :func:`simulate_batch` (m, rad, s).
+    t_start, t_end : float
+        The run, s, t_start < t_end (at rest at ``p_init`` at t_start).
+    target_xy : ndarray, (2,) or (P, S, 2)
+        A fixed target, m; or moving targets sampled every ``target_dt`` s from t_start (linear between
+        samples, held beyond them), candidate b taking path ``target_idx[b]`` (default 0): the
+        residual-corrected target of :mod:`stringcast.plan.residual`.
+    floor_y : float, optional
+        Unused here (the caller compares min_y with it); kept for the API.
+    target_dt : float, optional
+        The moving targets' sample step, s.
+    target_idx : ndarray of int, (B,), optional
+        Each candidate's target path.
+    g, max_stretch : float
+        As in :func:`simulate_batch`.
 
-    Returns:
-        d_min (B,) m, t_min (B,) s, min_y (B,) m (lowest y of any point 1..n over the
-        run), ok (B,) bool. A blown-up candidate has d_min = inf, t_min = NaN,
-        min_y = -inf and ok = False.
+    Returns
+    -------
+    d_min : ndarray, (B,)
+        Closest approach, m (inf for a blown-up candidate).
+    t_min : ndarray, (B,)
+        Its time, s (NaN for a blown-up candidate).
+    min_y : ndarray, (B,)
+        Lowest y of any point 1..n over the run, m (-inf for a blown-up candidate).
+    ok : ndarray of bool, (B,)
+        Whether each candidate stayed valid.
 
-    Raises:
-        ValueError: inconsistent shapes, non-finite targets, or a moving target without
-            target_dt > 0.
+    Raises
+    ------
+    ValueError
+        Inconsistent shapes, non-finite targets, or a moving target without ``target_dt`` > 0.
     """
     n = np.shape(p_init)[-2] if np.ndim(p_init) == 3 else -1
     B = len(np.atleast_1d(hand_idx))
@@ -247,16 +312,40 @@ def hanging_equilibrium(coeffs, mu, hand_pose, l0, psi0, n, dt=1e-4, tol=1e-4, t
     model's own), until every speed is below ``tol`` and every acceleration below
     ``tol * max(relax, 1)`` (checked every millisecond of simulated time).
 
-    Args:
-        coeffs (10,), mu (n,), hand_pose (3,) = (x m, y m, phi rad), l0 m, psi0 rad,
-        n points, dt s, tol m/s, t_max s. relax: 1/s, default 2 sqrt(g / (n l0))
-        (about critical for the pendulum mode).
+    Parameters
+    ----------
+    coeffs : ndarray, (10,)
+        Coefficients (Table 2 units).
+    mu : ndarray, (n,)
+        Relative masses.
+    hand_pose : ndarray, (3,)
+        The fixed hand, (x m, y m, phi rad).
+    l0 : float
+        Rest segment length, m.
+    psi0 : float
+        Rest direction in the hand frame, rad.
+    n : int
+        Points.
+    dt : float
+        Time step, s.
+    tol : float
+        Speed below which the string is at rest, m/s.
+    t_max : float
+        Longest settling run, s.
+    g, max_stretch : float
+        As in :func:`simulate_batch`.
+    relax : float, optional
+        The relaxation's damping, 1/s; default 2 sqrt(g / (n l0)) (about critical for the pendulum mode).
 
-    Returns:
-        (n, 2) m positions of points 1..n.
+    Returns
+    -------
+    ndarray, (n, 2)
+        Positions of points 1..n at rest, m.
 
-    Raises:
-        RuntimeError: if the string blows up or is still moving after t_max.
+    Raises
+    ------
+    RuntimeError
+        The string blows up, or is still moving after ``t_max``.
     """
     c, m = _batch(coeffs, mu, int(n))
     hp = _f64(hand_pose, "hand_pose", 1, 3)

@@ -60,11 +60,18 @@ def _residual_too_large(result: PlanResult, motion: MotionSettings) -> str:
 class NextMotion:
     """The next motion planned in memory (:func:`plan_next`) and what it was planned on.
 
-    Attributes:
-        result: the chosen motion and its predicted outcome (:class:`PlanResult`).
-        coeffs: (10,) the estimate's coefficients, ``PARAM_NAMES`` order. mu: (n,) its relative masses.
-        observed_miss_m: the played motion's tracked tip's closest approach to the target, m (NaN: not read).
-        failed_fit: the estimate's verdict where it is ``fail`` (the plan is then not to be trusted), else None.
+    Attributes
+    ----------
+    result : PlanResult
+        The chosen motion and its predicted outcome (closest approach d_min m at t_min s, ...).
+    coeffs : ndarray, (10,)
+        The estimate's coefficients, ``PARAM_NAMES`` order (Table 2 units).
+    mu : ndarray, (n,)
+        Its relative masses.
+    observed_miss_m : float
+        The played motion's tracked tip's closest approach to the target, m (NaN: not read).
+    failed_fit : dict or None
+        The estimate's verdict where it is ``fail`` (the plan is then not to be trusted).
     """
 
     result: PlanResult
@@ -169,11 +176,36 @@ def run_plan(params_json: Path, played_motion_json: Path, campaign: Campaign, ou
     motion.json's ``planned_on_failed_fit`` is true, ``failed_fit`` that verdict, and the
     message begins "planned on a failed fit".
 
-    Raises:
-        DataError: unreadable params.json (or, robust, one without ``top``), a played
-            motion.json without q0_rad, T_s, control_points_rad_s, or (residual correction)
-            unreadable tracks or a joint log that is not the played motion.
-        ConfigError: residual correction without the trial's files.
+    Parameters
+    ----------
+    params_json : Path
+        The trial's ``params.json`` (the estimate).
+    played_motion_json : Path
+        ``motion.json`` of the motion just played (its posture q0_rad, T_s, control points, origin).
+    campaign : Campaign
+        The resolved campaign (arm, string, target).
+    out_csv, out_json : Path
+        The next ``motion.csv`` (t_s, q1_rad ..) and its ``motion.json`` to write.
+    seed : int
+        The planner's seed, beside ``motion.seed``.
+    tracks_parquet, joints_csv : Path, optional
+        The played trial's tracked points and joint log (residual correction, replan rules).
+    model, motion : settings
+        :class:`~stringcast.core.ModelSettings`, :class:`~stringcast.core.MotionSettings`.
+
+    Returns
+    -------
+    PlanResult
+        The chosen motion and its predicted outcome.
+
+    Raises
+    ------
+    DataError
+        Unreadable params.json (or, robust, one without ``top``), a played motion.json without q0_rad,
+        T_s, control_points_rad_s, or (residual correction) unreadable tracks or a joint log that is not
+        the played motion.
+    ConfigError
+        Residual correction without the trial's files.
     """
     params = read_json(params_json, mapping=True)
     planned_parameters(n_points=campaign.string.n_points, params=params, source=str(params_json))  # named first

@@ -271,8 +271,30 @@ def _rng(motion: MotionSettings, seed: int) -> np.random.Generator:
 
 def run_first_plan(campaign: Campaign, out_csv: Path, out_json: Path, seed: int = 0, *, model: ModelSettings,
                    motion: MotionSettings) -> PlanResult:
-    """First motion of a campaign, planned with :func:`first_parameters` (Table 2 minima, k_s per
-    ``motion.first_k_s``)."""
+    """First motion of a campaign (Section V.A), planned with :func:`first_parameters` (Table 2 minima, k_s
+    per ``motion.first_k_s``); writes ``motion.csv`` and ``motion.json``.
+
+    Parameters
+    ----------
+    campaign : Campaign
+        The resolved campaign (arm, string, target).
+    out_csv, out_json : Path
+        ``motion.csv`` (t_s, q1_rad ..) and its ``motion.json`` to write.
+    seed : int
+        The planner's seed, beside ``motion.seed``.
+    model, motion : settings
+        :class:`~stringcast.core.ModelSettings`, :class:`~stringcast.core.MotionSettings`.
+
+    Returns
+    -------
+    PlanResult
+        The chosen motion and its predicted outcome (closest approach d_min m at t_min s, ...).
+
+    Raises
+    ------
+    ConfigError
+        No motion within the arm's limits can be generated at all.
+    """
     coeffs, mu = first_parameters(model=model, motion=motion, string=campaign.string)
     result = replace(search(campaign, model, motion, coeffs, mu, _rng(motion, seed)), origin="first")
     write_motion(result, campaign, motion, coeffs, mu, seed, out_csv, out_json, "first")

@@ -111,14 +111,19 @@ def inside_image(cal: Calibration, xy: np.ndarray) -> np.ndarray:
 class TrackedVideo:
     """What :func:`track_video` finds in a video.
 
-    Attributes:
-        table: the long table ``frame, t_s, point, x_m, y_m, valid`` ((n + 1) rows per frame; m in
-            the robot frame; point 0 the grasp; invalid points NaN), ``tracks.parquet``'s content.
-        quality: the tracking's self-measures and verdict (:func:`~stringcast.track.quality.tracking_quality`),
-            ``tracking.json``'s content.
-        shown: the frames kept for the overlay: (frame index, image (H, W), centreline px, points px,
-            valid), empty unless asked for.
-        m_per_px: the image scale near the grasp at the end of the log, m / px.
+    Attributes
+    ----------
+    table : DataFrame
+        The long table ``frame, t_s, point, x_m, y_m, valid`` ((n + 1) rows per frame; s; m in the robot
+        frame; point 0 the grasp; invalid points NaN), ``tracks.parquet``'s content.
+    quality : dict
+        The tracking's self-measures and verdict (:func:`~stringcast.track.quality.tracking_quality`),
+        ``tracking.json``'s content.
+    shown : list
+        The frames kept for the overlay: (frame index, image (H, W), centreline px, points px, valid);
+        empty unless asked for.
+    m_per_px : float
+        The image scale near the grasp, m / px (median over the frames).
     """
 
     table: pd.DataFrame
@@ -239,28 +244,41 @@ def run_tracking(trial: TrialFiles | str | Path, geometry_json, clock_json, camp
     """Track the string in one trial (:func:`track_video`); write ``tracks.parquet``, ``tracking.json``
     (the tracking's self-measures and verdict, :mod:`stringcast.track.quality`) and the overlay PNG.
 
-    Args:
-        trial: the trial's video and ``joints.csv`` (:class:`~stringcast.core.TrialFiles`; a folder: its
-            files by the data contract's names).
-        geometry_json, clock_json: this trial's ``geometry.json`` and ``clock.json`` (or, before the
-            sweep, ``calibration.json`` and ``sync.json``).
-        campaign: the resolved campaign (arm, string length L and n).
-        out_parquet: where to write ``tracks.parquet``.
-        overlay_png: if given, a strip of ``overlay_frames`` frames with the tracked points.
-        frames_npy: the video's frames decoded once (:func:`~stringcast.video.write_frame_cache`), read
-            instead of decoding the video; None: decode it (the background's frames a second time).
-        workers: processes that track frames side by side, from ``frames_npy`` only (a video being
-            decoded is tracked in this process, as it is decoded); the same result for any number.
-        quality_json: where to write ``tracking.json`` (None: beside ``out_parquet``).
-        tracking: tracking settings (:class:`~stringcast.core.TrackingSettings`).
+    Parameters
+    ----------
+    trial : TrialFiles, str or Path
+        The trial's video and ``joints.csv`` (:class:`~stringcast.core.TrialFiles`; a folder: its files by
+        the data contract's names).
+    geometry_json, clock_json : str or Path
+        This trial's ``geometry.json`` and ``clock.json`` (or, before the sweep, ``calibration.json`` and
+        ``sync.json``).
+    campaign : Campaign
+        The resolved campaign (arm, string length L and n).
+    out_parquet : str or Path
+        Where to write ``tracks.parquet``.
+    overlay_png : str or Path, optional
+        If given, a strip of ``overlay_frames`` frames with the tracked points.
+    frames_npy : str or Path, optional
+        The video's frames decoded once (:func:`~stringcast.video.write_frame_cache`), read instead of
+        decoding the video; None: decode it (the background's frames a second time).
+    workers : int
+        Processes that track frames side by side, from ``frames_npy`` only (a video being decoded is
+        tracked in this process, as it is decoded); the same result for any number.
+    quality_json : str or Path, optional
+        Where to write ``tracking.json`` (None: beside ``out_parquet``).
+    tracking : TrackingSettings
 
-    Returns:
-        The long table ``frame, t_s, point, x_m, y_m, valid``, (n + 1) rows per frame, in m
-        in the robot frame; frames outside the joint log are all invalid.
+    Returns
+    -------
+    DataFrame
+        The long table ``frame, t_s, point, x_m, y_m, valid``, (n + 1) rows per frame, s and m in the
+        robot frame; frames outside the joint log are all invalid.
 
-    Raises:
-        DataError: missing or malformed inputs (named), or a frame count or image size that
-            disagrees with the clock / the geometry.
+    Raises
+    ------
+    DataError
+        Missing or malformed inputs (named), or a frame count or image size that disagrees with the
+        clock or the geometry.
     """
     trial = TrialFiles.of(trial)
     cal = Calibration.from_json(geometry_json)
