@@ -48,3 +48,29 @@ def test_plan_next_in_memory_is_the_plan_stage_without_its_files(tmp_path, campa
     np.testing.assert_array_equal(memory.result.motion.control_points, filed.motion.control_points)
     assert memory.result.d_min == filed.d_min and memory.failed_fit is None
     np.testing.assert_allclose(memory.coeffs, coeffs * 2)
+
+
+def test_the_face_is_documented_in_numpydoc_sections():
+    """Each function of the face says its Parameters (with shapes and units where arrays) and what it
+    returns; each record its Attributes, in numpydoc's underlined sections."""
+    import inspect
+    import re
+
+    def section(doc: str, name: str) -> bool:
+        return re.search(rf"^{name}\n-{{{len(name)}}}$", doc, re.M) is not None
+
+    missing = []
+    for name in api.__all__:
+        obj = getattr(api, name)
+        doc = inspect.getdoc(obj) or ""
+        if inspect.isclass(obj):
+            if not (section(doc, "Attributes") or section(doc, "Parameters")):
+                missing.append(f"{name}: Attributes")
+            continue
+        sig = inspect.signature(obj)
+        params = [p for p in sig.parameters.values() if p.kind is not p.VAR_KEYWORD]
+        if params and not section(doc, "Parameters"):
+            missing.append(f"{name}: Parameters")
+        if sig.return_annotation not in (None, "None") and not section(doc, "Returns"):
+            missing.append(f"{name}: Returns")
+    assert missing == []
