@@ -161,32 +161,56 @@ def median_frame(video, n: int = 5) -> np.ndarray:
 def run_calibration(trial: TrialFiles | str | Path, calib_dir: str | Path | None, campaign, out_json: str | Path,
                     n_median: int = 5, intrinsics_json: str | Path | None = None, *, board_check: BoardCheckSettings,
                     calibration: CalibrationSettings = CalibrationSettings()) -> Calibration:
-    """Calibrate one trial and write ``calibration.json`` (reproducibly: :func:`~stringcast.calibrate.calib_views.single_threaded_opencv`).
+    """Calibrate one trial and write ``calibration.json`` (reproducibly: single-threaded OpenCV).
 
     Intrinsics from ``calib_dir`` (if given: the ``calib/`` folder, or the campaign's views found
-    in it once, ``calib_views.npz`` of :func:`~stringcast.calibrate.calib_views.write_calib_views`), judged (:func:`~stringcast.calibrate.intrinsics.judged_intrinsics`);
+    in it once, ``calib_views.npz`` of :func:`~stringcast.calibrate.calib_views.write_calib_views`), judged
+    (:func:`~stringcast.calibrate.intrinsics.judged_intrinsics`);
     the trial's board (in the median of the first ``n_median`` trial frames, where the arm
     and string hang still before the motion) checks them and joins the views; then the plane
     homography. The configured board-to-robot transform is checked against the still arm
     in that image at the joint log's first posture
     (:func:`stringcast.calibrate.board_check.check_board_to_robot`; ``board_check`` in the
     file, a warning above ``board_check.warn_mm``). The file's ``verdict`` gathers them.
+    OpenCV runs single-threaded throughout, so the result is reproducible
+    (:func:`~stringcast.calibrate.calib_views.single_threaded_opencv`).
 
-    Args:
-        trial: the trial's video and joint log (:class:`~stringcast.core.TrialFiles`; a folder: its
-            files by the data contract's names).
-        intrinsics_json: the campaign's views' own intrinsics, fitted once
-            (``intrinsics.json`` of :func:`~stringcast.calibrate.calib_views.write_campaign_intrinsics`),
-            read instead of refitted; None: fitted here. The result is the same.
-        board_check: board-check settings (:class:`~stringcast.core.BoardCheckSettings`); the
-            check looks for the arm's outline (``campaign.arm``).
-        calibration: intrinsics settings (:class:`~stringcast.core.CalibrationSettings`;
-            its defaults when not given).
+    Parameters
+    ----------
+    trial : TrialFiles or path
+        The trial's video and joint log (:class:`~stringcast.core.TrialFiles`; a folder: its
+        files by the data contract's names).
+    calib_dir : path or None
+        The ``calib/`` folder, or the ``calib_views.npz`` file of its views; None: no intrinsics, the
+        homography only (lens distortion not corrected, a ``warn``).
+    campaign : Campaign
+        The resolved campaign (the setup's board and ``board_to_robot``, the arm).
+    out_json : path
+        Where to write ``calibration.json``.
+    n_median : int
+        Trial frames, from the first, whose pixel-wise median (:func:`median_frame`) shows the board.
+    intrinsics_json : path, optional
+        The campaign's views' own intrinsics, fitted once
+        (``intrinsics.json`` of :func:`~stringcast.calibrate.calib_views.write_campaign_intrinsics`),
+        read instead of refitted; None: fitted here. The result is the same.
+    board_check : BoardCheckSettings
+        Board-check settings (:class:`~stringcast.core.BoardCheckSettings`); the
+        check looks for the arm's outline (``campaign.arm``).
+    calibration : CalibrationSettings
+        Intrinsics settings (:class:`~stringcast.core.CalibrationSettings`;
+        its defaults when not given).
 
-    Raises:
-        DataError: no board / too few corners in the trial frames or the calibration views,
-            mismatched image sizes, or an ``intrinsics_json`` made from other views or settings
-            (the file is named).
+    Returns
+    -------
+    Calibration
+        The trial's mapping with its verdict, as written to ``out_json``.
+
+    Raises
+    ------
+    DataError
+        No board / too few corners in the trial frames or the calibration views,
+        mismatched image sizes, or an ``intrinsics_json`` made from other views or settings
+        (the file is named).
     """
     with single_threaded_opencv():
         return _run_calibration(TrialFiles.of(trial), calib_dir, campaign, out_json, n_median, board_check, calibration,

@@ -26,23 +26,51 @@ def _f(a):
 class Calibration:
     """Pixel <-> robot-frame mapping of the swing plane for one trial.
 
-    Attributes:
-        H_pixel_to_robot: (3, 3) homography from undistorted pixels to robot (x, y), m.
-        image_size: (width, height) px.
-        K: (3, 3) camera matrix or None; dist: (5,) or None (homography only).
-        reprojection_error_px: RMS of the board corners, robot -> pixel vs detected.
-        n_corners: board corners used. board_to_robot: (3, 3) board-frame -> robot (m).
-        intrinsics_rms_px, intrinsics_views, intrinsics_views_found: from
-            :func:`~stringcast.calibrate.charuco.calibrate_intrinsics`, if any (views used / with the board).
-        warnings: human-readable problems worth reporting.
-        board_check: the board-to-robot transform checked against the arm at rest
-            (``residual_mm``, ``dx_mm``, ``dy_mm``, ...), or None when not checked.
-        intrinsics_quality: how well the calib/ views determine the intrinsics
-            (:func:`stringcast.calibrate.quality.assess`: standard deviations, per-view
-            errors, coverage, tilt, what was held), or None without calib/.
-        board_view: the trial's board reprojected under the calib/ intrinsics
-            (:func:`stringcast.calibrate.intrinsics.board_view_check`), or None.
-        verdict: :class:`~stringcast.core.Verdict`, ok / warn / fail with its reasons.
+    Attributes
+    ----------
+    H_pixel_to_robot : ndarray, (3, 3)
+        Homography from undistorted pixels (px) to robot-frame (x, y), m.
+    image_size : tuple of int, (2,)
+        (width, height), px.
+    K : ndarray, (3, 3), or None
+        Camera matrix, px; None (with ``dist``): homography only.
+    dist : ndarray, (5,), or None
+        OpenCV's lens coefficients (k1, k2, p1, p2, k3); None (with ``K``): homography only.
+    reprojection_error_px : float
+        RMS of the board corners, robot -> pixel vs detected, px (NaN when not measured).
+    n_corners : int
+        Board corners used.
+    board_to_robot : ndarray, (3, 3), or None
+        Board-plane (x, y) -> robot-frame (x, y) transform (homogeneous), m.
+    intrinsics_rms_px : float or None
+        From :func:`~stringcast.calibrate.charuco.calibrate_intrinsics`, if any: the reprojection RMS of
+        the views used, px.
+    intrinsics_views : int or None
+        From :func:`~stringcast.calibrate.charuco.calibrate_intrinsics`, if any: the views used.
+    warnings : tuple of str
+        Human-readable problems worth reporting.
+    corner_ids : tuple of int
+        The ChArUco ids of the board corners used.
+    intrinsics_views_found : int or None
+        From :func:`~stringcast.calibrate.charuco.calibrate_intrinsics`, if any: the views with the board.
+    board_check : dict or None
+        The board-to-robot transform checked against the arm at rest (``residual_mm``, ``dx_mm``,
+        ``dy_mm``, ...), or None when not checked.
+    intrinsics_quality : dict or None
+        How well the calib/ views determine the intrinsics (:func:`stringcast.calibrate.quality.assess`:
+        standard deviations, per-view errors, coverage, tilt, what was held), or None without calib/.
+    board_view : dict or None
+        The trial's board reprojected under the calib/ intrinsics
+        (:func:`stringcast.calibrate.intrinsics.board_view_check`), or None.
+    verdict : Verdict
+        :class:`~stringcast.core.Verdict`, ok / warn / fail with its reasons.
+
+    Raises
+    ------
+    ValueError
+        ``H_pixel_to_robot`` not a finite invertible (3, 3); ``K`` without ``dist`` or the reverse; ``K`` not
+        (3, 3) or ``dist`` not (5,), or either not finite, or a focal length <= 0; ``board_to_robot`` not a
+        finite (3, 3); ``image_size`` not (width, height) >= 1 px.
     """
 
     H_pixel_to_robot: np.ndarray

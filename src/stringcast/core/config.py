@@ -154,8 +154,20 @@ def load_config(path: str | Path | Sequence | None = None) -> dict:
     (:func:`merge_config`), as Snakemake merges ``--configfile`` files over the
     Snakefile's, and the result is validated.
 
-    Raises:
-        ConfigError: a missing or malformed file, or a merged config the schema refuses (named).
+    Parameters
+    ----------
+    path : str, Path, or list or tuple of them, optional
+        The config file, or files merged in order; None (or empty): ``config/config.yaml``.
+
+    Returns
+    -------
+    dict
+        The merged, validated config, with ``_path`` naming its file(s) (joined by ``" + "``).
+
+    Raises
+    ------
+    ConfigError
+        A missing or malformed file, or a merged config the schema refuses (named).
     """
     paths = [Path(p) for p in path] if isinstance(path, (list, tuple)) else [Path(path) if path else DEFAULT_CONFIG]
     if not paths:

@@ -120,18 +120,31 @@ def read_joint_table(path: str | Path, kind: str = "joints.csv", *, n_joints: in
     Read with the ``csv`` module and Python's ``float`` rather than pandas: the stages that read
     nothing else tabular (sync, the sweep, plan) then never import pandas, a large part of their start-up.
 
-    Args:
-        n_joints: the arm's joint count (``campaign.arm.n_joints``): the file must have exactly
-            ``q1_rad .. q<n_joints>_rad``; None takes whatever ``q<j>_rad`` columns it has.
-        arm_name: the arm, named in the error.
+    Parameters
+    ----------
+    path : str or Path
+        The CSV file: ``t_s`` and ``q1_rad``, ``q2_rad``, ... columns.
+    kind : str
+        Which file it is, ``"joints.csv"`` or ``"motion.csv"`` (the reading is the same for both).
+    n_joints : int, optional
+        The arm's joint count (``campaign.arm.n_joints``): the file must have exactly
+        ``q1_rad .. q<n_joints>_rad``; None takes whatever ``q<j>_rad`` columns it has.
+    arm_name : str, optional
+        The arm, named in the error.
 
-    Returns:
-        t: (K,) seconds on the controller clock; q: (K, J) rad.
+    Returns
+    -------
+    t : ndarray, (K,)
+        Seconds on the controller clock, strictly increasing.
+    q : ndarray, (K, J)
+        Joint angles, rad.
 
-    Raises:
-        DataError: missing or unreadable file, a row with another field count than the header,
-            missing columns (the arm's joint columns named), a cell that is not a number, NaN
-            values (an empty cell is one), or ``t_s`` not strictly increasing.
+    Raises
+    ------
+    DataError
+        Missing or unreadable file, a row with another field count than the header,
+        missing columns (the arm's joint columns named), a cell that is not a number, NaN or
+        infinite values (an empty cell is NaN), fewer than two rows, or ``t_s`` not strictly increasing.
     """
     path = Path(path)
     header, body = _read_numeric_csv(path)

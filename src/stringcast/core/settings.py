@@ -363,8 +363,20 @@ class Settings:
 def settings_from_config(config: Mapping | None) -> Settings:
     """Build every section's settings from a merged config (the sections it lacks take the defaults).
 
-    Raises:
-        ConfigError: an unknown key or a value out of its set (naming section and key).
+    Parameters
+    ----------
+    config : mapping or None
+        The merged config (:func:`~stringcast.core.config.load_config`); None: every section's defaults.
+
+    Returns
+    -------
+    Settings
+        One settings object per stage section (``model``, ``evaluation``, ..., ``sweep``).
+
+    Raises
+    ------
+    ConfigError
+        An unknown key or a value out of its set (naming section and key).
     """
     config = config or {}
     return Settings(**{c.SECTION: c.from_mapping(config.get(c.SECTION)) for c in SECTION_CLASSES})

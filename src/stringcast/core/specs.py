@@ -385,8 +385,33 @@ def resolve_campaign(doc: Mapping, config: Mapping, name: str = "campaign",
 
 
 def load_campaign(path: str | Path, config: Mapping | None = None, require_target: bool = True) -> Campaign:
-    """Read ``data/<campaign>/campaign.yaml`` and resolve it against the config
-    (:func:`resolve_campaign`; the campaign's name is the file's folder)."""
+    """Read ``data/<campaign>/campaign.yaml`` and resolve it against the config.
+
+    The campaign's name is the file's folder (:func:`resolve_campaign`).
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``campaign.yaml`` file.
+    config : mapping, optional
+        The merged config whose lab tables (arms, cameras, setups, strings, targets) resolve the campaign's
+        ids; None: :func:`~stringcast.core.config.load_config`'s default.
+    require_target : bool
+        False to read a campaign without a target (its ``target`` is then None).
+
+    Returns
+    -------
+    Campaign
+        The resolved campaign (string, target, arm, setup).
+
+    Raises
+    ------
+    ConfigError
+        A missing, unreadable or malformed file, one that is not a mapping, or what
+        :func:`resolve_campaign` refuses: unknown ids, bad inline values, no target where one is
+        required, or a target that the hanging string could reach without casting (unless
+        ``allow_reachable: true``).
+    """
     path = Path(path)
     config = config if config is not None else load_config()
     doc = load_yaml(path)

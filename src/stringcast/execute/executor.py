@@ -85,28 +85,48 @@ def execute(motion_csv: Path, backend: str, out_dir: Path, campaign_yaml: Path |
             robot_ip: str | None = None, move_to_start: bool = False, interfaces=None) -> dict:
     """Check a motion file, play it on ``backend`` and record the trial into ``out_dir``.
 
-    Args:
-        motion_csv: ``t_s, q1_rad..qJ_rad`` from t = 0 at the controller rate
-            (its ``motion.json``, which must be beside it, is copied along).
-        backend: ``"virtual"`` or ``"ur-rtde"``.
-        out_dir: the trial folder to create (``data/<campaign>/trial_<k>``).
-        campaign_yaml: ``campaign.yaml`` (or an already resolved :class:`Campaign`).
-        executor: pre- and post-roll, the UR backend's settings (:class:`~stringcast.core.ExecutorSettings`).
-        config: the merged config: its lab tables resolve ``campaign.yaml``, and the virtual
-            lab reads its world (``lab``) from it.
-        dry_run: check and describe the command, move nothing, write nothing.
-        robot_ip, move_to_start, interfaces: ``ur-rtde`` only (see
-            :func:`stringcast.execute.ur_rtde.play_ur`; ``interfaces`` replaces ur_rtde in tests).
+    Parameters
+    ----------
+    motion_csv : Path
+        ``t_s, q1_rad..qJ_rad`` (s, rad) from t = 0 at the controller rate
+        (its ``motion.json``, which must be beside it, is copied along).
+    backend : str
+        ``"virtual"`` or ``"ur-rtde"``.
+    out_dir : Path
+        The trial folder to create (``data/<campaign>/trial_<k>``).
+    campaign_yaml : Path or Campaign
+        ``campaign.yaml`` (or an already resolved :class:`Campaign`).
+    executor : ExecutorSettings
+        Pre- and post-roll (s), the UR backend's settings (:class:`~stringcast.core.ExecutorSettings`).
+    config : mapping
+        The merged config: its lab tables resolve ``campaign.yaml``, and the virtual
+        lab reads its world (``lab``) from it.
+    seed : int
+        The virtual lab's seed (:func:`stringcast_lab.run_trial`; ``virtual`` only).
+    dry_run : bool
+        Check and describe the command, move nothing, write nothing.
+    robot_ip : str, optional
+        ``ur-rtde`` only: the arm's address (see :func:`stringcast.execute.ur_rtde.play_ur`).
+    move_to_start : bool
+        ``ur-rtde`` only (see :func:`stringcast.execute.ur_rtde.play_ur`).
+    interfaces : optional
+        ``ur-rtde`` only: replaces ur_rtde in tests (see :func:`stringcast.execute.ur_rtde.play_ur`).
 
-    Returns:
-        dict: backend, samples, duration_s, motion_start_s, dry_run, plus what the backend returned.
+    Returns
+    -------
+    dict
+        backend, motion, samples, duration_s (s), motion_start_s (s), dry_run, plus what the backend returned.
 
-    Raises:
-        JointLimitError: the motion breaks a limit (before anything moves); for ``ur-rtde``
-            also :class:`~stringcast.execute.ur_rtde.StartPostureError` (arm not at the start).
-        DataError: unreadable motion file, bad timing, no ``motion.json`` beside it, or ``out_dir``
-            already holds a joints.csv.
-        ConfigError: unknown backend; ``ur-rtde`` without robot_ip, without ur_rtde, or bad ``executor.ur``.
+    Raises
+    ------
+    JointLimitError
+        The motion breaks a limit (before anything moves); for ``ur-rtde``
+        also :class:`~stringcast.execute.ur_rtde.StartPostureError` (arm not at the start).
+    DataError
+        Unreadable motion file, bad timing, no ``motion.json`` beside it, or ``out_dir``
+        already holds a joints.csv.
+    ConfigError
+        Unknown backend; ``ur-rtde`` without robot_ip, without ur_rtde, or bad ``executor.ur``.
     """
     motion_csv, out_dir = Path(motion_csv), Path(out_dir)
     if backend not in BACKENDS:

@@ -52,11 +52,24 @@ def write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign,
                           settings: Settings) -> None:
     """Write ``results/<campaign>/report.html``: one row per execution (paper Table 3; module doc).
 
-    ``settings``: every stage's: the page names the method they make (:mod:`.provenance`) and
-    reads the flight window (``motion``).
+    Parameters
+    ----------
+    data_dir : Path
+        ``data/<campaign>/``: the trials' raw files (``trial_<k>/``).
+    results_dir : Path
+        ``results/<campaign>/``: the trials' products (``trial_<k>/``) and Snakemake's ``benchmarks/``.
+    campaign : Campaign
+        The resolved campaign (its target, string and arm).
+    out : Path
+        Where to write the page.
+    settings : Settings
+        Every stage's: the page names the method they make (:mod:`.provenance`) and
+        reads the flight window (``motion``).
 
-    Raises:
-        DataError: a result file that is missing or malformed (named).
+    Raises
+    ------
+    DataError
+        A result file that is missing or malformed (named).
     """
     try:
         _write_campaign_report(Path(data_dir), Path(results_dir), campaign, Path(out), settings)

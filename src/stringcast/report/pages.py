@@ -89,14 +89,26 @@ def write_trial_report(trial: TrialFiles | Path, results: TrialResults | Path, c
                        settings: Settings) -> None:
     """Write ``results/<campaign>/trial_<k>/report.html`` from that trial's outputs.
 
-    ``trial``: the trial's raw files (:class:`~stringcast.core.TrialFiles`: the video, the joint log and
-    the played motion.json; a folder: by the data contract's names). ``results``: its products
-    (:class:`~stringcast.core.TrialResults`; a folder: by name). ``settings``: every stage's (:class:`~stringcast.core.Settings`): the page names the method
-    they make (:mod:`.provenance`), and reads Table 2's ranges (``model``) and the flight
-    window (``motion``).
+    Parameters
+    ----------
+    trial : TrialFiles or Path
+        The trial's raw files (:class:`~stringcast.core.TrialFiles`: the video, the joint log and
+        the played motion.json; a folder: by the data contract's names).
+    results : TrialResults or Path
+        Its products (:class:`~stringcast.core.TrialResults`; a folder: by name).
+    campaign : Campaign
+        The resolved campaign (its target, string and arm).
+    out : Path
+        Where to write the page.
+    settings : Settings
+        Every stage's (:class:`~stringcast.core.Settings`): the page names the method
+        they make (:mod:`.provenance`), and reads Table 2's ranges (``model``) and the flight
+        window (``motion``).
 
-    Raises:
-        DataError: a required result file is missing or malformed (named).
+    Raises
+    ------
+    DataError
+        A required result file is missing or malformed (named).
     """
     try:
         results = results if isinstance(results, TrialResults) else TrialResults.in_folder(results)

@@ -13,12 +13,22 @@ from stringcast.core import DataError
 def frame_times(sync: dict, n: int | None = None) -> np.ndarray:
     """Controller-clock times of frames 0..n-1: ``offset_s + k / fps`` -> (n,) s.
 
-    Args:
-        sync: the ``sync.json`` mapping (offset_s, fps, frames).
-        n: frame count (default ``sync["frames"]``).
+    Parameters
+    ----------
+    sync : dict
+        The ``sync.json`` (or ``clock.json``) mapping: ``offset_s`` (s), ``fps`` (frames / s), ``frames``.
+    n : int, optional
+        Frame count (default ``sync["frames"]``).
 
-    Raises:
-        DataError: missing or non-positive fps, or missing offset.
+    Returns
+    -------
+    ndarray, (n,)
+        Each frame's exposure centre on the controller clock, s.
+
+    Raises
+    ------
+    DataError
+        Missing or non-positive fps, or missing offset (or one not finite).
     """
     try:
         offset, fps = float(sync["offset_s"]), float(sync["fps"])

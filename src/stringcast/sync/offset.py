@@ -170,24 +170,40 @@ def run_sync(trial: TrialFiles | str | Path, calibration_json: str | Path | None
              board_check: BoardCheckSettings) -> dict:
     """Write ``sync.json`` for one trial (see the module docstring for its keys).
 
-    Args:
-        trial: the trial's video, ``video.yaml`` and ``joints.csv`` (:class:`~stringcast.core.TrialFiles`;
-            a folder: its files by the data contract's names).
-        calibration_json: the trial's ``calibration.json`` (needed by ``method: video``).
-        campaign: :class:`~stringcast.core.specs.Campaign` (the arm, with its outline and speed limits).
-        out_json: where to write ``sync.json`` (None: not written).
-        frames_npy: the video's frames decoded once (:func:`~stringcast.video.write_frame_cache`), read
-            instead of decoding the video; None: decode it.
-        workers: processes matching the decoded frames side by side (with ``frames_npy``; the same result).
-        sync: sync settings (:class:`~stringcast.core.SyncSettings`).
-        board_check: board-check settings (:class:`~stringcast.core.BoardCheckSettings`), for the
-            check on the rest frames when ``calibration.json`` has none.
+    Parameters
+    ----------
+    trial : TrialFiles or path
+        The trial's video, ``video.yaml`` and ``joints.csv`` (:class:`~stringcast.core.TrialFiles`;
+        a folder: its files by the data contract's names).
+    calibration_json : path or None
+        The trial's ``calibration.json`` (needed by ``method: video``).
+    campaign : Campaign
+        :class:`~stringcast.core.specs.Campaign` (the arm, with its outline and speed limits).
+    out_json : path, optional
+        Where to write ``sync.json`` (None: not written).
+    frames_npy : path, optional
+        The video's frames decoded once (:func:`~stringcast.video.write_frame_cache`), read
+        instead of decoding the video; None: decode it.
+    workers : int
+        Processes matching the decoded frames side by side (with ``frames_npy``; the same result).
+    sync : SyncSettings
+        Sync settings (:class:`~stringcast.core.SyncSettings`).
+    board_check : BoardCheckSettings
+        Board-check settings (:class:`~stringcast.core.BoardCheckSettings`), for the
+        check on the rest frames when ``calibration.json`` has none.
 
-    Raises:
-        DataError: missing/malformed inputs (the file is named), no trigger time with
-            ``method: trigger``, a video in which the arm's motion cannot be found and no trigger
-            time, or a joint log that misses part of the motion (it starts or ends with the arm
-            moving where the frames need it; ``joints.csv`` named).
+    Returns
+    -------
+    dict
+        The ``sync.json`` document (``offset_s`` in s on the controller clock, ``fps``, ``frames``, ...).
+
+    Raises
+    ------
+    DataError
+        Missing/malformed inputs (the file is named), no trigger time with
+        ``method: trigger``, a video in which the arm's motion cannot be found and no trigger
+        time, or a joint log that misses part of the motion (it starts or ends with the arm
+        moving where the frames need it; ``joints.csv`` named).
     """
     trial = TrialFiles.of(trial)
     if trial.video_meta is None:

@@ -152,23 +152,41 @@ def run_sweep(trial: TrialFiles | str | Path, calibration_json: str | Path, sync
               board_check: BoardCheckSettings) -> tuple[dict, dict]:
     """Refine one trial's mapping and clock by the arm's sweep; write ``geometry.json`` and ``clock.json``.
 
-    Args:
-        trial: the trial's video and ``joints.csv`` (:class:`~stringcast.core.TrialFiles`; a folder: its
-            files by the data contract's names).
-        calibration_json, sync_json: the trial's ``calibration.json`` and ``sync.json``.
-        campaign: :class:`~stringcast.core.specs.Campaign` (the arm's outline, the board, the string).
-        out_geometry, out_clock: where to write them (None: not written).
-        frames_npy: the video's frames decoded once (:func:`~stringcast.video.write_frame_cache`); None:
-            decode the video.
-        workers: processes reading the frames' link rows side by side (the same result).
-        sweep, board_check: settings (:class:`~stringcast.core.SweepSettings`; the link profiles').
+    Parameters
+    ----------
+    trial : TrialFiles or path
+        The trial's video and ``joints.csv`` (:class:`~stringcast.core.TrialFiles`; a folder: its
+        files by the data contract's names).
+    calibration_json, sync_json : path
+        The trial's ``calibration.json`` and ``sync.json``.
+    campaign : Campaign
+        :class:`~stringcast.core.specs.Campaign` (the arm's outline, the board, the string).
+    out_geometry, out_clock : path, optional
+        Where to write ``geometry.json`` and ``clock.json`` (None: not written).
+    frames_npy : path, optional
+        The video's frames decoded once (:func:`~stringcast.video.write_frame_cache`); None:
+        decode the video.
+    workers : int
+        Processes reading the frames' link rows side by side (the same result).
+    sweep : SweepSettings
+        The sweep's settings (:class:`~stringcast.core.SweepSettings`).
+    board_check : BoardCheckSettings
+        The link profiles' settings (:class:`~stringcast.core.BoardCheckSettings`).
 
-    Returns:
-        (geometry, clock) documents (module docstring).
+    Returns
+    -------
+    geometry : dict
+        The ``geometry.json`` document: the mapping (refined where the sweep ran) in ``calibration.json``'s
+        schema, with its ``sweep`` block and verdict (module docstring).
+    clock : dict
+        The ``clock.json`` document: ``sync.json`` with ``offset_s`` (s) corrected where the sweep ran, its
+        ``sweep`` block and verdict (module docstring).
 
-    Raises:
-        DataError: unreadable inputs, or a calibration under which no point the string can reach
-            is in the image (the files named).
+    Raises
+    ------
+    DataError
+        Unreadable inputs, or a calibration under which no point the string can reach
+        is in the image (the files named).
     """
     trial = TrialFiles.of(trial)
     calibration, sync_doc = Calibration.from_json(calibration_json), read_json(sync_json, mapping=True)

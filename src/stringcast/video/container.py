@@ -263,16 +263,28 @@ def open_video(path: str | Path, fps: float | None = None, count_frames: bool = 
     Opening reads the header and the first frame; only a container whose header does not give
     its frame count exactly (Matroska above 1000 fps, or no count) is decoded once to count it.
 
-    Args:
-        path: a container OpenCV reads (mkv/avi/mp4/...), a folder of PNG/TIFF frames, a
-            multi-page TIFF, or a Photron ``.cihx``/``.cih`` (or its ``.mraw``).
-        fps: frame rate to report for a frame folder or TIFF stack (the others report their own).
-        count_frames: False: never decode to count a container's frames (a look at its header:
-            ``n_frames`` is then the announced count, known to the reader's ``count_slack``
-            frames, None where unknown; for :func:`video_meta_problems`, not for reading frames).
+    Parameters
+    ----------
+    path : str or Path
+        A container OpenCV reads (mkv/avi/mp4/...), a folder of PNG/TIFF frames, a
+        multi-page TIFF, or a Photron ``.cihx``/``.cih`` (or its ``.mraw``).
+    fps : float, optional
+        Frame rate to report for a frame folder or TIFF stack, frames / s (the others report their own).
+    count_frames : bool
+        False: never decode to count a container's frames (a look at its header:
+        ``n_frames`` is then the announced count, known to the reader's ``count_slack``
+        frames, None where unknown; for :func:`video_meta_problems`, not for reading frames).
 
-    Raises:
-        DataError: missing, empty, unreadable or truncated source; a single image.
+    Returns
+    -------
+    VideoReader
+        The mono reader (:class:`ContainerReader`, a frame-folder, TIFF-stack or Photron reader): frames
+        (H, W) grey, ``uint8`` or ``uint16`` (12-bit in ``uint16``; the native depth is ``bit_depth``).
+
+    Raises
+    ------
+    DataError
+        Missing, empty, unreadable or truncated source; a single image.
     """
     path = Path(path)
     if path.is_dir():

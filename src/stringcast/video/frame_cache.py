@@ -44,16 +44,28 @@ def write_frame_cache(video_path: str | Path, frames_npy: str | Path, fps: float
                       progress: bool | None = None) -> Path:
     """Decode ``video_path`` once into ``frames_npy`` (+ ``frames.json``); returns ``frames_npy``.
 
-    Args:
-        video_path: any :func:`~stringcast.video.container.open_video` source.
-        frames_npy: the ``.npy`` file to write; written under a temporary name of its own and
-            renamed (the sidecar first), so an interrupted decode leaves no half cache and two
-            decodes of the same trial side by side each leave a whole one.
-        fps: the frame rate for a source that has none (frame folders), as ``open_video``.
-        progress: show a tqdm bar (default: when stderr is a terminal).
+    Parameters
+    ----------
+    video_path : str or Path
+        Any :func:`~stringcast.video.container.open_video` source.
+    frames_npy : str or Path
+        The ``.npy`` file to write, (F, H, W) ``uint8`` or ``uint16``; written under a temporary name of its
+        own and renamed (the sidecar first), so an interrupted decode leaves no half cache and two
+        decodes of the same trial side by side each leave a whole one.
+    fps : float, optional
+        The frame rate for a source that has none (frame folders), frames / s, as ``open_video``.
+    progress : bool, optional
+        Show a tqdm bar (default: when stderr is a terminal).
 
-    Raises:
-        DataError: the video is missing, unreadable or truncated (named by the reader).
+    Returns
+    -------
+    Path
+        ``frames_npy``.
+
+    Raises
+    ------
+    DataError
+        The video is missing, unreadable or truncated (named by the reader).
     """
     from tqdm import tqdm
 
