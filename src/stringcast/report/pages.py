@@ -71,6 +71,27 @@ def closest_approach(t: np.ndarray, tip: np.ndarray, target_xy: np.ndarray, t0: 
     return float(d[i]), float(t[sel][i])
 
 
+def floor_clearance(t: np.ndarray, xy: np.ndarray, t0: float, t1: float, floor_y: float) -> float:
+    """The tracked string's lowest point above the floor within [t0, t1], m (NaN where none is tracked).
+
+    Parameters
+    ----------
+    t : ndarray, (F,)
+        Frame times, s. xy: ndarray, (F, n + 1, 2), m, NaN where not valid (point 0, the grasp, is left out).
+    t0, t1 : float
+        The hit window, s. floor_y: the floor's height, m (``arm.floor_y``).
+
+    Returns
+    -------
+    float
+        Negative where the string went through where the floor is: in a lab with a real floor it struck
+        it, and the pass is no hit (as the planner and the lab judge one).
+    """
+    sel = (t >= t0) & (t <= t1)
+    y = xy[sel, 1:, 1]
+    return float(np.nanmin(y)) - float(floor_y) if np.isfinite(y).any() else float("nan")
+
+
 def _fmt(x, spec=".2f", unit=""):
     if x is None or (isinstance(x, float) and not np.isfinite(x)):
         return "n/a"
@@ -139,6 +160,7 @@ def _write_trial_report(trial: TrialFiles, res: TrialResults, campaign: Campaign
     tgt = campaign.target.xy
     t_tr, xy_tr, valid = _tracked(tracks, n)
     d_meas, _ = closest_approach(t_tr, xy_tr[:, n], tgt, t0, t1)
+    floor_m = floor_clearance(t_tr, xy_tr, t0, t1, campaign.arm.floor_y)
 
     tip_fit = fit[fit["point"] == n].sort_values("frame")
     figures = [{"id": "fig-tip-paths", "caption": "Tracked tip vs the model's tip driven by the measured joints, "
@@ -179,7 +201,7 @@ def _write_trial_report(trial: TrialFiles, res: TrialResults, campaign: Campaign
                            "src": figs.tip_paths(t_p, np.asarray(path["tracked_mm"], float) / 1000, t_p,
                                                  np.asarray(path["predicted_mm"], float) / 1000, tgt,
                                                  campaign.target.radius, title="Prediction check")})
-    summary = _trial_summary(params, diagnostics, valid, d_meas, campaign, played, nxt, bounds[1])
+    summary = _trial_summary(params, diagnostics, valid, (d_meas, floor_m), campaign, played, nxt, bounds[1])
     tracking = Path(res.tracking)
     box = verdict_box({calib_stage: calib, sync_stage: sync,
                        "tracking": read_json(tracking) if tracking.exists() else None, "fit": params})
@@ -224,10 +246,13 @@ def _parameter_figures(params: dict, model: ModelSettings) -> tuple[list, list, 
     return figures, values, lo, hi, diagnostics, bounds
 
 
-def _trial_summary(params: dict, diagnostics: dict, valid: np.ndarray, d_meas: float, campaign: Campaign,
-                   played: dict, nxt: dict, masses_at_bound: dict) -> list[tuple[str, str]]:
-    """The trial page's summary rows: the estimate, the tracking, the measured and predicted approaches
-    (the next motion's with its spread over the estimate's near-best sets, :func:`_spread`)."""
+def _trial_summary(params: dict, diagnostics: dict, valid: np.ndarray, measured: tuple[float, float],
+                   campaign: Campaign, played: dict, nxt: dict, masses_at_bound: dict) -> list[tuple[str, str]]:
+    """The trial page's summary rows: the estimate, the tracking, the measured approach (``measured``: the
+    tip's closest approach and the string's lowest point above the floor, m: :func:`floor_clearance`) and
+    the predicted ones (the next motion's with its spread over the estimate's near-best sets, :func:`_spread`)."""
+    d_meas, floor_m = measured
+    below = f" (the string went {-floor_m * 1000:.0f} mm below the floor)" if floor_m < 0 else ""
     summary = [("E (eqs. 4-6)", _fmt(params.get("E_mm"), ".2f", " mm")),
                ("optimizer, evaluations", f"{params.get('optimizer')}, {params.get('evaluations')}"),
                ("estimation time", _fmt(params.get("seconds"), ".1f", " s")),
@@ -235,7 +260,7 @@ def _trial_summary(params: dict, diagnostics: dict, valid: np.ndarray, d_meas: f
                    ", ".join(diagnostics.get(k) or ["-"]) for k in ("pinned", "loose"))),
                ("tracked points valid", f"{valid[:, 1:].mean() * 100:.1f} %"),
                ("measured closest approach of the tip", _fmt(d_meas * 1000, ".1f", " mm")),
-               ("measured hit", "yes" if d_meas <= campaign.target.radius else "no"),
+               ("measured hit", ("yes" if d_meas <= campaign.target.radius and not below else "no") + below),
                ("played motion: predicted closest approach", _fmt(played.get("closest_approach_mm"), ".1f", " mm")),
                ("next motion: predicted closest approach (the best set)",
                 _fmt(nxt.get("closest_approach_mm"), ".1f", " mm"))]
