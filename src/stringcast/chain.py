@@ -21,8 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from stringcast.check import check_campaign
-from stringcast.core import DataError, TrialFiles, claim_results, load_config
-from stringcast.core import input_argv, trial_inputs
+from stringcast.core import DataError, TrialFiles, claim_results, input_argv, load_config, trial_inputs
 
 RULE_WORKERS = {"sync": 4, "sweep": 2, "track": 4}
 """The rules' ``threads`` for the stages that take ``--workers`` (capped at this machine's CPUs)."""

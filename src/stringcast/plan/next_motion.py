@@ -210,11 +210,8 @@ def run_plan(params_json: Path, played_motion_json: Path, campaign: Campaign, ou
     params = read_json(params_json, mapping=True)
     planned_parameters(n_points=campaign.string.n_points, params=params, source=str(params_json))  # named first
     played = read_motion_json(played_motion_json, campaign.arm.n_joints, campaign.arm.controller_rate)
-    tracks = t_j = q_j = None
-    if motion.residual_correction or float(motion.replan_miss_mm) > 0:
-        if tracks_parquet is None or joints_csv is None:
-            raise ConfigError("motion.residual_correction and motion.replan_miss_mm need the played trial's "
-                              "tracks.parquet and joints.csv")
+    tracks = t_j = q_j = None   # without them, plan_next refuses the rules that need them (ConfigError)
+    if (motion.residual_correction or float(motion.replan_miss_mm) > 0) and None not in (tracks_parquet, joints_csv):
         t_j, q_j = read_joint_table(joints_csv, n_joints=campaign.arm.n_joints, arm_name=campaign.arm.name)
         tracks = read_parquet_columns(tracks_parquet, TRACK_COLUMNS)
     origin = read_json(played_motion_json, mapping=True).get("origin") or ""

@@ -175,9 +175,10 @@ def track_video(video, calibration: Calibration, frame_times_s: np.ndarray, t_j:
     half = 0.5 / float(fps or video.fps)  # the arm at the start, middle and end of each frame period
     jpx = np.stack([_joint_px(cal, arm, joints_at(t + dt, t_j, q_j)) for dt in (-half, 0.0, half)], axis=1)
     scale = float(np.median(cal.m_per_px(jpx[:, 1, -1])))
-    judged, rest = frames_judged(t, in_log, _motion_span(t_j, q_j)[0], hi)   # the frames tracking.json judges
+    motion = _motion_span(t_j, q_j)
+    judged, rest = frames_judged(t, in_log, motion[0], hi)   # the frames tracking.json judges
     frames = None if isinstance(video, CachedVideo) else prefetch(video, int(st.prefetch_frames))  # runs ahead
-    tracker, win = _tracker(video, cal, t, t_j, q_j, in_log, jpx, scale, np.nonzero(rest)[0], campaign, st, workers)
+    tracker, win = _tracker(video, cal, t, motion, in_log, jpx, scale, np.nonzero(rest)[0], campaign, st, workers)
     xy = np.full((F, n + 1, 2), np.nan)
     valid = np.zeros((F, n + 1), bool)
     mismatch = np.full(F, np.nan)
@@ -214,11 +215,11 @@ def _motion_span(t_j: np.ndarray, q_j: np.ndarray) -> tuple[float, float]:
         return float(t_j[0]), float(t_j[-1])
 
 
-def _tracker(video, cal: Calibration, t: np.ndarray, t_j, q_j, in_log, jpx, scale: float, rest: np.ndarray,
-             campaign, st: TrackingSettings, workers: int) -> tuple[FrameTracker, np.ndarray]:
-    """The frame tracker over the background of ``video`` (step 1; ``rest``: the still frames before the
-    motion, indices), and the motion's frames (indices)."""
-    t_start, t_end = _motion_span(t_j, q_j)
+def _tracker(video, cal: Calibration, t: np.ndarray, motion: tuple[float, float], in_log, jpx, scale: float,
+             rest: np.ndarray, campaign, st: TrackingSettings, workers: int) -> tuple[FrameTracker, np.ndarray]:
+    """The frame tracker over the background of ``video`` (step 1; ``motion``: the arm's motion window, s;
+    ``rest``: the still frames before the motion, indices), and the motion's frames (indices)."""
+    t_start, t_end = motion
     win = np.nonzero((t >= t_start) & (t <= t_end + 0.1) & in_log)[0]
     if len(win) < 9:
         win = np.arange(len(t))
