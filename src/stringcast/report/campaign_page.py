@@ -21,7 +21,8 @@ import pandas as pd
 from stringcast.core import (Campaign, DataError, Settings, TrialFiles, read_json, read_parquet, trial_result,
                              write_text)
 from . import figures as figs
-from .pages import MALFORMED, _common, _env, _fmt, _motion_window, _tracked, closest_approach, floor_clearance
+from .pages import (MALFORMED, _common, _env, _fmt, _motion_window, _tracked, closest_approach, floor_clearance,
+                    measured_hit)
 from .verdicts import stage_verdicts
 
 STAGES = ("geometry", "clock", "tracking", "fit")
@@ -122,13 +123,12 @@ def _execution_row(k: int, dd: Path, rd: Path, campaign: Campaign, settings: Set
                                     settings.motion, campaign.arm)
     t, xy, valid = _tracked(tracks, n)
     d, _ = closest_approach(t, xy[:, n], campaign.target.xy, t0, t1)
-    below = -floor_clearance(t, xy, t0, t1, campaign.arm.floor_y)     # > 0: the string went through the floor
+    hit, floor_note = measured_hit(d, floor_clearance(t, xy, t0, t1, campaign.arm.floor_y), campaign.target.radius)
     window = (t >= t0) & (t <= t1)
     prediction = read_json(rd / "prediction.json") if (rd / "prediction.json").is_file() else {}
     row = {"trial": k, "E_mm": _fmt(params.get("E_mm")), "measured_mm": _fmt(d * 1000, ".1f"),
            "predicted_mm": _fmt(played.get("closest_approach_mm"), ".1f"),
-           "hit_measured": bool(d <= campaign.target.radius and not below > 0),
-           "below_floor_mm": _fmt(below * 1000, ".0f") if below > 0 else "",
+           "hit_measured": hit, "floor_note": floor_note,
            "tip_valid_pct": _fmt(float(valid[window, n].mean()) * 100 if window.any() else None, ".0f"),
            **_fit_cell(params), "stages": stage_cells(rd, params),
            "prediction_mm": _fmt(prediction.get("median_mm"), ".1f"),

@@ -92,6 +92,14 @@ def floor_clearance(t: np.ndarray, xy: np.ndarray, t0: float, t1: float, floor_y
     return float(np.nanmin(y)) - float(floor_y) if np.isfinite(y).any() else float("nan")
 
 
+def measured_hit(d: float, floor_m: float, radius: float) -> tuple[bool, str]:
+    """Whether a tracked pass hit, judged as the planner and the lab judge one: the tip's closest approach
+    ``d`` (m) within ``radius`` (m) and the string nowhere below the floor (``floor_m``,
+    :func:`floor_clearance`); and, where the floor decides, why ("the string went 13 mm below the floor")."""
+    note = f"the string went {-floor_m * 1000:.0f} mm below the floor" if floor_m < 0 else ""
+    return bool(d <= radius and not note), note
+
+
 def _fmt(x, spec=".2f", unit=""):
     if x is None or (isinstance(x, float) and not np.isfinite(x)):
         return "n/a"
@@ -252,7 +260,7 @@ def _trial_summary(params: dict, diagnostics: dict, valid: np.ndarray, measured:
     tip's closest approach and the string's lowest point above the floor, m: :func:`floor_clearance`) and
     the predicted ones (the next motion's with its spread over the estimate's near-best sets, :func:`_spread`)."""
     d_meas, floor_m = measured
-    below = f" (the string went {-floor_m * 1000:.0f} mm below the floor)" if floor_m < 0 else ""
+    hit, floor_note = measured_hit(d_meas, floor_m, campaign.target.radius)
     summary = [("E (eqs. 4-6)", _fmt(params.get("E_mm"), ".2f", " mm")),
                ("optimizer, evaluations", f"{params.get('optimizer')}, {params.get('evaluations')}"),
                ("estimation time", _fmt(params.get("seconds"), ".1f", " s")),
@@ -260,7 +268,7 @@ def _trial_summary(params: dict, diagnostics: dict, valid: np.ndarray, measured:
                    ", ".join(diagnostics.get(k) or ["-"]) for k in ("pinned", "loose"))),
                ("tracked points valid", f"{valid[:, 1:].mean() * 100:.1f} %"),
                ("measured closest approach of the tip", _fmt(d_meas * 1000, ".1f", " mm")),
-               ("measured hit", ("yes" if d_meas <= campaign.target.radius and not below else "no") + below),
+               ("measured hit", ("yes" if hit else "no") + (f" ({floor_note})" if floor_note else "")),
                ("played motion: predicted closest approach", _fmt(played.get("closest_approach_mm"), ".1f", " mm")),
                ("next motion: predicted closest approach (the best set)",
                 _fmt(nxt.get("closest_approach_mm"), ".1f", " mm"))]
