@@ -40,7 +40,11 @@ def batch(settings):
     return coeffs, mu, hands, hand_idx, np.array(p_init)
 
 
-def one_candidate(c, mu, hand, p_init, sample_t, psi0, lmax=3 * L0):
+NORMAL = {"isotropic": 0.0, "normal": 1.0}
+"""The kernels' flag for each drag law."""
+
+
+def one_candidate(c, mu, hand, p_init, sample_t, psi0, lmax=3 * L0, drag="isotropic"):
     """One candidate by ``kernels.step`` in a Python loop: the per-candidate kernel's algorithm
     (positions on the line of the last step, NaN from a blow-up on)."""
     px, py = p_init[:, 0].copy(), p_init[:, 1].copy()
@@ -53,7 +57,7 @@ def one_candidate(c, mu, hand, p_init, sample_t, psi0, lmax=3 * L0):
     while f < len(sample_t):
         pose, vel = hand_at(HAND_T, hand, t0 + m * DT)
         if not kernels.step(px, py, vx, vy, fx, fy, pose[0], pose[1], vel[0], vel[1], pose[2], vel[2], c,
-                            1.0 / mu, L0, psi0, DT, G, lmax, 0.0):
+                            1.0 / mu, L0, psi0, DT, G, lmax, 0.0, NORMAL[drag]):
             return out, False
         m += 1
         t1 = t0 + m * DT
@@ -63,25 +67,27 @@ def one_candidate(c, mu, hand, p_init, sample_t, psi0, lmax=3 * L0):
     return out, True
 
 
-def test_batch_is_the_one_candidate_step_bit_for_bit(batch):
+@pytest.mark.parametrize("drag", ["isotropic", "normal"])
+def test_batch_is_the_one_candidate_step_bit_for_bit(batch, drag):
     coeffs, mu, hands, hand_idx, p_init = batch
     t = np.arange(0.0, 0.06, 0.0017)            # not a multiple of dt; past hand_t
-    pos, ok = simulate_batch(coeffs, mu, HAND_T, hands, hand_idx, p_init, L0, 0.3, DT, t)
+    pos, ok = simulate_batch(coeffs, mu, HAND_T, hands, hand_idx, p_init, L0, 0.3, DT, t, drag=drag)
     assert pos.shape == (B, len(t), N, 2)
     assert not ok[5] and ok.sum() >= B - 3
     for b in range(B):
-        single, ok_b = one_candidate(coeffs[b], mu[b], hands[hand_idx[b]], p_init[hand_idx[b]], t, 0.3)
+        single, ok_b = one_candidate(coeffs[b], mu[b], hands[hand_idx[b]], p_init[hand_idx[b]], t, 0.3, drag=drag)
         assert ok[b] == ok_b
         np.testing.assert_array_equal(pos[b], single)       # NaN from the same sample on
 
 
-def test_batch_matches_numpy_reference(batch):
+@pytest.mark.parametrize("drag", ["isotropic", "normal"])
+def test_batch_matches_numpy_reference(batch, drag):
     coeffs, mu, hands, hand_idx, p_init = batch
     t = np.arange(0.0, 0.06, 0.0017)
-    pos, ok = simulate_batch(coeffs, mu, HAND_T, hands, hand_idx, p_init, L0, 0.3, DT, t)
+    pos, ok = simulate_batch(coeffs, mu, HAND_T, hands, hand_idx, p_init, L0, 0.3, DT, t, drag=drag)
     for b in range(B):
         ref, ok_ref = simulate_reference(coeffs[b], mu[b], HAND_T, hands[hand_idx[b]], p_init[hand_idx[b]],
-                                         L0, 0.3, DT, t)
+                                         L0, 0.3, DT, t, drag=drag)
         assert ok[b] == ok_ref
         if ok_ref:
             assert np.max(np.abs(pos[b] - p_init[hand_idx[b]])) > 1e-3     # something happened
@@ -123,7 +129,7 @@ def one_closest(c, mu, hand, p_init, t0, t1, target, target_dt, psi0):
         t = t0 + m * DT
         pose, vel = hand_at(HAND_T, hand, t)
         if not kernels.step(px, py, vx, vy, fx, fy, pose[0], pose[1], vel[0], vel[1], pose[2], vel[2], c,
-                            1.0 / mu, L0, psi0, DT, G, 3 * L0, 0.0):
+                            1.0 / mu, L0, psi0, DT, G, 3 * L0, 0.0, 0.0):
             return math.inf, math.nan, -math.inf, False
         b, tg = np.array([px[-1], py[-1]]), target_at((m + 1) * DT)
         s = b - a

@@ -308,3 +308,48 @@ def test_kernel_atan2_matches_libm():
     libm = np.array([math.atan2(a, b) for a, b in zip(y, x)])
     assert np.all(np.abs(ours - libm) <= np.spacing(np.abs(libm)))       # one ulp (1.0 measured, 200 000 pairs)
     assert np.array_equal(np.signbit(ours), np.signbit(libm))
+
+
+@pytest.mark.parametrize("along", [True, False])
+def test_normal_drag_spares_motion_along_the_string(mid, along):
+    """``model.drag: normal`` (docs/string_model.md, "Air drag"): a straight string carried along its own
+    axis, no gravity, moves as it does without any drag, where the isotropic (paper's) drag holds it
+    back; carried broadside (it swings about the grasp), the normal law drags it, less than the isotropic."""
+    coeffs = mid.copy()
+    coeffs[0] = 1e5                                        # stiff segments
+    hand_t = np.arange(0.0, 0.101, 0.002)
+    hand = np.zeros((len(hand_t), 3))
+    hand[:, 0 if along else 1] = 2.0 * hand_t              # the hand moves at 2 m/s from t = 0
+    hand[:, 2] = np.pi                                     # the string leaves the gripper along -x
+    p0 = np.stack([-L0 * np.arange(1, N + 1), np.zeros(N)], axis=1)
+    t = np.linspace(0.0, 0.1, 11)
+
+    def run(drag, C):
+        c = coeffs.copy()
+        c[6] = c[7] = C                                    # linear and quadratic drag
+        pos, ok = simulate(c, np.ones(N), hand_t, hand, p0, L0, 0.0, DT, t, g=0.0, drag=drag)
+        assert ok
+        return pos
+    free = run("normal", 0.0)
+    gap = {drag: np.abs(run(drag, 1.0) - free).max() for drag in ("isotropic", "normal")}
+    if along:
+        assert gap["normal"] < 1e-9 and gap["isotropic"] > 1e-3
+    else:                                                  # the part of the swing across the string is dragged
+        assert 1e-3 < gap["normal"] < gap["isotropic"]
+
+
+def test_normal_drag_reference_drops_only_the_tangential_velocity(mid):
+    """The NumPy reference's drag term: velocity along a straight string feels nothing under the normal
+    law, velocity across it the same force as the isotropic law's."""
+    from stringcast.model.reference import accelerations
+    coeffs = mid.copy()
+    coeffs[6], coeffs[7] = 0.5, 2.0
+    p = np.stack([L0 * np.arange(1, N + 1), np.zeros(N)], axis=1)      # straight along +x from the hand
+    for v_dir, expect_zero in (((1.0, 0.0), True), ((0.0, 1.0), False)):
+        v = np.tile(v_dir, (N, 1)) * 1.5
+        hand_vel = np.array([*v[0], 0.0])
+        a_n, _ = accelerations(p, v, np.zeros(3), hand_vel, coeffs, np.ones(N), L0, 0.0, DT, 0.0, "normal")
+        a_i, _ = accelerations(p, v, np.zeros(3), hand_vel, coeffs, np.ones(N), L0, 0.0, DT, 0.0, "isotropic")
+        drag = -(0.5 + 2.0 * 1.5) * v
+        np.testing.assert_allclose(a_i, drag, atol=1e-9)
+        np.testing.assert_allclose(a_n, 0.0 if expect_zero else drag, atol=1e-9)

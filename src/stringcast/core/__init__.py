@@ -14,7 +14,7 @@ from .files import (TRACK_COLUMNS, DataError, atomic_path, find_video, read_json
 from .joint_log import (check_joint_coverage, check_joint_header, check_motion_timing, end_speed_shares, joint_log_span,
                         read_joint_table, read_motion_sidecar, write_joint_table)
 from .sections import markdown_table, sections_read, sections_read_from_source, settings_digest, stage_kwargs
-from .settings import (MODES, POLARITIES, SECTION_CLASSES, BoardCheckSettings, CalibrationSettings,
+from .settings import (DRAG_LAWS, MODES, POLARITIES, SECTION_CLASSES, BoardCheckSettings, CalibrationSettings,
                        EstimationSettings, EvaluationSettings, ExecutorSettings, ModelSettings, MotionSettings,
                        Settings, SweepSettings, SyncSettings, TrackingSettings, settings_from_config)
 from .verdict import STATUSES, Verdict, worst
@@ -39,7 +39,7 @@ __all__ = [
     "read_parquet_columns",
     "read_video_meta",
     "tracks_arrays", "trial_result", "TrialFiles", "TrialResults", "write_by_content", "write_job_config", "write_joint_table", "write_json", "write_parquet", "write_text", "write_yaml",
-    "MODES", "POLARITIES", "SECTION_CLASSES", "BoardCheckSettings", "CalibrationSettings", "EstimationSettings",
+    "DRAG_LAWS", "MODES", "POLARITIES", "SECTION_CLASSES", "BoardCheckSettings", "CalibrationSettings", "EstimationSettings",
     "EvaluationSettings", "ExecutorSettings", "ModelSettings", "MotionSettings", "Settings", "SweepSettings",
     "SyncSettings",
     "TrackingSettings",

@@ -32,6 +32,9 @@ POLARITIES = ("auto", "brighter", "darker")
 """``tracking.band_polarity``: a band brighter or darker than the string, or whichever gives more."""
 OPTIMIZERS = ("random_search", "cmaes", "de")
 PLANNERS = ("paper", "robust")
+DRAG_LAWS = ("normal", "isotropic")
+"""``model.drag``: the air drag on each point's velocity normal to the string (a slender body's, ours) or on its
+whole velocity (the paper's "air resistance at the mass point"); docs/string_model.md, "Air drag"."""
 FIRST_K_S = ("carrying", "max")
 """``motion.first_k_s``: the least k_s that keeps the hanging strain, or Table 2's largest."""
 SYNC_METHODS = ("video", "trigger")
@@ -66,6 +69,8 @@ class ModelSettings(Section):
     dt_s: float = _f(1.0e-4, "integration step of the string model, s", exclusiveMinimum=0, maximum=0.002)
     psi0_deg: float = _f(0.0, "the string's rest direction in the hand frame, deg")
     first_mu: float = _f(1.0, "relative masses for the first plan (Table 2 has no mass row)", exclusiveMinimum=0)
+    drag: str = _f("normal", "air drag (C_c1, C_c2) on each point's velocity normal to the string (normal: a slender "
+                             "body's) or on its whole velocity (isotropic: the paper's)", enum=list(DRAG_LAWS))
     ranges: Mapping[str, tuple] = _f({
         "k_s": (1.0e+3, 1.0e+6), "c_s": (1.0, 10.0), "k_h": (1.0e-3, 10.0), "c_h": (1.0e-3, 10.0),
         "k_sh": (1.0e-4, 1.0), "c_sh": (1.0e-4, 1.0), "C_c1": (1.0e-6, 10.0), "C_c2": (1.0e-6, 10.0),
@@ -76,6 +81,7 @@ class ModelSettings(Section):
     def __post_init__(self):
         if self.dt_s <= 0:
             raise ConfigError(f"model.dt_s must be > 0, got {self.dt_s}")
+        one_of("model", "drag", self.drag, DRAG_LAWS)
 
 
 @dataclass(frozen=True)

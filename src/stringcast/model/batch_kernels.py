@@ -30,7 +30,7 @@ _KERNEL = dict(cache=True, fastmath=False, error_model="numpy")
 
 
 @njit(**_KERNEL)
-def _samples_block(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, sample_t, g, lmax,
+def _samples_block(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, sample_t, g, lmax, normal,
                    b0, out, ok):
     """Candidates b0 .. b0 + W - 1 of :func:`simulate_batch_kernel`: writes out[b] (F, n, 2) and
     ok[b] for those in the batch.
@@ -54,7 +54,7 @@ def _samples_block(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, sam
     k = 0
     while f < F and any_ok(P):
         k = set_hand(S, P, hand_t, hand, lane_hand, t0 + m * dt, k)
-        step_block(S, P, n, l0, psi0, dt, g, lmax)
+        step_block(S, P, n, l0, psi0, dt, g, lmax, normal)
         m += 1
         t1 = t0 + m * dt
         while f < F and sample_t[f] <= t1:
@@ -75,7 +75,7 @@ def _samples_block(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, sam
 
 
 @njit(parallel=True, **_KERNEL)
-def simulate_batch_kernel(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, sample_t, g, lmax):
+def simulate_batch_kernel(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, sample_t, g, lmax, normal):
     """B candidates from sample_t[0] (at rest at p_init[hand_idx[b]]), sampled at sample_t.
 
     Parameters
@@ -98,6 +98,9 @@ def simulate_batch_kernel(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, 
         Sample times, s, non-decreasing; the run starts at sample_t[0].
     g, lmax : float
         Gravity m/s^2 along -y, blow-up segment length m.
+    normal : float
+        1.0: air drag on the velocity normal to the string; 0.0: on the whole velocity
+        (:func:`stringcast.model.lockstep.step_block`).
 
     Returns
     -------
@@ -109,7 +112,7 @@ def simulate_batch_kernel(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, 
     out = np.empty((B, sample_t.shape[0], p_init.shape[1], 2))
     ok = np.zeros(B, dtype=np.bool_)
     for blk in prange((B + LANES - 1) // LANES):
-        _samples_block(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, sample_t, g, lmax,
+        _samples_block(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, sample_t, g, lmax, normal,
                        blk * LANES, out, ok)
     return out, ok
 
@@ -169,7 +172,7 @@ def _approach(S, Q, tip, t, dt):
 
 @njit(**_KERNEL)
 def _closest_block(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, t_start, t_end,
-                   targets, target_idx, target_dt, g, lmax, b0, d_min, t_min, min_y, ok):
+                   targets, target_idx, target_dt, g, lmax, normal, b0, d_min, t_min, min_y, ok):
     """Candidates b0 .. b0 + W - 1 of :func:`closest_batch_kernel`: writes their d_min, t_min,
     min_y, ok. The tip path is the polyline through the substep tips; the distance is to each
     of its segments, from the target at the segment's end time."""
@@ -195,7 +198,7 @@ def _closest_block(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, t_s
             break
         t = t_start + m * dt
         k = set_hand(S, P, hand_t, hand, lane_hand, t, k)
-        step_block(S, P, n, l0, psi0, dt, g, lmax)
+        step_block(S, P, n, l0, psi0, dt, g, lmax, normal)
         _set_targets(Q, targets, lane_target, target_dt, (m + 1) * dt)
         _approach(S, Q, tip, t, dt)
         for r in range(_U(1), _U(n) + _U(1)):
@@ -214,12 +217,12 @@ def _closest_block(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, t_s
 
 @njit(parallel=True, **_KERNEL)
 def closest_batch_kernel(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt,
-                         t_start, t_end, targets, target_idx, target_dt, g, lmax):
+                         t_start, t_end, targets, target_idx, target_dt, g, lmax, normal):
     """Closest approach of B candidates' tip paths to their targets (docs/string_model.md, "Closest approach").
 
     Parameters
     ----------
-    coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, g, lmax
+    coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, g, lmax, normal
         As :func:`simulate_batch_kernel`'s.
     t_start, t_end : float
         The run, s; it starts at rest at p_init.
@@ -244,7 +247,7 @@ def closest_batch_kernel(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, d
     ok = np.zeros(B, dtype=np.bool_)
     for blk in prange((B + LANES - 1) // LANES):
         _closest_block(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, t_start, t_end,
-                       targets, target_idx, target_dt, g, lmax, blk * LANES, d_min, t_min, min_y, ok)
+                       targets, target_idx, target_dt, g, lmax, normal, blk * LANES, d_min, t_min, min_y, ok)
     return d_min, t_min, min_y, ok
 
 

@@ -25,6 +25,9 @@ Each point takes part in at most three bending dampers, so the explicit update w
 c_eff has a velocity-decay factor below 3 / s < 2 per step: stable for any c."""
 
 TWO_PI = 2.0 * math.pi
+TINY = 1e-300
+"""Added to |u_s + u_{s+1}|^2 before its square root: a string folded back on itself at a node
+(u_{s+1} = -u_s) gets a zero tangent there, so isotropic drag, instead of a division by zero."""
 
 
 
@@ -90,13 +93,15 @@ def atan2(y, x):
 
 @njit(cache=True, fastmath=False)
 def step(px, py, vx, vy, fx, fy, hx, hy, hvx, hvy, phi, dphi, c, inv_mu,
-         l0, psi0, dt, g, lmax, relax):
+         l0, psi0, dt, g, lmax, relax, normal):
     """One semi-implicit Euler step of one candidate (docs/string_model.md, Table 1).
 
     Forces use the state at time t and the hand (hx, hy, phi) with velocity (hvx, hvy, dphi) at t;
     then v += a dt, p += v dt in place. ``relax`` (1/s) adds a mass-proportional damping -relax * v
     to the acceleration (0 in normal runs; used by the equilibrium settling, where it does not change
-    the rest state). Returns False if a segment is longer than lmax or not finite (blow-up).
+    the rest state). ``normal`` 1.0: the air drag acts on each point's velocity normal to the string
+    (its tangent u_s + u_{s+1}, u_n at the tip; ``model.drag: normal``), 0.0: on the whole velocity
+    (``isotropic``, the paper's). Returns False if a segment is longer than lmax or not finite (blow-up).
     """
     n = px.shape[0]
     k_s = c[0]
@@ -109,6 +114,8 @@ def step(px, py, vx, vy, fx, fy, hx, hy, hvx, hvy, phi, dphi, c, inv_mu,
     C2 = c[7]
     k_ph = c[8]
     c_ph = c[9]
+    sux = np.empty(n)
+    suy = np.empty(n)
     ok = True
     qx = hx
     qy = hy
@@ -129,6 +136,8 @@ def step(px, py, vx, vy, fx, fy, hx, hy, hvx, hvy, phi, dphi, c, inv_mu,
         il = 1.0 / l
         ux = dx * il
         uy = dy * il
+        sux[j] = ux
+        suy[j] = uy
         dvx = vx[j] - qvx
         dvy = vy[j] - qvy
         om = fma(ux, dvy, -(uy * dvx)) * il
@@ -178,10 +187,19 @@ def step(px, py, vx, vy, fx, fy, hx, hy, hvx, hvy, phi, dphi, c, inv_mu,
         pil = il
         pom = om
     for j in range(n):
-        sp = math.sqrt(fma(vx[j], vx[j], vy[j] * vy[j]))
-        d = fma(C2, sp, C1)
-        ax = fma(-d, vx[j], fx[j]) * inv_mu[j] - relax * vx[j]
-        ay = fma(-d, vy[j], fy[j]) * inv_mu[j] - relax * vy[j] - g
+        nxt = 1.0 if j + 1 < n else 0.0      # point j's tangent u_j + u_{j+1} (u_n at the tip)
+        jn = j + 1 if j + 1 < n else j
+        tx = fma(nxt, sux[jn], sux[j])
+        ty = fma(nxt, suy[jn], suy[j])
+        it = normal / math.sqrt(fma(tx, tx, fma(ty, ty, TINY)))
+        tx *= it
+        ty *= it
+        vt = fma(vx[j], tx, vy[j] * ty)      # normal = 0: vt = 0, the drag on the whole v
+        nx = fma(-vt, tx, vx[j])
+        ny = fma(-vt, ty, vy[j])
+        d = fma(C2, math.sqrt(fma(nx, nx, ny * ny)), C1)
+        ax = fma(-d, nx, fx[j]) * inv_mu[j] - relax * vx[j]
+        ay = fma(-d, ny, fy[j]) * inv_mu[j] - relax * vy[j] - g
         vx[j] = fma(ax, dt, vx[j])
         vy[j] = fma(ay, dt, vy[j])
         px[j] = fma(vx[j], dt, px[j])
@@ -226,7 +244,7 @@ def settle(c, mu, hand_pose, p_init, l0, psi0, dt, g, lmax, relax, tol, t_max, c
             wx[:] = vx
             wy[:] = vy
         ok = step(px, py, vx, vy, fx, fy, hand_pose[0], hand_pose[1], 0.0, 0.0,
-                  hand_pose[2], 0.0, c, inv_mu, l0, psi0, dt, g, lmax, relax)
+                  hand_pose[2], 0.0, c, inv_mu, l0, psi0, dt, g, lmax, relax, 0.0)  # at rest: no drag either way
         if not ok:
             status = 1
             break

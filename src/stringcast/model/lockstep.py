@@ -36,7 +36,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .kernels import DAMPING_SAFETY, TWO_PI, fma
+from .kernels import DAMPING_SAFETY, TINY, TWO_PI, fma
 
 _U = np.uint64
 LANES = 16
@@ -117,7 +117,7 @@ def _segment(S, P, o, w, lmax, l0):
 
 
 @njit(inline="always", **_KERNEL)
-def step_block(S, P, n, l0, psi0, dt, g, lmax):
+def step_block(S, P, n, l0, psi0, dt, g, lmax, normal):
     """One semi-implicit Euler step of a block (docs/string_model.md, Table 1, "Integration").
 
     Forces use the state at t; then v += a dt, p += v dt in place (nodes 1..n).
@@ -134,6 +134,9 @@ def step_block(S, P, n, l0, psi0, dt, g, lmax):
     l0, psi0, dt, g, lmax : float
         Rest segment length m, rest direction in the hand frame rad, step s, gravity
         m/s^2 along -y, blow-up length m.
+    normal : float
+        1.0: air drag on each point's velocity normal to the string (``model.drag: normal``);
+        0.0: on its whole velocity (``isotropic``, the paper's). docs/string_model.md, "Air drag".
     """
     sdt = DAMPING_SAFETY * dt
     o = ROW
@@ -174,12 +177,22 @@ def step_block(S, P, n, l0, psi0, dt, g, lmax):
             S[qq + FY + w] += f2y
     for s in range(_1, _U(n) + _1):             # drag, v += a dt, p += v dt
         o = s * ROW
+        nxt = 1.0 if s < _U(n) else 0.0         # node s's tangent: u_s + u_{s+1} (u_n at the tip)
+        on = o + ROW if s < _U(n) else o
         for w in range(W):
             vx = S[o + VX + w]
             vy = S[o + VY + w]
-            d = fma(P[C_C2 + w], math.sqrt(fma(vx, vx, vy * vy)), P[C_C1 + w])
-            vx = fma(fma(-d, vx, S[o + FX + w]) * S[o + IMU + w], dt, vx)
-            vy = fma(fma(-d, vy, S[o + FY + w]) * S[o + IMU + w] - g, dt, vy)
+            tx = fma(nxt, S[on + UX + w], S[o + UX + w])
+            ty = fma(nxt, S[on + UY + w], S[o + UY + w])
+            it = normal / math.sqrt(fma(tx, tx, fma(ty, ty, TINY)))
+            tx *= it
+            ty *= it
+            vt = fma(vx, tx, vy * ty)           # normal = 0: vt = 0, the drag on the whole v
+            nx = fma(-vt, tx, vx)
+            ny = fma(-vt, ty, vy)
+            d = fma(P[C_C2 + w], math.sqrt(fma(nx, nx, ny * ny)), P[C_C1 + w])
+            vx = fma(fma(-d, nx, S[o + FX + w]) * S[o + IMU + w], dt, vx)
+            vy = fma(fma(-d, ny, S[o + FY + w]) * S[o + IMU + w] - g, dt, vy)
             S[o + VX + w] = vx
             S[o + VY + w] = vy
             S[o + PX + w] = fma(vx, dt, S[o + PX + w])

@@ -33,11 +33,12 @@ def hand_at(hand_t: np.ndarray, hand: np.ndarray, t: float) -> tuple[np.ndarray,
     return hand[k] + w * d, d / h
 
 
-def accelerations(p, v, hand_pose, hand_vel, coeffs, mu, l0, psi0, dt, g=9.81):
+def accelerations(p, v, hand_pose, hand_vel, coeffs, mu, l0, psi0, dt, g=9.81, drag="isotropic"):
     """Accelerations (n, 2) of points 1..n (Table 1), and the segment lengths (n,).
 
     p, v: (n, 2) positions m and velocities m/s; hand_pose (x, y, phi), hand_vel
-    (vx, vy, dphi/dt); coeffs (10,) in ``config.PARAM_NAMES`` order; mu (n,).
+    (vx, vy, dphi/dt); coeffs (10,) in ``config.PARAM_NAMES`` order; mu (n,); drag: "isotropic"
+    (the paper's) or "normal" (on the velocity normal to the string, docs/string_model.md).
     """
     k_s, c_s, k_h, c_h, k_sh, c_sh, C1, C2, k_ph, c_ph = coeffs
     q = np.vstack([hand_pose[None, :2], p])          # p_0 .. p_n
@@ -81,13 +82,18 @@ def accelerations(p, v, hand_pose, hand_vel, coeffs, mu, l0, psi0, dt, g=9.81):
 
     # air resistance, then a = F / mu + g
     F = F[1:]
+    if drag == "normal":                              # point s's tangent u_s + u_{s+1}, u_n at the tip
+        t = u.copy()
+        t[:-1] += u[1:]
+        t /= np.sqrt(np.sum(t * t, axis=1) + 1e-300)[:, None]
+        v = v - np.sum(v * t, axis=1)[:, None] * t
     speed = np.linalg.norm(v, axis=1)
     F -= (C1 + C2 * speed)[:, None] * v
     return F / mu[:, None] + np.array([0.0, -g]), l
 
 
 def simulate_reference(coeffs, mu, hand_t, hand, p_init, l0, psi0, dt, sample_t, g=9.81,
-                       max_stretch=3.0):
+                       max_stretch=3.0, drag="isotropic"):
     """One candidate, same contract as ``model.simulate``: returns pos (F, n, 2), ok."""
     coeffs, mu = np.asarray(coeffs, float), np.asarray(mu, float)
     hand_t, hand = np.asarray(hand_t, float), np.asarray(hand, float)
@@ -101,7 +107,7 @@ def simulate_reference(coeffs, mu, hand_t, hand, p_init, l0, psi0, dt, sample_t,
     m = 0
     while f < len(sample_t):
         pose, vel = hand_at(hand_t, hand, t0 + m * dt)
-        a, l = accelerations(p, v, pose, vel, coeffs, mu, l0, psi0, dt, g)
+        a, l = accelerations(p, v, pose, vel, coeffs, mu, l0, psi0, dt, g, drag)
         if not np.all(l <= max_stretch * l0) or not np.all(l > 0):
             return out, False
         p_old = p

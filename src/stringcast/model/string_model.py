@@ -34,6 +34,8 @@ import math
 
 import numpy as np
 
+from stringcast.core import DRAG_LAWS
+
 from . import batch_kernels as _bk
 from . import kernels as _k
 
@@ -101,7 +103,7 @@ def _scalars(l0, dt, max_stretch):
 
 
 def simulate_batch(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, sample_t,
-                   *, g: float = G, max_stretch: float = 3.0):
+                   *, g: float = G, max_stretch: float = 3.0, drag: str = "isotropic"):
     """Simulate B candidates of the string model (docs/string_model.md, the paper's CG model) and sample
     them at given times.
 
@@ -132,6 +134,9 @@ def simulate_batch(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, sam
         Gravity, m/s^2 along -y (0 for tests).
     max_stretch : float
         Blow-up threshold, segment length / l0.
+    drag : {"isotropic", "normal"}
+        The air drag on each point's whole velocity (the paper's model, the default here) or on its
+        velocity normal to the string (``model.drag``, docs/string_model.md "Air drag").
 
     Returns
     -------
@@ -143,7 +148,8 @@ def simulate_batch(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, sam
     Raises
     ------
     ValueError
-        Inconsistent shapes or non-finite / negative inputs (never for a blow-up, which gives ok = False).
+        Inconsistent shapes, non-finite / negative inputs or an unknown ``drag`` (never for a blow-up,
+        which gives ok = False).
     """
     n = np.shape(p_init)[-2] if np.ndim(p_init) == 3 else -1
     c, m = _batch(coeffs, mu, n)
@@ -155,11 +161,11 @@ def simulate_batch(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, sam
     if len(st) < 1 or np.any(np.diff(st) < 0) or not np.all(np.isfinite(st)):
         raise ValueError("sample_t: need >= 1 finite, non-decreasing times")
     return _bk.simulate_batch_kernel(c, m, ht, h, idx, p, l0, float(psi0), dt, st,
-                                     float(g), lmax)
+                                     float(g), lmax, _normal(drag))
 
 
 def simulate(coeffs, mu, hand_t, hand, p_init, l0, psi0, dt, sample_t, *, g: float = G,
-             max_stretch: float = 3.0):
+             max_stretch: float = 3.0, drag: str = "isotropic"):
     """One candidate of :func:`simulate_batch`.
 
     Parameters
@@ -174,7 +180,7 @@ def simulate(coeffs, mu, hand_t, hand, p_init, l0, psi0, dt, sample_t, *, g: flo
         The hand trajectory (x m, y m, phi_h rad).
     p_init : ndarray, (n, 2)
         Positions at rest at ``sample_t[0]``, m.
-    l0, psi0, dt, sample_t, g, max_stretch
+    l0, psi0, dt, sample_t, g, max_stretch, drag
         As in :func:`simulate_batch`.
 
     Returns
@@ -192,13 +198,13 @@ def simulate(coeffs, mu, hand_t, hand, p_init, l0, psi0, dt, sample_t, *, g: flo
     pos, ok = simulate_batch(np.atleast_2d(coeffs), np.atleast_2d(mu), hand_t,
                              np.asarray(hand, float)[None], np.zeros(1, np.int64),
                              np.asarray(p_init, float)[None], l0, psi0, dt, sample_t,
-                             g=g, max_stretch=max_stretch)
+                             g=g, max_stretch=max_stretch, drag=drag)
     return pos[0], bool(ok[0])
 
 
 def closest_approach_batch(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt,
                            t_start, t_end, target_xy, floor_y=None, *, target_dt: float | None = None,
-                           target_idx=None, g: float = G, max_stretch: float = 3.0):
+                           target_idx=None, g: float = G, max_stretch: float = 3.0, drag: str = "isotropic"):
     """Closest approach of each candidate's tip path to a target (motion planning).
 
     Simulates from t_start (at rest at p_init) to t_end without storing the path.
@@ -229,6 +235,8 @@ def closest_approach_batch(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0,
         Each candidate's target path.
     g, max_stretch : float
         As in :func:`simulate_batch`.
+    drag : {"isotropic", "normal"}
+        As in :func:`simulate_batch`.
 
     Returns
     -------
@@ -258,7 +266,14 @@ def closest_approach_batch(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0,
     if not (math.isfinite(t_start) and math.isfinite(t_end) and t_end > t_start):
         raise ValueError(f"need finite t_start < t_end (got {t_start}, {t_end})")
     return _bk.closest_batch_kernel(c, m, ht, h, idx, p, l0, float(psi0), dt, float(t_start),
-                                    float(t_end), targets, tidx, tdt, float(g), lmax)
+                                    float(t_end), targets, tidx, tdt, float(g), lmax, _normal(drag))
+
+
+def _normal(drag: str) -> float:
+    """The kernels' ``normal`` flag of a drag law (:data:`stringcast.core.DRAG_LAWS`): 1.0 normal, 0.0 isotropic."""
+    if drag not in DRAG_LAWS:
+        raise ValueError(f"drag: {drag!r} is not one of {', '.join(DRAG_LAWS)}")
+    return 1.0 if drag == "normal" else 0.0
 
 
 def _targets(target_xy, target_dt, target_idx, B: int):
