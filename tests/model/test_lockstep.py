@@ -9,7 +9,7 @@ from stringcast.core import model_ranges
 from stringcast.model import kernels
 from stringcast.model.lockstep import LANES, atan2_lane
 from stringcast.model.reference import hand_at, simulate_reference
-from stringcast.model.string_model import closest_approach_batch, simulate_batch
+from stringcast.model.string_model import _normal, closest_approach_batch, simulate_batch
 
 N, L0, DT, G = 7, 0.03, 1e-4, 9.81
 B = LANES + 3                                   # two blocks, the second one part full
@@ -40,15 +40,11 @@ def batch(settings):
     return coeffs, mu, hands, hand_idx, np.array(p_init)
 
 
-NORMAL = {"isotropic": 0.0, "normal": 1.0}
-"""The kernels' flag for each drag law."""
-
-
 def one_candidate(c, mu, hand, p_init, sample_t, psi0, lmax=3 * L0, drag="isotropic"):
     """One candidate by ``kernels.step`` in a Python loop: the per-candidate kernel's algorithm
     (positions on the line of the last step, NaN from a blow-up on)."""
     px, py = p_init[:, 0].copy(), p_init[:, 1].copy()
-    vx, vy, fx, fy = np.zeros(N), np.zeros(N), np.empty(N), np.empty(N)
+    vx, vy, fx, fy, ux, uy = np.zeros(N), np.zeros(N), np.empty(N), np.empty(N), np.empty(N), np.empty(N)
     out = np.full((len(sample_t), N, 2), np.nan)
     t0, f, m = sample_t[0], 0, 0
     while f < len(sample_t) and sample_t[f] <= t0:
@@ -56,8 +52,8 @@ def one_candidate(c, mu, hand, p_init, sample_t, psi0, lmax=3 * L0, drag="isotro
         f += 1
     while f < len(sample_t):
         pose, vel = hand_at(HAND_T, hand, t0 + m * DT)
-        if not kernels.step(px, py, vx, vy, fx, fy, pose[0], pose[1], vel[0], vel[1], pose[2], vel[2], c,
-                            1.0 / mu, L0, psi0, DT, G, lmax, 0.0, NORMAL[drag]):
+        if not kernels.step(px, py, vx, vy, fx, fy, ux, uy, pose[0], pose[1], vel[0], vel[1], pose[2], vel[2], c,
+                            1.0 / mu, L0, psi0, DT, G, lmax, 0.0, _normal(drag)):
             return out, False
         m += 1
         t1 = t0 + m * DT
@@ -121,14 +117,14 @@ def one_closest(c, mu, hand, p_init, t0, t1, target, target_dt, psi0):
         return target[-1] if i >= len(target) - 1 else target[i] + (f - i) * (target[i + 1] - target[i])
 
     px, py = p_init[:, 0].copy(), p_init[:, 1].copy()
-    vx, vy, fx, fy = np.zeros(N), np.zeros(N), np.empty(N), np.empty(N)
+    vx, vy, fx, fy, ux, uy = np.zeros(N), np.zeros(N), np.empty(N), np.empty(N), np.empty(N), np.empty(N)
     a = np.array([px[-1], py[-1]])
     e = a - target_at(0.0)
     d_min, t_min, min_y = math.sqrt(e[0] * e[0] + e[1] * e[1]), t0, py.min()
     for m in range(int(math.ceil((t1 - t0) / DT - 1e-9))):
         t = t0 + m * DT
         pose, vel = hand_at(HAND_T, hand, t)
-        if not kernels.step(px, py, vx, vy, fx, fy, pose[0], pose[1], vel[0], vel[1], pose[2], vel[2], c,
+        if not kernels.step(px, py, vx, vy, fx, fy, ux, uy, pose[0], pose[1], vel[0], vel[1], pose[2], vel[2], c,
                             1.0 / mu, L0, psi0, DT, G, 3 * L0, 0.0, 0.0):
             return math.inf, math.nan, -math.inf, False
         b, tg = np.array([px[-1], py[-1]]), target_at((m + 1) * DT)

@@ -92,7 +92,7 @@ def atan2(y, x):
 
 
 @njit(cache=True, fastmath=False)
-def step(px, py, vx, vy, fx, fy, hx, hy, hvx, hvy, phi, dphi, c, inv_mu,
+def step(px, py, vx, vy, fx, fy, sux, suy, hx, hy, hvx, hvy, phi, dphi, c, inv_mu,
          l0, psi0, dt, g, lmax, relax, normal):
     """One semi-implicit Euler step of one candidate (docs/string_model.md, Table 1).
 
@@ -101,7 +101,9 @@ def step(px, py, vx, vy, fx, fy, hx, hy, hvx, hvy, phi, dphi, c, inv_mu,
     to the acceleration (0 in normal runs; used by the equilibrium settling, where it does not change
     the rest state). ``normal`` 1.0: the air drag acts on each point's velocity normal to the string
     (its tangent u_s + u_{s+1}, u_n at the tip; ``model.drag: normal``), 0.0: on the whole velocity
-    (``isotropic``, the paper's). Returns False if a segment is longer than lmax or not finite (blow-up).
+    (``isotropic``, the paper's). ``sux``, ``suy`` (n,) are work arrays (the segments' unit vectors),
+    the caller's so that a step allocates nothing. Returns False if a segment is longer than lmax or
+    not finite (blow-up).
     """
     n = px.shape[0]
     k_s = c[0]
@@ -114,8 +116,6 @@ def step(px, py, vx, vy, fx, fy, hx, hy, hvx, hvy, phi, dphi, c, inv_mu,
     C2 = c[7]
     k_ph = c[8]
     c_ph = c[9]
-    sux = np.empty(n)
-    suy = np.empty(n)
     ok = True
     qx = hx
     qy = hy
@@ -210,14 +210,14 @@ def step(px, py, vx, vy, fx, fy, hx, hy, hvx, hvy, phi, dphi, c, inv_mu,
 @njit(cache=True, fastmath=False)
 def _state(p_init):
     """Work arrays of one simulation: positions px, py (n,) from p_init (n, 2) at rest
-    (vx = vy = 0) and force buffers fx, fy (n,)."""
+    (vx = vy = 0), force buffers fx, fy (n,) and segment unit vectors sux, suy (n,)."""
     n = p_init.shape[0]
     px = np.empty(n)
     py = np.empty(n)
     for j in range(n):
         px[j] = p_init[j, 0]
         py[j] = p_init[j, 1]
-    return px, py, np.zeros(n), np.zeros(n), np.empty(n), np.empty(n)
+    return px, py, np.zeros(n), np.zeros(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
 
 
 @njit(cache=True, fastmath=False)
@@ -230,7 +230,7 @@ def settle(c, mu, hand_pose, p_init, l0, psi0, dt, g, lmax, relax, tol, t_max, c
     2 t_max reached.
     """
     n = p_init.shape[0]
-    px, py, vx, vy, fx, fy = _state(p_init)
+    px, py, vx, vy, fx, fy, sux, suy = _state(p_init)
     wx = np.empty(n)
     wy = np.empty(n)
     inv_mu = 1.0 / mu
@@ -243,7 +243,7 @@ def settle(c, mu, hand_pose, p_init, l0, psi0, dt, g, lmax, relax, tol, t_max, c
         if check:
             wx[:] = vx
             wy[:] = vy
-        ok = step(px, py, vx, vy, fx, fy, hand_pose[0], hand_pose[1], 0.0, 0.0,
+        ok = step(px, py, vx, vy, fx, fy, sux, suy, hand_pose[0], hand_pose[1], 0.0, 0.0,
                   hand_pose[2], 0.0, c, inv_mu, l0, psi0, dt, g, lmax, relax, 0.0)  # at rest: no drag either way
         if not ok:
             status = 1

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .kernels import DAMPING_SAFETY
+from .kernels import DAMPING_SAFETY, TINY
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -85,7 +85,7 @@ def accelerations(p, v, hand_pose, hand_vel, coeffs, mu, l0, psi0, dt, g=9.81, d
     if drag == "normal":                              # point s's tangent u_s + u_{s+1}, u_n at the tip
         t = u.copy()
         t[:-1] += u[1:]
-        t /= np.sqrt(np.sum(t * t, axis=1) + 1e-300)[:, None]
+        t /= np.sqrt(np.sum(t * t, axis=1) + TINY)[:, None]
         v = v - np.sum(v * t, axis=1)[:, None] * t
     speed = np.linalg.norm(v, axis=1)
     F -= (C1 + C2 * speed)[:, None] * v
