@@ -147,3 +147,16 @@ def test_the_error_scale_is_the_largest_mm_figure_and_none_where_points_may_lie_
     past = np.zeros(F, bool)
     past[25:] = True
     assert _judge(_swing(), past_roi=past)["error_scale_mm"] is None                   # past the region tracked
+
+
+def test_a_stretched_string_is_judged_by_its_seen_length():
+    """An elastic cord seen 15 % longer than L to a trusted free end: the tracker spreads its points over the
+    seen length, so their spacing is 1.15 L / n and that is no misplacement; the same spacing without a seen
+    length (no trusted free end) is 4.5 mm of excess per 30 mm segment, and warns."""
+    xy = _swing() * 1.15
+    stretched = _judge(xy, mismatch=np.full(F, -0.15 * L))
+    assert stretched["segment_excess_p95_mm"] == pytest.approx(0.0, abs=1e-9)
+    assert stretched["verdict"]["status"] == "ok", stretched["verdict"]
+    unseen = _judge(xy, mismatch=np.full(F, np.nan))
+    assert unseen["segment_excess_p95_mm"] == pytest.approx(0.15 * L / N * 1000, rel=1e-6)
+    assert any("farther apart" in r for r in unseen["verdict"]["reasons"])

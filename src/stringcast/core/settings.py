@@ -214,6 +214,7 @@ class TrackingSettings(Section):
     end_contrast_min: float = _f(0.4, "a free end is clean when its contrast stays above this share ...", minimum=0)
     end_edge_max: float = _f(0.25, "... and not more than this share of it lies on an occluder's rim", minimum=0)
     max_missing_frac: float = _f(0.3, "a frame with more than this share of the string missing gives no points", minimum=0)
+    max_stretch_share: float = _f(0.3, "a string seen longer than L by up to this share, from the grasp to a trusted free end with no ambiguity between, is taken as stretched: its points at the same shares of the seen length", minimum=0)
     end_touch_mm: float = _f(12.0, "a free end this close to the string's own earlier stretch is not trusted, mm", minimum=0)
     background_window_s: float | None = _f(None, "background samples only from the motion's first seconds, s (null: all)", exclusiveMinimum=0)
     background_bursts: int = _f(5, "the background samples are decoded in this many short runs", minimum=0)

@@ -185,7 +185,7 @@ class FrameTracker:
         D = self.L - st.tip_shortfall_mm / 1000 - float(s_poly[-1])  # missing length if the end is the tip
         tol = self._anchor_tol(scale)
         slack = L_head - float(np.linalg.norm(xy[len(head)] - xy[0]))  # the head may be shorter, not below its chord
-        lo, hi, shift, split = -np.inf, np.inf, 0.0, None
+        lo, hi, shift, split, stretch = -np.inf, np.inf, 0.0, None, 1.0
         if free_end and len(events) and float(s_poly[-1]) - events[-1] < self.L / n:
             free_end = False  # a branch joins within a point spacing of the end: is the tip this end or the branch's?
         if free_end and abs(D) > tol and over_board(self.board, px[-1], self._width + 4):
@@ -197,6 +197,9 @@ class FrameTracker:
             shift, lo = D, (events[-1] if len(events) else (L_head if hidden_start else -np.inf))
             if D > tol:  # the missing length hides by the grasp (a loop at the fingers, under the arm's mask):
                 lo = max(lo, L_head + D)  # the visible path's first D past the head may be that loop's
+        elif free_end and not len(events) and -st.max_stretch_share * self.L <= D < 0:  # seen longer, no ambiguity:
+            stretch = float(s_poly[-1]) / (float(s_poly[-1]) + D)  # a stretched string (or the image scale off as much):
+            # both ends anchor it, and its points lie at the same shares of the seen length as of L (uniform strain)
         elif not hidden_start and not self._head_clutter and not ((loop_back or free_end) and D > tol):  # anchored at the grasp: valid before the first ambiguity
             hi = events[0] if len(events) else np.inf
             if free_end:
@@ -205,7 +208,7 @@ class FrameTracker:
             return self._with_beyond(none(px, cuts=cuts), absd, arm, walked, xy, scale, (y0, x0))
         else:  # no anchor: with a free end, a string seen longer or shorter than L (its mismatch kept)
             return none(px, D if free_end and not hidden_start else math.nan, cuts)
-        s_t = self.s_targets - shift  # the targets' polyline arc
+        s_t = self.s_targets * stretch - shift  # the targets' polyline arc
         if split is not None:  # model arc -> polyline arc: knots at the head's end and at the free end
             end = self.L - st.tip_shortfall_mm / 1000 - split[2]
             s_t = np.interp(self.s_targets, [0.0, L_head + split[0], end], [0.0, L_head, float(s_poly[-1])])

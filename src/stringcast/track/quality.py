@@ -25,8 +25,9 @@ not impose, and their violation measures its error (:func:`tracking_quality`):
   runs to the edge of the region tracked (L + ``roi_margin_mm`` around the grasp) inside the
   image: string seen farther from the grasp than the campaign's string reaches.
 * **Segment excess**: a chord between consecutive points cannot be longer than the arc
-  between them (L / n) by more than the string stretches; the p95 over the frames judged of
-  max(0, chord - L / n), mm.
+  between them: L / n, or in a frame whose string is seen longer than L to a trusted free end
+  (a stretched string, whose points the tracker spreads over the seen length) that length / n;
+  the p95 over the frames judged of max(0, chord - that arc), mm.
 * **Rest jitter**: the string hangs still before the motion; the p95 over the points of each
   point's standard deviation over those frames, mm: the tracker's noise where the truth is
   constant.
@@ -92,12 +93,13 @@ def tracking_quality(tracks: pd.DataFrame, mismatch_m: np.ndarray, L: float, n: 
     ok = t["valid"].to_numpy(bool).reshape(F, n + 1)
     use = np.asarray(judged, bool)
     share = float(ok[use, 1:].mean()) if use.any() else None
-    D = np.asarray(mismatch_m, float)[use] * 1000
-    D = D[np.isfinite(D)]
+    D_all = np.asarray(mismatch_m, float)[use] * 1000
+    D = D_all[np.isfinite(D_all)]
     med = float(np.median(D)) if D.size else None
     chord = np.linalg.norm(np.diff(xy[use], axis=1), axis=2) * 1000
     both = ok[use, 1:] & ok[use, :-1]
-    excess = np.maximum(chord[both] - L / n * 1000, 0.0)
+    spacing = (L * 1000 - np.minimum(np.nan_to_num(D_all, nan=0.0), 0.0)) / n   # a string seen stretched: its own
+    excess = np.maximum(chord - spacing[:, None], 0.0)[both]
     still = np.asarray(rest, bool)
     jitter = None
     if still.sum() >= 5:

@@ -39,8 +39,11 @@ Settings: tracking settings (:class:`~stringcast.core.TrackingSettings`).
    joining the walk, a guess at a crossing, a bridged gap) and, for a missing length D, not
    within D past the hidden head (a loop at the fingers); but an end over the calibration
    board is the tip only where its length agrees (a square of the string's shade may hide the
-   rest: :mod:`stringcast.track.board_zone`). Without a free end, the arc is anchored at the
-   grasp, valid before the first ambiguity. Where the walk stops at the arm (the string passes behind a link), the one
+   rest: :mod:`stringcast.track.board_zone`). A string seen *longer* than L to a trusted free
+   end, by up to ``max_stretch_share`` of L and with no ambiguity on the way, is stretched (an
+   elastic cord under a cast, or an image scale off by as much): its points lie at s_i = (i / n)
+   times the seen length (uniform strain; the tip at the tip). Without a free end, the arc is
+   anchored at the grasp, valid before the first ambiguity. Where the walk stops at the arm (the string passes behind a link), the one
    stretch that comes out from behind it and ends free (:mod:`stringcast.track.beyond_arm`) adds
    its points, anchored at the tip in the same way. Invalid points keep NaN positions: never a guess.
    A point outside the image is never valid: a stretch of the path with a vertex outside the
