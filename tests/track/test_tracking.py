@@ -442,7 +442,8 @@ def test_an_end_at_the_arm_is_cut_not_free(campaign, settings, occluded):
     guarded mask and the skeleton about a width short of it, 5-7 px from the mask (generalization
     seed 11 took such ends for the free tip, and its tip-anchored points slid ~100 mm). The same
     string ending in open space, clear of the link, is free."""
-    from stringcast.track.frame_tracker import FrameTracker, end_cut
+    from stringcast.track.ends import end_cut
+    from stringcast.track.frame_tracker import FrameTracker
 
     st = settings.tracking
     bg = np.full((200, 200), 120, np.float32)

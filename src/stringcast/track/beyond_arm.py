@@ -29,7 +29,7 @@ def tip_stretch(skel: np.ndarray, skel_at: np.ndarray, walked: np.ndarray, arm: 
 
     Candidates are skeleton components the grasp's walk never touched, at least ``min_px``
     long, with an end within ``width_px + 4`` px of the arm (where the string comes out: the
-    reach of :func:`~stringcast.track.frame_tracker.end_cut`) and another end that is free
+    reach of :func:`~stringcast.track.ends.end_cut`) and another end that is free
     (:func:`~stringcast.track.ends.clean_end`, not by the arm). Each candidate is walked from its
     free end (:func:`~stringcast.track.junctions.walk_skeleton`), and kept if the walk ends by the
     arm.

@@ -195,3 +195,14 @@ def mismatch_split(D: float, sigmas) -> np.ndarray:
         raise ValueError(f"mismatch_split: sigmas must be finite, got {sigmas}")
     tot = float(v.sum())
     return np.full(len(v), D / len(v)) if tot <= 0 else D * v / tot
+
+
+def seen_segments(px: np.ndarray, origin_xy, roi_shape) -> np.ndarray:
+    """(M - 1,) bool: the segments of a path px (M, 2) (x, y) image px whose both vertices lie in
+    the region of interest (``origin_xy`` (x0, y0), ``roi_shape`` (h, w): pixel centres 0 .. w - 1,
+    their areas to -0.5 .. w - 0.5), i.e. where the frame was looked at. A vertex outside it (the
+    hidden head from a grasp outside the image, a centreline refined or extended past the edge)
+    was not seen, and no point on its segments is valid."""
+    x, y = px[:, 0] - origin_xy[0], px[:, 1] - origin_xy[1]
+    inside = (x >= -0.5) & (x <= roi_shape[1] - 0.5) & (y >= -0.5) & (y <= roi_shape[0] - 0.5)
+    return inside[:-1] & inside[1:]

@@ -17,6 +17,7 @@ import numpy as np
 from scipy.ndimage import distance_transform_edt, map_coordinates
 
 from stringcast.core import TrackingSettings
+from .arm_mask import near_arm
 from .centreline import arc_length
 
 
@@ -270,3 +271,35 @@ def clean_end(pts: np.ndarray, skel: np.ndarray, skel_at: np.ndarray, absd: np.n
     step = abs(float(np.median(b[6:])) - float(np.median(b[:3])))  # the background changes at the end:
     return (float(v[-3:].mean()) >= st.end_contrast_min * float(np.median(v))  # an occluder's rim
             and step < st.end_edge_max * float(np.median(v)))
+
+
+def end_cut(end, arm: np.ndarray, origin, image_shape, width_px: float) -> bool:
+    """Whether a skeleton walk's end may be cut by the arm, the image's edge or the region of
+    interest's edge, not the string's own.
+
+    The skeleton stops about half a string's width short of the foreground's end, and the
+    foreground stops at the guarded arm mask, the image's edge and the ROI's edge (the ROI
+    clips the frame to L + ``roi_margin_mm`` around the grasp; a string seen past it, where the
+    image scale or the grasp's place is wrong, goes on beyond it); blur and fading take up to
+    another half width and a few px. An end within ``width_px + 4`` px of any of them is therefore
+    taken as cut (ends of generalization seed 11 cut by a joint disc lay 4.6-6.7 px from it at a
+    3.8 px width; seed 2's free tip 12.9 px from a disc at 5.5 px must stay free; a square size
+    configured 50 instead of 60 mm put walks' ends on the ROI's edge, taken for free ends).
+
+    Args:
+        end: (row, col) of the end in the ROI, px. arm: (h, w) bool guarded arm mask of the ROI
+            (its shape is the ROI's). origin: (row, col) of the ROI in the image. image_shape:
+            (H, W). width_px: the string's width in the foreground, px.
+    """
+    return edge_cut(end, arm.shape, origin, image_shape, width_px) or near_arm(end, arm, math.ceil(width_px) + 4)
+
+
+def edge_cut(end, roi_shape, origin, image_shape, width_px: float) -> bool:
+    """Whether an end (row, col) in the ROI lies within ``width_px + 4`` px of the image's edge or
+    the ROI's (``roi_shape`` (h, w) at ``origin`` (row, col) in an image of ``image_shape`` (H, W)):
+    the foreground stops there, so the string may go on (:func:`end_cut`)."""
+    r = math.ceil(width_px) + 4
+    row, col = end[0] + origin[0], end[1] + origin[1]
+    if not (r <= row < image_shape[0] - r and r <= col < image_shape[1] - r):
+        return True
+    return not (r <= end[0] < roi_shape[0] - r and r <= end[1] < roi_shape[1] - r)

@@ -23,9 +23,10 @@ from .centreline import (
     odd_smooth,
     refine_centreline,
     resample_by_arc,
+    seen_segments,
 )
 from .beyond_arm import tip_stretch
-from .ends import clean_end, locate_end, string_continues
+from .ends import clean_end, edge_cut, end_cut, locate_end, string_continues
 from .junctions import Zones, walk_skeleton
 from .markers import band_points, path_contrast
 
@@ -64,49 +65,6 @@ def _events_px(pts: np.ndarray, bridged: np.ndarray, ambiguous: np.ndarray) -> t
     cum_px = arc_length(pts)
     gap = np.nonzero(bridged & (np.r_[0.0, np.diff(cum_px)] > 2.5))[0]
     return cum_px, np.sort(np.concatenate([cum_px[ambiguous], cum_px[gap - 1], cum_px[gap]]))
-
-
-def end_cut(end, arm: np.ndarray, origin, image_shape, width_px: float) -> bool:
-    """Whether a skeleton walk's end may be cut by the arm, the image's edge or the region of
-    interest's edge, not the string's own.
-
-    The skeleton stops about half a string's width short of the foreground's end, and the
-    foreground stops at the guarded arm mask, the image's edge and the ROI's edge (the ROI
-    clips the frame to L + ``roi_margin_mm`` around the grasp; a string seen past it, where the
-    image scale or the grasp's place is wrong, goes on beyond it); blur and fading take up to
-    another half width and a few px. An end within ``width_px + 4`` px of any of them is therefore
-    taken as cut (ends of generalization seed 11 cut by a joint disc lay 4.6-6.7 px from it at a
-    3.8 px width; seed 2's free tip 12.9 px from a disc at 5.5 px must stay free; a square size
-    configured 50 instead of 60 mm put walks' ends on the ROI's edge, taken for free ends).
-
-    Args:
-        end: (row, col) of the end in the ROI, px. arm: (h, w) bool guarded arm mask of the ROI
-            (its shape is the ROI's). origin: (row, col) of the ROI in the image. image_shape:
-            (H, W). width_px: the string's width in the foreground, px.
-    """
-    return edge_cut(end, arm.shape, origin, image_shape, width_px) or near_arm(end, arm, math.ceil(width_px) + 4)
-
-
-def edge_cut(end, roi_shape, origin, image_shape, width_px: float) -> bool:
-    """Whether an end (row, col) in the ROI lies within ``width_px + 4`` px of the image's edge or
-    the ROI's (``roi_shape`` (h, w) at ``origin`` (row, col) in an image of ``image_shape`` (H, W)):
-    the foreground stops there, so the string may go on (:func:`end_cut`)."""
-    r = math.ceil(width_px) + 4
-    row, col = end[0] + origin[0], end[1] + origin[1]
-    if not (r <= row < image_shape[0] - r and r <= col < image_shape[1] - r):
-        return True
-    return not (r <= end[0] < roi_shape[0] - r and r <= end[1] < roi_shape[1] - r)
-
-
-def seen_segments(px: np.ndarray, origin_xy, roi_shape) -> np.ndarray:
-    """(M - 1,) bool: the segments of a path px (M, 2) (x, y) image px whose both vertices lie in
-    the region of interest (``origin_xy`` (x0, y0), ``roi_shape`` (h, w): pixel centres 0 .. w - 1,
-    their areas to -0.5 .. w - 0.5), i.e. where the frame was looked at. A vertex outside it (the
-    hidden head from a grasp outside the image, a centreline refined or extended past the edge)
-    was not seen, and no point on its segments is valid."""
-    x, y = px[:, 0] - origin_xy[0], px[:, 1] - origin_xy[1]
-    inside = (x >= -0.5) & (x <= roi_shape[1] - 0.5) & (y >= -0.5) & (y <= roi_shape[0] - 0.5)
-    return inside[:-1] & inside[1:]
 
 
 class FrameTracker:

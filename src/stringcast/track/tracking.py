@@ -27,7 +27,7 @@ Settings: tracking settings (:class:`~stringcast.core.TrackingSettings`).
    by a spline; a free end (:func:`clean_end`: not fading, not at an occluder's rim, not
    within ``end_touch_mm`` of the string's own earlier stretch, no branch within a point
    spacing, no arm or image edge within a string width + 4 px:
-   :func:`~stringcast.track.frame_tracker.end_cut`, no string-like contrast going on past it:
+   :func:`~stringcast.track.ends.end_cut`, no string-like contrast going on past it:
    :func:`string_continues`) is extended to where the contrast fades, or to a clay ball's
    centre (:func:`~stringcast.track.ends.locate_end`).
 5. **Metric resampling** (:func:`resample_by_arc`): :meth:`Calibration.pixel_to_robot`, arc
@@ -47,7 +47,7 @@ Settings: tracking settings (:class:`~stringcast.core.TrackingSettings`).
    stretch that comes out from behind it and ends free (:mod:`stringcast.track.beyond_arm`) adds
    its points, anchored at the tip in the same way. Invalid points keep NaN positions: never a guess.
    A point outside the image is never valid: a stretch of the path with a vertex outside the
-   region tracked holds none (:func:`~stringcast.track.frame_tracker.seen_segments`), and every
+   region tracked holds none (:func:`~stringcast.track.centreline.seen_segments`), and every
    point is checked against the image once more before ``tracks.parquet`` is written.
 6. **Verdict** (:mod:`stringcast.track.quality`, ``tracking.json``), over every frame a later stage
    compares (the motion's start to the joint log's end): the valid share, consecutive points
