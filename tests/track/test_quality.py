@@ -29,12 +29,12 @@ def _table(xy, valid=None):
                          "x_m": xy[..., 0].ravel(), "y_m": xy[..., 1].ravel(), "valid": valid.ravel()})
 
 
-def _judge(xy, valid=None, mismatch=None, **flags):
+def _judge(xy, valid=None, mismatch=None, stretch=None, **flags):
     t = np.arange(F) / 100.0
     judged, rest = frames_judged(t, np.ones(F, bool), 0.2 + 0.021, 0.59)
     D = np.full(F, 0.0005) if mismatch is None else mismatch
     return tracking_quality(_table(xy, valid), D, L, N, judged, rest, ST, string_setting=lambda k: f"strings.7.{k}",
-                            **flags)
+                            stretch=stretch, **flags)
 
 
 def test_a_clean_track_is_ok():
@@ -151,12 +151,13 @@ def test_the_error_scale_is_the_largest_mm_figure_and_none_where_points_may_lie_
 
 def test_a_stretched_string_is_judged_by_its_seen_length():
     """An elastic cord seen 15 % longer than L to a trusted free end: the tracker spreads its points over the
-    seen length, so their spacing is 1.15 L / n and that is no misplacement; the same spacing without a seen
-    length (no trusted free end) is 4.5 mm of excess per 30 mm segment, and warns."""
+    seen length, so their spacing is 1.15 L / n and that is no misplacement; the same spacing where the tracker
+    did not stretch the points (no trusted free end, or an ambiguity on the way: seen as long, and yet its
+    points were laid at L / n) is 4.5 mm of excess per 30 mm segment, and warns."""
     xy = _swing() * 1.15
-    stretched = _judge(xy, mismatch=np.full(F, -0.15 * L))
+    stretched = _judge(xy, mismatch=np.full(F, -0.15 * L), stretch=np.full(F, 1.15))
     assert stretched["segment_excess_p95_mm"] == pytest.approx(0.0, abs=1e-9)
     assert stretched["verdict"]["status"] == "ok", stretched["verdict"]
-    unseen = _judge(xy, mismatch=np.full(F, np.nan))
+    unseen = _judge(xy, mismatch=np.full(F, -0.15 * L))
     assert unseen["segment_excess_p95_mm"] == pytest.approx(0.15 * L / N * 1000, rel=1e-6)
     assert any("farther apart" in r for r in unseen["verdict"]["reasons"])

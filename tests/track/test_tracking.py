@@ -741,6 +741,7 @@ def test_a_stretched_string_keeps_its_points_at_shares_of_its_length(campaign, l
     ft = FrameTracker(bg, (4.0, 0.0), cal, campaign, st).track(frame, poses)
     assert ft.length_mismatch_m == pytest.approx(-(stretch - 1) * L, abs=3 * M_PER_PX)   # seen 36 mm longer
     share = stretch if limit > stretch - 1 else 1.0
+    assert ft.stretch == pytest.approx(share, abs=3 * M_PER_PX / L)   # what tracking.json's segment check reads
     s = np.arange(1, n + 1) * L / n * share                  # where the points should be, m from the grasp
     true = ORIGIN + M_PER_PX * np.column_stack([np.full(n, 100.0), np.full(n, -10.0)]) + np.column_stack(
         [np.zeros(n), -s])

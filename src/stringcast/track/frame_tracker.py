@@ -40,8 +40,9 @@ class FrameTrack:
     too large to anchor any point: a string longer or shorter than the campaign's); ``past_roi``:
     the walk from the grasp was cut by the region of interest's edge inside the image, i.e. the
     string was seen farther than L + ``roi_margin_mm`` from the grasp; ``off_image``: that walk was
-    cut by the image's edge (the string runs out of the image). :mod:`stringcast.track.quality`
-    reads the last three."""
+    cut by the image's edge (the string runs out of the image); ``stretch``: the seen length over L
+    where the points were spread over a stretched string's seen length, else 1.
+    :mod:`stringcast.track.quality` reads the last four."""
 
     positions: np.ndarray
     valid: np.ndarray
@@ -49,6 +50,7 @@ class FrameTrack:
     length_mismatch_m: float = math.nan
     past_roi: bool = False
     off_image: bool = False
+    stretch: float = 1.0
 
     def __post_init__(self):
         n = len(self.valid)
@@ -156,7 +158,7 @@ class FrameTracker:
             if D > tol:  # the missing length hides by the grasp (a loop at the fingers, under the arm's mask):
                 lo = max(lo, L_head + D)  # the visible path's first D past the head may be that loop's
         elif free_end and not len(events) and -st.max_stretch_share * self.L <= D < 0:  # seen longer, no ambiguity:
-            stretch = float(s_poly[-1]) / (float(s_poly[-1]) + D)  # a stretched string (or the image scale off as much):
+            stretch = float(s_poly[-1]) / (self.L - st.tip_shortfall_mm / 1000)  # a stretched string (or the scale off as much):
             # both ends anchor it, and its points lie at the same shares of the seen length as of L (uniform strain)
         elif not hidden_start and not self._head_clutter and not ((loop_back or free_end) and D > tol):  # anchored at the grasp: valid before the first ambiguity
             hi = events[0] if len(events) else np.inf
@@ -178,7 +180,7 @@ class FrameTracker:
             pos, valid = band_points(frame, px, obs & (np.arange(len(obs)) >= len(head)), s_poly, s_t, trusted,
                                      free_end, path_contrast(absd, pts), cal, st)
         pos[~valid] = np.nan
-        done = FrameTrack(pos, valid, px, D if free_end and not hidden_start else math.nan, *cuts)
+        done = FrameTrack(pos, valid, px, D if free_end and not hidden_start else math.nan, *cuts, stretch)
         return self._with_beyond(done, absd, arm, walked, xy, scale, (y0, x0)) if behind else done
 
     def _with_beyond(self, done: FrameTrack, absd, arm, walked, xy, scale: float, origin) -> FrameTrack:

@@ -25,8 +25,8 @@ not impose, and their violation measures its error (:func:`tracking_quality`):
   runs to the edge of the region tracked (L + ``roi_margin_mm`` around the grasp) inside the
   image: string seen farther from the grasp than the campaign's string reaches.
 * **Segment excess**: a chord between consecutive points cannot be longer than the arc
-  between them: L / n, or in a frame whose string is seen longer than L to a trusted free end
-  (a stretched string, whose points the tracker spreads over the seen length) that length / n;
+  between them: L / n, or in a frame where the tracker spread the points over a stretched
+  string's seen length (:attr:`~stringcast.track.frame_tracker.FrameTrack.stretch`) that length / n;
   the p95 over the frames judged of max(0, chord - that arc), mm.
 * **Rest jitter**: the string hangs still before the motion; the p95 over the points of each
   point's standard deviation over those frames, mm: the tracker's noise where the truth is
@@ -56,7 +56,8 @@ def _p95(a: np.ndarray) -> float | None:
 
 def tracking_quality(tracks: pd.DataFrame, mismatch_m: np.ndarray, L: float, n: int, judged: np.ndarray,
                      rest: np.ndarray, st: TrackingSettings, past_roi: np.ndarray | None = None,
-                     off_image: np.ndarray | None = None, string_setting=None, scale_note: str | None = None) -> dict:
+                     off_image: np.ndarray | None = None, string_setting=None, scale_note: str | None = None,
+                     stretch: np.ndarray | None = None) -> dict:
     """The tracking's self-measures and verdict, for ``tracking.json``.
 
     Args:
@@ -74,6 +75,9 @@ def tracking_quality(tracks: pd.DataFrame, mismatch_m: np.ndarray, L: float, n: 
         scale_note: where the calibration found the image scale off (the still arm seen at a scale,
             :func:`~stringcast.calibrate.scale_check.arm_scale`), what it said: a string seen at another
             length is then put down to the scale, not to the string.
+        stretch: (F,) the factor each frame's points were spread by over a stretched string
+            (:attr:`FrameTrack.stretch`; None: 1, none stretched): the segment excess is measured
+            against stretch L / n.
 
     Returns:
         ``{"valid_share", "judged_frames", "length_mismatch_mm": {"frames", "median", "spread_p95",
@@ -85,21 +89,22 @@ def tracking_quality(tracks: pd.DataFrame, mismatch_m: np.ndarray, L: float, n: 
     """
     F = len(judged)
     flags = [np.zeros(F, bool) if f is None else np.asarray(f, bool) for f in (past_roi, off_image)]
-    if len(tracks) != F * (n + 1) or len(mismatch_m) != F or len(rest) != F or any(len(f) != F for f in flags):
+    stretch = np.ones(F) if stretch is None else np.asarray(stretch, float)
+    if len(tracks) != F * (n + 1) or len(mismatch_m) != F or len(rest) != F or any(len(f) != F for f in flags) \
+            or len(stretch) != F:
         raise ValueError(f"tracking_quality: {len(tracks)} rows for {F} frames x {n + 1} points, "
-                         f"{len(mismatch_m)} mismatches, {len(rest)} rest flags")
+                         f"{len(mismatch_m)} mismatches, {len(rest)} rest flags, {len(stretch)} stretches")
     t = tracks.sort_values(["frame", "point"])
     xy = t[["x_m", "y_m"]].to_numpy(float).reshape(F, n + 1, 2)
     ok = t["valid"].to_numpy(bool).reshape(F, n + 1)
     use = np.asarray(judged, bool)
     share = float(ok[use, 1:].mean()) if use.any() else None
-    D_all = np.asarray(mismatch_m, float)[use] * 1000
-    D = D_all[np.isfinite(D_all)]
+    D = np.asarray(mismatch_m, float)[use] * 1000
+    D = D[np.isfinite(D)]
     med = float(np.median(D)) if D.size else None
     chord = np.linalg.norm(np.diff(xy[use], axis=1), axis=2) * 1000
     both = ok[use, 1:] & ok[use, :-1]
-    spacing = (L * 1000 - np.minimum(np.nan_to_num(D_all, nan=0.0), 0.0)) / n   # a string seen stretched: its own
-    excess = np.maximum(chord - spacing[:, None], 0.0)[both]
+    excess = np.maximum(chord - (L / n * 1000 * stretch[use])[:, None], 0.0)[both]   # a stretched string: its own
     still = np.asarray(rest, bool)
     jitter = None
     if still.sum() >= 5:
