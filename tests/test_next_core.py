@@ -36,13 +36,8 @@ def project(root: Path, trials=("trial_1",)) -> Path:
     return root
 
 
-@pytest.fixture(scope="module")
-def field_project(tmp_path_factory):
-    return project(tmp_path_factory.mktemp("field") / "project")
-
-
-def test_next_runs_a_recorded_trial_to_its_next_motion(field_project, capsys):
-    root = field_project
+def test_next_runs_a_recorded_trial_to_its_next_motion(tmp_path, capsys):
+    root = project(tmp_path / "project")          # tmp_path: its 1.6 GB of decoded frames go when it passes
     before = {p: p.stat().st_mtime_ns for p in (root / "data").rglob("*") if p.is_file()}
     code = main(["--config", str(FIELD / "lab.yaml"), "--config", str(root / "small.yaml"), "next",
                  str(root / "data" / "field_1" / "trial_1")])
