@@ -26,7 +26,8 @@ the residual correction (and so without its gate on perturbations), the weak cla
 being threads (issue 52);
 ``ours_always_perturb`` perturbs the played motion (+-0.5 rad/s) after any miss, as the paper does, instead
 of a wider perturbation or a new motion after a miss over 45 mm; ``ours_paper_w`` fits with the paper's tip
-weighting w = 0.1 (the threads' next-motion error, docs/method.md). ``benchmarks.loop_ab`` compares such a run with ours.
+weighting w = 0.1 (the threads' next-motion error, docs/method.md); ``ours_isotropic_drag`` fits with the
+paper's air drag on the whole velocity (``model.drag: isotropic``). ``benchmarks.loop_ab`` compares such a run with ours.
 
 A seed ``s`` sets the lab's noise (the campaign's seed: camera noise, joint noise, trigger
 error), the pipeline's own searches (``estimation.seed`` and ``motion.seed`` = ``s``) and, in
@@ -112,6 +113,7 @@ VARIANTS = {
     "ours_no_residual": {"motion": {"residual_correction": False}},
     "ours_always_perturb": {"motion": {"replan_miss_mm": 0.0}},
     "ours_paper_w": {"evaluation": {"w": 0.1}},
+    "ours_isotropic_drag": {"model": {"drag": "isotropic"}},
 }
 PHYSICS = ("mujoco", "elastica")
 MODES = ("state", "video")
