@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks.loop import Spec, method_config, run_dir
+from benchmarks.loop import VARIANTS, Spec, method_config, run_dir
 from benchmarks.loop_summary import family_into
 from benchmarks.loop_summary import bootstrap_ci, summarize
 
@@ -163,6 +163,22 @@ def test_a_variant_is_ours_with_one_setting_changed(config):
     assert replace(variant, motion=replace(variant.motion, residual_correction=True)) == ours
     with pytest.raises(ValueError, match="method ours_no_residual"):
         Spec(methods=("ours_no_residual",))
+
+
+@pytest.mark.parametrize("name", sorted(VARIANTS))
+def test_every_variant_changes_only_what_it_names(config, name):
+    """Each variant resolves to valid settings that differ from ours in exactly the settings it names
+    (``ours_isotropic_drag``: the model's drag law; none a no-op)."""
+    from dataclasses import fields
+
+    from stringcast.core import settings_from_config
+
+    ours = settings_from_config(method_config(config, "ours", 0, "elastica", "state"))
+    variant = settings_from_config(method_config(config, name, 0, "elastica", "state"))
+    changed = {(sec.name, key.name) for sec in fields(ours) for key in fields(getattr(ours, sec.name))
+               if getattr(getattr(ours, sec.name), key.name) != getattr(getattr(variant, sec.name), key.name)}
+    named = {(sec, key) for sec, entries in VARIANTS[name].items() for key in entries}
+    assert changed == named
 
 
 def test_a_lab_that_ran_other_physics_is_refused(tmp_path):
