@@ -85,7 +85,7 @@ def test_ours_is_the_default_and_method_paper_merges_config_paper_yaml_last():
 def test_config_readme_lists_every_setting_as_the_code_defines_it():
     """config/README.md's reference (below its mark) is what ``stringcast settings --markdown``
     prints: every setting with the default that core.settings holds, and each stage's sections."""
-    from stringcast.cli import REFERENCE_MARK, settings_reference
+    from stringcast.core import REFERENCE_MARK, settings_reference
     from stringcast.core import SECTION_CLASSES, markdown_table
 
     text = (Path(__file__).resolve().parents[1] / "config" / "README.md").read_text()

@@ -154,7 +154,7 @@ def test_a_stage_loads_only_what_it_runs(tmp_path):
 
     log = tmp_path / "joints.csv"
     log.write_text("t_s,q1_rad\n0,0\n0.002,0.1\n")
-    code = ("import sys\nfrom stringcast.cli import stage_entry\nstage_entry('decode')\n"
+    code = ("import sys\nfrom stringcast.core import stage_entry\nstage_entry('decode')\n"
             "print('pandas' in sys.modules)\nstage_entry('sync')\nprint('scipy.optimize' in sys.modules)\n"
             "stage_entry('sweep')\nprint('scipy.optimize' in sys.modules)\n"
             f"from stringcast.core import read_joint_table\nread_joint_table({str(log)!r})\n"

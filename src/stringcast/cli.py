@@ -17,6 +17,7 @@ import sys
 from pathlib import Path
 
 from stringcast.core import INTERNAL_ERROR_STATUS, TRACEBACK_DIR_ENV, JobLog, internal_error  # noqa: F401
+from stringcast.core import STAGES, reads_target, settings_reference, stage_entry
 
 
 CONFIG_ENV = "STRINGCAST_CONFIG"
@@ -64,50 +65,6 @@ def _settings(func, args) -> dict:
     if key not in _CONFIG_CACHE:
         _CONFIG_CACHE[key] = settings_from_config(_config(args))
     return stage_kwargs(func, _CONFIG_CACHE[key])
-
-
-STAGES = {
-    "decode": "stringcast.video:write_frame_cache",
-    "calib-views": "stringcast.calibrate:write_calib_views",
-    "calibrate": "stringcast.calibrate:run_calibration",
-    "sync": "stringcast.sync:run_sync",
-    "sweep": "stringcast.sync:run_sweep",
-    "track": "stringcast.track:run_tracking",
-    "estimate": "stringcast.estimate:run_estimation",
-    "predict": "stringcast.estimate:run_prediction",
-    "plan-first": "stringcast.plan:run_first_plan",
-    "plan": "stringcast.plan:run_plan",
-    "report-trial": "stringcast.report:write_trial_report",
-    "report-campaign": "stringcast.report:write_campaign_report",
-}
-"""Each workflow subcommand's stage entry point, ``module:function``."""
-
-
-def stage_entry(command: str):
-    """The stage function a subcommand runs (imported on demand: each loads only its stage)."""
-    import importlib
-
-    module, _, name = STAGES[command].partition(":")
-    return getattr(importlib.import_module(module), name)
-
-
-def stage_sections(command: str) -> tuple[str, ...]:
-    """The config sections a workflow subcommand reads: those of its stage entry's settings
-    parameters, read from the source without importing the stage
-    (:func:`stringcast.core.sections_read_from_source`). The rules' params are these sections."""
-    from stringcast.core import sections_read_from_source
-
-    return sections_read_from_source(STAGES[command])
-
-
-TARGET_COMMANDS = ("predict", "plan-first", "plan", "report-trial", "report-campaign")
-"""The workflow subcommands that read the campaign's target: the workflow gives the others its
-campaign.yaml without the target, so that a new target reruns only these."""
-
-
-def reads_target(command: str) -> bool:
-    """Whether a subcommand reads the campaign's target (:data:`TARGET_COMMANDS`)."""
-    return command in TARGET_COMMANDS
 
 
 def _run(command: str, args, *positional, **keywords):
@@ -350,18 +307,6 @@ def cmd_check(args) -> int:
     n_trials = len(trial_dirs(args.campaign_dir)[1]) if Path(args.campaign_dir).is_dir() else 0
     print(check_summary(str(args.campaign_dir), problems, n_trials))
     return 2 if any(p.is_error for p in problems) else 0
-
-
-REFERENCE_MARK = "<!-- below: made by `stringcast settings --markdown`; tests/test_cli.py keeps it in step -->"
-
-
-def settings_reference(tables: str) -> str:
-    """config/README.md's generated part: which sections each workflow stage reads, then
-    ``tables`` (every setting's default and meaning)."""
-    rows = [f"| `{cmd}` | {', '.join(f'`{s}`' for s in stage_sections(cmd))} |" for cmd in STAGES]
-    return "\n".join([REFERENCE_MARK, "", "## What each stage reads", "",
-                      "| stage (`stringcast` command) | sections read |", "| --- | --- |", *rows, "",
-                      "## Every setting", "", tables])
 
 
 def cmd_settings(args):

@@ -4,7 +4,7 @@ import dataclasses
 
 import pytest
 
-from stringcast.cli import STAGES, stage_entry, stage_sections
+from stringcast.core import STAGES, stage_entry, stage_sections
 from stringcast.core import (SECTION_CLASSES, ConfigError, EstimationSettings, EvaluationSettings, ModelSettings, MotionSettings,
                              Settings, TrackingSettings, load_config, sections_read, settings_digest,
                              settings_from_config, stage_kwargs)

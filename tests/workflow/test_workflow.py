@@ -253,7 +253,7 @@ def test_a_setting_on_the_command_line_reruns_exactly_what_reads_it(finished):
 
 @pytest.mark.slow
 def test_a_new_target_reruns_only_planning_and_the_reports(finished):
-    """The target reaches only the stages that read it (stringcast.cli.TARGET_COMMANDS): a new
+    """The target reaches only the stages that read it (stringcast.core.stages.TARGET_COMMANDS): a new
     target in campaign.yaml plans the motions, the prediction check and the reports again, and
     leaves calibration, sync, tracking and the estimate as they are."""
     root, _ = finished

@@ -11,7 +11,7 @@ import yaml
 from snakemake.exceptions import WorkflowError
 
 from stringcast.check import check_campaign
-from stringcast.cli import reads_target, stage_sections
+from stringcast.core import reads_target, stage_sections
 from stringcast.core import (
     ConfigError,
     DataError,
@@ -86,7 +86,7 @@ except ConfigError as exc:
 
 def stage_settings(command):
     """The settings of the config sections that `stringcast <command>`'s stage reads (its
-    entry point's settings parameters, stringcast.cli.stage_sections), as plain data: a
+    entry point's settings parameters, stringcast.core.stages.stage_sections), as plain data: a
     rule's params, so that a changed setting reruns exactly the stages that read it."""
     return {s: getattr(SETTINGS, s).as_dict() for s in stage_sections(command)}
 
@@ -94,7 +94,7 @@ def stage_settings(command):
 def lab_entries_for(command):
     """The params of `stringcast <command>`'s rule: an input function giving the config's
     entries this campaign resolves to (its arm, set-up, camera and string, and its target if
-    the stage reads it: stringcast.cli.TARGET_COMMANDS; inline entries as written;
+    the stage reads it: stringcast.core.stages.TARGET_COMMANDS; inline entries as written;
     stringcast.core.campaign_entries), so that editing one of them reruns that campaign's
     stages that read it and no other campaign's."""
     keep_target = reads_target(command)
@@ -178,7 +178,7 @@ def checked(campaign):
 
 def campaign_yaml(wildcards):
     """data/<campaign>/campaign.yaml, its campaign checked first (checked): the input of the
-    rules whose stage reads the target (stringcast.cli.TARGET_COMMANDS)."""
+    rules whose stage reads the target (stringcast.core.stages.TARGET_COMMANDS)."""
     checked(wildcards.campaign)
     return f"data/{wildcards.campaign}/campaign.yaml"
 
@@ -204,7 +204,7 @@ def _lab_yaml(campaign):
 
 def campaign_for(command):
     """The campaign input of `stringcast <command>`'s rule: campaign_yaml if its stage reads the
-    target (stringcast.cli.TARGET_COMMANDS), else campaign_lab_yaml."""
+    target (stringcast.core.stages.TARGET_COMMANDS), else campaign_lab_yaml."""
     return campaign_yaml if reads_target(command) else campaign_lab_yaml
 
 

@@ -6,8 +6,9 @@ from .arm import (JointLimitError, assert_within_limits, check_limits, forward_k
                   motion_start, motion_window)
 from .config import (DEFAULT_CONFIG, METHOD_CONFIGS, PAPER_CONFIG, PARAM_NAMES, ConfigError, load_config, load_yaml,
                      merge_config, model_ranges, schema_problems, typed_overrides, validate)
-from .specs import (NO_TARGET, REACH_MARGIN, ArmSpec, BoardSpec, Campaign, SetupSpec, StringSpec, TargetSpec, campaign_entries,
-                    load_campaign, resolve_campaign, target_reach_problem, without_target)
+from .specs import ArmSpec, BoardSpec, Campaign, SetupSpec, StringSpec, TargetSpec
+from .campaign import (NO_TARGET, REACH_MARGIN, campaign_entries, load_campaign, resolve_campaign, target_reach_problem,
+                       without_target)
 from .files import (TRACK_COLUMNS, DataError, atomic_path, find_video, read_json, read_parquet, read_parquet_columns,
                     read_video_meta, tracks_arrays, trial_result, TrialFiles, TrialResults, write_by_content, write_job_config, write_json, write_parquet,
                     write_text, write_yaml)
@@ -18,6 +19,7 @@ from .settings import (DRAG_LAWS, MODES, POLARITIES, SECTION_CLASSES, BoardCheck
                        EstimationSettings, EvaluationSettings, ExecutorSettings, ModelSettings, MotionSettings,
                        Settings, SweepSettings, SyncSettings, TrackingSettings, settings_from_config)
 from .verdict import STATUSES, Verdict, worst
+from .stages import REFERENCE_MARK, STAGES, TARGET_COMMANDS, reads_target, settings_reference, stage_entry, stage_sections
 from .forked import chunked, forked_map
 from .joblog import INTERNAL_ERROR_STATUS, TRACEBACK_DIR_ENV, JobLog, internal_error
 from .lifeline import start_lifeline, workflow_stamp
@@ -44,6 +46,7 @@ __all__ = [
     "SyncSettings",
     "TrackingSettings",
     "STATUSES", "Verdict", "worst",
+    "REFERENCE_MARK", "STAGES", "TARGET_COMMANDS", "reads_target", "settings_reference", "stage_entry", "stage_sections",
     "chunked", "forked_map", "lazy_exports", "INTERNAL_ERROR_STATUS", "TRACEBACK_DIR_ENV", "JobLog", "internal_error", "start_lifeline", "workflow_stamp", "RunConflict",
     "claim_results", "outputs_newer_than",
     "markdown_table", "sections_read", "sections_read_from_source", "settings_digest", "settings_from_config",
