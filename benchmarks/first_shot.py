@@ -7,10 +7,10 @@ type (with its paper target), seed and variant, the first motion is planned as t
 ``plan_first`` rule plans it (:func:`stringcast.plan.planning.run_first_plan`, ``motion.seed`` =
 the seed) and played by the virtual lab without filming (``lab.render: false``) with the executor
 seed the loop benchmark's first execution has (seed x 1000 + 1), so a case is the loop
-benchmark's first shot exactly (``benchmarks.loop.method_config``). The lab's verdict
+benchmark's first shot exactly (``benchmarks.loop_methods.method_config``). The lab's verdict
 (``ground_truth.json``: hit, closest approach) is read here, by the benchmark only.
 
-Variants: ``paper`` and ``ours`` (benchmarks.loop's ``METHODS``), and ``NAME=FILE``: FILE's
+Variants: ``paper`` and ``ours`` (benchmarks.loop_methods' ``METHODS``), and ``NAME=FILE``: FILE's
 settings merged over ours (a candidate change to ours, judged before a loop run).
 
 Figures per variant and physics: hits, hit rate, the median and each case's closest approach (mm),
@@ -35,7 +35,8 @@ import numpy as np
 import yaml
 
 from benchmarks.common import header, write
-from benchmarks.loop import METHODS, PHYSICS, method_config
+from benchmarks.loop import PHYSICS
+from benchmarks.loop_methods import METHODS, method_config
 from benchmarks.loop_summary import PAPER_TARGET
 
 

@@ -11,23 +11,11 @@ trial, as the campaign loop reads it to stop); the workflow's stages never read 
 campaigns run with ``reports=False``: no HTML reports, and the hitting trial is processed only
 as far as the prediction error needs (below).
 
-Methods are config overlays:
-
-* ``paper``: ``config/paper.yaml``, read at import (the file ``snakemake --configfile`` and
-  ``--method paper`` use): the random search of eqs. (2)-(3), Table 2's ranges, w = 0.1 and the
-  Section V planner, the paper's method as the paper wrote it.
-* ``ours``: the settings' defaults (no overlay), one set for both physics; the evidence for each,
-  and what was tried and left out, is in docs/method.md.
-
-Variants (``VARIANTS``) are ours with one setting changed, to A/B it on the same code and
-campaigns; they run only by name (``--only 1 0 ours_no_residual``, or loop.smk's
-``methods="ours_no_residual"``) and loop.json leaves them out: ``ours_no_residual`` plans without
-the residual correction (and so without its gate on perturbations), the weak class of the family
-being threads (issue 52);
-``ours_always_perturb`` perturbs the played motion (+-0.5 rad/s) after any miss, as the paper does, instead
-of a wider perturbation or a new motion after a miss over 45 mm; ``ours_paper_w`` fits with the paper's tip
-weighting w = 0.1 (the threads' next-motion error, docs/method.md); ``ours_isotropic_drag`` fits with the
-paper's air drag on the whole velocity (``model.drag: isotropic``). ``benchmarks.loop_ab`` compares such a run with ours.
+Methods are config overlays (:mod:`benchmarks.loop_methods`): ``paper`` (``config/paper.yaml``, the
+paper's method as the paper wrote it) and ``ours`` (the settings' defaults, one set for both physics;
+docs/method.md). Variants (``VARIANTS``) are ours with one setting changed, run only by name
+(``--only 1 0 ours_no_residual``, or loop.smk's ``methods="ours_no_residual"``) and left out of
+loop.json; ``benchmarks.loop_ab`` compares such a run with ours.
 
 A seed ``s`` sets the lab's noise (the campaign's seed: camera noise, joint noise, trigger
 error), the pipeline's own searches (``estimation.seed`` and ``motion.seed`` = ``s``) and, in
@@ -89,32 +77,18 @@ summarizes the finished ones. loop.json, loop.png and loop.md are rewritten afte
 from __future__ import annotations
 
 import argparse
-import copy
 import dataclasses
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from benchmarks.common import BENCH_DIR, ROOT, git_commit, library_versions, write
+from benchmarks.loop_methods import METHODS, VARIANTS, material_of, method_config
 from benchmarks.loop_summary import (CAP, PAPER_TABLE3, PAPER_TARGET, document, family_into, figure, markdown,
                                     prediction_steps)
 
-PAPER_CONFIG = ROOT / "config" / "paper.yaml"
-METHODS = {
-    "paper": yaml.safe_load(PAPER_CONFIG.read_text()),   # one place for the paper's settings
-    "ours": {},                                           # ours: the settings' defaults
-}
-VARIANTS = {
-    # ours with one setting changed (merged over ours), run only by name (--only, loop.smk's
-    # methods=...) and left out of loop.json: an A/B of that setting on the same code and campaigns
-    "ours_no_residual": {"motion": {"residual_correction": False}},
-    "ours_always_perturb": {"motion": {"replan_miss_mm": 0.0}},
-    "ours_paper_w": {"evaluation": {"w": 0.1}},
-    "ours_isotropic_drag": {"model": {"drag": "isotropic"}},
-}
 PHYSICS = ("mujoco", "elastica")
 MODES = ("state", "video")
 STATE_SOURCE = ROOT / "results" / "bench"
@@ -158,39 +132,6 @@ class Spec:
                 out += [(p, "video", k, s, m) for s in self.video_seeds for k in (self.video_types or self.types)
                         for m in self.video_methods]
         return out
-
-
-def material_of(seed: int) -> dict:
-    """A family run's ``lab.material``: the draw ``seed`` of class ``KINDS[seed % 5]`` (every class
-    among any five consecutive seeds; :mod:`stringcast_lab.materials`)."""
-    from stringcast_lab.materials import KINDS
-
-    return {"seed": int(seed), "class": KINDS[int(seed) % len(KINDS)]}
-
-
-def method_config(config: dict, method: str, seed: int, physics: str = "mujoco", mode: str = "video",
-                  family: bool = False) -> dict:
-    """The config a run uses: ``config`` (as loaded) with the method's overlay, the seed,
-    ``lab.physics``, in the state mode ``lab.render: false``, and in a family run ``lab.material``
-    (:func:`material_of`).
-
-    Raises:
-        KeyError: unknown method (not in ``METHODS`` or ``VARIANTS``).
-    """
-    from stringcast.core import merge_config
-
-    overlays = [METHODS[method]] if method in METHODS else [METHODS["ours"], VARIANTS[method]]
-    cfg = copy.deepcopy({k: v for k, v in config.items() if k != "_path"})
-    for overlay in overlays:
-        merge_config(cfg, overlay)
-    cfg.setdefault("estimation", {})["seed"] = int(seed)   # the config file may leave a section to its defaults
-    cfg.setdefault("motion", {})["seed"] = int(seed)
-    cfg["lab"] = dict(cfg.get("lab") or {}, physics=physics)
-    if mode == "state":
-        cfg["lab"]["render"] = False
-    if family:
-        cfg["lab"]["material"] = material_of(seed)
-    return cfg
 
 
 def project_root(path: Path, cfg: dict) -> Path:

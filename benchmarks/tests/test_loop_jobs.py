@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks.loop import VARIANTS, Spec, method_config, run_dir
+from benchmarks.loop import Spec, run_dir
+from benchmarks.loop_methods import VARIANTS, method_config
 from benchmarks.loop_summary import family_into
 from benchmarks.loop_summary import bootstrap_ci, summarize
 

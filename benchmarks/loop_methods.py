@@ -1,0 +1,68 @@
+"""The loop benchmark's methods and variants, as config overlays (:mod:`benchmarks.loop`).
+
+* ``METHODS``: ``paper`` (``config/paper.yaml``, read at import: the file ``--method paper`` and
+  ``snakemake --configfile`` use) and ``ours`` (the settings' defaults, no overlay).
+* ``VARIANTS``: ours with one setting changed, run only by name and left out of loop.json, to A/B
+  that setting on the same code and campaigns (:mod:`benchmarks.loop_ab` pairs them with ours):
+  ``ours_no_residual`` plans without the residual correction (and so without its gate on
+  perturbations), the weak class of the family being threads (issue 52); ``ours_always_perturb``
+  perturbs the played motion (+-0.5 rad/s) after any miss, as the paper does, instead of a wider
+  perturbation or a new motion after a miss over 45 mm; ``ours_paper_w`` fits with the paper's tip
+  weighting w = 0.1 (the threads' next-motion error, docs/method.md); ``ours_isotropic_drag`` fits
+  with the paper's air drag on the whole velocity (``model.drag: isotropic``).
+* :func:`method_config`: the config one campaign runs with (method, seed, physics, mode, material).
+"""
+from __future__ import annotations
+
+import copy
+
+import yaml
+
+from benchmarks.common import ROOT
+
+PAPER_CONFIG = ROOT / "config" / "paper.yaml"
+METHODS = {
+    "paper": yaml.safe_load(PAPER_CONFIG.read_text()),   # one place for the paper's settings
+    "ours": {},                                           # ours: the settings' defaults
+}
+VARIANTS = {
+    # ours with one setting changed (merged over ours), run only by name (--only, loop.smk's
+    # methods=...) and left out of loop.json: an A/B of that setting on the same code and campaigns
+    "ours_no_residual": {"motion": {"residual_correction": False}},
+    "ours_always_perturb": {"motion": {"replan_miss_mm": 0.0}},
+    "ours_paper_w": {"evaluation": {"w": 0.1}},
+    "ours_isotropic_drag": {"model": {"drag": "isotropic"}},
+}
+
+
+def material_of(seed: int) -> dict:
+    """A family run's ``lab.material``: the draw ``seed`` of class ``KINDS[seed % 5]`` (every class
+    among any five consecutive seeds; :mod:`stringcast_lab.materials`)."""
+    from stringcast_lab.materials import KINDS
+
+    return {"seed": int(seed), "class": KINDS[int(seed) % len(KINDS)]}
+
+
+def method_config(config: dict, method: str, seed: int, physics: str = "mujoco", mode: str = "video",
+                  family: bool = False) -> dict:
+    """The config a run uses: ``config`` (as loaded) with the method's overlay, the seed,
+    ``lab.physics``, in the state mode ``lab.render: false``, and in a family run ``lab.material``
+    (:func:`material_of`).
+
+    Raises:
+        KeyError: unknown method (not in ``METHODS`` or ``VARIANTS``).
+    """
+    from stringcast.core import merge_config
+
+    overlays = [METHODS[method]] if method in METHODS else [METHODS["ours"], VARIANTS[method]]
+    cfg = copy.deepcopy({k: v for k, v in config.items() if k != "_path"})
+    for overlay in overlays:
+        merge_config(cfg, overlay)
+    cfg.setdefault("estimation", {})["seed"] = int(seed)   # the config file may leave a section to its defaults
+    cfg.setdefault("motion", {})["seed"] = int(seed)
+    cfg["lab"] = dict(cfg.get("lab") or {}, physics=physics)
+    if mode == "state":
+        cfg["lab"]["render"] = False
+    if family:
+        cfg["lab"]["material"] = material_of(seed)
+    return cfg
