@@ -305,10 +305,18 @@ def check_board_to_robot(rest_image: np.ndarray, calibration, arm, q_rest: np.nd
     cov = None if spread is None else _translation_covariance(A, np.asarray(where, float), spread)
     doc.update(_cause(d, cov, float(np.sqrt(np.mean(r ** 2))), len(y), doc["residual_mm"] > st.warn_mm,
                       weak_intrinsics is not None))
+    doc["verdict"] = _offset_verdict(doc, st.warn_mm, weak_intrinsics).as_dict()
+    return doc
+
+
+def _offset_verdict(doc: dict, warn_mm: float, weak_intrinsics: str | None) -> Verdict:
+    """The board-to-robot check's verdict from its figures ``doc`` (:func:`check_board_to_robot`): ``warn``
+    beyond ``warn_mm``, the reason naming the likely cause (the intrinsics, where they explain the offset,
+    or the board pose) and what to do; ``ok`` within it."""
     verdict = Verdict()
-    if doc["residual_mm"] > st.warn_mm:
+    if doc["residual_mm"] > warn_mm:
         seen = (f"the still arm is seen {doc['residual_mm']:.1f} mm (dx {doc['dx_mm']:+.1f}, dy {doc['dy_mm']:+.1f} mm) "
-                f"from where the configured board pose puts it (> {st.warn_mm:g} mm)")
+                f"from where the configured board pose puts it (> {warn_mm:g} mm)")
         sd = doc["intrinsics_sd_mm"]
         if doc["likely_cause"] == "intrinsics" and (doc["intrinsics_chi2"] or 0.0) <= EXPLAINED_CHI2:
             verdict = verdict.add("warn", f"{seen}: the calibration's intrinsics are too weak to place the arm so far "
@@ -328,8 +336,7 @@ def check_board_to_robot(rest_image: np.ndarray, calibration, arm, q_rest: np.nd
             known = "" if chi2 is None else (f" ({math.sqrt(chi2):.1f} standard deviations of what the intrinsics' "
                                              "own uncertainty moves the arm by: more than they explain)")
             verdict = verdict.add("warn", f"{seen}{known}: check setups.*.board_origin_mm / board_angle_deg")
-    doc["verdict"] = verdict.as_dict()
-    return doc
+    return verdict
 
 
 def _mm_or_undetermined(sd: float | None) -> str:
