@@ -9,7 +9,9 @@
   perturbs the played motion (+-0.5 rad/s) after any miss, as the paper does, instead of a wider
   perturbation or a new motion after a miss over 45 mm; ``ours_paper_w`` fits with the paper's tip
   weighting w = 0.1 (the threads' next-motion error, docs/method.md); ``ours_isotropic_drag`` fits
-  with the paper's air drag on the whole velocity (``model.drag: isotropic``).
+  with the paper's air drag on the whole velocity (``model.drag: isotropic``); ``ours_grasp_flip``
+  leaves 30 % of CMA-ES's budget to a last run in the other basin of the hand spring
+  (``estimation.cmaes_grasp_flip``).
 * :func:`method_config`: the config one campaign runs with (method, seed, physics, mode, material).
 """
 from __future__ import annotations
@@ -32,6 +34,7 @@ VARIANTS = {
     "ours_always_perturb": {"motion": {"replan_miss_mm": 0.0}},
     "ours_paper_w": {"evaluation": {"w": 0.1}},
     "ours_isotropic_drag": {"model": {"drag": "isotropic"}},
+    "ours_grasp_flip": {"estimation": {"cmaes_grasp_flip": 0.3}},
 }
 
 

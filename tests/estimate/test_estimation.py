@@ -209,6 +209,32 @@ def test_cmaes_runs_share_the_budget(settings):
         assert spread2 > 0.3 / 4, (M, spread2)                                       # run 2: the full step
 
 
+def test_cmaes_grasp_flip_tries_the_other_hand_spring_basin(settings):
+    """E with a weak- and a stiff-hand-spring basin (k_ph's chi 0.05: E = 1; chi 0.95: E = 0.5, everything
+    else the same): one run from the weak basin stays there; ``cmaes_grasp_flip`` leaves a share of the
+    budget to a last run from the best set with k_ph at the other end of its range, which finds the
+    stiff one. Without the flip nothing moves the search across."""
+    from stringcast.estimate.optimizers import K_PH, flipped_grasp
+
+    weak, stiff = np.full(12, 0.3), np.full(12, 0.3)
+    weak[K_PH], stiff[K_PH] = 0.05, 0.95
+
+    def two_basins(c):
+        return np.minimum(1.0 + np.sum((c - weak) ** 2, axis=1), 0.5 + np.sum((c - stiff) ** 2, axis=1))
+
+    np.testing.assert_array_equal(flipped_grasp(weak)[K_PH], 1.0)
+    np.testing.assert_array_equal(flipped_grasp(stiff)[K_PH], 0.0)
+    found = {}
+    for flip in (0.0, 0.3):
+        estimation = _est(settings, optimizer="cmaes", iterations=1500, batch=32, cmaes_runs=1, cmaes_first_look=0,
+                          cmaes_grasp_flip=flip)
+        est = es.estimate(_problem_stub(), settings.model, estimation, weak, 4, seed=0, objective=two_basins)
+        assert est.n_evaluations == 1500
+        found[flip] = est
+    assert found[0.0].E_m > 0.99 and abs(found[0.0].chi[K_PH] - 0.05) < 0.05     # stayed in the weak basin
+    assert found[0.3].E_m < 0.51 and abs(found[0.3].chi[K_PH] - 0.95) < 0.05     # the flip found the stiff one
+
+
 def test_partly_blown_up_search_says_so(settings):
     def f(c):  # about 70 % of the candidates blow up, wherever they are
         return np.where((np.sum(c, axis=1) * 1e4) % 1 > 0.3, np.inf, 1.0 + c[:, 1])

@@ -39,7 +39,12 @@ its E and the search history. ``estimation`` is the estimation settings
   (median final E, type 3: 84 -> 59 mm, type 2: 64 -> 53 mm): from the centre, CMA-ES settled
   in basins with a light clay point (its mu's chi 0.0-0.4 against 0.8-0.9 in the paper
   search's best sets). ``cmaes_options`` (a mapping) is passed on to
-  ``cma.CMAOptions`` (e.g. ``CSA_dampfac``); an unknown name is a ConfigError.
+  ``cma.CMAOptions`` (e.g. ``CSA_dampfac``); an unknown name is a ConfigError; (f)
+  ``cmaes_grasp_flip`` = s > 0: the runs leave a share s of the budget after the first look to a last
+  run, from the best set so far with the hand spring k_ph moved to the other end of its range, step
+  sigma0 / 2. E has a weak- and a stiff-hand-spring basin (docs/method.md, "Two basins of the hand
+  spring"), and a run seldom crosses from one to the other: the last run tries the other basin with
+  everything else as found.
 * ``de``: SciPy differential evolution (vectorized), x0 = chi_best.
 """
 from __future__ import annotations
@@ -48,7 +53,10 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from stringcast.core import ConfigError, EstimationSettings
+from stringcast.core import PARAM_NAMES, ConfigError, EstimationSettings
+
+K_PH = PARAM_NAMES.index("k_ph")
+"""chi's index of the hand spring k_ph (``cmaes_grasp_flip``)."""
 
 
 class Recorder:
@@ -147,8 +155,9 @@ def cmaes_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: n
         rec(first[None])  # chi_best is evaluated, but not an estimate yet: start at the centre
         first = np.full(d, 0.5)
     starts = [(first, sigma0 / M)] + [(np.full(d, 0.5), sigma0)] * (runs - 1)
-    share = rec.remaining // runs
-    quotas = [share] * (runs - 1) + [rec.remaining - share * (runs - 1)]
+    reserve = int(float(estimation.cmaes_grasp_flip) * rec.remaining)
+    share = (rec.remaining - reserve) // runs
+    quotas = [share] * (runs - 1) + [rec.remaining - reserve - share * (runs - 1)]
     gens = [_cma_run(x0, s0, popsize, quota, child, options)
             for (x0, s0), quota, child in zip(starts, quotas, rng.spawn(runs))]
     results = [(np.inf, x0, s0) for x0, s0 in starts]
@@ -161,9 +170,34 @@ def cmaes_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: n
         E = np.concatenate([rec(xs[a:a + batch]) for a in range(0, len(xs), batch)])
         for r, part in zip(order, np.split(E, np.cumsum([len(asked[r]) for r in order])[:-1])):
             _advance(gens[r], part, r, asked, results, starts)
-    _, best, s0 = min(results, key=lambda x: x[0])
+    E_best, best, s0 = min(results, key=lambda x: x[0])
+    if reserve >= popsize:
+        E_best, best, s0 = min((E_best, best, s0), _grasp_flip(rec, best, sigma0 / 2, popsize, reserve, batch,
+                                                           rng.spawn(1)[0], options), key=lambda x: x[0])
     while rec.remaining > 0:  # spend the rest (< popsize, or after a stop) around the best run's best point
         rec(np.clip(best + (s0 / 4) * rng.standard_normal((min(batch, rec.remaining), d)), 0.0, 1.0))
+
+
+def flipped_grasp(chi: np.ndarray) -> np.ndarray:
+    """chi (D,) with the hand spring k_ph moved to the other end of its range (chi 0 <-> 1, split at 0.5)."""
+    out = np.array(chi, float, copy=True)
+    out[K_PH] = 0.0 if out[K_PH] >= 0.5 else 1.0
+    return out
+
+
+def _grasp_flip(rec: Recorder, best: np.ndarray, sigma0: float, popsize: int, quota: int, batch: int,
+                rng: np.random.Generator, options) -> tuple[float, np.ndarray, float]:
+    """The ``cmaes_grasp_flip`` run: CMA-ES from :func:`flipped_grasp` of ``best`` over ``quota``
+    evaluations. Returns its best (E, chi, sigma0)."""
+    start = flipped_grasp(best)
+    gen = _cma_run(start, sigma0, popsize, quota, rng, options)
+    E = None
+    try:
+        while True:
+            xs = gen.send(E)
+            E = np.concatenate([rec(xs[a:a + batch]) for a in range(0, len(xs), batch)])
+    except StopIteration as done:
+        return (*done.value, sigma0)
 
 
 def _advance(gen, E, r: int, asked: dict, results: list, starts: list) -> None:
