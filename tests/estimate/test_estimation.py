@@ -187,7 +187,8 @@ def test_cmaes_runs_share_the_budget(settings):
     side (each generation both populations in one batch), each converges on its half of the budget,
     and the best of both is the estimate."""
     corner = np.r_[np.ones(6), np.zeros(6)]
-    estimation = _est(settings, optimizer="cmaes", iterations=1200, batch=32, cmaes_runs=2, cmaes_first_look=0)
+    estimation = _est(settings, optimizer="cmaes", iterations=1200, batch=32, cmaes_runs=2, cmaes_first_look=0,
+                      cmaes_grasp_flip=0.0)
     pop = 4 + int(3 * np.log(12))
     for M, start, n_first in ((1, np.full(12, 0.5), 1), (2, np.full(12, 0.2), 0)):
         rec = Recording(lambda c: np.sum((c - corner) ** 2, axis=1))
@@ -369,7 +370,7 @@ def test_cmaes_options_reach_cma_and_unknown_ones_are_refused(settings, monkeypa
 
     monkeypatch.setattr(cma, "CMAEvolutionStrategy", spy)
     corner = np.r_[np.ones(6), np.zeros(6)]
-    estimation = _est(settings, optimizer="cmaes", iterations=600, batch=32, cmaes_runs=2,
+    estimation = _est(settings, optimizer="cmaes", iterations=600, batch=32, cmaes_runs=2, cmaes_grasp_flip=0.0,
                       cmaes_options={"CSA_dampfac": 0.5, "tolx": 1e-3})
     est = es.estimate(_problem_stub(), settings.model, estimation, np.full(12, 0.2), 1, seed=0,
                       objective=lambda c: np.sum((c - corner) ** 2, axis=1))
