@@ -11,7 +11,6 @@ import yaml
 from snakemake.exceptions import WorkflowError
 
 from stringcast.check import check_campaign
-from stringcast.core import reads_target, stage_sections
 from stringcast.core import (
     ConfigError,
     DataError,
@@ -21,7 +20,9 @@ from stringcast.core import (
     find_video,
     load_yaml,
     outputs_newer_than,
+    reads_target,
     settings_from_config,
+    stage_sections,
     without_target,
     workflow_stamp,
     write_by_content,

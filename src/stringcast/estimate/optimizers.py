@@ -160,20 +160,11 @@ def cmaes_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: n
     quotas = [share] * (runs - 1) + [rec.remaining - reserve - share * (runs - 1)]
     gens = [_cma_run(x0, s0, popsize, quota, child, options)
             for (x0, s0), quota, child in zip(starts, quotas, rng.spawn(runs))]
-    results = [(np.inf, x0, s0) for x0, s0 in starts]
-    asked = {}
-    for r, gen in enumerate(gens):
-        _advance(gen, None, r, asked, results, starts)
-    while asked:
-        order = sorted(asked)
-        xs = np.concatenate([asked[r] for r in order])
-        E = np.concatenate([rec(xs[a:a + batch]) for a in range(0, len(xs), batch)])
-        for r, part in zip(order, np.split(E, np.cumsum([len(asked[r]) for r in order])[:-1])):
-            _advance(gens[r], part, r, asked, results, starts)
-    E_best, best, s0 = min(results, key=lambda x: x[0])
-    if reserve >= popsize:
-        E_best, best, s0 = min((E_best, best, s0), _grasp_flip(rec, best, sigma0 / 2, popsize, reserve, batch,
-                                                           rng.spawn(1)[0], options), key=lambda x: x[0])
+    results = _side_by_side(rec, gens, starts, batch)
+    if reserve >= popsize:  # cmaes_grasp_flip: a last run in the hand spring's other basin
+        flip = (flipped_grasp(min(results, key=lambda x: x[0])[1]), sigma0 / 2)
+        results += _side_by_side(rec, [_cma_run(*flip, popsize, reserve, rng.spawn(1)[0], options)], [flip], batch)
+    _, best, s0 = min(results, key=lambda x: x[0])
     while rec.remaining > 0:  # spend the rest (< popsize, or after a stop) around the best run's best point
         rec(np.clip(best + (s0 / 4) * rng.standard_normal((min(batch, rec.remaining), d)), 0.0, 1.0))
 
@@ -185,19 +176,21 @@ def flipped_grasp(chi: np.ndarray) -> np.ndarray:
     return out
 
 
-def _grasp_flip(rec: Recorder, best: np.ndarray, sigma0: float, popsize: int, quota: int, batch: int,
-                rng: np.random.Generator, options) -> tuple[float, np.ndarray, float]:
-    """The ``cmaes_grasp_flip`` run: CMA-ES from :func:`flipped_grasp` of ``best`` over ``quota``
-    evaluations. Returns its best (E, chi, sigma0)."""
-    start = flipped_grasp(best)
-    gen = _cma_run(start, sigma0, popsize, quota, rng, options)
-    E = None
-    try:
-        while True:
-            xs = gen.send(E)
-            E = np.concatenate([rec(xs[a:a + batch]) for a in range(0, len(xs), batch)])
-    except StopIteration as done:
-        return (*done.value, sigma0)
+def _side_by_side(rec: Recorder, gens: list, starts: list, batch: int) -> list[tuple[float, np.ndarray, float]]:
+    """Step CMA-ES runs (:func:`_cma_run` generators, started at ``starts``, (x0, sigma0) each) side by
+    side until all are done: each generation every run's population in one batch, evaluated by ``rec``
+    in chunks of ``batch``. Returns each run's best (E, point, sigma0)."""
+    results = [(np.inf, x0, s0) for x0, s0 in starts]
+    asked = {}
+    for r, gen in enumerate(gens):
+        _advance(gen, None, r, asked, results, starts)
+    while asked:
+        order = sorted(asked)
+        xs = np.concatenate([asked[r] for r in order])
+        E = np.concatenate([rec(xs[a:a + batch]) for a in range(0, len(xs), batch)])
+        for r, part in zip(order, np.split(E, np.cumsum([len(asked[r]) for r in order])[:-1])):
+            _advance(gens[r], part, r, asked, results, starts)
+    return results
 
 
 def _advance(gen, E, r: int, asked: dict, results: list, starts: list) -> None:
