@@ -212,9 +212,9 @@ def test_cmaes_runs_share_the_budget(settings):
 
 def test_cmaes_grasp_flip_tries_the_other_hand_spring_basin(settings):
     """E with a weak- and a stiff-hand-spring basin (k_ph's chi 0.05: E = 1; chi 0.95: E = 0.5, everything
-    else the same): one run from the weak basin stays there; ``cmaes_grasp_flip`` leaves a share of the
-    budget to a last run from the best set with k_ph at the other end of its range, which finds the
-    stiff one. Without the flip nothing moves the search across."""
+    else the same): one run from the weak basin stays there; ``cmaes_grasp_flip`` adds evaluations for a
+    last run from the best set with k_ph at the other end of its range, which finds the stiff one.
+    Without the flip nothing moves the search across, and the flip leaves the runs before it as they were."""
     from stringcast.estimate.optimizers import K_PH, flipped_grasp
 
     weak, stiff = np.full(12, 0.3), np.full(12, 0.3)
@@ -230,8 +230,9 @@ def test_cmaes_grasp_flip_tries_the_other_hand_spring_basin(settings):
         estimation = _est(settings, optimizer="cmaes", iterations=1500, batch=32, cmaes_runs=1, cmaes_first_look=0,
                           cmaes_grasp_flip=flip)
         est = es.estimate(_problem_stub(), settings.model, estimation, weak, 4, seed=0, objective=two_basins)
-        assert est.n_evaluations == 1500
+        assert est.n_evaluations == 1500 + int(flip * 1500)                        # added, not taken
         found[flip] = est
+    np.testing.assert_array_equal(found[0.3].chi_evaluated[:1500], found[0.0].chi_evaluated)
     assert found[0.0].E_m > 0.99 and abs(found[0.0].chi[K_PH] - 0.05) < 0.05     # stayed in the weak basin
     assert found[0.3].E_m < 0.51 and abs(found[0.3].chi[K_PH] - 0.95) < 0.05     # the flip found the stiff one
 

@@ -40,11 +40,12 @@ its E and the search history. ``estimation`` is the estimation settings
   in basins with a light clay point (its mu's chi 0.0-0.4 against 0.8-0.9 in the paper
   search's best sets). ``cmaes_options`` (a mapping) is passed on to
   ``cma.CMAOptions`` (e.g. ``CSA_dampfac``); an unknown name is a ConfigError; (f)
-  ``cmaes_grasp_flip`` = s > 0: the runs leave a share s of the budget after the first look to a last
-  run, from the best set so far with the hand spring k_ph moved to the other end of its range, step
-  sigma0 / 2. E has a weak- and a stiff-hand-spring basin (docs/method.md, "Two basins of the hand
-  spring"), and a run seldom crosses from one to the other: the last run tries the other basin with
-  everything else as found.
+  ``cmaes_grasp_flip`` = s > 0: after the runs have spent the budget, s times the budget left after
+  the first look is *added* for a last run from the best set with the hand spring k_ph moved to the
+  other end of its range, step sigma0 / 2. E has a weak- and a stiff-hand-spring basin (docs/method.md,
+  "Two basins of the hand spring"), and a run seldom crosses from one to the other: the last run tries
+  the other basin with everything else as found. The runs before it are exactly those without the
+  option, so the estimate changes only where the other basin's E is lower.
 * ``de``: SciPy differential evolution (vectorized), x0 = chi_best.
 """
 from __future__ import annotations
@@ -76,6 +77,12 @@ class Recorder:
         self.history = {"evaluations": [], "best_E_m": []}
         self.best = np.inf
         self.bar = tqdm(total=self.budget, desc=desc, unit="cand", disable=None)
+
+    def extend(self, n: int) -> None:
+        """Raise the budget by ``n`` candidates (``cmaes_grasp_flip``'s added evaluations)."""
+        self.budget += int(n)
+        self.bar.total = self.budget
+        self.bar.refresh()
 
     @property
     def remaining(self) -> int:
@@ -155,18 +162,26 @@ def cmaes_search(rec: Recorder, chi_best: np.ndarray, batch: int, M: int, rng: n
         rec(first[None])  # chi_best is evaluated, but not an estimate yet: start at the centre
         first = np.full(d, 0.5)
     starts = [(first, sigma0 / M)] + [(np.full(d, 0.5), sigma0)] * (runs - 1)
-    reserve = int(float(estimation.cmaes_grasp_flip) * rec.remaining)
-    share = (rec.remaining - reserve) // runs
-    quotas = [share] * (runs - 1) + [rec.remaining - reserve - share * (runs - 1)]
+    added = int(float(estimation.cmaes_grasp_flip) * rec.remaining)
+    share = rec.remaining // runs
+    quotas = [share] * (runs - 1) + [rec.remaining - share * (runs - 1)]
     gens = [_cma_run(x0, s0, popsize, quota, child, options)
             for (x0, s0), quota, child in zip(starts, quotas, rng.spawn(runs))]
     results = _side_by_side(rec, gens, starts, batch)
-    if reserve >= popsize:  # cmaes_grasp_flip: a last run in the hand spring's other basin
-        flip = (flipped_grasp(min(results, key=lambda x: x[0])[1]), sigma0 / 2)
-        results += _side_by_side(rec, [_cma_run(*flip, popsize, reserve, rng.spawn(1)[0], options)], [flip], batch)
     _, best, s0 = min(results, key=lambda x: x[0])
-    while rec.remaining > 0:  # spend the rest (< popsize, or after a stop) around the best run's best point
-        rec(np.clip(best + (s0 / 4) * rng.standard_normal((min(batch, rec.remaining), d)), 0.0, 1.0))
+    _spend_around(rec, best, s0 / 4, batch, rng)
+    if added >= popsize:  # cmaes_grasp_flip: added evaluations in the hand spring's other basin
+        rec.extend(added)
+        flip = (flipped_grasp(best), sigma0 / 2)
+        (_, best, s0), = _side_by_side(rec, [_cma_run(*flip, popsize, added, rng.spawn(1)[0], options)], [flip],
+                                       batch)
+        _spend_around(rec, best, s0 / 4, batch, rng)
+
+
+def _spend_around(rec: Recorder, centre: np.ndarray, step: float, batch: int, rng: np.random.Generator) -> None:
+    """Spend what is left of the budget (< popsize, or after a stop) on Gaussian steps around ``centre``."""
+    while rec.remaining > 0:
+        rec(np.clip(centre + step * rng.standard_normal((min(batch, rec.remaining), len(centre))), 0.0, 1.0))
 
 
 def flipped_grasp(chi: np.ndarray) -> np.ndarray:
