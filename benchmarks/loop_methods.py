@@ -10,8 +10,8 @@
   perturbation or a new motion after a miss over 45 mm; ``ours_paper_w`` fits with the paper's tip
   weighting w = 0.1 (the threads' next-motion error, docs/method.md); ``ours_isotropic_drag`` fits
   with the paper's air drag on the whole velocity (``model.drag: isotropic``); ``ours_grasp_flip``
-  leaves 30 % of CMA-ES's budget to a last run in the other basin of the hand spring
-  (``estimation.cmaes_grasp_flip``).
+  adds 30 % to CMA-ES's budget (after the first look) for a last run in the other basin of the hand
+  spring (``estimation.cmaes_grasp_flip``).
 * :func:`method_config`: the config one campaign runs with (method, seed, physics, mode, material).
 """
 from __future__ import annotations
