@@ -17,7 +17,8 @@ seed. Per physics and split (``choosing``: MuJoCo seeds 0-2; ``judging``: the re
 The sides' commits, and the settings in which their campaigns' configs differ, are recorded.
 ``results/bench/loop_ab_<NAME>.json``.
 
-Run: ``python -m benchmarks.loop_ab --base /data/loop:ours --variant /data/loop2:ours --name NAME``.
+Run: ``python -m benchmarks.loop_ab --base /data/loop:ours --variant /data/loop2:ours --name NAME``
+(``--family``: the campaigns on drawn materials instead of the default strings).
 """
 from __future__ import annotations
 
@@ -40,8 +41,9 @@ def split_of(physics: str, seed: int) -> str:
     return "choosing" if physics == "mujoco" and seed <= 2 else "judging"
 
 
-def load_runs(work: Path, method: str) -> dict[tuple[str, int, int], dict]:
-    """{(physics, type, seed): run.json} of ``work``'s state-mode campaigns of ``method``.
+def load_runs(work: Path, method: str, family: bool = False) -> dict[tuple[str, int, int], dict]:
+    """{(physics, type, seed): run.json} of ``work``'s state-mode campaigns of ``method``: on the default
+    strings, or with ``family`` on drawn materials (``benchmarks.loop --family``'s ``loop_family_*``).
 
     Raises:
         FileNotFoundError: no such campaign in ``work``.
@@ -49,11 +51,12 @@ def load_runs(work: Path, method: str) -> dict[tuple[str, int, int], dict]:
     out = {}
     for path in sorted(Path(work).glob(f"loop_*_state_s*_seed*_{method}/run.json")):
         rec = json.loads(path.read_text())
-        if path.parent != run_dir(Path(work), rec["string"], rec["seed"], method, rec["physics"], "state"):
-            continue                     # another method whose name ends in this one's
+        if path.parent != run_dir(Path(work), rec["string"], rec["seed"], method, rec["physics"], "state", family):
+            continue                     # another method whose name ends in this one's, or the other strings
         out[(rec["physics"], int(rec["string"]), int(rec["seed"]))] = rec
     if not out:
-        raise FileNotFoundError(f"loop_ab: no state-mode campaigns of method {method!r} under {work}")
+        strings = "drawn-material" if family else "default-string"
+        raise FileNotFoundError(f"loop_ab: no state-mode {strings} campaigns of method {method!r} under {work}")
     return out
 
 
@@ -103,14 +106,15 @@ def main() -> None:
     ap.add_argument("--base", required=True, help="WORK:METHOD of the base run (ours as it is)")
     ap.add_argument("--variant", required=True, help="WORK:METHOD of the candidate run")
     ap.add_argument("--name", required=True, help="results/bench/loop_ab_<NAME>.json")
+    ap.add_argument("--family", action="store_true", help="pair the campaigns on drawn materials (loop --family)")
     a = ap.parse_args()
     (bw, bm), (vw, vm) = (s.rsplit(":", 1) for s in (a.base, a.variant))
-    base, variant = load_runs(Path(bw), bm), load_runs(Path(vw), vm)
+    base, variant = load_runs(Path(bw), bm, a.family), load_runs(Path(vw), vm, a.family)
     keys = sorted(set(base) & set(variant))
     doc = header("loop_ab", False)
     k0 = keys[0]
-    dirs = [run_dir(Path(w), k0[1], k0[2], m, k0[0], "state") for w, m in ((bw, bm), (vw, vm))]
-    doc.update(base={"work": bw, "method": bm, "git_commits": sorted({base[k]["git_commit"] for k in keys})},
+    dirs = [run_dir(Path(w), k0[1], k0[2], m, k0[0], "state", a.family) for w, m in ((bw, bm), (vw, vm))]
+    doc.update(family=a.family, base={"work": bw, "method": bm, "git_commits": sorted({base[k]["git_commit"] for k in keys})},
                variant={"work": vw, "method": vm, "git_commits": sorted({variant[k]["git_commit"] for k in keys})},
                settings_differ=config_difference(*dirs),
                unpaired={"base": len(set(base) - set(variant)), "variant": len(set(variant) - set(base))},

@@ -7,9 +7,9 @@ import yaml
 from benchmarks.loop_ab import compare, config_difference, load_runs, split_of
 
 
-def _campaign(work, physics, k, seed, method, misses, motion=None):
+def _campaign(work, physics, k, seed, method, misses, motion=None, family=False):
     """A finished campaign folder: its run.json (lab misses per execution, mm) and its config."""
-    d = work / f"loop_{physics}_state_s{k}_seed{seed}_{method}"
+    d = work / f"loop_{'family_' if family else ''}{physics}_state_s{k}_seed{seed}_{method}"
     (d / "config").mkdir(parents=True)
     hit = misses[-1] <= 20.0
     rec = {"physics": physics, "string": k, "seed": seed, "method": method, "git_commit": "abc",
@@ -49,5 +49,18 @@ def test_two_runs_paired_by_physics_type_and_seed(tmp_path):
     b[("elastica", 1, 0)]["prediction"][0]["median_mm"] = None      # a prediction not judged: left out
     assert compare(a, b, [("elastica", 1, 0)])["variant"]["second_step_prediction_error_mm_median"] is None
     assert e["base"]["mean"] == 8 and e["base"]["max"] == 8 and e["paired_diff_mean"] == -6
-    with pytest.raises(FileNotFoundError, match="no state-mode campaigns of method 'paper'"):
+    with pytest.raises(FileNotFoundError, match="no state-mode default-string campaigns of method 'paper'"):
         load_runs(base, "paper")
+
+
+def test_drawn_material_campaigns_pair_apart_from_the_default_strings(tmp_path):
+    """``--family``'s campaigns (``loop_family_*``) are read only when asked for, and the default
+    strings' only when not: the same (physics, type, seed) names two different strings."""
+    _campaign(tmp_path, "mujoco", 7, 7, "ours", [5.0])
+    _campaign(tmp_path, "mujoco", 7, 7, "ours", [40.0, 30.0, 3.0], family=True)
+    _campaign(tmp_path, "mujoco", 2, 6, "ours", [30.0, 2.0], family=True)
+    default, drawn = load_runs(tmp_path, "ours"), load_runs(tmp_path, "ours", family=True)
+    assert set(default) == {("mujoco", 7, 7)} and set(drawn) == {("mujoco", 7, 7), ("mujoco", 2, 6)}
+    assert default[("mujoco", 7, 7)]["executions"] == 1 and drawn[("mujoco", 7, 7)]["executions"] == 3
+    with pytest.raises(FileNotFoundError, match="drawn-material campaigns of method 'paper'"):
+        load_runs(tmp_path, "paper", family=True)
