@@ -11,7 +11,8 @@
   weighting w = 0.1 (the threads' next-motion error, docs/method.md); ``ours_isotropic_drag`` fits
   with the paper's air drag on the whole velocity (``model.drag: isotropic``); ``ours_grasp_flip``
   adds 30 % to CMA-ES's budget (after the first look) for a last run in the other basin of the hand
-  spring (``estimation.cmaes_grasp_flip``).
+  spring (``estimation.cmaes_grasp_flip``); ``ours_grasp_basins`` adds to that flip a robust
+  planner's ensemble that holds both basins when they near-tie (``estimation.top_grasp_basins``).
 * :func:`method_config`: the config one campaign runs with (method, seed, physics, mode, material).
 """
 from __future__ import annotations
@@ -35,6 +36,7 @@ VARIANTS = {
     "ours_paper_w": {"evaluation": {"w": 0.1}},
     "ours_isotropic_drag": {"model": {"drag": "isotropic"}},
     "ours_grasp_flip": {"estimation": {"cmaes_grasp_flip": 0.3}},
+    "ours_grasp_basins": {"estimation": {"cmaes_grasp_flip": 0.3, "top_grasp_basins": True}},
 }
 
 

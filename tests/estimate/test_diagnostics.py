@@ -36,6 +36,23 @@ def test_near_best_takes_the_tolerance_or_the_best_k():
     assert len(e) == 3 and np.all(np.isinf(e))
 
 
+def test_best_k_two_basins_holds_the_other_basin_only_when_near_tied():
+    """Column 0 splits at 0.5: the best set (E 1.0) is in the low basin; the high basin's best has E 1.03.
+    Within the tolerance, half of k from each basin, sorted by E, the best first; beyond it, best_k."""
+    chi = np.array([[0.1], [0.2], [0.3], [0.4], [0.45], [0.6], [0.7], [0.8]])
+    E = np.array([1.0, 1.01, 1.02, 1.025, 1.05, 1.03, 1.04, 1.5])
+    c, e = dg.best_k_two_basins(chi, E, k=4, index=0, tol=0.05)
+    np.testing.assert_array_equal(e, [1.0, 1.01, 1.03, 1.04])
+    np.testing.assert_array_equal(c[:, 0], [0.1, 0.2, 0.6, 0.7])
+    for tol in (0.02, 0.0):                   # the other basin is 3 % worse: not a tie
+        c, e = dg.best_k_two_basins(chi, E, k=4, index=0, tol=tol)
+        np.testing.assert_array_equal(e, dg.best_k(chi, E, 4)[1])
+    c, e = dg.best_k_two_basins(chi, E, k=5, index=0, tol=0.05)   # odd k: the extra set from the best's basin
+    np.testing.assert_array_equal(c[:, 0], [0.1, 0.2, 0.3, 0.6, 0.7])
+    c, e = dg.best_k_two_basins(chi[:5], E[:5], k=4, index=0, tol=1.0)   # one basin only: best_k
+    np.testing.assert_array_equal(e, [1.0, 1.01, 1.02, 1.025])
+
+
 def test_search_tells_excited_from_unexcited_parameters(settings):
     """E depends on chi[0] and chi[4] only: those are pinned, every other parameter is loose."""
     def f(c):

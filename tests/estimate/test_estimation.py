@@ -235,6 +235,14 @@ def test_cmaes_grasp_flip_tries_the_other_hand_spring_basin(settings):
     np.testing.assert_array_equal(found[0.3].chi_evaluated[:1500], found[0.0].chi_evaluated)
     assert found[0.0].E_m > 0.99 and abs(found[0.0].chi[K_PH] - 0.05) < 0.05     # stayed in the weak basin
     assert found[0.3].E_m < 0.51 and abs(found[0.3].chi[K_PH] - 0.95) < 0.05     # the flip found the stiff one
+    # top_grasp_basins: the ensemble holds the weak basin's best sets too, but only when near-tied with the best
+    assert np.all(found[0.3].top_chi[:, K_PH] >= 0.5)                           # best_k: all in the stiff basin
+    for tol, weak_sets in ((1.5, 10), (0.5, 0)):                                 # weak basin's E is ~2x the best
+        estimation = _est(settings, optimizer="cmaes", iterations=1500, batch=32, cmaes_runs=1, cmaes_first_look=0,
+                          cmaes_grasp_flip=0.3, top_k=20, near_best_tol=tol, top_grasp_basins=True)
+        est = es.estimate(_problem_stub(), settings.model, estimation, weak, 4, seed=0, objective=two_basins)
+        np.testing.assert_array_equal(est.chi, found[0.3].chi)                    # the estimate itself is unchanged
+        assert np.sum(est.top_chi[:, K_PH] < 0.5) == weak_sets, tol
 
 
 def test_partly_blown_up_search_says_so(settings):

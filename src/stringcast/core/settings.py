@@ -114,6 +114,7 @@ class EstimationSettings(Section):
     cmaes_first_look: int = _f(300, "CMA-ES: first evaluate this many eq. (3) samples around chi_best and start at their best (0: off)", minimum=0)
     compare_after_motion_s: float | None = _f(None, "compare frames up to this long after the arm stops, s (null: the whole joint log, as the paper)", minimum=0)
     cmaes_grasp_flip: float = _f(0.0, "CMA-ES: evaluations added, as a share of the budget after the first look, for a last run from the best set with the hand spring k_ph at the other end of its range (0: off)", minimum=0, maximum=1)
+    top_grasp_basins: bool = _f(False, "params.json's top (the robust planner's ensemble): half its sets from the hand spring k_ph's other basin (chi on the other side of 0.5) when that basin's best E is within near_best_tol of the best")
     cmaes_first_start: str = _f("centre", "CMA-ES on trial 1 without a first look: from the centre of the box (centre) or from chi_best (best)", enum=["centre", "best"])
     verdict_error_share: tuple = _f((0.18, 0.25), "fit verdict: [warn, fail] when the fit's median error over the moving frames exceeds these shares of the string's length", items={"type": "number", "minimum": 0}, minItems=2, maxItems=2)
     verdict_skill: tuple = _f((0.45, 0.25), "fit verdict: [warn, fail] when the fit explains at most this share of the error of a string carried without swinging (1 - error / that error)", items={"type": "number", "minimum": 0}, minItems=2, maxItems=2)

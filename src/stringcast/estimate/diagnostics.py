@@ -6,7 +6,9 @@ E (N,) in m) this module builds the report-ready ``diagnostics`` block of
 
 * ``ensemble`` (written as params.json's ``top``, not here): the best K parameter sets
   (K = ``estimation.top_k``, :func:`best_k`): the ensemble the robust planner
-  (:mod:`stringcast.plan.planning`, ``motion.planner: robust``) scores motions under.
+  (:mod:`stringcast.plan.planning`, ``motion.planner: robust``) scores motions under. With
+  ``estimation.top_grasp_basins`` (off in ours), half of them from the hand spring's other
+  basin when its best E is within ``near_best_tol`` of the best (:func:`best_k_two_basins`).
 * ``near_best``: the candidates whose E is within ``estimation.near_best_tol`` (5 % by
   default) of the best, or the best K if fewer: the parameter sets this trial
   cannot tell apart.
@@ -57,6 +59,33 @@ def best_k(chi: np.ndarray, E: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarr
         raise ValueError(f"best_k: chi (N, D) and E (N,) expected, got {chi.shape}, {E.shape}")
     order = np.argsort(E, kind="stable")[:k]
     return chi[order], E[order]
+
+
+def best_k_two_basins(chi: np.ndarray, E: np.ndarray, k: int, index: int, tol: float) -> tuple[np.ndarray, np.ndarray]:
+    """The robust planner's ensemble over both basins of one parameter (``estimation.top_grasp_basins``).
+
+    chi[:, index] splits the candidates at 0.5 into two basins (for the hand spring k_ph: weak and
+    stiff, docs/method.md "Two basins of the hand spring"). When the other basin's best E is within
+    ``tol`` of the best (E_other <= E_best (1 + tol)), the k sets are the best k - k // 2 of the
+    best's basin and the best k // 2 of the other, sorted by E; else :func:`best_k`.
+
+    Args:
+        chi: (N, D) candidates, exponents of eq. (2) in [0, 1]. E: (N,) their E, m.
+        k: sets kept (>= 1). index: the splitting parameter's column in chi. tol: share of E_best.
+
+    Returns:
+        chi (min(k, N), D), E (min(k, N),), best first; chi[0] and E[0] are :func:`best_k`'s.
+    """
+    top_chi, top_E = best_k(chi, E, k)
+    if k < 2 or not np.isfinite(top_E[0]):
+        return top_chi, top_E
+    chi, E = np.asarray(chi, float), np.asarray(E, float)
+    other = (chi[:, index] >= 0.5) != (top_chi[0, index] >= 0.5)
+    if not other.any() or not np.nanmin(np.where(other, E, np.inf)) <= top_E[0] * (1 + tol):
+        return top_chi, top_E
+    own_chi, own_E = best_k(chi[~other], E[~other], k - k // 2)
+    oth_chi, oth_E = best_k(chi[other], E[other], k // 2)
+    return best_k(np.concatenate([own_chi, oth_chi]), np.concatenate([own_E, oth_E]), k)
 
 
 def near_best(chi: np.ndarray, E: np.ndarray, k: int, tol: float) -> tuple[np.ndarray, np.ndarray]:

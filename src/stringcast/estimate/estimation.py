@@ -48,9 +48,9 @@ from stringcast.core import (PARAM_NAMES, TRACK_COLUMNS, Campaign, ConfigError, 
                              motion_window, read_joint_table, read_json, read_parquet, trial_result, write_json,
                              write_parquet)
 from stringcast.model import decode, start_chi
-from .diagnostics import best_k, checked
+from .diagnostics import best_k, best_k_two_basins, checked
 from .fitcheck import fit_figures
-from .optimizers import OPTIMIZERS, Recorder
+from .optimizers import K_PH, OPTIMIZERS, Recorder
 from .records import Estimate, Fit, fit_table, params_document
 from .problem import (EstimationProblem, build_problem, make_objective, point_errors, simulate_fit,
                       upstream_causes)
@@ -104,7 +104,9 @@ def estimate(problem: EstimationProblem, model: ModelSettings, estimation: Estim
     finally:
         rec.bar.close()
     all_chi, all_E = np.concatenate(rec.chi), np.concatenate(rec.E)
-    top_chi, top_E = best_k(all_chi, all_E, checked(estimation)[0])
+    k, tol, _ = checked(estimation)
+    top_chi, top_E = (best_k_two_basins(all_chi, all_E, k, K_PH, tol) if estimation.top_grasp_basins
+                      else best_k(all_chi, all_E, k))
     best_chi = top_chi[0]
     coeffs, mu = decode(best_chi, model, problem.mass_groups)
     if custom:  # E_i needs the model; a custom objective defines no points
