@@ -13,7 +13,8 @@
 # family entry; benchmarks/loop.py). Where the gathered file (loop.json, or loop_family.md) exists
 # already, Snakemake finds nothing to do: add --forcerun gather to run new campaigns. The jobs run
 # in the repository (benchmarks/ is not an installed package); loop.json goes to results/bench/
-# there, or to $STRINGCAST_BENCH_DIR.
+# there, or to $STRINGCAST_BENCH_DIR. With a variant of ours among the methods (an A/B, e.g.
+# methods=ours_grasp_flip) the run ends with the campaigns' run.json: pair them with benchmarks.loop_ab.
 
 
 import os
@@ -56,6 +57,22 @@ STATE_SOURCE = Path(
     str(config.get("state_source", REPO / "results" / "bench"))
 ).resolve()
 RUN = f"{WORK}/loop_{FAMILY_TAG}{{physics}}_{{mode}}_s{{type}}_seed{{seed}}_{{method}}/run.json"
+RUNS = expand(
+    RUN, physics=PHYSICS, mode=[MODE], type=TYPES, seed=SEEDS, method=METHODS
+) + expand(
+    RUN,
+    physics=PHYSICS,
+    mode=["video"],
+    type=VIDEO_TYPES,
+    seed=VIDEO_SEEDS,
+    method=VIDEO_METHODS,
+)
+sys.path.insert(0, str(REPO))  # benchmarks/ is not an installed package
+from benchmarks.loop_methods import METHODS as GATHERED_METHODS
+
+# A variant of ours (benchmarks/loop_methods.py VARIANTS) is an A/B left out of loop.json: such a run
+# ends with its campaigns' run.json, to pair with benchmarks.loop_ab, and gathers nothing.
+VARIANT_RUN = any(m not in GATHERED_METHODS for m in METHODS + VIDEO_METHODS)
 
 
 wildcard_constraints:
@@ -68,7 +85,7 @@ wildcard_constraints:
 
 rule all:
     input:
-        f"{BENCH}/{GATHERED}",
+        RUNS if VARIANT_RUN else f"{BENCH}/{GATHERED}",
 
 
 rule campaign:
@@ -89,17 +106,7 @@ rule campaign:
 
 rule gather:
     input:
-        expand(
-            RUN, physics=PHYSICS, mode=[MODE], type=TYPES, seed=SEEDS, method=METHODS
-        ),
-        expand(
-            RUN,
-            physics=PHYSICS,
-            mode=["video"],
-            type=VIDEO_TYPES,
-            seed=VIDEO_SEEDS,
-            method=VIDEO_METHODS,
-        ),
+        RUNS,
     output:
         f"{BENCH}/{GATHERED}",
     params:

@@ -51,6 +51,19 @@ def test_one_job_per_campaign_then_one_gather(tmp_path):
     assert proc.returncode == 0 and (proc.stdout + proc.stderr).count("rule campaign:") == 2   # no video check
 
 
+def test_a_variant_run_ends_with_its_campaigns_and_gathers_nothing(tmp_path):
+    """A variant of ours is an A/B left out of loop.json (loop.py refuses its name): the run plans its
+    campaigns and no gather, with ours beside it or alone."""
+    variant = sorted(VARIANTS)[0]
+    for methods in (variant, f"ours {variant}"):
+        proc = _snakemake(tmp_path, "-n", "--config", f"work={tmp_path / 'w'}", "types=1", "seeds=0 1",
+                          "physics=mujoco", f"methods={methods}", "video_seeds=")
+        out = proc.stdout + proc.stderr
+        assert proc.returncode == 0, out
+        assert out.count("rule campaign:") == 2 * len(methods.split()) and "rule gather" not in out, out
+        assert f"loop_mujoco_state_s1_seed1_{variant}/run.json" in out
+
+
 def test_gather_summarises_the_campaign_jobs_run_json(tmp_path):
     """Campaigns already finished (their run.json) are not run again; the gather writes loop.json
     with the summary benchmarks.loop_summary.summarize gives for the same runs, per physics."""
