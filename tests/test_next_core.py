@@ -36,6 +36,7 @@ def project(root: Path, trials=("trial_1",)) -> Path:
     return root
 
 
+@pytest.mark.slow
 def test_next_runs_a_recorded_trial_to_its_next_motion(tmp_path, capsys):
     root = project(tmp_path / "project")          # tmp_path: its 1.6 GB of decoded frames go when it passes
     before = {p: p.stat().st_mtime_ns for p in (root / "data").rglob("*") if p.is_file()}
@@ -61,6 +62,7 @@ def test_next_runs_a_recorded_trial_to_its_next_motion(tmp_path, capsys):
     assert {p: p.stat().st_mtime_ns for p in (root / "data").rglob("*") if p.is_file()} == before
 
 
+@pytest.mark.slow
 def test_next_method_paper_runs_the_papers_method(tmp_path, capsys):
     """``--method paper``: config/paper.yaml over the config: the random search of eqs. (2)-(3), w = 0.1
     and the Section V planner (the pages name custom settings: the budgets here are small)."""
