@@ -81,7 +81,7 @@ def best_k_two_basins(chi: np.ndarray, E: np.ndarray, k: int, index: int, tol: f
         return top_chi, top_E
     chi, E = np.asarray(chi, float), np.asarray(E, float)
     other = (chi[:, index] >= 0.5) != (top_chi[0, index] >= 0.5)
-    if not other.any() or not np.nanmin(np.where(other, E, np.inf)) <= top_E[0] * (1 + tol):
+    if not other.any() or not np.nanmin(E[other]) <= top_E[0] * (1 + tol):
         return top_chi, top_E
     own_chi, own_E = best_k(chi[~other], E[~other], k - k // 2)
     oth_chi, oth_E = best_k(chi[other], E[other], k // 2)
