@@ -52,6 +52,16 @@ def checked(estimation: EstimationSettings) -> tuple[int, float, float]:
     return k, tol, pinned
 
 
+BASIN_SPLIT = 0.5
+"""The exponent chi of eq. (2) that splits a parameter's range into its lower and upper basin (for the
+hand spring k_ph: weak and stiff grasp; :func:`best_k_two_basins`, ``optimizers.flipped_grasp``)."""
+
+
+def upper_basin(chi):
+    """True where chi (any shape, exponents of eq. (2) in [0, 1]) lies in the upper basin (>= BASIN_SPLIT)."""
+    return np.asarray(chi) >= BASIN_SPLIT
+
+
 def best_k(chi: np.ndarray, E: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     """The k lowest-E candidates: chi (min(k, N), D) and E (min(k, N),), best first (stable order)."""
     chi, E = np.asarray(chi, float), np.asarray(E, float)
@@ -64,7 +74,7 @@ def best_k(chi: np.ndarray, E: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarr
 def best_k_two_basins(chi: np.ndarray, E: np.ndarray, k: int, index: int, tol: float) -> tuple[np.ndarray, np.ndarray]:
     """The robust planner's ensemble over both basins of one parameter (``estimation.top_grasp_basins``).
 
-    chi[:, index] splits the candidates at 0.5 into two basins (for the hand spring k_ph: weak and
+    chi[:, index] splits the candidates at BASIN_SPLIT into two basins (for the hand spring k_ph: weak and
     stiff, docs/method.md "Two basins of the hand spring"). When the other basin's best E is within
     ``tol`` of the best (E_other <= E_best (1 + tol)), the k sets are the best k - k // 2 of the
     best's basin and the best k // 2 of the other, sorted by E; else :func:`best_k`.
@@ -80,7 +90,7 @@ def best_k_two_basins(chi: np.ndarray, E: np.ndarray, k: int, index: int, tol: f
     if k < 2 or not np.isfinite(top_E[0]):
         return top_chi, top_E
     chi, E = np.asarray(chi, float), np.asarray(E, float)
-    other = (chi[:, index] >= 0.5) != (top_chi[0, index] >= 0.5)
+    other = upper_basin(chi[:, index]) != upper_basin(top_chi[0, index])
     if not other.any() or not np.nanmin(E[other]) <= top_E[0] * (1 + tol):
         return top_chi, top_E
     own_chi, own_E = best_k(chi[~other], E[~other], k - k // 2)

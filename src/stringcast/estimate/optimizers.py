@@ -56,6 +56,8 @@ import numpy as np
 
 from stringcast.core import PARAM_NAMES, ConfigError, EstimationSettings
 
+from .diagnostics import upper_basin
+
 K_PH = PARAM_NAMES.index("k_ph")
 """chi's index of the hand spring k_ph (``cmaes_grasp_flip``)."""
 
@@ -185,9 +187,10 @@ def _spend_around(rec: Recorder, centre: np.ndarray, step: float, batch: int, rn
 
 
 def flipped_grasp(chi: np.ndarray) -> np.ndarray:
-    """chi (D,) with the hand spring k_ph moved to the other end of its range (chi 0 <-> 1, split at 0.5)."""
+    """chi (D,) with the hand spring k_ph moved to the other end of its range (chi 0 <-> 1, split at
+    ``diagnostics.BASIN_SPLIT``)."""
     out = np.array(chi, float, copy=True)
-    out[K_PH] = 0.0 if out[K_PH] >= 0.5 else 1.0
+    out[K_PH] = 0.0 if upper_basin(out[K_PH]) else 1.0
     return out
 
 

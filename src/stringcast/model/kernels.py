@@ -186,6 +186,15 @@ def step(px, py, vx, vy, fx, fy, sux, suy, hx, hy, hvx, hvy, phi, dphi, c, inv_m
         pl = l
         pil = il
         pom = om
+    _drag_and_move(px, py, vx, vy, fx, fy, sux, suy, C1, C2, inv_mu, dt, g, relax, normal)
+    return ok
+
+
+@njit(cache=True, fastmath=False, inline="always")
+def _drag_and_move(px, py, vx, vy, fx, fy, sux, suy, C1, C2, inv_mu, dt, g, relax, normal):
+    """:func:`step`'s second half: each point's air drag C1 + C2 |v_n| on its (normal) velocity, then
+    a = (f - drag) / mu - relax v - g, v += a dt, p += v dt in place (arrays (n,), as in :func:`step`)."""
+    n = px.shape[0]
     for j in range(n):
         nxt = 1.0 if j + 1 < n else 0.0      # point j's tangent u_j + u_{j+1} (u_n at the tip)
         jn = j + 1 if j + 1 < n else j
@@ -204,7 +213,6 @@ def step(px, py, vx, vy, fx, fy, sux, suy, hx, hy, hvx, hvy, phi, dphi, c, inv_m
         vy[j] = fma(ay, dt, vy[j])
         px[j] = fma(vx[j], dt, px[j])
         py[j] = fma(vy[j], dt, py[j])
-    return ok
 
 
 @njit(cache=True, fastmath=False)
