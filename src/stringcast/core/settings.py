@@ -69,6 +69,9 @@ class ModelSettings(Section):
     dt_s: float = _f(1.0e-4, "integration step of the string model, s", exclusiveMinimum=0, maximum=0.002)
     psi0_deg: float = _f(0.0, "the string's rest direction in the hand frame, deg")
     first_mu: float = _f(1.0, "relative masses for the first plan (Table 2 has no mass row)", exclusiveMinimum=0)
+    blowup_halvings: int = _f(0, "a candidate whose run blows up is run again at half the step, up to this many "
+                                 "times: a stiff string's blow-up at dt is the step's, not the string's (0: never, "
+                                 "the paper's)", minimum=0, maximum=4)
     drag: str = _f("normal", "air drag (C_c1, C_c2) on each point's velocity normal to the string (normal: a slender "
                              "body's) or on its whole velocity (isotropic: the paper's)", enum=list(DRAG_LAWS))
     ranges: Mapping[str, tuple] = _f({

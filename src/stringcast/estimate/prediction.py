@@ -78,7 +78,8 @@ def tip_prediction_error(problem: EstimationProblem, coeffs: np.ndarray, mu: np.
     i_close = int(np.argmin(d_target))
     window = (t >= t0) & (t <= t[i_close])
     pos, fine = simulate_batch(coeffs[None], mu[None], problem.hand_t, problem.hand[None], np.zeros(1, np.int64),
-                               problem.p_init[None], problem.l0, problem.psi0, problem.dt, t, drag=problem.drag)
+                               problem.p_init[None], problem.l0, problem.psi0, problem.dt, t, drag=problem.drag,
+                               halvings=problem.halvings)
     model_tip = np.asarray(pos)[0, :, -1]
     use = window & ok
     err = np.hypot(*(model_tip[use] - tip[use]).T) * 1000

@@ -53,6 +53,7 @@ class EstimationProblem:
         fallback_points: points (1..n) never valid at rest (p_init filled by ``fill_rest_pose``).
         t_motion_start: s, when the joint log starts to move.
         drag: the model's air drag law (``model.drag``: normal or isotropic).
+        halvings: ``model.blowup_halvings``, a blown-up candidate's reruns at half the step.
     """
 
     hand_t: np.ndarray
@@ -70,6 +71,7 @@ class EstimationProblem:
     fallback_points: tuple = ()
     t_motion_start: float = 0.0
     drag: str = "isotropic"
+    halvings: int = 0
 
     def __post_init__(self):
         k, f, n = len(self.hand_t), len(self.frame_t), len(self.p_init)
@@ -169,7 +171,8 @@ def build_problem(tracks_df: pd.DataFrame, t_joints: np.ndarray, q_joints: np.nd
         hand_t=hand_t, hand=hand, p_init=p_init, frame_t=t[use], frames=frames[use], tracked=tracked,
         valid=valid[use, 1:], l0=s.l0, psi0=psi0,
         dt=float(model.dt_s), mass_groups=s.mass_groups(),
-        w=float(evaluation.w), fallback_points=tuple(fallback), t_motion_start=t_move, drag=str(model.drag))
+        w=float(evaluation.w), fallback_points=tuple(fallback), t_motion_start=t_move, drag=str(model.drag),
+        halvings=int(model.blowup_halvings))
 
 
 def upstream_causes(upstream: Mapping[str, str | Path]) -> str:
@@ -204,7 +207,7 @@ def _simulate(problem: EstimationProblem, coeffs: np.ndarray, mu: np.ndarray) ->
     """(B, F, n, 2) m and (B,) ok: B sets along the problem's hand path from p_init."""
     return simulate_batch(coeffs, mu, problem.hand_t, problem.hand[None], np.zeros(len(coeffs), np.int64),
                           problem.p_init[None], problem.l0, problem.psi0, problem.dt, problem.frame_t,
-                          drag=problem.drag)
+                          drag=problem.drag, halvings=problem.halvings)
 
 
 def make_objective(problem: EstimationProblem, model: ModelSettings) -> Callable[[np.ndarray], np.ndarray]:

@@ -26,7 +26,10 @@ c = 1e-2, and c_eff = 0.43 c at c = 1, where the damper's time constant is ~1.5 
 and no first-order scheme resolves it anyway. All other terms are explicit.
 
 Blow-up: a non-finite value or a segment longer than ``max_stretch`` * l0 (default
-3) marks the candidate ok = False; the run stops there and never raises.
+3) marks the candidate ok = False; the run stops there and never raises. With ``halvings`` = h > 0
+(``model.blowup_halvings``) a blown-up candidate is run again at dt / 2, up to h times: an explicit
+step too long for a stiff candidate blows it up though its equations do not (docs/method.md,
+"Blow-ups of stiff strings"); a candidate that blows up at every step keeps ok = False.
 """
 from __future__ import annotations
 
@@ -103,7 +106,7 @@ def _scalars(l0, dt, max_stretch):
 
 
 def simulate_batch(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, sample_t,
-                   *, g: float = G, max_stretch: float = 3.0, drag: str = "isotropic"):
+                   *, g: float = G, max_stretch: float = 3.0, drag: str = "isotropic", halvings: int = 0):
     """Simulate B candidates of the string model (docs/string_model.md, the paper's CG model) and sample
     them at given times.
 
@@ -137,6 +140,8 @@ def simulate_batch(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, sam
     drag : {"isotropic", "normal"}
         The air drag on each point's whole velocity (the paper's model, the default here) or on its
         velocity normal to the string (``model.drag``, docs/string_model.md "Air drag").
+    halvings : int
+        A blown-up candidate runs again at half the step, up to this many times (module doc); 0: never.
 
     Returns
     -------
@@ -160,12 +165,15 @@ def simulate_batch(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, sam
     st = _f64(sample_t, "sample_t", 1)
     if len(st) < 1 or np.any(np.diff(st) < 0) or not np.all(np.isfinite(st)):
         raise ValueError("sample_t: need >= 1 finite, non-decreasing times")
-    return _bk.simulate_batch_kernel(c, m, ht, h, idx, p, l0, float(psi0), dt, st,
-                                     float(g), lmax, _normal(drag))
+    def run(lanes, step):
+        return _bk.simulate_batch_kernel(c[lanes], m[lanes], ht, h, idx[lanes], p, l0, float(psi0), step, st,
+                                         float(g), lmax, _normal(drag))
+
+    return _halve_blown(run, c.shape[0], dt, halvings)
 
 
 def simulate(coeffs, mu, hand_t, hand, p_init, l0, psi0, dt, sample_t, *, g: float = G,
-             max_stretch: float = 3.0, drag: str = "isotropic"):
+             max_stretch: float = 3.0, drag: str = "isotropic", halvings: int = 0):
     """One candidate of :func:`simulate_batch`.
 
     Parameters
@@ -180,7 +188,7 @@ def simulate(coeffs, mu, hand_t, hand, p_init, l0, psi0, dt, sample_t, *, g: flo
         The hand trajectory (x m, y m, phi_h rad).
     p_init : ndarray, (n, 2)
         Positions at rest at ``sample_t[0]``, m.
-    l0, psi0, dt, sample_t, g, max_stretch, drag
+    l0, psi0, dt, sample_t, g, max_stretch, drag, halvings
         As in :func:`simulate_batch`.
 
     Returns
@@ -198,13 +206,14 @@ def simulate(coeffs, mu, hand_t, hand, p_init, l0, psi0, dt, sample_t, *, g: flo
     pos, ok = simulate_batch(np.atleast_2d(coeffs), np.atleast_2d(mu), hand_t,
                              np.asarray(hand, float)[None], np.zeros(1, np.int64),
                              np.asarray(p_init, float)[None], l0, psi0, dt, sample_t,
-                             g=g, max_stretch=max_stretch, drag=drag)
+                             g=g, max_stretch=max_stretch, drag=drag, halvings=halvings)
     return pos[0], bool(ok[0])
 
 
 def closest_approach_batch(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt,
                            t_start, t_end, target_xy, floor_y=None, *, target_dt: float | None = None,
-                           target_idx=None, g: float = G, max_stretch: float = 3.0, drag: str = "isotropic"):
+                           target_idx=None, g: float = G, max_stretch: float = 3.0, drag: str = "isotropic",
+                           halvings: int = 0):
     """Closest approach of each candidate's tip path to a target (motion planning).
 
     Simulates from t_start (at rest at p_init) to t_end without storing the path.
@@ -235,7 +244,7 @@ def closest_approach_batch(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0,
         Each candidate's target path.
     g, max_stretch : float
         As in :func:`simulate_batch`.
-    drag : {"isotropic", "normal"}
+    drag : {"isotropic", "normal"}, halvings : int
         As in :func:`simulate_batch`.
 
     Returns
@@ -265,8 +274,28 @@ def closest_approach_batch(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0,
     targets, tidx, tdt = _targets(target_xy, target_dt, target_idx, B)
     if not (math.isfinite(t_start) and math.isfinite(t_end) and t_end > t_start):
         raise ValueError(f"need finite t_start < t_end (got {t_start}, {t_end})")
-    return _bk.closest_batch_kernel(c, m, ht, h, idx, p, l0, float(psi0), dt, float(t_start),
-                                    float(t_end), targets, tidx, tdt, float(g), lmax, _normal(drag))
+    def run(lanes, step):
+        return _bk.closest_batch_kernel(c[lanes], m[lanes], ht, h, idx[lanes], p, l0, float(psi0), step,
+                                        float(t_start), float(t_end), targets, tidx[lanes], tdt, float(g), lmax,
+                                        _normal(drag))
+
+    return _halve_blown(run, B, dt, halvings)
+
+
+def _halve_blown(run, B: int, dt: float, halvings: int) -> tuple:
+    """``run(lanes, dt)`` -> a kernel's outputs for those lanes, ok (lanes,) last; all B lanes at dt, then
+    the blown-up ones again at dt / 2, up to ``halvings`` times (module doc). Returns the outputs (B, ...)."""
+    if isinstance(halvings, bool) or not isinstance(halvings, (int, np.integer)) or halvings < 0:
+        raise ValueError(f"halvings: expected an int >= 0, got {halvings!r}")
+    outs = run(np.arange(B), dt)
+    for _ in range(int(halvings)):
+        blown = np.flatnonzero(~np.asarray(outs[-1], bool))
+        if not len(blown):
+            break
+        dt = dt / 2
+        for out, again in zip(outs, run(blown, dt)):
+            out[blown] = again
+    return outs
 
 
 def _normal(drag: str) -> float:

@@ -37,6 +37,7 @@ class Predictor:
         self.dt = float(model.dt_s)
         self.psi0 = np.radians(float(model.psi0_deg))
         self.drag = str(model.drag)
+        self.halvings = int(model.blowup_halvings)
         self.n, self.l0 = campaign.string.n_points, campaign.string.l0
         self.warnings: list[str] = []
         self.residual = None    # residual.TipResidual: row 0 the planned set, rows 1.. the ensemble
@@ -76,7 +77,8 @@ class Predictor:
         tg = self._targets(np.tile(np.arange(1, k + 1), s))
         d, _, my, ok = closest_approach_batch(np.tile(coeffs, (s, 1)), np.tile(mu, (s, 1)), hand_t, hand,
                                               np.arange(s * k, dtype=np.int64), p, self.l0, self.psi0, self.dt,
-                                              0.0, T + self.flight, floor_y=self.arm.floor_y, drag=self.drag, **tg)
+                                              0.0, T + self.flight, floor_y=self.arm.floor_y, drag=self.drag,
+                                              halvings=self.halvings, **tg)
         return (np.asarray(d, float).reshape(s, k), np.asarray(my, float).reshape(s, k),
                 np.asarray(ok, bool).reshape(s, k))
 
@@ -94,7 +96,8 @@ class Predictor:
         d, tm, my, ok = closest_approach_batch(self.coeffs, self.mu, hand_t, np.ascontiguousarray(hand),
                                                np.arange(b, dtype=np.int64), np.ascontiguousarray(p_init),
                                                self.l0, self.psi0, self.dt, 0.0, T + self.flight,
-                                               floor_y=self.arm.floor_y, drag=self.drag, **self._targets(np.zeros(b)))
+                                               floor_y=self.arm.floor_y, drag=self.drag, halvings=self.halvings,
+                                               **self._targets(np.zeros(b)))
         return (np.asarray(d, float), np.asarray(tm, float), np.asarray(my, float), np.asarray(ok, bool))
 
     def set_residual(self, previous: Motion, observed: tuple, p_init: np.ndarray, coeffs: np.ndarray,
@@ -112,7 +115,7 @@ class Predictor:
         p = len(coeffs)
         pos, _ = simulate_batch(coeffs, mu, hand_t, np.repeat(hand[None], p, axis=0), np.arange(p, dtype=np.int64),
                                 np.ascontiguousarray(p_init), self.l0, self.psi0, self.dt,
-                                np.concatenate([[0.0], ft[sel]]), drag=self.drag)
+                                np.concatenate([[0.0], ft[sel]]), drag=self.drag, halvings=self.halvings)
         self.residual, why = tip_residual(ft[sel], tip[sel], valid[sel], np.asarray(pos)[:, 1:, -1, :], horizon,
                                           delay)
         return why
@@ -123,5 +126,5 @@ class Predictor:
         hand_t, hand = self.hand_trajectory(motion.q)
         sample_t = np.arange(0.0, hand_t[-1] + 1e-12, 1.0 / rate_hz)
         pos, _ = simulate(self.coeffs, self.mu, hand_t, hand, p_init, self.l0, self.psi0, self.dt, sample_t,
-                          drag=self.drag)
+                          drag=self.drag, halvings=self.halvings)
         return np.column_stack([sample_t, np.asarray(pos)[:, -1, :]])
