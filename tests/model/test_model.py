@@ -353,3 +353,39 @@ def test_normal_drag_reference_drops_only_the_tangential_velocity(mid):
         drag = -(0.5 + 2.0 * 1.5) * v
         np.testing.assert_allclose(a_i, drag, atol=1e-9)
         np.testing.assert_allclose(a_n, 0.0 if expect_zero else drag, atol=1e-9)
+
+
+def test_a_blown_up_candidate_is_run_again_at_half_the_step(campaign, ranges, mid):
+    """model.blowup_halvings: a candidate that blows up at dt only because dt is too long for it runs
+    again at dt / 2 (up to h times) and then equals a plain run at the first step it survives; one that
+    blows up at every step stays ok = False; the others are untouched, and h = 0 is the plain run."""
+    lo, hi = ranges
+    hand_t, hand = swing(campaign.arm)
+    stiff = lo.copy()
+    stiff[0] = 1e6      # k_s = 1e6 N/m/kg, mu = 1: 2 sqrt(k_s) dt = 8 at 2 ms (unstable), 0.5 at 0.25 ms
+    C = np.stack([stiff, mid])
+    p0 = straight_hanging(mid, np.ones(N), hand[0], L0, N)
+    t = np.arange(0.0, 0.5, 0.01)
+    dt, target = 2e-3, [1.2, 0.3]
+    args = (C, np.ones((2, N)), hand_t, hand[None], np.zeros(2, np.int64), p0[None], L0, 0.0)
+    plain = simulate_batch(*args, dt, t)
+    assert list(plain[1]) == [False, True]
+    same = simulate_batch(*args, dt, t, halvings=0)
+    assert np.array_equal(same[0], plain[0], equal_nan=True) and np.array_equal(same[1], plain[1])
+    # the stiff candidate alone, at dt / 2, dt / 4, dt / 8: the first step it survives
+    runs = [simulate(stiff, np.ones(N), hand_t, hand, p0, L0, 0.0, dt / 2**h, t) for h in (1, 2, 3)]
+    first = next(run for run in runs if run[1])
+    pos, ok = simulate_batch(*args, dt, t, halvings=3)
+    assert ok.all() and np.array_equal(pos[0], first[0]) and np.array_equal(pos[1], plain[0][1])
+    h = 1 + [run[1] for run in runs].index(True)
+    d, tm, my, ok = closest_approach_batch(C, np.ones((2, N)), hand_t, hand[None], [0, 0], p0[None], L0, 0.0,
+                                           dt, 0.0, 0.5, target, halvings=3)
+    ref = closest_approach_batch(stiff, np.ones(N), hand_t, hand[None], [0], p0[None], L0, 0.0, dt / 2**h, 0.0,
+                                 0.5, target)
+    assert ok.all() and (d[0], tm[0], my[0]) == (ref[0][0], ref[1][0], ref[2][0])
+    # a string stretched past max_stretch at every step stays blown up
+    _, ok = simulate_batch(*args, dt, t, halvings=2, max_stretch=1.0001)
+    assert not ok.any()
+    for bad in (-1, 1.5, True):
+        with pytest.raises(ValueError, match="halvings"):
+            simulate_batch(*args, dt, t, halvings=bad)
