@@ -169,7 +169,7 @@ def simulate_batch(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0, dt, sam
         return _bk.simulate_batch_kernel(c[lanes], m[lanes], ht, h, idx[lanes], p, l0, float(psi0), step, st,
                                          float(g), lmax, _normal(drag))
 
-    return _halve_blown(run, c.shape[0], dt, halvings)
+    return _halve_blown(run, dt, halvings)
 
 
 def simulate(coeffs, mu, hand_t, hand, p_init, l0, psi0, dt, sample_t, *, g: float = G,
@@ -279,15 +279,16 @@ def closest_approach_batch(coeffs, mu, hand_t, hand, hand_idx, p_init, l0, psi0,
                                         float(t_start), float(t_end), targets, tidx[lanes], tdt, float(g), lmax,
                                         _normal(drag))
 
-    return _halve_blown(run, B, dt, halvings)
+    return _halve_blown(run, dt, halvings)
 
 
-def _halve_blown(run, B: int, dt: float, halvings: int) -> tuple:
-    """``run(lanes, dt)`` -> a kernel's outputs for those lanes, ok (lanes,) last; all B lanes at dt, then
-    the blown-up ones again at dt / 2, up to ``halvings`` times (module doc). Returns the outputs (B, ...)."""
+def _halve_blown(run, dt: float, halvings: int) -> tuple:
+    """``run(lanes, dt)`` -> a kernel's outputs for those lanes, ok last; every lane at dt (a slice: the
+    inputs as views, no copy), then the blown-up ones again at dt / 2, up to ``halvings`` times (module
+    doc). Returns the outputs (B, ...)."""
     if isinstance(halvings, bool) or not isinstance(halvings, (int, np.integer)) or halvings < 0:
         raise ValueError(f"halvings: expected an int >= 0, got {halvings!r}")
-    outs = run(np.arange(B), dt)
+    outs = run(slice(None), dt)
     for _ in range(int(halvings)):
         blown = np.flatnonzero(~np.asarray(outs[-1], bool))
         if not len(blown):
