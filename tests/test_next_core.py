@@ -1,6 +1,8 @@
 """``stringcast next`` on a recorded trial from another lab (../shared/field): the pipeline from the raw
 files to the next motion in one process, without the virtual lab (``make test-core`` runs it in a
 venv without the lab extra; the product's suite runs it too)."""
+import contextlib
+import io
 import json
 import os
 import shutil
@@ -10,6 +12,7 @@ import pytest
 import yaml
 
 from stringcast.cli import main
+from stringcast.core import METHOD_CONFIGS
 
 ROOT = Path(__file__).resolve().parents[1]
 FIELD = Path(os.environ.get("STRINGCAST_FIELD_DATA", ROOT.parent / "shared" / "field"))
@@ -36,14 +39,24 @@ def project(root: Path, trials=("trial_1",)) -> Path:
     return root
 
 
-@pytest.mark.slow
-def test_next_runs_a_recorded_trial_to_its_next_motion(tmp_path, capsys):
-    root = project(tmp_path / "project")          # tmp_path: its 1.6 GB of decoded frames go when it passes
+@pytest.fixture(scope="module")
+def field_next(tmp_path_factory):
+    """``stringcast next`` (ours) run once on the field recording: (project root, its printed output, the
+    raw files' mtimes before). Its 1.6 GB of decoded frames go with the module's last test."""
+    root = project(tmp_path_factory.mktemp("field") / "project")
     before = {p: p.stat().st_mtime_ns for p in (root / "data").rglob("*") if p.is_file()}
-    code = main(["--config", str(FIELD / "lab.yaml"), "--config", str(root / "small.yaml"), "next",
-                 str(root / "data" / "field_1" / "trial_1")])
-    out = capsys.readouterr().out
-    assert code == 0, out
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        code = main(["--config", str(FIELD / "lab.yaml"), "--config", str(root / "small.yaml"), "next",
+                     str(root / "data" / "field_1" / "trial_1")])
+    assert code == 0, out.getvalue()
+    yield root, out.getvalue(), before
+    shutil.rmtree(root, ignore_errors=True)
+
+
+@pytest.mark.slow
+def test_next_runs_a_recorded_trial_to_its_next_motion(field_next):
+    root, out, before = field_next
     res = root / "results" / "field_1"
     for i, stage in enumerate(("decode", "calib-views", "calibrate", "sync", "sweep", "track", "estimate", "plan",
                                "report-trial"), 1):
@@ -62,14 +75,35 @@ def test_next_runs_a_recorded_trial_to_its_next_motion(tmp_path, capsys):
     assert {p: p.stat().st_mtime_ns for p in (root / "data").rglob("*") if p.is_file()} == before
 
 
-@pytest.mark.slow
-def test_next_method_paper_runs_the_papers_method(tmp_path, capsys):
-    """``--method paper``: config/paper.yaml over the config: the random search of eqs. (2)-(3), w = 0.1
-    and the Section V planner (the pages name custom settings: the budgets here are small)."""
+def test_next_method_paper_puts_the_papers_file_last(tmp_path, monkeypatch):
+    """``next --method paper`` merges config/paper.yaml over the project's config and every ``--config``."""
+    import stringcast.chain
+
     root = project(tmp_path / "project")
-    code = main(["--config", str(FIELD / "lab.yaml"), "--config", str(root / "small.yaml"), "next",
-                 str(root / "data" / "field_1" / "trial_1"), "--method", "paper"])
-    assert code == 0, capsys.readouterr().out
+    seen = {}
+    monkeypatch.setattr(stringcast.chain, "run_next", lambda trial, paths, main, say: seen.setdefault("paths", paths))
+    main(["--config", str(root / "small.yaml"), "next", str(root / "data" / "field_1" / "trial_1"), "--method", "paper"])
+    assert seen["paths"] == [str(root / "config" / "config.yaml"), str(root / "small.yaml"),
+                             *map(str, METHOD_CONFIGS["paper"])]
+
+
+@pytest.mark.slow
+def test_the_papers_estimate_and_plan_run_on_a_recorded_trial(field_next, tmp_path):
+    """The steps ``--method paper`` changes, as ``next`` runs them (:func:`stringcast.chain.trial_steps`),
+    on the field trial's tracked results: the random search of eqs. (2)-(3) and the Section V planner
+    (the budgets here are small)."""
+    from stringcast.chain import trial_steps
+
+    src = field_next[0]
+    root = project(tmp_path / "project")
+    shutil.copytree(src / "results", root / "results", ignore=shutil.ignore_patterns("frames*"))
+    paths = [str(root / "config" / "config.yaml"), str(FIELD / "lab.yaml"), str(root / "small.yaml"),
+             *map(str, METHOD_CONFIGS["paper"])]                  # as `next --method paper` merges them
+    with contextlib.chdir(root):
+        steps = {s.rule: s for s in trial_steps("field_1", 1, True, 2)}
+        for rule in ("estimate", "plan"):
+            assert main([*(a for p in paths for a in ("--config", p)), "--log", steps[rule].log,
+                         *steps[rule].argv]) == 0, rule
     res = root / "results" / "field_1" / "trial_1"
     params = json.loads((res / "params.json").read_text())
     assert params["optimizer"] == "random_search" and params["evaluations"] == SMALL["estimation"]["iterations"]
