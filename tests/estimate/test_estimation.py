@@ -12,7 +12,7 @@ from stringcast.core.arm import hand_pose, motion_start
 from stringcast.core import PARAM_NAMES, ConfigError, model_ranges
 from stringcast.core.files import DataError, read_json, read_parquet, write_json, write_parquet
 from stringcast.core.joint_log import write_joint_table
-from stringcast.model.string_model import hanging_equilibrium, simulate
+from stringcast.model import hanging_equilibrium, simulate
 from stringcast.plan.motion import joint_paths
 from stringcast.model.parameters import first_parameters
 

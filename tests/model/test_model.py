@@ -3,8 +3,8 @@ import pytest
 
 from stringcast.core.arm import hand_pose
 from stringcast.core import model_ranges
-from stringcast.model.string_model import (closest_approach_batch, hanging_equilibrium, simulate,
-                              simulate_batch, straight_hanging)
+from stringcast.model import (closest_approach_batch, hanging_equilibrium, simulate, simulate_batch,
+                              straight_hanging)
 from stringcast.model.reference import simulate_reference
 
 N, L0 = 10, 0.03

@@ -3,7 +3,7 @@ the parameter sets of Table 2 and eq. (2), and the rest state (docs/string_model
 """
 from .parameters import decode, ensemble_parameters, first_parameters, planned_parameters, start_chi
 from .rest_state import FOLD_CHORD_SHARE, fill_rest_pose, folded_points
-from .string_model import (closest_approach_batch, hanging_equilibrium, simulate, simulate_batch,
-                           straight_hanging)
+from .hanging import hanging_equilibrium, straight_hanging
+from .string_model import closest_approach_batch, simulate, simulate_batch
 
 __all__ = ["FOLD_CHORD_SHARE", "closest_approach_batch", "decode", "ensemble_parameters", "fill_rest_pose", "folded_points", "first_parameters", "hanging_equilibrium", "planned_parameters", "simulate", "simulate_batch", "start_chi", "straight_hanging"]
