@@ -18,7 +18,7 @@ and against the first variant the paired change of the closest approach (median,
 closer / farther). ``results/bench/first_shot.json`` (or ``--out NAME``) with the library versions.
 
 Run: ``python -m benchmarks.first_shot [--physics mujoco elastica] [--types 1 2 ...] [--seeds 0 1 2]
-[--variant ours --variant NAME=FILE ...] [--jobs 2] [--work DIR] [--out NAME]``.
+[--variant ours --variant NAME=FILE ...] [--family] [--jobs 2] [--work DIR] [--out NAME]``.
 """
 from __future__ import annotations
 
@@ -40,25 +40,27 @@ from benchmarks.loop_methods import METHODS, method_config
 from benchmarks.loop_summary import PAPER_TARGET
 
 
-def variant_config(config: dict, variant: str, overlay: dict | None, seed: int, physics: str) -> dict:
-    """The config of one case: a built-in method (``overlay`` None) or ours with ``overlay`` merged over it."""
+def variant_config(config: dict, variant: str, overlay: dict | None, seed: int, physics: str,
+                   family: bool = False) -> dict:
+    """The config of one case: a built-in method (``overlay`` None) or ours with ``overlay`` merged over it;
+    ``family``: the lab's string material drawn from ``seed`` as the loop benchmark's ``--family`` draws it."""
     from stringcast.core import merge_config
 
     if overlay is None:
-        return method_config(config, variant, seed, physics, "state")
-    cfg = method_config(config, "ours", seed, physics, "state")
+        return method_config(config, variant, seed, physics, "state", family)
+    cfg = method_config(config, "ours", seed, physics, "state", family)
     return merge_config(cfg, copy.deepcopy(overlay))
 
 
 def first_shot(case: tuple) -> dict:
     """Plan and play one case's first motion; its record (the lab's closest approach and hit)."""
-    physics, k, seed, variant, overlay, work = case
+    physics, k, seed, variant, overlay, work, family = case
     from stringcast.core import load_config, read_json, resolve_campaign, settings_from_config, stage_kwargs
     from stringcast.api import execute
     from stringcast.api import run_first_plan
 
-    cfg = variant_config(load_config(), variant, overlay, seed, physics)
-    name = f"{physics}_{variant}_s{k}_seed{seed}"
+    cfg = variant_config(load_config(), variant, overlay, seed, physics, family)
+    name = f"{'family_' if family else ''}{physics}_{variant}_s{k}_seed{seed}"
     d = Path(work) / name
     truth_path = d / "trial_1" / "ground_truth.json"
     t0 = time.perf_counter()
@@ -118,6 +120,7 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=2, help="cases played side by side (processes)")
     ap.add_argument("--work", type=Path, help="keep each case here (a later run reuses the played ones)")
     ap.add_argument("--out", default="first_shot", help="results/bench/<OUT>.json")
+    ap.add_argument("--family", action="store_true", help="each seed also draws the string's material (issue 52)")
     a = ap.parse_args()
     variants, overlays = [], {}
     for spec in a.variant or ["ours"]:
@@ -129,7 +132,7 @@ def main() -> None:
     os.environ.setdefault("NUMBA_NUM_THREADS", "1")   # the cases run side by side, one core each
     with tempfile.TemporaryDirectory(prefix="bench_first_shot_") as tmp:
         work = Path(a.work or tmp)
-        cases = [(p, k, s, v, overlays[v], str(work)) for p in a.physics for s in a.seeds for k in a.types
+        cases = [(p, k, s, v, overlays[v], str(work), a.family) for p in a.physics for s in a.seeds for k in a.types
                  for v in variants]
         rows = []
         with ProcessPoolExecutor(max(1, a.jobs), mp_context=multiprocessing.get_context("spawn")) as pool:
@@ -140,7 +143,7 @@ def main() -> None:
                       flush=True)
     rows.sort(key=lambda r: (r["physics"], r["variant"], r["string"], r["seed"]))
     doc = header("first_shot", False) | {"variants": {v: overlays[v] for v in variants}, "physics": a.physics,
-                                         "types": a.types, "seeds": a.seeds, "summary": summarize(rows, variants),
+                                         "types": a.types, "seeds": a.seeds, "family": a.family, "summary": summarize(rows, variants),
                                          "cases": rows}
     path = write(a.out, doc)
     for physics, per in doc["summary"].items():
