@@ -95,6 +95,9 @@ class PlanResult:
     """Residual correction (:meth:`stringcast.plan.residual.TipResidual.summary`); d_min is then corrected."""
     origin: str = ""
     """How the motion was made (motion.json ``origin``): first, perturbation, wide_perturbation, new."""
+    chord_share: float | None = None
+    """The model string's tip-to-grasp distance over its length at t_min (``motion.taut_chord_share`` > 0, a
+    first or new plan's hit; else None)."""
 
 
 # ---------------------------------------------------------------------------
@@ -140,6 +143,7 @@ def search(campaign: Campaign, model: ModelSettings, motion: MotionSettings, coe
     radius = campaign.target.radius
     aim = radius if motion.aim_radius_mm is None else min(radius, float(motion.aim_radius_mm) / 1000)
     why_not = residual_correction(pl, previous, observed, coeffs, mu, ensemble, equilibria, member_eq)
+    taut_min = float(motion.taut_chord_share) if previous is None else 0.0   # first and new plans only
     best, best_key, tried, first_hit, fails = None, None, 0, None, 0
     bar = tqdm(total=max_cand, desc="plan", unit="cand", disable=None)
     while tried < max_cand and (first_hit is None or tried < first_hit + extra):
@@ -159,11 +163,12 @@ def search(campaign: Campaign, model: ModelSettings, motion: MotionSettings, coe
         fails = 0
         d, tm, my, ok, hit, scores = _score_batch(pl, cands, T, postures, equilibria, member_eq, ensemble, radius,
                                                   arm.floor_y, screen)
-        best, best_key = keep_best(cands, T, d, tm, my, ok, hit, scores, arm.floor_y, best, best_key)
+        taut = _taut_hits(pl, cands, T, equilibria, tm, hit, taut_min) if taut_min > 0 else None
+        best, best_key = keep_best(cands, T, d, tm, my, ok, hit, scores, arm.floor_y, best, best_key, taut)
         tried += len(cands)
         bar.update(len(cands))
         if first_hit is None and any(hit[b] and d[b] <= aim and scores.get(b, (0.0,))[0] >= min_share
-                                     for b in range(len(cands))):
+                                     and (taut is None or taut[b][0]) for b in range(len(cands))):
             first_hit = tried
     bar.close()
     return _plan_result(pl, best, tried, radius, ensemble, why_not, equilibria)
@@ -188,12 +193,26 @@ def _score_batch(pl: Predictor, cands: list, T: float, postures: np.ndarray, equ
     return d, tm, my, ok, hit, scores
 
 
+def _taut_hits(pl: Predictor, cands: list, T: float, equilibria: dict, tm: np.ndarray, hit: np.ndarray,
+               taut_min: float) -> dict[int, tuple[bool, float]]:
+    """{index of a hit: (its model string's chord share at its closest approach >= ``taut_min``, that
+    share)} (:meth:`Predictor.chord_share`): a hit on a taut string rests on the string's length and the
+    hand's motion, one on a slack string on the bending, damping and drag the model guesses
+    (docs/method.md, "A taut string at the hit")."""
+    idx = np.flatnonzero(hit)
+    if not len(idx):
+        return {}
+    q = np.stack([cands[b][2] for b in idx])
+    share = pl.chord_share(q, T, np.stack([equilibria[cands[b][3]] for b in idx]), tm[idx])
+    return {int(b): (bool(c >= taut_min), float(c)) for b, c in zip(idx, share)}
+
+
 def _plan_result(pl: Predictor, best: tuple, tried: int, radius: float, ensemble: tuple[np.ndarray, np.ndarray] | None,
                  why_not: str, equilibria: dict) -> PlanResult:
     """The :class:`PlanResult` of the search's best candidate (:func:`keep_best`'s tuple) after ``tried``
     candidates: its motion, predicted tip path and messages (no hit, chosen for the ensemble, the
     model's first warning, why there is no residual correction)."""
-    (cp, q0, q, i), T, hit, d, tm, my, share, margin, d_k = best
+    (cp, q0, q, i), T, hit, d, tm, my, share, margin, d_k, chord = best
     t, _ = time_grid(T, pl.rate)
     motion = Motion(t=t, q=q, T=T, control_points=cp, q0=q0)
     msgs = [] if hit else [f"no candidate hit in {tried} tried; returning the closest "
@@ -211,7 +230,7 @@ def _plan_result(pl: Predictor, best: tuple, tried: int, radius: float, ensemble
     msgs += sorted(set(pl.warnings))[:1] + [why_not] * bool(why_not)
     residual = None if pl.residual is None else pl.residual.summary()
     return PlanResult(motion, hit, d, tm, my, tried, "; ".join(msgs), pl.tip_path(motion, equilibria[i]),
-                      residual=residual, **robust)
+                      residual=residual, chord_share=chord, **robust)
 
 
 def _ensemble_scores(pl: Predictor, cands: list, q: np.ndarray, T: float, screened: np.ndarray,
@@ -261,7 +280,8 @@ def write_motion(result: PlanResult, campaign: Campaign, motion: MotionSettings,
         "ensemble_margin_mm": None if result.margin is None else result.margin * 1000,
         "ensemble_d_min_mm": None if result.ensemble_d_min is None else np.asarray(result.ensemble_d_min) * 1000,
         "residual_correction": result.residual, "played_observed_miss_mm": observed_miss_mm,
-        "origin": result.origin, "message": result.message, "planned_on_failed_fit": failed_fit is not None,
+        "origin": result.origin, "chord_share_at_closest_approach": result.chord_share,
+        "message": result.message, "planned_on_failed_fit": failed_fit is not None,
         "failed_fit": failed_fit})
 
 

@@ -100,6 +100,29 @@ class Predictor:
                                                **self._targets(np.zeros(b)))
         return (np.asarray(d, float), np.asarray(tm, float), np.asarray(my, float), np.asarray(ok, bool))
 
+    def chord_share(self, q: np.ndarray, T: float, p_init: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """How taut the model string is: the tip's distance from the grasp over the string's length
+        (n l0), for candidates q (B, K, J) from p_init (B, n, 2), each at its own time t (B,) s
+        (:func:`~stringcast.model.string_model.simulate_batch` sampled there; the grasp is the hand's
+        position at the controller sample nearest t). (B,); NaN where t is not finite or the run blew up."""
+        hand_t, hand = self.hand_trajectory(q)
+        t = np.asarray(t, float)
+        out = np.full(len(q), np.nan)
+        good = np.flatnonzero(np.isfinite(t))
+        if not len(good):
+            return out
+        times, at = np.unique(np.clip(t[good], 0.0, hand_t[-1]), return_inverse=True)
+        g = len(good)
+        pos, _ = simulate_batch(np.tile(self.coeffs, (g, 1)), np.tile(self.mu, (g, 1)), hand_t, np.ascontiguousarray(hand[good]),
+                                np.arange(g, dtype=np.int64), np.ascontiguousarray(p_init[good]), self.l0,
+                                self.psi0, self.dt, np.concatenate([[0.0], times]), drag=self.drag,
+                                halvings=self.halvings)                        # from rest at t = 0
+        tip = np.asarray(pos)[np.arange(g), 1 + at, -1, :]                          # (G, 2)
+        k = np.clip(np.rint(times[at] * self.rate).astype(np.int64), 0, len(hand_t) - 1)
+        grasp = hand[good, k, :2]
+        out[good] = np.linalg.norm(tip - grasp, axis=1) / (self.n * self.l0)
+        return out
+
     def set_residual(self, previous: Motion, observed: tuple, p_init: np.ndarray, coeffs: np.ndarray,
                      mu: np.ndarray) -> str:
         """Build ``self.residual`` from the played motion's tracked tip ``observed`` (frame_t, tip,

@@ -69,16 +69,19 @@ def residual_correction(pl: Predictor, previous: Motion | None, observed: tuple 
 
 def keep_best(cands: list, T: float, d: np.ndarray, tm: np.ndarray, my: np.ndarray, ok: np.ndarray,
               hit: np.ndarray, scores: dict, floor_y: float, best: tuple | None,
-              best_key: tuple | None) -> tuple[tuple | None, tuple | None]:
+              best_key: tuple | None, taut: dict | None = None) -> tuple[tuple | None, tuple | None]:
     """The best candidate so far and its ranking key, after one batch: cands (B,) of T s with closest
-    approach d (B,) m at tm (B,) s, lowest point my (B,) m, valid ok (B,), hit (B,) and (robust
-    planner) scores {index: (hit share, margin m, d_min (K,) m)}. The key ranks by the larger hit
-    share, then the larger margin, a hit, valid and above the floor, valid, the smaller d."""
+    approach d (B,) m at tm (B,) s, lowest point my (B,) m, valid ok (B,), hit (B,), (robust
+    planner) scores {index: (hit share, margin m, d_min (K,) m)} and (``motion.taut_chord_share``)
+    taut {index of a hit: (taut enough, chord share)}. The key ranks by the larger hit share, then a
+    taut hit, then the larger margin, a hit, valid and above the floor, valid, the smaller d."""
+    taut = taut or {}
     for b, c in enumerate(cands):
         share, margin, d_k = scores.get(b, (0.0, -np.inf, None))
-        key = (-share, -margin if share > 0 else np.inf, not hit[b], not (ok[b] and my[b] >= floor_y), not ok[b],
-               d[b] if np.isfinite(d[b]) else np.inf)
+        is_taut, chord = taut.get(b, (False, None))
+        key = (-share, not is_taut, -margin if share > 0 else np.inf, not hit[b], not (ok[b] and my[b] >= floor_y),
+               not ok[b], d[b] if np.isfinite(d[b]) else np.inf)
         if best_key is None or key < best_key:
             best_key = key
-            best = (c, T, bool(hit[b]), float(d[b]), float(tm[b]), float(my[b]), share, margin, d_k)
+            best = (c, T, bool(hit[b]), float(d[b]), float(tm[b]), float(my[b]), share, margin, d_k, chord)
     return best, best_key
