@@ -15,7 +15,9 @@
   planner's ensemble that holds both basins when they near-tie (``estimation.top_grasp_basins``);
   ``ours_wide_bending`` lets the bending springs k_h and k_sh reach 100 times Table 2's top (the stiff
   ropes of the family, docs/method.md); ``ours_halving`` runs a blown-up candidate again at half the
-  step, once (``model.blowup_halvings``: the stiff ropes' fits blow up at dt = 1e-4 s, docs/method.md).
+  step, once (``model.blowup_halvings``: the stiff ropes' fits blow up at dt = 1e-4 s, docs/method.md);
+  ``ours_taut`` prefers first and new plans whose model string is taut at the hit
+  (``motion.taut_chord_share``: slack ones miss, docs/method.md).
 * :func:`method_config`: the config one campaign runs with (method, seed, physics, mode, material).
 """
 from __future__ import annotations
@@ -42,6 +44,7 @@ VARIANTS = {
     "ours_grasp_basins": {"estimation": {"cmaes_grasp_flip": 0.3, "top_grasp_basins": True}},
     "ours_wide_bending": {"model": {"ranges": {"k_h": [1.0e-3, 1.0e+3], "k_sh": [1.0e-4, 1.0e+2]}}},
     "ours_halving": {"model": {"blowup_halvings": 1}},
+    "ours_taut": {"motion": {"taut_chord_share": 0.95}},
 }
 
 
