@@ -35,6 +35,11 @@ from an initial posture q0):
   margin (radius - median d_min over the members); the stopping rule is the paper's, or
   with ``motion.robust_min_share`` > 0 (tried, off in ours) the first hit that starts the
   count of ``extra_after_hit`` candidates must hit under at least that share of the members.
+* A taut string at the hit (``motion.taut_chord_share`` > 0, off in ours; first and new plans): a
+  hit whose model string's tip is at least that share of its length from the grasp at the closest
+  approach ranks before one that is not (after the ensemble's hit share), and the count of
+  ``extra_after_hit`` starts at the first such hit; perturbations are not judged (docs/method.md,
+  "Where the executions go, and a taut string at the hit").
 * Residual correction (``motion.residual_correction``, later motions, with either
   planner; ours): every set aims at the target minus the model's error on the played
   motion's tracked tip (:mod:`stringcast.plan.residual`), so d_min is the corrected one.
