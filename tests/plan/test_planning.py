@@ -15,6 +15,11 @@ from stringcast.core.joint_log import read_joint_table
 from stringcast.model.string_model import closest_approach_batch
 
 
+@pytest.fixture
+def small(settings):
+    return _with(settings, max_candidates=2048, extra_after_hit=64, batch=64, posture_pool=8)
+
+
 def _with(s, **motion):
     """Settings ``s`` with these motion settings changed."""
     return replace(s, motion=replace(s.motion, **motion))

@@ -10,6 +10,13 @@ from stringcast.plan.prediction import Predictor
 from test_planning import _fake_model, _first, _with
 
 
+@pytest.fixture
+def small(settings):
+    """test_planning's small search (a fixture of that module, not a shared conftest: ``conftest`` is
+    tests/conftest.py's module name for the tests that import from it)."""
+    return _with(settings, max_candidates=2048, extra_after_hit=64, batch=64, posture_pool=8)
+
+
 def test_the_chord_share_is_the_tips_distance_from_the_grasp_over_the_length(campaign, settings):
     """At rest at t = 0 a hanging string is straight (stretched a little by its weight): share ~1; a string
     folded back at its middle has its tip beside the grasp, at the fold's chord."""
