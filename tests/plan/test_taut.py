@@ -1,5 +1,5 @@
 """``motion.taut_chord_share``: first and new plans prefer a hit on a taut model string (docs/method.md,
-"A taut string at the hit")."""
+"Where the executions go, and a taut string at the hit")."""
 import numpy as np
 import pytest
 
@@ -26,21 +26,21 @@ def test_the_chord_share_is_the_tips_distance_from_the_grasp_over_the_length(cam
     q = np.repeat(np.array([[0.3, -1.5, -0.4]]), 50, axis=0)[None]              # (1, K, J): the arm still
     hp = pl.hand_trajectory(q)[1][0, 0]
     rest = hanging_equilibrium(coeffs, mu, hp, pl.l0, pl.psi0, pl.n, pl.dt)
-    share = pl.chord_share(q, 0.1, rest[None], np.array([0.0]))
+    share = pl.chord_share(q, rest[None], np.array([0.0]))
     assert 1.0 <= share[0] < 1.05
     n, l0 = pl.n, pl.l0
     down = np.arange(1, n // 2 + 1) * l0                                        # down to the fold, then back up
     s = np.concatenate([down, down[-1] - np.arange(1, n - n // 2 + 1) * l0])
     folded = np.column_stack([hp[0] + 0.01 * (np.arange(n) >= n // 2), hp[1] - s])
-    share = pl.chord_share(np.repeat(q, 2, axis=0), 0.1, np.stack([folded, folded]), np.array([0.0, 0.3]))
+    share = pl.chord_share(np.repeat(q, 2, axis=0), np.stack([folded, folded]), np.array([0.0, 0.3]))
     assert share[0] == pytest.approx(np.linalg.norm(folded[-1] - hp[:2]) / (n * l0))
     assert share[0] < 0.2 < share[1]                 # released, the folded half falls: each at its own time
-    assert np.isnan(pl.chord_share(q, 0.1, rest[None], np.array([np.nan]))[0])   # a blown-up candidate's t_min
+    assert np.isnan(pl.chord_share(q, rest[None], np.array([np.nan]))[0])   # a blown-up candidate's t_min
 
 
 def _fake_chords(monkeypatch, d_best: dict, chords: dict, state: dict, radius: float):
     """Fake chord_share: the hits of the last batch (d_best <= radius), in order, at chords[i] (1 if absent)."""
-    def fake(self, q, T, p_init, t):
+    def fake(self, q, p_init, t):
         hits = [int(i) for i in state["ids"] if d_best.get(int(i), 1.0) <= radius]
         assert len(hits) == len(q)
         return np.array([chords.get(i, 1.0) for i in hits])

@@ -166,8 +166,8 @@ class MotionSettings(Section):
     replan_miss_mm: float = _f(45.0, "> 0: after a tracked miss larger than this, plan a new motion (0: always perturb, Section V.B), mm", minimum=0)
     replan_perturb_rad_s: float = _f(1.0, "> 0 (with replan_miss_mm): first try perturbing the played motion by up to this, rad/s", minimum=0)
     replan_min_share: float = _f(0.9, "that wider perturbation is kept when it hits under at least this share of the ensemble", minimum=0, maximum=1)
-    taut_chord_share: float = _f(0.0, "first and new plans: a hit whose model string is at least this taut at its closest approach (tip-to-grasp distance / the string's length) is preferred to one that is not (0: off, the paper)", minimum=0, maximum=1.5)
     replan_residual_mm: float = _f(50.0, "> 0 (with residual_correction): no perturbation when the model's tip error on the played motion exceeds this, mm", minimum=0)
+    taut_chord_share: float = _f(0.0, "first and new plans: a hit whose model string is at least this taut at its closest approach (tip-to-grasp distance / the string's length) is preferred to one that is not (0: off, the paper)", minimum=0, maximum=1.5)
 
     def __post_init__(self):
         one_of("motion", "planner", self.planner, PLANNERS)

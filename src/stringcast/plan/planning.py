@@ -168,7 +168,7 @@ def search(campaign: Campaign, model: ModelSettings, motion: MotionSettings, coe
         fails = 0
         d, tm, my, ok, hit, scores = _score_batch(pl, cands, T, postures, equilibria, member_eq, ensemble, radius,
                                                   arm.floor_y, screen)
-        taut = _taut_hits(pl, cands, T, equilibria, tm, hit, taut_min) if taut_min > 0 else None
+        taut = _taut_hits(pl, cands, equilibria, tm, hit, taut_min) if taut_min > 0 else None
         best, best_key = keep_best(cands, T, d, tm, my, ok, hit, scores, arm.floor_y, best, best_key, taut)
         tried += len(cands)
         bar.update(len(cands))
@@ -198,17 +198,17 @@ def _score_batch(pl: Predictor, cands: list, T: float, postures: np.ndarray, equ
     return d, tm, my, ok, hit, scores
 
 
-def _taut_hits(pl: Predictor, cands: list, T: float, equilibria: dict, tm: np.ndarray, hit: np.ndarray,
+def _taut_hits(pl: Predictor, cands: list, equilibria: dict, tm: np.ndarray, hit: np.ndarray,
                taut_min: float) -> dict[int, tuple[bool, float]]:
     """{index of a hit: (its model string's chord share at its closest approach >= ``taut_min``, that
     share)} (:meth:`Predictor.chord_share`): a hit on a taut string rests on the string's length and the
     hand's motion, one on a slack string on the bending, damping and drag the model guesses
-    (docs/method.md, "A taut string at the hit")."""
+    (docs/method.md, "Where the executions go, and a taut string at the hit")."""
     idx = np.flatnonzero(hit)
     if not len(idx):
         return {}
     q = np.stack([cands[b][2] for b in idx])
-    share = pl.chord_share(q, T, np.stack([equilibria[cands[b][3]] for b in idx]), tm[idx])
+    share = pl.chord_share(q, np.stack([equilibria[cands[b][3]] for b in idx]), tm[idx])
     return {int(b): (bool(c >= taut_min), float(c)) for b, c in zip(idx, share)}
 
 

@@ -100,7 +100,7 @@ class Predictor:
                                                **self._targets(np.zeros(b)))
         return (np.asarray(d, float), np.asarray(tm, float), np.asarray(my, float), np.asarray(ok, bool))
 
-    def chord_share(self, q: np.ndarray, T: float, p_init: np.ndarray, t: np.ndarray) -> np.ndarray:
+    def chord_share(self, q: np.ndarray, p_init: np.ndarray, t: np.ndarray) -> np.ndarray:
         """How taut the model string is: the tip's distance from the grasp over the string's length
         (n l0), for candidates q (B, K, J) from p_init (B, n, 2), each at its own time t (B,) s
         (:func:`~stringcast.model.string_model.simulate_batch` sampled there; the grasp is the hand's
