@@ -91,6 +91,8 @@ def test_first_plan_hits_and_is_consistent(tmp_path, campaign, small):
                                            doc["T_s"] + doc["flight_window_s"], campaign.target.xy)
     assert ok[0] and d[0] == pytest.approx(res.d_min, abs=1e-9)
     assert doc["hit_predicted"] and doc["closest_approach_mm"] == pytest.approx(res.d_min * 1000)
+    chord = doc["chord_share_at_closest_approach"]     # the first plan's hit: how taut its string is then
+    assert 0 < chord < 1.1 and doc["slack_at_predicted_hit"] == (chord < small.motion.slack_warn_chord_share)
     tip = np.array(doc["predicted_tip_path"])
     assert tip.shape[1] == 3 and np.min(np.hypot(*(tip[:, 1:] - campaign.target.xy).T)) < 0.03
     # the executor accepts the planned file
@@ -207,13 +209,15 @@ def test_robust_plan_scores_the_ensemble(tmp_path, campaign, small):
 def _fake_model(monkeypatch, d_best: dict, members: dict, screened: int | None = None) -> dict:
     """Fake Predictor: candidate i (counted over the search's batches) passes d_best[i] m from the
     target under the planning set (1 m if absent) and members[i] under the 4 ensemble members;
-    ``screened``: how many candidates each call must hand the ensemble. Returns the counter
-    (set state["k"] = 0 to search again)."""
-    state = {"k": 0}
+    ``screened``: how many candidates each call must hand the ensemble. Every model string is taut
+    (chord share 1) at its closest approach. Returns the counter (set state["k"] = 0 to search again)
+    and state["id_of"], each candidate's number by its joint trajectory's bytes."""
+    state = {"k": 0, "id_of": {}}
 
     def fake_evaluate(self, q, T, p_init):
         b = len(q)
         state["ids"] = np.arange(state["k"], state["k"] + b)
+        state["id_of"].update({qi.tobytes(): int(i) for qi, i in zip(q, state["ids"])})
         state["k"] += b
         return np.array([d_best.get(int(i), 1.0) for i in state["ids"]]), np.zeros(b), np.zeros(b), np.ones(b, bool)
 
@@ -226,6 +230,7 @@ def _fake_model(monkeypatch, d_best: dict, members: dict, screened: int | None =
     monkeypatch.setattr(pn.Predictor, "evaluate_ensemble", fake_ensemble)
     monkeypatch.setattr(pn.Predictor, "equilibrium", lambda self, q0, c=None, m=None: np.zeros((self.n, 2)))
     monkeypatch.setattr(pn.Predictor, "tip_path", lambda self, m, p: np.zeros((0, 3)))
+    monkeypatch.setattr(pn.Predictor, "chord_share", lambda self, q, p, t: np.ones(len(q)))
     return state
 
 

@@ -1,5 +1,6 @@
 """``motion.taut_chord_share``: first and new plans prefer a hit on a taut model string (docs/method.md,
-"Where the executions go, and a taut string at the hit")."""
+"Where the executions go, and a taut string at the hit"); ``motion.slack_warn_chord_share``: they warn of
+a slack one ("A slack string at the predicted hit")."""
 import numpy as np
 import pytest
 
@@ -39,11 +40,12 @@ def test_the_chord_share_is_the_tips_distance_from_the_grasp_over_the_length(cam
 
 
 def _fake_chords(monkeypatch, d_best: dict, chords: dict, state: dict, radius: float):
-    """Fake chord_share: the hits of the last batch (d_best <= radius), in order, at chords[i] (1 if absent)."""
+    """Fake chord_share: candidate i (by its trajectory, :func:`_fake_model`'s state["id_of"]) at chords[i]
+    (1 if absent); only hits (d_best <= radius) are asked."""
     def fake(self, q, p_init, t):
-        hits = [int(i) for i in state["ids"] if d_best.get(int(i), 1.0) <= radius]
-        assert len(hits) == len(q)
-        return np.array([chords.get(i, 1.0) for i in hits])
+        ids = [state["id_of"][qi.tobytes()] for qi in q]
+        assert all(d_best.get(i, 1.0) <= radius for i in ids)
+        return np.array([chords.get(i, 1.0) for i in ids])
 
     monkeypatch.setattr(Predictor, "chord_share", fake)
 
@@ -51,30 +53,39 @@ def _fake_chords(monkeypatch, d_best: dict, chords: dict, state: dict, radius: f
 def test_a_taut_hit_is_chosen_over_a_nearer_slack_one(monkeypatch, campaign, small):
     """Candidate 5 hits 1 mm from the centre on a string folded to 0.6 of its length, 130 hits 15 mm off on
     a taut one: off, 5 (the paper's nearest hit); at 0.95, 130, and the count of extra candidates starts
-    there; with no taut hit at all, the nearest slack one after every candidate."""
+    there; with no taut hit at all, the nearest slack one after every candidate. A slack hit chosen is
+    warned of (``motion.slack_warn_chord_share``, 0.9), whether the option is on or off, unless the
+    warning is off."""
     d_best, chords = {5: 0.001, 130: 0.015}, {5: 0.6, 130: 1.0}
     state = _fake_model(monkeypatch, d_best, {})
     _fake_chords(monkeypatch, d_best, chords, state, campaign.target.radius)
     cfg = _with(small, max_candidates=400, extra_after_hit=20, batch=50)
     coeffs, mu = _first(cfg, campaign.string)
     res = pn.search(campaign, cfg.model, cfg.motion, coeffs, mu, np.random.default_rng(0))
-    assert res.d_min == pytest.approx(0.001) and res.candidates == 100 and res.chord_share is None
+    assert res.d_min == pytest.approx(0.001) and res.candidates == 100 and res.chord_share == 0.6
+    assert res.slack and "slack at the predicted hit (its tip 0.60" in res.message
     cfg = _with(cfg, taut_chord_share=0.95)
     state["k"] = 0
     res = pn.search(campaign, cfg.model, cfg.motion, coeffs, mu, np.random.default_rng(0))
     assert res.d_min == pytest.approx(0.015) and res.candidates == 200 and res.chord_share == 1.0
+    assert not res.slack and "slack" not in res.message
     chords[130] = 0.5
     state["k"] = 0
     res = pn.search(campaign, cfg.model, cfg.motion, coeffs, mu, np.random.default_rng(0))
     assert res.d_min == pytest.approx(0.001) and res.candidates == 400 and res.chord_share == 0.6
-    assert res.hit
+    assert res.hit and res.slack
+    state["k"] = 0
+    res = pn.search(campaign, cfg.model, _with(cfg, slack_warn_chord_share=0.0).motion, coeffs, mu,
+                    np.random.default_rng(0))
+    assert res.chord_share == 0.6 and not res.slack and "slack" not in res.message      # warning off
 
 
 def test_a_perturbation_is_not_judged_by_its_chord(monkeypatch, campaign, small):
-    """Later plans that perturb the played motion rest on a model checked there: no chord is computed."""
-    monkeypatch.setattr(Predictor, "chord_share", lambda *a: pytest.fail("chord_share called for a perturbation"))
+    """Later plans that perturb the played motion rest on a model checked there: no chord is computed,
+    and no slack is warned of."""
     cfg = _with(small, max_candidates=64, extra_after_hit=0, batch=32, taut_chord_share=0.95)
     coeffs, mu = _first(cfg, campaign.string)
     first = pn.search(campaign, cfg.model, _with(small, max_candidates=64).motion, coeffs, mu, np.random.default_rng(0))
+    monkeypatch.setattr(Predictor, "chord_share", lambda *a: pytest.fail("chord_share called for a perturbation"))
     res = pn.search(campaign, cfg.model, cfg.motion, coeffs, mu, np.random.default_rng(1), previous=first.motion)
-    assert res.chord_share is None
+    assert res.chord_share is None and not res.slack

@@ -1,7 +1,7 @@
 """The pages say what decides the next step (issue 54): each reason once in the trial page's box, the
 prediction check, the next motion's spread over the near-best sets, parameters at a bound; on the
-campaign page each stage's verdict, the prediction error, an execution planned on a failed fit or for
-another target, and the next motion file to play."""
+campaign page each stage's verdict, the prediction error, an execution planned on a failed fit, on a slack
+model string or for another target, and the next motion file to play."""
 import re
 
 import numpy as np
@@ -77,7 +77,8 @@ def test_the_campaign_page_marks_a_failed_fit_another_target_and_gives_the_next_
     data, res = _trial(tmp_path, settings, campaign, dx=0.15 * campaign.string.length)
     assert read_json(res / "params.json")["verdict"]["status"] == "fail"
     played = read_json(data / "motion.json")
-    write_json(data / "motion.json", {**played, "target": {"x_mm": 1450.0, "y_mm": 300.0, "radius_mm": 20.0}})
+    write_json(data / "motion.json", {**played, "target": {"x_mm": 1450.0, "y_mm": 300.0, "radius_mm": 20.0},
+                                      "slack_at_predicted_hit": True})
     write_json(res / "tracking.json", {"verdict": {"status": "warn", "reasons": ["62 % tracked"]}})
     write_json(res / "prediction.json", {"median_mm": 16.3, "p95_mm": 25.8, "verdict": {"status": "ok"}})
     out = tmp_path / "results" / "report.html"
@@ -91,6 +92,12 @@ def test_the_campaign_page_marks_a_failed_fit_another_target_and_gives_the_next_
     nxt = html[html.index('id="next-motion"'):]
     assert 'href="trial_1/motion.csv"' in nxt and "planned on a failed fit" in _text(nxt.split("</p>")[0])
     assert np.isclose(campaign.target.x, 1.2)   # the campaign's target now: another than the played motion's
+    assert "(a slack model string at the predicted hit)" in _text(row) and "slack" not in _text(nxt.split("</p>")[0])
+    planned = read_json(res / "motion.json")     # a next motion on a usable fit, slack at its hit
+    write_json(res / "motion.json", {**planned, "planned_on_failed_fit": False, "slack_at_predicted_hit": True})
+    write_campaign_report(tmp_path / "data", tmp_path / "results", campaign, out, settings=settings)
+    nxt = _text(out.read_text().split('id="next-motion"')[1].split("</p>")[0])
+    assert "on a model string slack at the hit: such plans seldom hit" in nxt and "failed fit" not in nxt
 
 
 def test_a_pass_through_the_floor_is_no_hit_on_either_page(tmp_path, settings, campaign):

@@ -40,6 +40,11 @@ from an initial posture q0):
   approach ranks before one that is not (after the ensemble's hit share), and the count of
   ``extra_after_hit`` starts at the first such hit; perturbations are not judged (docs/method.md,
   "Where the executions go, and a taut string at the hit").
+* A slack string at the hit (``motion.slack_warn_chord_share``, 0.9; first and new plans): when the
+  chosen hit's model string has its tip nearer the grasp than that share of its length, the
+  planner's note says so, and ``motion.json``'s ``slack_at_predicted_hit`` is true: such a hit rests
+  on the bending, damping and drag the model guesses, and in the virtual labs such plans hit about
+  one time in six, taut ones about one in two (docs/method.md, "A slack string at the predicted hit").
 * Residual correction (``motion.residual_correction``, later motions, with either
   planner; ours): every set aims at the target minus the model's error on the played
   motion's tracked tip (:mod:`stringcast.plan.residual`), so d_min is the corrected one.
@@ -101,8 +106,9 @@ class PlanResult:
     origin: str = ""
     """How the motion was made (motion.json ``origin``): first, perturbation, wide_perturbation, new."""
     chord_share: float | None = None
-    """The model string's tip-to-grasp distance over its length at t_min (``motion.taut_chord_share`` > 0, a
-    first or new plan's hit; else None)."""
+    """The model string's tip-to-grasp distance over its length at t_min (a first or new plan's hit; else None)."""
+    slack: bool = False
+    """A first or new plan's hit with chord_share under ``motion.slack_warn_chord_share`` (the note says so)."""
 
 
 # ---------------------------------------------------------------------------
@@ -176,7 +182,10 @@ def search(campaign: Campaign, model: ModelSettings, motion: MotionSettings, coe
                                      and (taut is None or taut[b][0]) for b in range(len(cands))):
             first_hit = tried
     bar.close()
-    return _plan_result(pl, best, tried, radius, ensemble, why_not, equilibria)
+    if previous is None:
+        best = _with_chord(pl, best, equilibria)
+    slack_below = float(motion.slack_warn_chord_share) if previous is None else 0.0
+    return _plan_result(pl, best, tried, radius, ensemble, why_not, equilibria, slack_below)
 
 
 def _score_batch(pl: Predictor, cands: list, T: float, postures: np.ndarray, equilibria: dict, member_eq: dict,
@@ -212,11 +221,29 @@ def _taut_hits(pl: Predictor, cands: list, equilibria: dict, tm: np.ndarray, hit
     return {int(b): (bool(c >= taut_min), float(c)) for b, c in zip(idx, share)}
 
 
+def _with_chord(pl: Predictor, best: tuple, equilibria: dict) -> tuple:
+    """:func:`keep_best`'s tuple with the chord share of its hit filled in where the search did not
+    compute it (``motion.taut_chord_share`` off): one run of the chosen candidate to its t_min."""
+    (cp, q0, q, i), T, hit, d, tm, my, share, margin, d_k, chord = best
+    if hit and chord is None:
+        chord = float(pl.chord_share(q[None], equilibria[i][None], np.array([tm]))[0])
+    return (cp, q0, q, i), T, hit, d, tm, my, share, margin, d_k, chord
+
+
+def _slack_note(chord: float, below: float) -> str:
+    """The planner's note on a hit whose model string is slack (chord share under ``below``)."""
+    return (f"the model string is slack at the predicted hit (its tip {chord:.2f} of the string's length from the "
+            f"grasp, under motion.slack_warn_chord_share {below:g}): the hit rests on the bending, damping and "
+            "drag the model guesses, not on the string's length and the hand's motion; in the virtual labs such "
+            "first and new plans hit about one time in six, taut ones about one in two (docs/method.md, "
+            "\"A slack string at the predicted hit\")")
+
+
 def _plan_result(pl: Predictor, best: tuple, tried: int, radius: float, ensemble: tuple[np.ndarray, np.ndarray] | None,
-                 why_not: str, equilibria: dict) -> PlanResult:
+                 why_not: str, equilibria: dict, slack_below: float = 0.0) -> PlanResult:
     """The :class:`PlanResult` of the search's best candidate (:func:`keep_best`'s tuple) after ``tried``
-    candidates: its motion, predicted tip path and messages (no hit, chosen for the ensemble, the
-    model's first warning, why there is no residual correction)."""
+    candidates: its motion, predicted tip path and messages (no hit, chosen for the ensemble, a hit on a
+    string slacker than ``slack_below``, the model's first warning, why there is no residual correction)."""
     (cp, q0, q, i), T, hit, d, tm, my, share, margin, d_k, chord = best
     t, _ = time_grid(T, pl.rate)
     motion = Motion(t=t, q=q, T=T, control_points=cp, q0=q0)
@@ -232,10 +259,12 @@ def _plan_result(pl: Predictor, best: tuple, tried: int, radius: float, ensemble
         if d_k is None or share == 0:
             msgs.append(f"no candidate hit under any of the {len(ensemble[0])} ensemble sets; returning the "
                         "best under the estimate")
+    slack = bool(hit and chord is not None and chord < slack_below)
+    msgs += [_slack_note(chord, slack_below)] if slack else []
     msgs += sorted(set(pl.warnings))[:1] + [why_not] * bool(why_not)
     residual = None if pl.residual is None else pl.residual.summary()
     return PlanResult(motion, hit, d, tm, my, tried, "; ".join(msgs), pl.tip_path(motion, equilibria[i]),
-                      residual=residual, chord_share=chord, **robust)
+                      residual=residual, chord_share=chord, slack=slack, **robust)
 
 
 def _ensemble_scores(pl: Predictor, cands: list, q: np.ndarray, T: float, screened: np.ndarray,
@@ -286,6 +315,7 @@ def write_motion(result: PlanResult, campaign: Campaign, motion: MotionSettings,
         "ensemble_d_min_mm": None if result.ensemble_d_min is None else np.asarray(result.ensemble_d_min) * 1000,
         "residual_correction": result.residual, "played_observed_miss_mm": observed_miss_mm,
         "origin": result.origin, "chord_share_at_closest_approach": result.chord_share,
+        "slack_at_predicted_hit": result.slack,
         "message": result.message, "planned_on_failed_fit": failed_fit is not None,
         "failed_fit": failed_fit})
 

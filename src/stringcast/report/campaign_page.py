@@ -134,6 +134,7 @@ def _execution_row(k: int, dd: Path, rd: Path, campaign: Campaign, settings: Set
            "prediction_mm": _fmt(prediction.get("median_mm"), ".1f"),
            "prediction_p95_mm": _fmt(prediction.get("p95_mm"), ".1f"),
            "played_on_failed_fit": bool(played.get("planned_on_failed_fit")),
+           "played_slack": bool(played.get("slack_at_predicted_hit")),
            "other_target": other_target(played, campaign)}
     return row, xy[window, n]
 
@@ -162,6 +163,7 @@ def _write_campaign_report(data_dir: Path, results_dir: Path, campaign: Campaign
         next_motion = {"href": f"trial_{rows[-1]['trial']}/motion.csv", "after": rows[-1]["trial"],
                        "hit_measured": rows[-1]["hit_measured"],
                        "failed_fit": bool(nxt.get("planned_on_failed_fit")),
+                       "slack": bool(nxt.get("slack_at_predicted_hit")),
                        "predicted_mm": _fmt(nxt.get("closest_approach_mm"), ".1f")}
     timings, stages = _stage_times(results_dir)
     ctx = _common(campaign, f"Campaign {campaign.name}", settings)
