@@ -17,6 +17,9 @@ from stringcast.model.string_model import closest_approach_batch
 
 @pytest.fixture
 def small(settings):
+    """The paper's settings (``settings``) with a small search: 2048 candidates, 64 after the first hit,
+    batches of 64, 8 start postures (here, not in a tests/plan/conftest.py: ``conftest`` is
+    tests/conftest.py's module name for the tests that import from it; test_taut.py imports it)."""
     return _with(settings, max_candidates=2048, extra_after_hit=64, batch=64, posture_pool=8)
 
 

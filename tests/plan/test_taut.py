@@ -8,14 +8,10 @@ from stringcast.model import hanging_equilibrium
 from stringcast.plan import planning as pn
 from stringcast.plan.prediction import Predictor
 
+import test_planning
 from test_planning import _fake_model, _first, _with
 
-
-@pytest.fixture
-def small(settings):
-    """test_planning's small search (a fixture of that module, not a shared conftest: ``conftest`` is
-    tests/conftest.py's module name for the tests that import from it)."""
-    return _with(settings, max_candidates=2048, extra_after_hit=64, batch=64, posture_pool=8)
+small = test_planning.small        # the fixture: its small search budget, declared once
 
 
 def test_the_chord_share_is_the_tips_distance_from_the_grasp_over_the_length(campaign, settings):
