@@ -33,11 +33,20 @@ collect_ignore = [] if _lab_installed() else sorted(
 SHARED_REAL = Path(os.environ.get("STRINGCAST_REAL_DATA", ROOT.parent / "shared" / "real"))
 
 
+def pytest_configure(config):
+    """pytest-xdist hands out ``--dist loadfile``'s files largest test count first unless told not
+    to (``--no-loadscope-reorder``); that order would undo :func:`pytest_collection_modifyitems`'s,
+    and left the Slurm test's file (four tests, three minutes) to the end of ``make test``."""
+    if hasattr(config.option, "loadscopereorder"):
+        config.option.loadscopereorder = False
+
+
 def pytest_collection_modifyitems(config, items):
     """Files with a slow test first, each file's tests in their order: under ``make test``'s
-    ``-n 2 --dist loadfile`` a file is one worker's unit of work, handed out in collection order, and
-    the long ones handed out first let the two workers finish together (longest processing time
-    first) instead of one running the workflow's files alone at the end."""
+    ``-n 2 --dist loadfile`` a file is one worker's unit of work, handed out in collection order
+    (:func:`pytest_configure`), and the long ones handed out first let the two workers finish
+    together (longest processing time first) instead of one running the workflow's files alone at
+    the end."""
     slow = {item.path for item in items if item.get_closest_marker("slow")}
     items.sort(key=lambda item: item.path not in slow)           # stable: files stay contiguous
 
