@@ -17,8 +17,7 @@
   ropes of the family, docs/method.md); ``ours_halving`` runs a blown-up candidate again at half the
   step, once (``model.blowup_halvings``: the stiff ropes' fits blow up at dt = 1e-4 s, docs/method.md);
   ``ours_taut`` prefers first and new plans whose model string is taut at the hit
-  (``motion.taut_chord_share``: slack ones miss, docs/method.md); ``ours_newton`` plays the least change of
-  the played motion aimed at the corrected target's centre when it hits (``motion.newton_steps``, docs/method.md).
+  (``motion.taut_chord_share``: slack ones miss, docs/method.md).
 * :func:`method_config`: the config one campaign runs with (method, seed, physics, mode, material).
 """
 from __future__ import annotations
@@ -46,7 +45,6 @@ VARIANTS = {
     "ours_wide_bending": {"model": {"ranges": {"k_h": [1.0e-3, 1.0e+3], "k_sh": [1.0e-4, 1.0e+2]}}},
     "ours_halving": {"model": {"blowup_halvings": 1}},
     "ours_taut": {"motion": {"taut_chord_share": 0.95}},
-    "ours_newton": {"motion": {"newton_steps": 8}},
 }
 
 

@@ -168,7 +168,6 @@ class MotionSettings(Section):
     replan_min_share: float = _f(0.9, "that wider perturbation is kept when it hits under at least this share of the ensemble", minimum=0, maximum=1)
     replan_residual_mm: float = _f(50.0, "> 0 (with residual_correction): no perturbation when the model's tip error on the played motion exceeds this, mm", minimum=0)
     taut_chord_share: float = _f(0.0, "first and new plans: a hit whose model string is at least this taut at its closest approach (tip-to-grasp distance / the string's length) is preferred to one that is not (0: off, the paper)", minimum=0, maximum=1.5)
-    newton_steps: int = _f(0, "later motions (residual correction): > 0 also tries the least change of the played motion that aims the corrected tip at the target's centre, in up to this many Newton steps on the corrected closest approach, and plays it when it hits under as large a share of the ensemble as the best random perturbation (0: off, the paper)", minimum=0, maximum=20)
     slack_warn_chord_share: float = _f(0.9, "first and new plans: the planner's note warns when the model string's tip is nearer the grasp than this share of the string's length at the predicted hit (such hits rest on the bending, damping and drag the model guesses; 0: no warning)", minimum=0, maximum=1.5)
 
     def __post_init__(self):

@@ -40,12 +40,6 @@ from an initial posture q0):
   approach ranks before one that is not (after the ensemble's hit share), and the count of
   ``extra_after_hit`` starts at the first such hit; perturbations are not judged (docs/method.md,
   "Where the executions go, and a taut string at the hit").
-* The least change (``motion.newton_steps`` > 0, off in ours; later motions with a residual
-  correction): after the random search, Newton steps from the played motion on its corrected closest
-  approach (:mod:`stringcast.plan.newton`) give the smallest change of the control points that aims
-  the corrected tip at the target's centre; it is played instead of the search's best when it hits
-  under the planning set and under at least that best's share of the ensemble, so that the first-order
-  residual is carried to a motion next to the one it was measured on (docs/method.md, "The least change").
 * A slack string at the hit (``motion.slack_warn_chord_share``, 0.9; first and new plans): when the
   chosen hit's model string has its tip nearer the grasp than that share of its length, the
   planner's note says so, and ``motion.json``'s ``slack_at_predicted_hit`` is true: such a hit rests
@@ -84,7 +78,6 @@ from stringcast.core import (Campaign, ConfigError, ModelSettings, MotionSetting
                              write_json)
 from stringcast.model import first_parameters
 from .motion import Motion, time_grid
-from .newton import newton_perturbation
 from .search import draw_candidates, keep_best, residual_correction, start_postures
 from .prediction import Predictor
 
@@ -189,36 +182,10 @@ def search(campaign: Campaign, model: ModelSettings, motion: MotionSettings, coe
                                      and (taut is None or taut[b][0]) for b in range(len(cands))):
             first_hit = tried
     bar.close()
-    newton = previous is not None and int(motion.newton_steps) > 0
-    if newton:
-        best, newton = _prefer_newton(pl, previous, int(motion.newton_steps), perturb, rng, best, equilibria,
-                                      member_eq, ensemble, screen)
     if previous is None:
         best = _with_chord(pl, best, equilibria)
     slack_below = float(motion.slack_warn_chord_share) if previous is None else 0.0
-    result = _plan_result(pl, best, tried, radius, ensemble, why_not, equilibria, slack_below)
-    if newton:
-        note = "the least change of the played motion aimed at the target's centre (motion.newton_steps)"
-        result = replace(result, message="; ".join([note] + [result.message] * bool(result.message)))
-    return result
-
-
-def _prefer_newton(pl: Predictor, previous: Motion, steps: int, perturb: float, rng: np.random.Generator,
-                   best: tuple | None, equilibria: dict, member_eq: dict,
-                   ensemble: tuple[np.ndarray, np.ndarray] | None, screen: float) -> tuple[tuple | None, bool]:
-    """``motion.newton_steps``: the least change of ``previous`` aimed at the target's centre
-    (:func:`~stringcast.plan.newton.newton_perturbation`) in place of the search's ``best`` (:func:`keep_best`'s
-    tuple) when it hits under the planning set and under at least ``best``'s share of the ensemble; and
-    whether it did."""
-    cands = newton_perturbation(pl, previous, equilibria[0], steps, perturb, rng) if pl.residual is not None else []
-    if not cands:
-        return best, False
-    d, tm, my, ok, hit, scores = _score_batch(pl, cands, previous.T, previous.q0[None], equilibria, member_eq,
-                                              ensemble, pl.campaign.target.radius, pl.arm.floor_y, screen)
-    share, margin, d_k = scores.get(0, (float(hit[0]), -np.inf, None)) if ensemble is not None else (1.0, None, None)
-    if not hit[0] or (best is not None and share < best[6]):
-        return best, False
-    return (cands[0], previous.T, True, float(d[0]), float(tm[0]), float(my[0]), share, margin, d_k, None), True
+    return _plan_result(pl, best, tried, radius, ensemble, why_not, equilibria, slack_below)
 
 
 def _score_batch(pl: Predictor, cands: list, T: float, postures: np.ndarray, equilibria: dict, member_eq: dict,
