@@ -79,6 +79,22 @@ def film_first_motion(string_type: int, config: dict, work: Path, seed: int, cal
     return campaign, d, trial
 
 
+def play_on_lab(motion_csv: Path, trial: Path, campaign, executor, config: dict, seed: int) -> Path:
+    """Play ``motion_csv`` on the virtual lab into the trial folder ``trial``
+    (:func:`stringcast.api.execute`: ``campaign`` a Campaign or its campaign.yaml, ``executor`` its
+    settings), recorded first into ``.<name>.partial`` beside it (one a killed run left is removed) and
+    then renamed, so ``trial`` is whole or absent. Returns ``trial``."""
+    import shutil
+
+    from stringcast.api import execute
+
+    tmp = trial.with_name(f".{trial.name}.partial")
+    shutil.rmtree(tmp, ignore_errors=True)
+    execute(motion_csv, "virtual", tmp, campaign, executor, config, seed=seed)
+    tmp.rename(trial)
+    return trial
+
+
 def lab_calibration_clip(config: dict, work: Path) -> Path:
     """The lab's ChArUco clip (seed 11) that every benchmark calibrates its trials with: ``work/calib``."""
     from stringcast.core import resolve_campaign

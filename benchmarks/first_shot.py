@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from benchmarks.common import header, write
+from benchmarks.common import header, play_on_lab, write
 from benchmarks.loop import PHYSICS
 from benchmarks.loop_methods import METHODS, method_config
 from benchmarks.loop_summary import PAPER_TARGET
@@ -56,7 +56,6 @@ def first_shot(case: tuple) -> dict:
     """Plan and play one case's first motion; its record (the lab's closest approach and hit)."""
     physics, k, seed, variant, overlay, work, family = case
     from stringcast.core import load_config, read_json, resolve_campaign, settings_from_config, stage_kwargs
-    from stringcast.api import execute
     from stringcast.api import run_first_plan
 
     cfg = variant_config(load_config(), variant, overlay, seed, physics, family)
@@ -70,13 +69,7 @@ def first_shot(case: tuple) -> dict:
         settings = settings_from_config(cfg)
         plan = run_first_plan(campaign, d / "motion.csv", d / "motion.json", 0,
                               **stage_kwargs(run_first_plan, settings))
-        tmp = d / "trial_1.partial"
-        if tmp.exists():
-            import shutil
-
-            shutil.rmtree(tmp)
-        execute(d / "motion.csv", "virtual", tmp, campaign, settings.executor, cfg, seed=seed * 1000 + 1)
-        tmp.rename(d / "trial_1")
+        play_on_lab(d / "motion.csv", d / "trial_1", campaign, settings.executor, cfg, seed * 1000 + 1)
         predicted = float(plan.d_min) * 1000
     else:
         predicted = float(read_json(d / "motion.json")["closest_approach_mm"])

@@ -78,6 +78,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import re
 import tempfile
 import time
 from pathlib import Path
@@ -153,6 +154,11 @@ def run_dir(work: Path, string_type: int, seed: int, method: str, physics: str =
             mode: str = "state", family: bool = False) -> Path:
     """The campaign's project folder (and campaign name) under ``work``."""
     return work / f"loop_{'family_' if family else ''}{physics}_{mode}_s{string_type}_seed{seed}_{method}"
+
+
+RUN_NAME = re.compile(r"^loop_(?P<family>family_)?(?P<physics>[a-z]+)_(?P<mode>state|video)_s(?P<type>\d+)"
+                      r"_seed(?P<seed>\d+)_(?P<method>[a-z_]+)$")
+"""A campaign folder's name as :func:`run_dir` makes it (groups family, physics, mode, type, seed, method)."""
 
 
 def check_physics(truth_json: Path, physics: str) -> None:

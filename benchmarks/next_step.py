@@ -24,9 +24,9 @@ Run: ``python -m benchmarks.next_step --work DIR [DIR ...] --variant NAME=FILE [
 from __future__ import annotations
 
 import argparse
+import json
 import multiprocessing
 import os
-import re
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -35,11 +35,10 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from benchmarks.common import header, write
+from benchmarks.common import header, play_on_lab, write
+from benchmarks.loop import RUN_NAME
 
 ORIGINS = ("perturbation", "wide_perturbation", "new")
-RUN_NAME = re.compile(r"^loop_(?P<family>family_)?(?P<physics>[a-z]+)_(?P<mode>state|video)_s(?P<type>\d+)"
-                      r"_seed(?P<seed>\d+)_(?P<method>[a-z_]+)$")
 
 
 def find_steps(works: list[Path], method: str, origins: tuple) -> list[dict]:
@@ -58,7 +57,7 @@ def find_steps(works: list[Path], method: str, origins: tuple) -> list[dict]:
                 truth = run / "data" / run.name / f"trial_{k + 1}" / "ground_truth.json"
                 if not truth.exists():
                     continue
-                doc, verdict = (yaml.safe_load(p.read_text()) for p in (plan, truth))
+                doc, verdict = (json.loads(p.read_text()) for p in (plan, truth))
                 if doc.get("origin") not in origins:
                     continue
                 steps.append({"run": str(run), "name": run.name, "k": k, "physics": m["physics"],
@@ -72,7 +71,7 @@ def replan_step(case: tuple) -> dict:
     """Re-plan one step with the variant's settings and judge it (module doc): the step's row with the
     variant's closest approach mm, hit, predicted closest approach mm and whether its motion changed."""
     step, overlay, out = case
-    from stringcast.api import execute, run_plan
+    from stringcast.api import run_plan
     from stringcast.core import load_config, merge_config, read_json, resolve_campaign, settings_from_config
 
     t0 = time.perf_counter()
@@ -92,17 +91,10 @@ def replan_step(case: tuple) -> dict:
     changed = (d / "motion.csv").read_bytes() != (played / "motion.csv").read_bytes()
     truth = played / "ground_truth.json"
     if changed:
-        lab = d / "trial"
-        if not (lab / "ground_truth.json").exists():
-            tmp = d / "trial.partial"
-            if tmp.exists():
-                import shutil
-
-                shutil.rmtree(tmp)
-            execute(d / "motion.csv", "virtual", tmp, campaign, settings.executor, cfg,
-                    seed=int(doc.get("seed", 0)) * 1000 + k + 1)
-            tmp.rename(lab)
-        truth = lab / "ground_truth.json"
+        truth = d / "trial" / "ground_truth.json"
+        if not truth.exists():
+            play_on_lab(d / "motion.csv", d / "trial", campaign, settings.executor, cfg,
+                        int(doc.get("seed", 0)) * 1000 + k + 1)
     verdict = read_json(truth)
     return step | {"changed": changed, "variant_mm": float(verdict["closest_approach_mm"]),
                    "variant_hit": bool(verdict["hit"]), "predicted_mm": float(plan.d_min) * 1000,

@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.common import ROOT, header, write
+from benchmarks.common import ROOT, header, play_on_lab, write
 
 CAMPAIGN = "turnaround"
 STAGES = ("decode", "calibrate", "sync", "sweep", "track", "estimate", "plan")
@@ -61,7 +61,6 @@ def _film(root: Path) -> Path:
     """The campaign's first motion, planned by the workflow and played on the lab: data/<c>/trial_1."""
     from stringcast_lab.campaign import campaign_config
     from stringcast.core import load_yaml, resolve_campaign, settings_from_config, write_yaml
-    from stringcast.execute import execute
     from stringcast_lab import write_calibration_clip
 
     data = root / "data" / CAMPAIGN
@@ -76,12 +75,8 @@ def _film(root: Path) -> Path:
     if not (data / "calib").is_dir():
         write_calibration_clip(campaign, config, data / "calib", 0)
     _snakemake(root, f"results/{CAMPAIGN}/first_motion/motion.csv", cores=2)
-    tmp = data / ".trial_1.partial"
-    shutil.rmtree(tmp, ignore_errors=True)
-    execute(root / "results" / CAMPAIGN / "first_motion" / "motion.csv", "virtual", tmp, data / "campaign.yaml",
-            settings_from_config(config).executor, config, seed=1)
-    tmp.rename(trial)
-    return trial
+    return play_on_lab(root / "results" / CAMPAIGN / "first_motion" / "motion.csv", trial, data / "campaign.yaml",
+                       settings_from_config(config).executor, config, seed=1)
 
 
 def _snakemake(root: Path, target: str, cores: int) -> float:
