@@ -45,6 +45,7 @@ VARIANTS = {
     "ours_wide_bending": {"model": {"ranges": {"k_h": [1.0e-3, 1.0e+3], "k_sh": [1.0e-4, 1.0e+2]}}},
     "ours_halving": {"model": {"blowup_halvings": 1}},
     "ours_taut": {"motion": {"taut_chord_share": 0.95}},
+    "ours_drag_floor": {"model": {"ranges": {"C_c2": [1.0e-3, 10.0]}}},
 }
 
 
