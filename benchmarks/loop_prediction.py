@@ -4,8 +4,8 @@ The loop benchmark's prediction error (``loop.json``) compares each method on th
 played: ours, which hits sooner, is judged on fewer and harder steps than the paper's method, on
 other motions. This benchmark takes the estimator alone. For every paper-method campaign of a
 loop run (``--work``) with a second execution, each variant estimates trial 1 as the workflow's
-``estimate`` rule does (its tracked points and joint log, the campaign's own config with the
-variant's overlay merged last, ``stringcast estimate``), and then predicts trial 2's tip from
+``estimate`` rule does (its tracked points and joint log, the campaign's config with ours' estimate
+sections and the variant's overlay merged last, ``stringcast estimate``), and then predicts trial 2's tip from
 trial 2's measured joint log (``stringcast predict``, :mod:`stringcast.estimate.prediction`). Every
 variant sees the same training trial and the same test motion. ``--methods`` takes other methods'
 campaigns (ours' steps are the near misses a planner must refine), ``--all-pairs`` every trial k
@@ -123,10 +123,10 @@ def one(camp: Path, name: str, overlay: dict, out: Path, k: int = 1) -> dict:
             "verdict": pred.get("verdict", {}).get("status")}
 
 
-def paired(diffs: list[float]) -> dict:
-    """The mean of paired differences, mm, with its 95 % bootstrap interval (campaigns resampled,
-    :func:`benchmarks.loop_summary.bootstrap_ci` with one stratum)."""
-    return {"paired_diff_mm": float(np.mean(diffs)), "paired_diff_ci95": bootstrap_ci({"all": diffs})}
+def paired(diffs: list[float], name: str = "paired_diff") -> dict:
+    """The mean of paired differences, mm (``<name>_mm``), with its 95 % bootstrap interval
+    (``<name>_ci95``; pairs resampled, :func:`benchmarks.loop_summary.bootstrap_ci` with one stratum)."""
+    return {f"{name}_mm": float(np.mean(diffs)), f"{name}_ci95": bootstrap_ci({"all": diffs})}
 
 
 def summarize(rows: list[dict], names: list[str], reference: str = "paper") -> dict:
@@ -149,10 +149,14 @@ def summarize(rows: list[dict], names: list[str], reference: str = "paper") -> d
                 d95 = [r[n]["p95_mm"] - r[reference]["p95_mm"] for r in rs
                        if r[n].get("p95_mm") is not None and r[reference].get("p95_mm") is not None]
                 if d95:
-                    out[phys][n] |= {"paired_p95_diff_mm": float(np.mean(d95)),
-                                     "paired_p95_diff_ci95": bootstrap_ci({"all": d95})}
+                    out[phys][n] |= paired(d95, "paired_p95_diff")
                 out[phys][n]["E_lower_share"] = float(np.mean([r[n]["E_mm"] < r[reference]["E_mm"] for r in rs]))
     return out
+
+
+def _mm(x: float | None) -> str:
+    """A figure for the progress line; None (no compared frame, or the model blew up) as '-'."""
+    return "-" if x is None else f"{x:.1f}"
 
 
 def run(work: Path, physics: list[str], seeds: list[int], out: Path, extra: dict[str, Path],
@@ -168,7 +172,7 @@ def run(work: Path, physics: list[str], seeds: list[int], out: Path, extra: dict
             row[name] = one(camp, name, overlay, out, k)
         rows.append(row)
         print(f"  {camp.name} {k} -> {k + 1}: " + ", ".join(
-            f"{n} {row[n]['median_mm']:.1f} / p95 {row[n]['p95_mm']:.0f} mm (E {row[n]['E_mm']:.0f})" for n in var),
+            f"{n} {_mm(row[n]['median_mm'])} / p95 {_mm(row[n]['p95_mm'])} mm (E {_mm(row[n]['E_mm'])})" for n in var),
             flush=True)
     doc = header("loop_prediction", False) | {
         "work": str(work), "physics": physics, "seeds": seeds, "methods": list(methods), "all_pairs": all_pairs,
@@ -184,7 +188,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4])
     ap.add_argument("--out", type=Path, help="where the estimates are kept (default: WORK/prediction_ab)")
     ap.add_argument("--overlay", action="append", default=[], metavar="NAME=FILE",
-                    help="another variant: a YAML merged over each campaign's config")
+                    help="another variant: a YAML merged over ours' settings (each campaign's config)")
     ap.add_argument("--methods", nargs="+", default=["paper"],
                     help="whose campaigns give the trial pairs (loop method or variant names; default paper)")
     ap.add_argument("--all-pairs", action="store_true", help="every trial k -> k + 1, not only 1 -> 2")
