@@ -17,7 +17,10 @@
   ropes of the family, docs/method.md); ``ours_halving`` runs a blown-up candidate again at half the
   step, once (``model.blowup_halvings``: the stiff ropes' fits blow up at dt = 1e-4 s, docs/method.md);
   ``ours_taut`` prefers first and new plans whose model string is taut at the hit
-  (``motion.taut_chord_share``: slack ones miss, docs/method.md).
+  (``motion.taut_chord_share``: slack ones miss, docs/method.md); ``ours_paper_drag_range`` searches the
+  quadratic drag C_c2 over Table 2's whole range, from 1e-6 (ours from 1e-3: the thread's drag lost
+  on the flat decades, docs/method.md; until stop 74 ours was this and the floor the variant
+  ``ours_drag_floor``).
 * :func:`method_config`: the config one campaign runs with (method, seed, physics, mode, material).
 """
 from __future__ import annotations
@@ -45,7 +48,7 @@ VARIANTS = {
     "ours_wide_bending": {"model": {"ranges": {"k_h": [1.0e-3, 1.0e+3], "k_sh": [1.0e-4, 1.0e+2]}}},
     "ours_halving": {"model": {"blowup_halvings": 1}},
     "ours_taut": {"motion": {"taut_chord_share": 0.95}},
-    "ours_drag_floor": {"model": {"ranges": {"C_c2": [1.0e-3, 10.0]}}},
+    "ours_paper_drag_range": {"model": {"ranges": {"C_c2": [1.0e-6, 10.0]}}},
 }
 
 

@@ -30,14 +30,14 @@ def test_only_paper_campaigns_with_a_second_trial_of_the_asked_physics_and_seeds
 
 def test_all_pairs_of_the_asked_methods_campaigns_variant_names_included(tmp_path):
     _campaign(tmp_path, "loop_family_mujoco_state_s7_seed0_ours", 4)
-    _campaign(tmp_path, "loop_family_mujoco_state_s7_seed0_ours_drag_floor", 2)
+    _campaign(tmp_path, "loop_family_mujoco_state_s7_seed0_ours_paper_drag_range", 2)
     _campaign(tmp_path, "loop_mujoco_state_s3_seed1_paper", 3)
     _campaign(tmp_path, "loop_mujoco_state_s1_seed1_ours", 1)       # hit first: no pair
     (tmp_path / "loop_mujoco_state_s2_seed1_ours.partial").mkdir()   # not a campaign's name
-    found = [(c.name, k) for c, _p, _t, _s, k in campaigns(tmp_path, ["mujoco"], [0, 1], ("ours", "ours_drag_floor"),
+    found = [(c.name, k) for c, _p, _t, _s, k in campaigns(tmp_path, ["mujoco"], [0, 1], ("ours", "ours_paper_drag_range"),
                                                             all_pairs=True)]
     assert found == [("loop_family_mujoco_state_s7_seed0_ours", 1), ("loop_family_mujoco_state_s7_seed0_ours", 2),
-                     ("loop_family_mujoco_state_s7_seed0_ours", 3), ("loop_family_mujoco_state_s7_seed0_ours_drag_floor", 1)]
+                     ("loop_family_mujoco_state_s7_seed0_ours", 3), ("loop_family_mujoco_state_s7_seed0_ours_paper_drag_range", 1)]
     assert [k for *_, k in campaigns(tmp_path, ["mujoco"], [1], ("paper",))] == [1]   # 1 -> 2 only by default
 
 
