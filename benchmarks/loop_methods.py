@@ -20,8 +20,9 @@
   (``motion.taut_chord_share``: slack ones miss, docs/method.md); ``ours_paper_drag_range`` searches the
   quadratic drag C_c2 over Table 2's whole range, from 1e-6 (ours from 1e-3: the thread's drag lost
   on the flat decades, docs/method.md; until stop 74 ours was this and the floor the variant
-  ``ours_drag_floor``); ``ours_mass_floor`` lets the relative masses reach 0.01, not 0.1 (a thread's
-  point is 1/3000 of a 10 g weight; docs/method.md).
+  ``ours_drag_floor``); ``ours_paper_mass_range`` keeps the relative masses from 0.1, as the paper's
+  method (ours from 0.01: a thread's point is 1/3000 of a 10 g weight, docs/method.md; until stop 75
+  ours was this and 0.01 the variant ``ours_mass_floor``).
 * :func:`method_config`: the config one campaign runs with (method, seed, physics, mode, material).
 """
 from __future__ import annotations
@@ -50,7 +51,7 @@ VARIANTS = {
     "ours_halving": {"model": {"blowup_halvings": 1}},
     "ours_taut": {"motion": {"taut_chord_share": 0.95}},
     "ours_paper_drag_range": {"model": {"ranges": {"C_c2": [1.0e-6, 10.0]}}},
-    "ours_mass_floor": {"model": {"ranges": {"mu": [0.01, 100.0]}}},
+    "ours_paper_mass_range": {"model": {"ranges": {"mu": [0.1, 100.0]}}},
 }
 
 

@@ -77,9 +77,9 @@ class ModelSettings(Section):
     ranges: Mapping[str, tuple] = _f({
         "k_s": (1.0e+3, 1.0e+6), "c_s": (1.0, 10.0), "k_h": (1.0e-3, 10.0), "c_h": (1.0e-3, 10.0),
         "k_sh": (1.0e-4, 1.0), "c_sh": (1.0e-4, 1.0), "C_c1": (1.0e-6, 10.0), "C_c2": (1.0e-3, 10.0),
-        "k_ph": (1.0e-3, 1.0), "c_ph": (1.0e-3, 1.0), "mu": (0.1, 100.0)},
+        "k_ph": (1.0e-3, 1.0), "c_ph": (1.0e-3, 1.0), "mu": (0.01, 100.0)},
         "[min, max] of each coefficient (Table 2; ours: k_ph, c_ph up to 1, C_c2 from 1e-3) and of the relative "
-        "masses mu; a file may set some",
+        "masses mu (ours from 0.01: a thread's point against a 10 g weight); a file may set some",
         additionalProperties=False, properties={k: {"$ref": "#/$defs/range"} for k in (*PARAM_NAMES, "mu")})
 
     def __post_init__(self):
