@@ -108,8 +108,10 @@ def test_cli_prints_the_verdict_after_E(trial, settings, campaign, tmp_path, cap
                    "--out-params", str(tmp_path / "params.json"), "--out-fit", str(tmp_path / "fit.parquet")])
     lines = capsys.readouterr().out.splitlines()
     assert rc == 0 and lines[0].startswith("estimation: E = ")
-    assert lines[1].startswith("fit: fail, the estimate is not usable, likely cause clock: shifting the frames' times "
-                               "by -30.0 ms")
+    head = "fit: fail, the estimate is not usable, likely cause clock: shifting the frames' times by "
+    assert lines[1].startswith(head)
+    # the planted +30 ms, found back within three frame periods (2 ms each) by a 64-evaluation fit
+    assert abs(float(lines[1][len(head):].split(" ms")[0]) + 30.0) <= 6.0
     assert lines[1].endswith(f"-> {tmp_path / 'params.json'}")
 
 
