@@ -203,25 +203,26 @@ def cmd_predict(args):
 
 def cmd_plan_first(args):
     out = Path(args.out_dir)
-    _run("plan-first", args, _campaign(args), out / "motion.csv", out / "motion.json", int(args.seed))
-    _LOG.say(f"first motion -> {out / 'motion.csv'}")
+    result = _run("plan-first", args, _campaign(args), out / "motion.csv", out / "motion.json", int(args.seed))
+    _plan_line("first motion", result, out)
 
 
 def cmd_plan(args):
     out = Path(args.out_dir)
-    _run("plan", args, Path(args.params), Path(args.played_motion), _campaign(args), out / "motion.csv",
-         out / "motion.json", int(args.seed), Path(args.tracks) if args.tracks else None,
-         Path(args.joints) if args.joints else None)
+    result = _run("plan", args, Path(args.params), Path(args.played_motion), _campaign(args), out / "motion.csv",
+                  out / "motion.json", int(args.seed), Path(args.tracks) if args.tracks else None,
+                  Path(args.joints) if args.joints else None)
+    _plan_line("next motion", result, out)
     doc = json.loads((out / "motion.json").read_text())
-    if not doc.get("planned_on_failed_fit"):
-        _LOG.say(f"next motion -> {out / 'motion.csv'}")
-        return
-    fit = doc.get("failed_fit") or {}
-    _LOG.say(f"next motion: WARNING: planned on a failed fit (likely cause: {fit.get('likely_cause') or 'not named'}): "
-             f"the estimate in {args.params} is not usable, nor is this motion's predicted hit; check before playing "
-             f"it -> {out / 'motion.csv'}")
-    for reason in fit.get("reasons", []):
-        print(f"  - {reason}")
+    for reason in (doc.get("failed_fit") or {}).get("reasons", []) if doc.get("planned_on_failed_fit") else []:
+        print(f"  - the fit ({args.params}): {reason}")
+
+
+def _plan_line(what: str, result, out: Path) -> None:
+    """The plan stage's terminal line: its verdict (motion.json), the predicted closest approach."""
+    doc = json.loads((out / "motion.json").read_text())
+    note = f"{what} predicted {result.d_min * 1000:.1f} mm from the target ({doc.get('origin') or 'planned'})"
+    _verdict_line("plan", doc.get("verdict") or {}, "the predicted hit is not doubted", out / "motion.csv", note)
 
 
 def cmd_report_trial(args):

@@ -54,6 +54,8 @@ def test_cli_plan_warns_on_a_failed_fit(tmp_path, campaign, played, capsys):
                    "plan", "--params", str(tmp_path / "params.json"), "--played-motion", str(tmp_path / "m1.json"),
                    "--campaign", str(tmp_path / "campaign.yaml"), "--out-dir", str(tmp_path / "next"), "--seed", "1"])
     lines = capsys.readouterr().out.splitlines()
-    assert rc == 0 and lines[0].startswith("next motion: WARNING: planned on a failed fit (likely cause: geometry)")
+    assert rc == 0 and lines[0].startswith("plan: fail, next motion predicted ")
+    assert "): planned on a failed fit (likely cause: geometry)" in lines[0]
     assert lines[0].endswith(f"-> {tmp_path / 'next' / 'motion.csv'}")
-    assert lines[1:] == [f"  - {r}" for r in FAILED["reasons"]]
+    assert lines[-2:] == [f"  - the fit ({tmp_path / 'params.json'}): {r}" for r in FAILED["reasons"]]
+    assert read_json(tmp_path / "next" / "motion.json")["verdict"]["status"] == "fail"

@@ -87,7 +87,7 @@ def test_the_campaign_page_marks_a_failed_fit_another_target_and_gives_the_next_
     row = html[html.index('<tr class="execution'):html.index("</tr>", html.index('<tr class="execution'))]
     assert "other-target" in row.split(">")[0] and "planned for another target, (1450, 300) mm" in _text(row)
     badges = re.findall(r'verdict-(\w+)"><span class="badge ([\w-]+)"', row)
-    assert dict(badges) == {"geometry": "warn", "clock": "ok", "tracking": "warn", "fit": "fail"}
+    assert dict(badges) == {"geometry": "warn", "clock": "ok", "tracking": "warn", "fit": "fail", "plan": "fail"}
     assert "16.3 / 25.8" in _text(row)
     nxt = html[html.index('id="next-motion"'):]
     assert 'href="trial_1/motion.csv"' in nxt and "planned on a failed fit" in _text(nxt.split("</p>")[0])

@@ -80,6 +80,7 @@ from stringcast.model import first_parameters
 from .motion import Motion, time_grid
 from .search import draw_candidates, keep_best, residual_correction, start_postures
 from .prediction import Predictor
+from .verdict import plan_verdict
 
 
 @dataclass(frozen=True)
@@ -295,8 +296,12 @@ def write_motion(result: PlanResult, campaign: Campaign, motion: MotionSettings,
                  failed_fit: dict | None = None) -> None:
     """Write ``motion.csv`` (t_s, q1_rad..) and its ``motion.json`` sidecar (``observed_miss_mm``: the
     played motion's tracked tip's closest approach, when the plan read it; ``failed_fit``: the
-    verdict of a failed fit the plan was made on: ``planned_on_failed_fit`` and its reasons)."""
+    verdict of a failed fit the plan was made on: ``planned_on_failed_fit`` and its reasons), with the plan
+    stage's ``verdict`` (:func:`stringcast.plan.verdict.plan_verdict`: how sure the predicted hit is)."""
     m = result.motion
+    miss_m = float("nan") if observed_miss_mm is None else observed_miss_mm / 1000
+    verdict = plan_verdict(result.origin, result.hit, result.d_min, campaign.target.radius, result.residual,
+                           result.slack, failed_fit, miss_m)
     write_joint_table(out_csv, m.t, m.q)
     step = max(1, len(result.tip_path) // 400)
     write_json(out_json, {
@@ -317,7 +322,7 @@ def write_motion(result: PlanResult, campaign: Campaign, motion: MotionSettings,
         "origin": result.origin, "chord_share_at_closest_approach": result.chord_share,
         "slack_at_predicted_hit": result.slack,
         "message": result.message, "planned_on_failed_fit": failed_fit is not None,
-        "failed_fit": failed_fit})
+        "failed_fit": failed_fit, "verdict": verdict.as_dict()})
 
 
 def _rng(motion: MotionSettings, seed: int) -> np.random.Generator:

@@ -25,9 +25,10 @@ from .pages import (MALFORMED, _common, _env, _fmt, _motion_window, _tracked, cl
                     measured_hit)
 from .verdicts import stage_verdicts
 
-STAGES = ("geometry", "clock", "tracking", "fit")
+STAGES = ("geometry", "clock", "tracking", "fit", "plan")
 """The campaign table's verdict columns (geometry and clock: the files they refine where the trial has
-no sweep, :func:`stringcast.core.trial_result`; fit: params.json's verdict)."""
+no sweep, :func:`stringcast.core.trial_result`; fit: params.json's verdict; plan: the verdict of the next motion
+planned from this execution, its motion.json, :mod:`stringcast.plan.verdict`)."""
 
 
 def _stage_times(results: Path) -> tuple[list, list]:
@@ -91,7 +92,7 @@ def stage_cells(results: Path, params: dict) -> list[dict]:
     status "not run" where the stage wrote no file; the first reason where it is not ok)."""
     cells = []
     for stage in STAGES:
-        path = trial_result(results, stage)[1]
+        path = results / "motion.json" if stage == "plan" else trial_result(results, stage)[1]
         doc = params if stage == "fit" else (read_json(path) if path.is_file() else None)
         rows = stage_verdicts({stage: doc})["rows"]
         if not rows:

@@ -212,7 +212,8 @@ def _write_trial_report(trial: TrialFiles, res: TrialResults, campaign: Campaign
     summary = _trial_summary(params, diagnostics, valid, (d_meas, floor_m), campaign, played, nxt, bounds[1])
     tracking = Path(res.tracking)
     box = verdict_box({calib_stage: calib, sync_stage: sync,
-                       "tracking": read_json(tracking) if tracking.exists() else None, "fit": params})
+                       "tracking": read_json(tracking) if tracking.exists() else None, "fit": params,
+                       "plan": nxt})
     notes = [str(w) for w in calib.get("warnings", [])] + [str(w) for w in [params.get("message")] if w]
     warnings = list(dict.fromkeys(w for w in notes if reason_key(w) not in box["said"]))   # each said once
     cal_rows = _calibration_rows(calib, sync)
