@@ -70,7 +70,7 @@ def test_next_runs_a_recorded_trial_to_its_next_motion(field_next):
     assert plan["planner"] == "robust"
     assert plan["planned_on_failed_fit"] == (params["verdict"]["status"] == "fail")
     assert (res / "report.html").is_file() and (res / "logs" / "track_1.log").is_file()
-    assert f"-> {res / 'trial_1' / 'motion.csv'}" in out and "plan: " in out
+    assert f"next motion -> {res / 'trial_1' / 'motion.csv'}" in out
     assert (plan["verdict"]["status"] == "fail") == plan["planned_on_failed_fit"] and plan["verdict"]["reasons"]
     # the raw files are only read
     assert {p: p.stat().st_mtime_ns for p in (root / "data").rglob("*") if p.is_file()} == before
