@@ -24,24 +24,13 @@ from pathlib import Path
 
 from benchmarks.common import header, write
 from benchmarks.loop import RUN_NAME
-from stringcast.plan.verdict import RESIDUAL_WARN_RADII, plan_verdict
-
-RULES = ("failed_fit", "predicted_miss", "first", "new", "large_residual", "small_residual", "no_residual")
-"""Each step's rule: the first of these that applies (:func:`rule`)."""
-
+from stringcast.plan.verdict import BASES, RESIDUAL_WARN_RADII, plan_basis, plan_verdict
 
 def rule(doc: dict) -> str:
-    """Which of :data:`RULES` decides a motion.json's verdict (the first that applies)."""
-    residual = (doc.get("residual_correction") or {}).get("median_mm")
-    if doc.get("planned_on_failed_fit"):
-        return "failed_fit"
-    if not doc.get("hit_predicted", True):
-        return "predicted_miss"
-    if doc.get("origin") in ("first", "new"):
-        return doc["origin"]
-    if residual is None:
-        return "no_residual"
-    return "large_residual" if residual > RESIDUAL_WARN_RADII * doc["target"]["radius_mm"] else "small_residual"
+    """What a stored motion.json's plan rests on (:func:`~stringcast.plan.verdict.plan_basis`)."""
+    return plan_basis(doc.get("origin") or "", bool(doc.get("hit_predicted", True)),
+                      float(doc["target"]["radius_mm"]) / 1000, doc.get("residual_correction"),
+                      (doc.get("failed_fit") or {}) if doc.get("planned_on_failed_fit") else None)
 
 
 def verdict_of(doc: dict) -> str:
@@ -101,7 +90,7 @@ def rates(rows: list[dict]) -> dict:
                 "ci95": wilson(hits, len(sel))}
     return {"all": cell(rows),
             "status": {s: cell([r for r in rows if r["status"] == s]) for s in ("ok", "warn", "fail")},
-            "rule": {u: cell([r for r in rows if r["rule"] == u]) for u in RULES}}
+            "rule": {u: cell([r for r in rows if r["rule"] == u]) for u in BASES}}
 
 
 def summarize(rows: list[dict]) -> dict:

@@ -212,17 +212,18 @@ def cmd_plan(args):
     result = _run("plan", args, Path(args.params), Path(args.played_motion), _campaign(args), out / "motion.csv",
                   out / "motion.json", int(args.seed), Path(args.tracks) if args.tracks else None,
                   Path(args.joints) if args.joints else None)
-    _plan_line("next motion", result, out)
-    doc = json.loads((out / "motion.json").read_text())
+    doc = _plan_line("next motion", result, out)
     for reason in (doc.get("failed_fit") or {}).get("reasons", []) if doc.get("planned_on_failed_fit") else []:
         print(f"  - the fit ({args.params}): {reason}")
 
 
-def _plan_line(what: str, result, out: Path) -> None:
-    """The plan stage's terminal line: its verdict (motion.json), the predicted closest approach."""
+def _plan_line(what: str, result, out: Path) -> dict:
+    """The plan stage's terminal line: its verdict (motion.json), the predicted closest approach; returns
+    the motion.json it read."""
     doc = json.loads((out / "motion.json").read_text())
     note = f"{what} predicted {result.d_min * 1000:.1f} mm from the target ({doc.get('origin') or 'planned'})"
     _verdict_line("plan", doc.get("verdict") or {}, "the predicted hit is not doubted", out / "motion.csv", note)
+    return doc
 
 
 def cmd_report_trial(args):

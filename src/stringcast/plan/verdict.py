@@ -35,6 +35,33 @@ HIT_RATE = {"small_residual": "about nine times in ten", "large_residual": "abou
 """How often such plans hit over the lab's families (module doc; ``results/bench/plan_verdict.json``)."""
 
 
+def plan_basis(origin: str, hit: bool, radius_m: float, residual: dict | None = None,
+               failed_fit: dict | None = None) -> str:
+    """What a plan rests on, the first of :data:`BASES` that applies (module doc).
+
+    Args:
+        origin, hit, radius_m, residual, failed_fit: as :func:`plan_verdict`'s.
+
+    Returns:
+        ``failed_fit``, ``predicted_miss``, ``first``, ``new``, ``no_residual`` (no residual correction, or
+        not finite), ``large_residual`` (beyond :data:`RESIDUAL_WARN_RADII` target radii) or ``small_residual``.
+    """
+    size = None if residual is None else residual.get("median_mm")
+    if failed_fit is not None:
+        return "failed_fit"
+    if not hit:
+        return "predicted_miss"
+    if origin in ("first", "new"):
+        return origin
+    if size is None or not math.isfinite(size):
+        return "no_residual"
+    return "large_residual" if size > RESIDUAL_WARN_RADII * radius_m * 1000 else "small_residual"
+
+
+BASES = ("failed_fit", "predicted_miss", "first", "new", "large_residual", "small_residual", "no_residual")
+"""The bases :func:`plan_basis` names."""
+
+
 def plan_verdict(origin: str, hit: bool, d_min_m: float, radius_m: float, residual: dict | None = None,
                  slack: bool = False, failed_fit: dict | None = None,
                  observed_miss_m: float = float("nan")) -> Verdict:
@@ -77,18 +104,19 @@ def plan_verdict(origin: str, hit: bool, d_min_m: float, radius_m: float, residu
     if slack:
         v = v.add("warn", "the predicted hit is on a slack string, whose tip the model's guessed bending, damping and "
                           "drag place (such hits land about one time in six)")
-    if origin == "first":
+    basis = plan_basis(origin, True, radius_m, residual)        # the motion's own basis, beside the above
+    if basis == "first":
         return v.add("warn", "the first motion, planned before any fit of this string: first motions hit "
                              f"{HIT_RATE['first']} over the lab's string families; the next plan corrects this one's "
                              "tracked miss")
-    if origin == "new":
+    if basis == "new":
         miss = f" after a tracked miss of {observed_miss_m * 1000:.0f} mm" if math.isfinite(observed_miss_m) else ""
         return v.add("warn", f"a new motion (random posture and T){miss}: no measured correction carries over to it, "
                              f"and such plans hit {HIT_RATE['new']} over the lab's string families")
-    size = None if residual is None else residual.get("median_mm")
-    if size is None or not math.isfinite(size):
+    if basis == "no_residual":
         return v
-    if size > RESIDUAL_WARN_RADII * radius_mm:
+    size = residual["median_mm"]
+    if basis == "large_residual":
         return v.add("warn", f"the model is {size:.0f} mm off the played motion's tracked tip (median), more than the "
                              f"target's radius {radius_mm:.0f} mm: the hit rests on a correction larger than its "
                              f"tolerance, and such plans hit {HIT_RATE['large_residual']} over the lab's string families")
