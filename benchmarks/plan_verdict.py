@@ -13,6 +13,17 @@ beyond or within the target's radius, no correction), over all labs and per lab 
 or drawn materials): steps, hits, the hit rate and its 95 % Wilson interval; ``rows``: every step.
 ``results/bench/plan_verdict.json`` (or ``--out NAME``) with the library versions.
 
+``realised_step`` (docs/method.md, "The realised step of a perturbation"): for each perturbation (narrow or
+wide) played as execution k >= 2, how far the lab's tip moved of the way the plan meant it to: its closest
+approach to the target (the lab's tip path, ``ground_truth.parquet``, in the lab's hit window) moved from
+a_{k-1} to a_k where the plan aimed from a_{k-1} at the target, so the gain is
+(a_k - a_{k-1}) . (t - a_{k-1}) / |t - a_{k-1}|^2 (1: the string moved as the model said; a secant, as
+Broyden's update measures a Jacobian along its step). Its quartiles over all such steps, and over those that
+follow a missed perturbation, with the correlation between consecutive steps' gains; and ``aim_replay``, a
+first-order replay of aiming beyond the target (the realised shift scaled with the aim): the hits of a
+fixed aim of 1.25 and 1.5 times the step and of 1 / the previous step's gain (clipped below at 0.5, 0.67
+and 0.8, at most 1), against the hits as played.
+
 Run: ``python -m benchmarks.plan_verdict --work DIR [DIR ...] [--methods ours ...] [--out NAME]``.
 """
 from __future__ import annotations
@@ -21,6 +32,9 @@ import argparse
 import json
 import math
 from pathlib import Path
+
+import numpy as np
+import pandas as pd
 
 from benchmarks.common import header, write
 from benchmarks.loop import RUN_NAME
@@ -42,8 +56,34 @@ def verdict_of(doc: dict) -> str:
                         float("nan") if miss is None else float(miss) / 1000).status
 
 
+def lab_closest_point(truth_json: Path) -> np.ndarray | None:
+    """The lab's tip at its closest approach to the target within the lab's hit window, mm relative to the
+    target (2,), from the trial's ``ground_truth.parquet`` beside ``truth_json``; None without that file."""
+    path = truth_json.with_suffix(".parquet")
+    if not path.exists():
+        return None
+    lab = json.loads(truth_json.read_text())
+    df = pd.read_parquet(path, columns=["t_s", "point", "x_m", "y_m"])
+    tip = df[df["point"] == df["point"].max()]
+    lo, hi = lab.get("hit_window_s") or (-np.inf, np.inf)
+    tip = tip[(tip["t_s"] >= lo) & (tip["t_s"] <= hi)]
+    if tip.empty:
+        return None
+    xy = tip[["x_m", "y_m"]].to_numpy() * 1000 - np.asarray(lab["target_mm"][:2], float)
+    return xy[int(np.argmin(np.hypot(xy[:, 0], xy[:, 1])))]
+
+
+def realised_gain(before: np.ndarray | None, after: np.ndarray | None) -> float | None:
+    """How far a perturbation moved the tip's closest approach of the way to the target (module doc):
+    before, after (2,) mm relative to the target; None where either is unknown or before is on the target."""
+    if before is None or after is None or not np.hypot(*before) > 0:
+        return None
+    planned = -np.asarray(before, float)
+    return float((np.asarray(after, float) - before) @ planned / (planned @ planned))
+
+
 def find_plans(works: list[Path], methods: tuple) -> list[dict]:
-    """Every played plan of the runs under ``works`` (module doc): {name, physics, family, type, seed, k
+    """Every played plan of the runs under ``works`` (module doc): {name, run (its folder), physics, family, type, seed, k
     (the execution the plan was played as), origin, status, rule, residual_mm, predicted_mm, played_mm,
     hit}; a motion played alike in two runs once."""
     rows, seen = [], set()
@@ -55,21 +95,29 @@ def find_plans(works: list[Path], methods: tuple) -> list[dict]:
             res, data = run / "results" / run.name, run / "data" / run.name
             plans = [(1, res / "first_motion" / "motion.json")] + [
                 (int(p.parent.name.split("_")[1]) + 1, p) for p in res.glob("trial_*/motion.json")]
+            points: dict[int, np.ndarray | None] = {}
             for k, plan in sorted(plans):
                 truth = data / f"trial_{k}" / "ground_truth.json"
                 if not (plan.exists() and truth.exists()):
                     continue
+                points[k] = lab_closest_point(truth)
                 doc, lab = (json.loads(p.read_text()) for p in (plan, truth))
                 key = (m["physics"], bool(m["family"]), m["type"], m["seed"], k, round(float(lab["closest_approach_mm"]), 3))
                 if key in seen:
                     continue
                 seen.add(key)
-                rows.append({"name": run.name, "physics": m["physics"], "family": bool(m["family"]),
+                rows.append({"name": run.name, "run": str(run), "physics": m["physics"], "family": bool(m["family"]),
                              "type": int(m["type"]), "seed": int(m["seed"]), "k": k, "origin": doc.get("origin") or "",
                              "status": verdict_of(doc), "rule": rule(doc),
                              "residual_mm": (doc.get("residual_correction") or {}).get("median_mm"),
                              "predicted_mm": float(doc["closest_approach_mm"]),
-                             "played_mm": float(lab["closest_approach_mm"]), "hit": bool(lab["hit"])})
+                             "played_mm": float(lab["closest_approach_mm"]), "hit": bool(lab["hit"]),
+                             "realised_gain": None, "before_mm": None, "after_mm": None})
+                if k >= 2 and doc.get("origin") in ("perturbation", "wide_perturbation") \
+                        and realised_gain(points.get(k - 1), points[k]) is not None:
+                    rows[-1].update(realised_gain=realised_gain(points[k - 1], points[k]),
+                                    before_mm=points[k - 1].tolist(), after_mm=points[k].tolist(),
+                                    radius_mm=float(doc["target"]["radius_mm"]))
     return rows
 
 
@@ -100,6 +148,41 @@ def summarize(rows: list[dict]) -> dict:
                                    rates([r for r in rows if (r["physics"], r["family"]) == (p, f)]) for p, f in labs}}
 
 
+def realised_steps(rows: list[dict]) -> dict:
+    """The realised gains' quartiles over all perturbations and over those after a missed perturbation of the
+    same run, and the correlation of consecutive gains (module doc)."""
+    def quart(g):
+        return {"steps": len(g), "quartiles": np.percentile(g, [25, 50, 75]).tolist() if g else None,
+                "range": [min(g), max(g)] if g else None}
+    gain = {(r["run"], r["k"]): r["realised_gain"] for r in rows if r.get("realised_gain") is not None}
+    pairs = [(g, gain[(name, k + 1)]) for (name, k), g in gain.items() if (name, k + 1) in gain]
+    out = {"all": quart(list(gain.values())), "after_a_missed_perturbation": quart([b for _, b in pairs])}
+    out["consecutive_correlation"] = float(np.corrcoef(np.array(pairs).T)[0, 1]) if len(pairs) > 2 else None
+    out["aim_replay"] = aim_replay([r for r in rows if r.get("realised_gain") is not None], gain)
+    return out
+
+
+def aim_replay(steps: list[dict], gain: dict) -> dict:
+    """Hits of each aim rule (module doc) over all realised steps and over those after a missed
+    perturbation (``gain``: (run, k) -> realised gain): {rule: {"all": hits, "after_a_miss": hits}}."""
+    def hits(scale) -> dict:
+        out = {"all": 0, "after_a_miss": 0}
+        for r in steps:
+            g = scale(gain.get((r["run"], r["k"] - 1)))
+            if g is None:
+                continue
+            b, a = np.asarray(r["before_mm"]), np.asarray(r["after_mm"])
+            hit = bool(np.hypot(*(b + g * (a - b))) <= r["radius_mm"])
+            out["all"] += hit
+            out["after_a_miss"] += hit if (r["run"], r["k"] - 1) in gain else 0
+        return out
+    rules = {"as played": lambda prev: 1.0, "1.25": lambda prev: 1.25, "1.5": lambda prev: 1.5}
+    for lo in (0.5, 0.67, 0.8):
+        rules[f"1 / gain, gain in [{lo}, 1]"] = lambda prev, lo=lo: 1.0 if prev is None else 1 / min(1.0, max(lo, prev))
+    return {"steps": len(steps), "after_a_miss": sum((r["run"], r["k"] - 1) in gain for r in steps),
+            **{name: hits(f) for name, f in rules.items()}}
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--work", type=Path, nargs="+", required=True, help="folders holding loop_* runs")
@@ -108,10 +191,13 @@ def main(argv: list[str] | None = None) -> None:
     args = ap.parse_args(argv)
     rows = find_plans(args.work, tuple(args.methods))
     doc = {**header("plan_verdict", False), "work": [str(w) for w in args.work], "methods": args.methods,
-           "residual_warn_radii": RESIDUAL_WARN_RADII, "labs": summarize(rows), "rows": rows}
+           "residual_warn_radii": RESIDUAL_WARN_RADII, "labs": summarize(rows), "realised_step": realised_steps(rows), "rows": rows}
     for lab, fig in doc["labs"].items():
         cells = [(k, c) for k, c in (*fig["status"].items(), *fig["rule"].items()) if c["steps"]]
         print(f"{lab}: " + ", ".join(f"{k} {c['hits']}/{c['steps']}" for k, c in cells))
+    step = doc["realised_step"]
+    print(f"realised step gain: all {step['all']}, after a missed perturbation {step['after_a_missed_perturbation']}, "
+          f"consecutive correlation {step['consecutive_correlation']}, aim replay {step['aim_replay']}")
     print(f"-> {write(args.out, doc)}")
 
 
