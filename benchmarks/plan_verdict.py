@@ -56,13 +56,13 @@ def verdict_of(doc: dict) -> str:
                         float("nan") if miss is None else float(miss) / 1000).status
 
 
-def lab_closest_point(truth_json: Path) -> np.ndarray | None:
+def lab_closest_point(truth_json: Path, lab: dict) -> np.ndarray | None:
     """The lab's tip at its closest approach to the target within the lab's hit window, mm relative to the
-    target (2,), from the trial's ``ground_truth.parquet`` beside ``truth_json``; None without that file."""
+    target (2,), from the trial's ``ground_truth.parquet`` beside ``truth_json`` (``lab``: that json, read);
+    None without that file."""
     path = truth_json.with_suffix(".parquet")
     if not path.exists():
         return None
-    lab = json.loads(truth_json.read_text())
     df = pd.read_parquet(path, columns=["t_s", "point", "x_m", "y_m"])
     tip = df[df["point"] == df["point"].max()]
     lo, hi = lab.get("hit_window_s") or (-np.inf, np.inf)
@@ -85,7 +85,8 @@ def realised_gain(before: np.ndarray | None, after: np.ndarray | None) -> float 
 def find_plans(works: list[Path], methods: tuple) -> list[dict]:
     """Every played plan of the runs under ``works`` (module doc): {name, run (its folder), physics, family, type, seed, k
     (the execution the plan was played as), origin, status, rule, residual_mm, predicted_mm, played_mm,
-    hit}; a motion played alike in two runs once."""
+    hit, radius_mm, and for a perturbation played as k >= 2 its realised_gain with the lab's closest points
+    before_mm and after_mm (else None)}; a motion played alike in two runs once."""
     rows, seen = [], set()
     for work in works:
         for run in sorted(Path(work).glob("loop_*")):
@@ -100,8 +101,8 @@ def find_plans(works: list[Path], methods: tuple) -> list[dict]:
                 truth = data / f"trial_{k}" / "ground_truth.json"
                 if not (plan.exists() and truth.exists()):
                     continue
-                points[k] = lab_closest_point(truth)
                 doc, lab = (json.loads(p.read_text()) for p in (plan, truth))
+                points[k] = lab_closest_point(truth, lab)
                 key = (m["physics"], bool(m["family"]), m["type"], m["seed"], k, round(float(lab["closest_approach_mm"]), 3))
                 if key in seen:
                     continue
@@ -112,12 +113,12 @@ def find_plans(works: list[Path], methods: tuple) -> list[dict]:
                              "residual_mm": (doc.get("residual_correction") or {}).get("median_mm"),
                              "predicted_mm": float(doc["closest_approach_mm"]),
                              "played_mm": float(lab["closest_approach_mm"]), "hit": bool(lab["hit"]),
+                             "radius_mm": float(doc["target"]["radius_mm"]),
                              "realised_gain": None, "before_mm": None, "after_mm": None})
-                if k >= 2 and doc.get("origin") in ("perturbation", "wide_perturbation") \
-                        and realised_gain(points.get(k - 1), points[k]) is not None:
-                    rows[-1].update(realised_gain=realised_gain(points[k - 1], points[k]),
-                                    before_mm=points[k - 1].tolist(), after_mm=points[k].tolist(),
-                                    radius_mm=float(doc["target"]["radius_mm"]))
+                gain = realised_gain(points.get(k - 1), points[k]) \
+                    if k >= 2 and doc.get("origin") in ("perturbation", "wide_perturbation") else None
+                if gain is not None:
+                    rows[-1].update(realised_gain=gain, before_mm=points[k - 1].tolist(), after_mm=points[k].tolist())
     return rows
 
 
@@ -155,7 +156,7 @@ def realised_steps(rows: list[dict]) -> dict:
         return {"steps": len(g), "quartiles": np.percentile(g, [25, 50, 75]).tolist() if g else None,
                 "range": [min(g), max(g)] if g else None}
     gain = {(r["run"], r["k"]): r["realised_gain"] for r in rows if r.get("realised_gain") is not None}
-    pairs = [(g, gain[(name, k + 1)]) for (name, k), g in gain.items() if (name, k + 1) in gain]
+    pairs = [(g, gain[(run, k + 1)]) for (run, k), g in gain.items() if (run, k + 1) in gain]
     out = {"all": quart(list(gain.values())), "after_a_missed_perturbation": quart([b for _, b in pairs])}
     out["consecutive_correlation"] = float(np.corrcoef(np.array(pairs).T)[0, 1]) if len(pairs) > 2 else None
     out["aim_replay"] = aim_replay([r for r in rows if r.get("realised_gain") is not None], gain)

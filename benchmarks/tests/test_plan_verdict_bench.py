@@ -97,9 +97,8 @@ def test_the_lab_closest_point_keeps_to_the_hit_window(tmp_path):
     from benchmarks.plan_verdict import lab_closest_point
     truth = tmp_path / "ground_truth.json"
     _tip_path(truth, (-30.0, 5.0))
-    assert lab_closest_point(truth) == __import__("pytest").approx([-30.0, 5.0], abs=1e-6)
     doc = json.loads(truth.read_text())
-    truth.write_text(json.dumps(doc | {"hit_window_s": [1.6, 2.0]}))   # the pass at t = 1 is outside it
-    far = lab_closest_point(truth)
+    assert lab_closest_point(truth, doc) == __import__("pytest").approx([-30.0, 5.0], abs=1e-6)
+    far = lab_closest_point(truth, doc | {"hit_window_s": [1.6, 2.0]})   # the pass at t = 1 is outside it
     assert np.hypot(*far) > 200                                          # 0.6 s further along the pass
-    assert lab_closest_point(tmp_path / "none.json") is None
+    assert lab_closest_point(tmp_path / "none.json", doc) is None
