@@ -35,6 +35,7 @@ REAL_PROFILE = ROOT / "config" / "profiles" / "slurm" / "config.yaml"
 ACCOUNT = os.environ.get("STRINGCAST_SLURM_ACCOUNT", "stringcast")
 PARTITION = os.environ.get("STRINGCAST_SLURM_PARTITION")   # None: the cluster's default partition
 CORES = 2               # the local run's --cores (run_campaign's default)
+QUICK_POLL = Path(__file__).with_name("snakemake_quick_poll.py")   # python -m snakemake, polling sacct every 3 s
 TIMEOUT_S = 900         # the Slurm run, at most (a job that can never start would hang it)
 # every rule of the workflow: the campaign's first motion, one trial's stages, the campaign report
 RULES = {"plan_first", "decode", "calib_views", "calibrate", "sync", "sweep", "track", "estimate", "plan", "report_trial",
@@ -102,7 +103,8 @@ def fitted_profile(real: dict, account: str, partition: str, cpus: int, mem_mb: 
       --cores in the same way.
     * ``mem_mb``: at most the node's memory (it has more than the profile asks in CI).
     * ``slurm-init-seconds-before-status-checks``: the first ``sacct`` poll after 2 s, not the
-      plugin's 40 s, as each of these jobs takes seconds.
+      plugin's 40 s, as each of these jobs takes seconds (and :mod:`snakemake_quick_poll`, which
+      runs the profile, keeps the later polls 3 s apart).
     """
     prof = copy.deepcopy(real)
     prof["default-resources"] = {**prof.get("default-resources", {}), "slurm_account": account,
@@ -120,7 +122,7 @@ def fitted_profile(real: dict, account: str, partition: str, cpus: int, mem_mb: 
 def run_through_slurm(root: Path, profile: Path) -> str:
     """Run the whole workflow in ``root`` with ``profile``; returns Snakemake's output. On failure
     or timeout the output's tail and the queue are in the message (and the run's jobs cancelled)."""
-    proc = subprocess.Popen([sys.executable, "-m", "snakemake", "--profile", str(profile), "--directory", str(root)],
+    proc = subprocess.Popen([sys.executable, str(QUICK_POLL), "--profile", str(profile), "--directory", str(root)],
                             cwd=root, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                             start_new_session=True)
     try:
