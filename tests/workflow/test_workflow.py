@@ -132,9 +132,12 @@ def test_campaign_end_to_end(tmp_path, finished):
     t_done = time.time()
     out = snakemake(root, "-n")
     assert "Nothing to be done" in out or not planned_rules(out), out
-    # deleting one trial's tracks reruns what depends on it, not calibration or sync
+    # deleting the last trial's tracks (it has the fewest outputs downstream) reruns what depends on
+    # them, not calibration or sync
     before_data = snapshot(root / "data")
-    (res / "trial_1" / "tracks.parquet").unlink()
+    last = res / f"trial_{k}"
+    tracks, params = pd.read_parquet(last / "tracks.parquet"), json.loads((last / "params.json").read_text())
+    (last / "tracks.parquet").unlink()
     rules = planned_rules(snakemake(root, "-n"))
     assert {"track", "estimate", "plan", "report_trial", "report_campaign"} <= rules
     assert not rules & {"calibrate", "sync", "sweep", "plan_first"}
@@ -142,7 +145,7 @@ def test_campaign_end_to_end(tmp_path, finished):
     # a run killed hard in the middle of tracking, then started again, ends with the same results
     proc = subprocess.Popen([sys.executable, "-m", "snakemake", "--cores", "2", "--directory", str(root)],
                             cwd=root, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-    log = res / "logs" / "track_1.log"
+    log = res / "logs" / f"track_{k}.log"
 
     def tracking_started():    # Snakemake removes a job's old log as the job starts: it may go between looks
         try:
@@ -156,11 +159,11 @@ def test_campaign_end_to_end(tmp_path, finished):
     time.sleep(1.0)
     os.killpg(proc.pid, signal.SIGKILL)   # snakemake and its job, as a power cut would
     proc.wait()
-    assert not (res / "trial_1" / "tracks.parquet").exists()   # nothing half-written under the real name
+    assert not (last / "tracks.parquet").exists()   # nothing half-written under the real name
     snakemake(root, "--unlock")
     snakemake(root, "--rerun-incomplete")
-    pd.testing.assert_frame_equal(pd.read_parquet(res / "trial_1" / "tracks.parquet"), tracks)
-    again = json.loads((res / "trial_1" / "params.json").read_text())
+    pd.testing.assert_frame_equal(pd.read_parquet(last / "tracks.parquet"), tracks)
+    again = json.loads((last / "params.json").read_text())
     assert again["E_mm"] == pytest.approx(params["E_mm"], rel=1e-9)
     # raw data under data/ were never written by the workflow
     assert snapshot(root / "data") == before_data
@@ -291,6 +294,39 @@ def test_a_configfile_that_changes_nothing_a_stage_reads_reruns_nothing(finished
     assert {"plan", "plan_first"} <= rules and not rules & {"calibrate", "sync", "track"}
 
 
+@pytest.mark.slow
+def test_a_broken_campaign_is_refused_and_the_others_run(finished):
+    """A campaign.yaml typo in one campaign: a run of every campaign builds the others, lists the broken
+    one and ends non-zero; a target of another campaign runs; a target of the broken one names its problem."""
+    root, _ = finished
+    snakemake(root)                                        # the built campaign up to date
+    (root / "results" / "e2e" / "report.html").unlink()   # ... but for its page, which the next run makes
+    broken = root / "data" / "broken"
+    broken.mkdir()
+    (broken / "campaign.yaml").write_text("string: 1\ntarget: [1\n")
+    try:
+        done = snapshot(root / "results" / "e2e")
+        proc = subprocess.run([sys.executable, "-m", "snakemake", "--cores", "2", "--directory", str(root)], cwd=root,
+                              capture_output=True, text=True, timeout=600)
+        out = proc.stdout + proc.stderr
+        assert proc.returncode != 0, out
+        assert "data/broken was not built" in out and "data/broken/campaign.yaml" in out, out
+        assert "Traceback" not in out
+        after = snapshot(root / "results" / "e2e")
+        assert (root / "results" / "e2e" / "report.html").exists()          # the other campaign was built
+        kept = {k: v for k, v in done.items() if k.split("/")[0] not in ("logs", "benchmarks")}
+        assert {k: v for k, v in after.items() if k in kept} == kept        # and nothing else of it remade
+        assert not (root / "results" / "broken").exists()
+        snakemake(root, "results/e2e/report.html")
+        proc = subprocess.run([sys.executable, "-m", "snakemake", "--cores", "1", "--directory", str(root),
+                               "results/broken/first_motion/motion.csv"], cwd=root, capture_output=True, text=True)
+        out = proc.stdout + proc.stderr
+        assert proc.returncode != 0 and "data/broken/campaign.yaml" in out and "none of its jobs is built" in out, out
+    finally:
+        (broken / "campaign.yaml").unlink()
+        broken.rmdir()
+
+
 def _job_processes(root: Path, log_name: str) -> list[int]:
     """Pids of the processes running the workflow job that logs to ``log_name`` in project ``root``."""
     pids = []
@@ -402,36 +438,3 @@ def test_two_runs_on_one_results_folder_lose_no_finished_output(finished):
         if name.startswith(("trial_1/", "logs/", "benchmarks/")) and name != "trial_1/tracks.parquet":
             continue
         assert end[name][2] == digest, name
-
-
-@pytest.mark.slow
-def test_a_broken_campaign_is_refused_and_the_others_run(finished):
-    """A campaign.yaml typo in one campaign: a run of every campaign builds the others, lists the broken
-    one and ends non-zero; a target of another campaign runs; a target of the broken one names its problem."""
-    root, _ = finished
-    snakemake(root)                                        # the built campaign up to date
-    (root / "results" / "e2e" / "report.html").unlink()   # ... but for its page, which the next run makes
-    broken = root / "data" / "broken"
-    broken.mkdir()
-    (broken / "campaign.yaml").write_text("string: 1\ntarget: [1\n")
-    try:
-        done = snapshot(root / "results" / "e2e")
-        proc = subprocess.run([sys.executable, "-m", "snakemake", "--cores", "2", "--directory", str(root)], cwd=root,
-                              capture_output=True, text=True, timeout=600)
-        out = proc.stdout + proc.stderr
-        assert proc.returncode != 0, out
-        assert "data/broken was not built" in out and "data/broken/campaign.yaml" in out, out
-        assert "Traceback" not in out
-        after = snapshot(root / "results" / "e2e")
-        assert (root / "results" / "e2e" / "report.html").exists()          # the other campaign was built
-        kept = {k: v for k, v in done.items() if k.split("/")[0] not in ("logs", "benchmarks")}
-        assert {k: v for k, v in after.items() if k in kept} == kept        # and nothing else of it remade
-        assert not (root / "results" / "broken").exists()
-        snakemake(root, "results/e2e/report.html")
-        proc = subprocess.run([sys.executable, "-m", "snakemake", "--cores", "1", "--directory", str(root),
-                               "results/broken/first_motion/motion.csv"], cwd=root, capture_output=True, text=True)
-        out = proc.stdout + proc.stderr
-        assert proc.returncode != 0 and "data/broken/campaign.yaml" in out and "none of its jobs is built" in out, out
-    finally:
-        (broken / "campaign.yaml").unlink()
-        broken.rmdir()
