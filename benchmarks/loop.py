@@ -54,7 +54,9 @@ The family (issue 52, ``--family``): each seed s also draws the lab's string mat
 and bead chain), the runs are named ``loop_family_...``, and their summary (the same keys, ``draws``)
 goes into loop.json's ``family`` entry beside today's (:func:`benchmarks.loop_summary.family_into`)
 and loop_family.md. Every run records ``fit_skill`` (each fit's skill, the fit check's share of the
-tracked motion explained) and the summary its median and 10th percentile per method.
+tracked motion explained) and the summary its median and 10th percentile per method. The family's
+filmed check (``--video-seeds 0 1 2 3 4 --video-seed-per-type --video-methods paper ours``: type k
+filmed with seed (k - 1) mod 5, every class at least once, both methods) is the entry's ``video_check``.
 
 Run: ``python -m benchmarks.loop [--quick] [--physics mujoco elastica] [--mode state|video]
 [--types 1 5] [--seeds 0 1 2 3 4] [--methods paper ours] [--video-seeds 0] [--family] [--work DIR]``, one
@@ -109,6 +111,9 @@ class Spec:
     video_types: tuple[int, ...] | None = None       # None: the main runs' types
     video_seeds: tuple[int, ...] = (0,)
     video_methods: tuple[str, ...] = ("ours",)
+    video_seed_per_type: bool = False
+    """The video check films each of its types with one seed, the i-th type's ``video_seeds[i % n]`` (types 1-7
+    with seeds 0-4 in a family run: every material class at least once), not every seed."""
     state_source: Path = STATE_SOURCE
     family: bool = False
     """Each seed s also draws the lab's string material (``lab.material``: seed s, class ``KINDS[s % 5]``,
@@ -126,12 +131,14 @@ class Spec:
     def campaigns(self) -> list[tuple[str, str, int, int, str]]:
         """(physics, mode, type, seed, method) of every run, seed by seed within each physics (a
         partial run covers every type), each physics' video check after its main runs."""
+        vtypes, vseeds = self.video_types or self.types, self.video_seeds
+        filmed = ([(k, vseeds[i % len(vseeds)]) for i, k in enumerate(vtypes)] if self.video_seed_per_type and vseeds
+                  else [(k, s) for s in vseeds for k in vtypes])
         out = []
         for p in self.physics:
             out += [(p, self.mode, k, s, m) for s in self.seeds for k in self.types for m in self.methods]
             if self.mode == "state":
-                out += [(p, "video", k, s, m) for s in self.video_seeds for k in (self.video_types or self.types)
-                        for m in self.video_methods]
+                out += [(p, "video", k, s, m) for k, s in filmed for m in self.video_methods]
         return out
 
 
@@ -357,6 +364,8 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--video-types", type=int, nargs="+", help="the video check's types (default: --types)")
     ap.add_argument("--video-methods", nargs="+", choices=list(METHODS), default=["ours"],
                     help="the video check's methods")
+    ap.add_argument("--video-seed-per-type", action="store_true",
+                    help="the video check films its i-th type with the (i mod n)-th of --video-seeds only")
     ap.add_argument("--state-source", type=Path, default=STATE_SOURCE,
                     help="folder holding tracking.json and generalization.json (the state mode's error)")
     ap.add_argument("--family", action="store_true", help="each seed also draws the lab's string material "
@@ -380,7 +389,8 @@ def main(argv: list[str] | None = None) -> None:
                     seeds=tuple(a.seeds if a.seeds is not None else quick_seeds or (0, 1, 2, 3, 4)),
                     methods=tuple(a.methods or METHODS), physics=tuple(a.physics), mode=a.mode,
                     video_types=tuple(a.video_types) if a.video_types else None, video_seeds=tuple(a.video_seeds),
-                    video_methods=tuple(a.video_methods), state_source=a.state_source.resolve(), family=a.family)
+                    video_methods=tuple(a.video_methods), video_seed_per_type=a.video_seed_per_type,
+                    state_source=a.state_source.resolve(), family=a.family)
     except ValueError as exc:
         ap.error(str(exc))
     if not a.only:

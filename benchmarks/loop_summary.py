@@ -307,8 +307,9 @@ def markdown(doc: dict, spec) -> str:
 def family_into(loop_json: Path, doc: dict, spec, materials: dict) -> dict:
     """loop.json with ``doc`` (a family run's document) as its ``family`` entry: per physics the summary
     (:func:`benchmarks.loop_summary.summarize`'s keys, ``fit_skill``), the draws (type, seed, material)
-    and whether the family run is complete, and ``materials`` (each seed's ``lab.material``); another
-    physics' family entry and the rest of loop.json as they were (a fresh one if none)."""
+    and whether the family run is complete, ``materials`` (each seed's ``lab.material``) and, where the run
+    filmed some, ``video_check`` (:func:`video_check` per physics); another physics' family entry (and
+    filmed check) and the rest of loop.json as they were (a fresh one if none)."""
     from stringcast.core import read_json
 
     base = read_json(loop_json) if loop_json.exists() else header("loop", False)
@@ -320,5 +321,7 @@ def family_into(loop_json: Path, doc: dict, spec, materials: dict) -> dict:
     family.update({"complete": doc["complete"], "mode": spec.mode, "types": list(spec.types),
                    "seeds": list(spec.seeds), "materials": materials,
                    "runs": runs, "git_commits": doc["git_commits"], "libraries": doc["libraries"]})
+    if "skipped" not in doc.get("video_check", {"skipped": True}):   # the run's filmed campaigns (another
+        family["video_check"] = dict(family.get("video_check") or {}) | doc["video_check"]   # engine's stay)
     base["family"] = family
     return base

@@ -13,7 +13,7 @@ import pytest
 from benchmarks.loop import Spec, run_dir
 from benchmarks.loop_methods import VARIANTS, method_config
 from benchmarks.loop_summary import family_into
-from benchmarks.loop_summary import bootstrap_ci, summarize
+from benchmarks.loop_summary import bootstrap_ci, summarize, video_check
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -124,6 +124,10 @@ def test_spec_and_run_config(config):
     runs = spec.campaigns()
     assert len(runs) == 2 * 2 * 2 + 2 and runs[-1] == ("mujoco", "video", 5, 0, "ours")
     assert len(Spec(mode="video", physics=("mujoco",)).campaigns()) == 7 * 5 * 2
+    filmed = [c for c in Spec(video_seeds=(0, 1, 2, 3, 4), video_methods=("paper", "ours"), video_seed_per_type=True,
+                              physics=("elastica",)).campaigns() if c[1] == "video"]
+    assert [(k, s) for _, _, k, s, m in filmed if m == "ours"] == [(1, 0), (2, 1), (3, 2), (4, 3), (5, 4), (6, 0), (7, 1)]
+    assert len(filmed) == 14
     with pytest.raises(ValueError, match="physics bullet"):
         Spec(physics=("bullet",))
     cfg = method_config(config, "ours", 3, "elastica", "state")
@@ -162,7 +166,14 @@ def test_a_family_run_draws_every_material_class_and_joins_loop_json(config, tmp
     both = family_into(old, {"elastica": summarize(el, [1, 2], ["paper", "ours"]), "complete": True, "runs": el,
                              "git_commits": {}, "libraries": {}}, spec_el, {})
     assert both["family"]["mujoco"] == fam and both["family"]["elastica"]["mean_ours"] == 1.0
-    assert len(both["family"]["runs"]) == 16
+    assert len(both["family"]["runs"]) == 16 and "video_check" not in both["family"]
+    filmed = {"types": [1, 2], "seeds": [0], "methods": ["paper", "ours"],      # the filmed check, per engine
+              "elastica": video_check(el, None, el, [1, 2], ["paper", "ours"])}
+    old.write_text(json.dumps(both))
+    film = family_into(old, {"elastica": both["family"]["elastica"], "complete": True, "runs": el,
+                             "git_commits": {}, "libraries": {}, "video_check": filmed}, spec_el, {})
+    assert film["family"]["video_check"]["elastica"]["mean_ours"] == 1.0
+    assert film["family"]["video_check"]["elastica"]["relative_difference_ours_same_campaigns"] == 0.0
 
 
 def test_a_variant_is_ours_with_one_setting_changed(config):
