@@ -138,8 +138,15 @@ def video_check(video: list[dict], state: dict | None, state_runs: list[dict], t
     """One physics' video check: the video-mode runs' summary (:func:`summarize`) and, per method, the
     relative difference of their mean to the state mode's (``relative_difference_<label>``:
     (video - state) / state, against the state entry's mean; ``..._same_campaigns``: against the
-    state mode's mean over the same (type, seed) campaigns)."""
+    state mode's mean over the same (type, seed) campaigns). With one filmed seed per type the
+    intervals by type have no spread; ``paired_diffs`` lists each campaign's (type, seed, ours minus the
+    paper's) and ``paired_diff_ci95_pooled`` resamples the campaigns as one group."""
     out = summarize(video, types, methods)
+    if {"ours", "paper"} <= set(methods):
+        done = {m: {(r["string"], r["seed"]): executions(r) for r in video if r["method"] == m} for m in ("ours", "paper")}
+        diffs = [[k, s, done["ours"][(k, s)] - done["paper"][(k, s)]] for k, s in sorted(set(done["ours"]) & set(done["paper"]))]
+        out["paired_diffs"] = diffs
+        out["paired_diff_ci95_pooled"] = bootstrap_ci({"all": [d for *_, d in diffs]})
     for m in methods:
         lab = LABELS[m]
         v, s = out.get(f"mean_{lab}"), (state or {}).get(f"mean_{lab}")

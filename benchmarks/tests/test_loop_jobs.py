@@ -174,6 +174,8 @@ def test_a_family_run_draws_every_material_class_and_joins_loop_json(config, tmp
                              "git_commits": {}, "libraries": {}, "video_check": filmed}, spec_el, {})
     assert film["family"]["video_check"]["elastica"]["mean_ours"] == 1.0
     assert film["family"]["video_check"]["elastica"]["relative_difference_ours_same_campaigns"] == 0.0
+    assert film["family"]["video_check"]["elastica"]["paired_diffs"] == [[1, 0, -1], [1, 1, -1], [2, 0, -1], [2, 1, -1]]
+    assert film["family"]["video_check"]["elastica"]["paired_diff_ci95_pooled"] == [-1.0, -1.0]
 
 
 def test_a_variant_is_ours_with_one_setting_changed(config):
