@@ -304,8 +304,11 @@ def markdown(doc: dict, spec) -> str:
     for p in spec.physics if "skipped" not in vc else ():
         diffs = ", ".join(f"{lab}: {vc[p].get(f'relative_difference_{lab}'):+.0%}" for lab in ("ours", "paper_method")
                           if vc[p].get(f"relative_difference_{lab}") is not None) or "-"
+        pooled = ("" if vc[p].get("paired_diff_ci95_pooled") is None else "\nWith one seed per type the intervals above "
+                  f"have no spread; pooled over the campaigns, ours minus the paper's: {_f(vc[p]['paired_diff_ci95_pooled'])} "
+                  "(each campaign's: " + ", ".join(f"type {k} {d:+d}" for k, _, d in vc[p]["paired_diffs"]) + ").\n")
         out.append(f"## {p}, video-mode check\n\n" + table(vc[p], list(spec.video_methods))
-                   + f"\nRelative difference of the video mode's mean to the state mode's: {diffs}.\n")
+                   + f"\nRelative difference of the video mode's mean to the state mode's: {diffs}.\n" + pooled)
     commits = "; ".join(f"{m} at " + ", ".join(c[:7] + c[40:] if len(c) >= 40 else c for c in cs)
                         for m, cs in doc["git_commits"].items() if cs)
     return "\n".join(out) + (f"\nCode that ran the campaigns: {commits}.\n" if commits else "")

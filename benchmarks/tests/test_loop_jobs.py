@@ -12,7 +12,7 @@ import pytest
 
 from benchmarks.loop import Spec, run_dir
 from benchmarks.loop_methods import VARIANTS, method_config
-from benchmarks.loop_summary import family_into
+from benchmarks.loop_summary import family_into, markdown
 from benchmarks.loop_summary import bootstrap_ci, summarize, video_check
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -176,6 +176,10 @@ def test_a_family_run_draws_every_material_class_and_joins_loop_json(config, tmp
     assert film["family"]["video_check"]["elastica"]["relative_difference_ours_same_campaigns"] == 0.0
     assert film["family"]["video_check"]["elastica"]["paired_diffs"] == [[1, 0, -1], [1, 1, -1], [2, 0, -1], [2, 1, -1]]
     assert film["family"]["video_check"]["elastica"]["paired_diff_ci95_pooled"] == [-1.0, -1.0]
+    md = markdown({"elastica": both["family"]["elastica"] | {"mode": "state"}, "complete": True, "runs": el, "git_commits": {},
+                   "video_check": filmed}, spec_el)
+    assert ("pooled over the campaigns, ours minus the paper's: [-1.00, -1.00] (each campaign's: type 1 -1, "
+            "type 1 -1, type 2 -1, type 2 -1)") in md
 
 
 def test_a_variant_is_ours_with_one_setting_changed(config):
