@@ -87,6 +87,13 @@ def per_string(runs: list[dict], types: list[int], methods: list[str]) -> dict:
     return per
 
 
+def paired(runs: list[dict], methods: list[str]) -> tuple[dict, list[tuple]]:
+    """Each method's executions per campaign, {method: {(type, seed): executions}}, and the campaigns
+    (type, seed) every method finished, sorted: the like-for-like comparison."""
+    done = {m: {(r["string"], r["seed"]): executions(r) for r in runs if r["method"] == m} for m in methods}
+    return done, sorted(set.intersection(*(set(d) for d in done.values())))
+
+
 def summarize(runs: list[dict], types: list[int], methods: list[str]) -> dict:
     """One physics' entry of loop.json (docs/results.md): per_string; per method ``campaigns``, the mean
     (type means averaged), max, all-hit flag, first-shot hit rate and the median next-motion prediction
@@ -118,8 +125,7 @@ def summarize(runs: list[dict], types: list[int], methods: list[str]) -> dict:
     out["paper_table3_mean"] = float(np.mean([PAPER_TABLE3[k] for k in types]))
     out["paired_diff_ci95"] = None
     if len(methods) > 1:  # the campaigns (type, seed) every method finished: a like-for-like comparison
-        done = {m: {(r["string"], r["seed"]): executions(r) for r in runs if r["method"] == m} for m in methods}
-        both = sorted(set.intersection(*(set(d) for d in done.values())))
+        done, both = paired(runs, methods)
         out["paired_campaigns"] = len(both)
         for m in methods:
             out[f"paired_mean_{LABELS[m]}"] = float(np.mean([done[m][c] for c in both])) if both else None
@@ -143,8 +149,8 @@ def video_check(video: list[dict], state: dict | None, state_runs: list[dict], t
     paper's) and ``paired_diff_ci95_pooled`` resamples the campaigns as one group."""
     out = summarize(video, types, methods)
     if {"ours", "paper"} <= set(methods):
-        done = {m: {(r["string"], r["seed"]): executions(r) for r in video if r["method"] == m} for m in ("ours", "paper")}
-        diffs = [[k, s, done["ours"][(k, s)] - done["paper"][(k, s)]] for k, s in sorted(set(done["ours"]) & set(done["paper"]))]
+        done, both = paired(video, ["ours", "paper"])
+        diffs = [[k, s, done["ours"][(k, s)] - done["paper"][(k, s)]] for k, s in both]
         out["paired_diffs"] = diffs
         out["paired_diff_ci95_pooled"] = bootstrap_ci({"all": [d for *_, d in diffs]})
     for m in methods:
