@@ -80,14 +80,16 @@ def _with_video_yaml(root, trial, name, **change):
 @pytest.fixture(scope="module")
 def synced(lab_trial, settings):
     """``synced(name, **change)``: :func:`_run` on the lab trial with video.yaml ``change``d, once per name
-    in the module (a sync of this clip takes 10-30 s): (its folder, its document)."""
+    in the module (a sync of this clip takes 10-30 s): (its folder, its document). A name asked again
+    must come with the same change."""
     root, trial, campaign, cfg, truth = lab_trial
     docs = {}
 
     def run(name, **change):
         if name not in docs:
-            docs[name] = (root / name, _run(root, trial, campaign, settings, name, **change))
-        return docs[name]
+            docs[name] = (change, root / name, _run(root, trial, campaign, settings, name, **change))
+        assert docs[name][0] == change, f"{name} was synced with {docs[name][0]}, not {change}"
+        return docs[name][1:]
     return run
 
 
