@@ -747,3 +747,32 @@ def test_a_stretched_string_keeps_its_points_at_shares_of_its_length(campaign, l
         [np.zeros(n), -s])
     assert ft.valid.all()
     assert np.abs(ft.positions - true).max() < 2.5 * M_PER_PX, np.abs(ft.positions - true).max()
+
+
+def test_a_frame_says_why_it_placed_no_point(campaign, settings):
+    """FrameTrack.unplaced (what tracking.json's lost_points and the verdict's cause read): a frame without the
+    string says no_string; a string whose start is hidden and whose seen length is far short of L (no anchor
+    at either end) says no_anchor; a string seen whole says nothing, its points placed."""
+    from stringcast.track.frame_tracker import FrameTracker
+
+    S, L = 240, campaign.string.length
+    cal = Calibration(_calibration().H_pixel_to_robot, (S, S), None, None, 0.1, 40)
+    bg = np.full((S, S), 120, np.float32)
+    poses = np.array([[[100.0, -400.0], [100.0, -250.0], [100.0, -120.0], [100.0, -40.0], [100.0, 10.0]]] * 3)
+    noise = np.random.default_rng(4).normal(0, 2.0, bg.shape).astype(np.float32)
+    tracker = FrameTracker(bg, (4.0, 0.0), cal, campaign, settings.tracking)
+
+    def frame(start_row, end_row):
+        f = bg.copy()
+        if end_row > start_row:
+            cv2.line(f, (100, start_row), (100, end_row), 70.0, 4)
+        return cv2.GaussianBlur(f, (0, 0), 1.2) + noise
+
+    whole = tracker.track(frame(10, round(10 + L / M_PER_PX) - 2), poses)
+    assert whole.valid.all() and whole.unplaced == ""
+    empty = tracker.track(frame(0, 0), poses)
+    assert not empty.valid.any() and empty.unplaced == "no_string"
+    short = tracker.track(frame(35, 80), poses)              # starts 25 px (50 mm) below the grasp, 90 mm seen of 300
+    assert not short.valid.any() and short.unplaced == "no_anchor"
+    with pytest.raises(ValueError, match="unplaced"):
+        dataclasses.replace(whole, unplaced="lost")

@@ -41,8 +41,9 @@ class FrameTrack:
     the walk from the grasp was cut by the region of interest's edge inside the image, i.e. the
     string was seen farther than L + ``roi_margin_mm`` from the grasp; ``off_image``: that walk was
     cut by the image's edge (the string runs out of the image); ``stretch``: the seen length over L
-    where the points were spread over a stretched string's seen length, else 1.
-    :mod:`stringcast.track.quality` reads the last four."""
+    where the points were spread over a stretched string's seen length, else 1; ``unplaced``: why the
+    frame placed no point along a walk (:data:`UNPLACED`; "" where it placed them, even if some fell
+    past an ambiguity or the end seen). :mod:`stringcast.track.quality` reads the last five."""
 
     positions: np.ndarray
     valid: np.ndarray
@@ -51,6 +52,7 @@ class FrameTrack:
     past_roi: bool = False
     off_image: bool = False
     stretch: float = 1.0
+    unplaced: str = ""
 
     def __post_init__(self):
         n = len(self.valid)
@@ -59,6 +61,15 @@ class FrameTrack:
                              f"path_px {np.shape(self.path_px)}")
         if np.any(np.isnan(self.positions[self.valid])) or not np.all(np.isnan(self.positions[~self.valid])):
             raise ValueError("FrameTrack: valid points need positions and invalid ones NaN")
+        if self.unplaced not in ("", *UNPLACED):
+            raise ValueError(f"FrameTrack: unplaced {self.unplaced!r} is none of {UNPLACED}")
+
+
+UNPLACED = ("no_view", "no_string", "behind_arm", "no_anchor")
+"""Why a frame placed no point (:attr:`FrameTrack.unplaced`): the grasp maps to no place in the image (or its
+region is cut to nothing); no walk from the grasp (the string not seen there); the walk from the grasp ends
+by the arm and no free stretch comes out beyond it; a walk, but neither its start at the grasp nor a free end
+anchors points on it (the start hidden by the fingers, an ambiguity before a free end, or a length far from L)."""
 
 
 def _events_px(pts: np.ndarray, bridged: np.ndarray, ambiguous: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -93,17 +104,17 @@ class FrameTracker:
         st, cal, n = self.st, self.cal, self.n
         gpx = poses_px[len(poses_px) // 2][-1]
         scale = float(cal.m_per_px(gpx[None])[0]) if np.all(np.isfinite(gpx)) else math.nan  # m per px near the grasp
-        def none(path=None, mismatch=math.nan, cuts=(False, False)):  # no points (NaN), with the centreline found
+        def none(path=None, mismatch=math.nan, cuts=(False, False), why="no_string"):  # no points (NaN): why not
             return FrameTrack(np.full((n, 2), np.nan), np.zeros(n, bool), np.zeros((0, 2)) if path is None else path,
-                              mismatch, *cuts)
+                              mismatch, *cuts, unplaced=why)
         if not (math.isfinite(scale) and scale > 0):
-            return none()   # the grasp maps to no place in the image (a mapping that degenerates there)
+            return none(why="no_view")   # the grasp maps to no place in the image (a mapping that degenerates there)
         R = (self.L + st.roi_margin_mm / 1000) / scale
         H, W = frame.shape
         x0, y0 = int(np.clip(gpx[0] - R, 0, W)), int(np.clip(gpx[1] - R, 0, H))
         x1, y1 = int(np.clip(gpx[0] + R + 1, 0, W)), int(np.clip(gpx[1] + R + 1, 0, H))
         if x1 - x0 < 8 or y1 - y0 < 8:
-            return none()
+            return none(why="no_view")
         arm = draw_arm_mask((y1 - y0, x1 - x0), poses_px, self.arm, st, scale, (x0, y0))
         absd, fg = self._segment(frame[y0:y1, x0:x1].astype(np.float32), self.bg[y0:y1, x0:x1],
                                  self.sigma[y0:y1, x0:x1], arm)
@@ -165,9 +176,9 @@ class FrameTracker:
             if free_end:
                 hi = min(hi, float(s_poly[-1]))
         elif behind:  # the grasp's side holds no point: only the stretch beyond the arm may
-            return self._with_beyond(none(px, cuts=cuts), absd, arm, walked, xy, scale, (y0, x0))
+            return self._with_beyond(none(px, cuts=cuts, why="behind_arm"), absd, arm, walked, xy, scale, (y0, x0))
         else:  # no anchor: with a free end, a string seen longer or shorter than L (its mismatch kept)
-            return none(px, D if free_end and not hidden_start else math.nan, cuts)
+            return none(px, D if free_end and not hidden_start else math.nan, cuts, "no_anchor")
         s_t = self.s_targets * stretch - shift  # the targets' polyline arc
         if split is not None:  # model arc -> polyline arc: knots at the head's end and at the free end
             end = self.L - st.tip_shortfall_mm / 1000 - split[2]

@@ -14,13 +14,17 @@ not impose, and their violation measures its error (:func:`tracking_quality`):
   (:class:`~stringcast.track.frame_tracker.FrameTrack`). The tracker shares D among the head,
   the arc and the end, so it is not in the points' spacing; it is the error of the measured
   length itself: its median, a bias (the image scale, or L, or a tip lost against the wall),
-  and its spread (p95 of |D - median|). Both are reported; only a median beyond
-  ``verdict_length_share`` of L is judged: a drawn setup whose points were within 0.43 mm
-  median / 0.85 mm p95 of the truth measured its string 21 mm short at the median frame (a
-  clay weight half-way, string type 3; 7 % of it), and the free end's extension varies by
-  several mm on tracks whose points are within 3 mm; a string of another length than the
-  campaign's (a 5000 mm string configured for a 300 mm one) is not the string filmed, and
-  then no point is trusted.
+  and its spread (p95 of |D - median|), with the tails on each side (``longer_p95``: how much
+  longer than at its median the string is seen in the 5 % of frames where it is seen longest;
+  ``shorter_p95`` likewise shorter). A median beyond ``verdict_length_share`` of L is judged
+  as a string of another length than the campaign's (a 5000 mm string configured for a 300 mm
+  one) and then no point is trusted; a smaller median is not (a drawn setup whose points were
+  within 0.43 mm median / 0.85 mm p95 of the truth measured its string 21 mm short at the
+  median frame: a clay weight half-way, string type 3). A spread beyond
+  ``verdict_length_spread_mm`` is judged: in those frames the tracker placed points by an end
+  whose length disagrees with the rest of the cast, so they lie off along the string by up
+  to about the spread (a stretching cord spread evenly over its seen length; a whipping
+  thread whose blurred tip is seen short, every point shifted by the missing length).
 * **Past the region of interest**: the share of the frames judged whose walk from the grasp
   runs to the edge of the region tracked (L + ``roi_margin_mm`` around the grasp) inside the
   image: string seen farther from the grasp than the campaign's string reaches.
@@ -57,7 +61,7 @@ def _p95(a: np.ndarray) -> float | None:
 def tracking_quality(tracks: pd.DataFrame, mismatch_m: np.ndarray, L: float, n: int, judged: np.ndarray,
                      rest: np.ndarray, st: TrackingSettings, past_roi: np.ndarray | None = None,
                      off_image: np.ndarray | None = None, string_setting=None, scale_note: str | None = None,
-                     stretch: np.ndarray | None = None) -> dict:
+                     stretch: np.ndarray | None = None, unplaced: np.ndarray | None = None) -> dict:
     """The tracking's self-measures and verdict, for ``tracking.json``.
 
     Args:
@@ -78,11 +82,14 @@ def tracking_quality(tracks: pd.DataFrame, mismatch_m: np.ndarray, L: float, n: 
         stretch: (F,) the factor each frame's points were spread by over a stretched string
             (:attr:`FrameTrack.stretch`; None: 1, none stretched): the segment excess is measured
             against stretch L / n.
+        unplaced: (F,) str, why each frame placed no point (:attr:`FrameTrack.unplaced`; None: not known):
+            the points lost in the frames judged are shared among those causes (``lost_points``).
 
     Returns:
         ``{"valid_share", "judged_frames", "length_mismatch_mm": {"frames", "median", "spread_p95",
-        "abs_p95"}, "past_roi_share", "off_image_share", "segment_excess_p95_mm", "rest_jitter_p95_mm",
-        "verdict", "error_scale_mm"}`` (a figure without data is None; :func:`error_scale_mm`).
+        "abs_p95", "longer_p95", "shorter_p95"}, "lost_points", "past_roi_share", "off_image_share",
+        "segment_excess_p95_mm", "rest_jitter_p95_mm", "verdict", "error_scale_mm"}`` (a figure without data
+        is None; :func:`lost_points`, :func:`error_scale_mm`).
 
     Raises:
         ValueError: the table does not hold (n + 1) points for every frame, or mismatched lengths.
@@ -91,7 +98,7 @@ def tracking_quality(tracks: pd.DataFrame, mismatch_m: np.ndarray, L: float, n: 
     flags = [np.zeros(F, bool) if f is None else np.asarray(f, bool) for f in (past_roi, off_image)]
     stretch = np.ones(F) if stretch is None else np.asarray(stretch, float)
     if len(tracks) != F * (n + 1) or len(mismatch_m) != F or len(rest) != F or any(len(f) != F for f in flags) \
-            or len(stretch) != F:
+            or len(stretch) != F or (unplaced is not None and len(unplaced) != F):
         raise ValueError(f"tracking_quality: {len(tracks)} rows for {F} frames x {n + 1} points, "
                          f"{len(mismatch_m)} mismatches, {len(rest)} rest flags, {len(stretch)} stretches")
     t = tracks.sort_values(["frame", "point"])
@@ -113,15 +120,59 @@ def tracking_quality(tracks: pd.DataFrame, mismatch_m: np.ndarray, L: float, n: 
         if seen.any():
             at_rest = np.where(oks[:, seen, None], xs[:, seen], np.nan)
             jitter = _p95(np.sqrt(np.nanvar(at_rest, axis=0).sum(axis=1)) * 1000)
+    tails = (max(0.0, med - float(np.percentile(D, 5))), max(0.0, float(np.percentile(D, 95)) - med)) if D.size \
+        else (None, None)
     doc = {"valid_share": share, "judged_frames": int(use.sum()),
            "length_mismatch_mm": {"frames": int(D.size), "median": med,
-                                  "spread_p95": _p95(np.abs(D - med)) if D.size else None, "abs_p95": _p95(np.abs(D))},
+                                  "spread_p95": _p95(np.abs(D - med)) if D.size else None, "abs_p95": _p95(np.abs(D)),
+                                  "longer_p95": tails[0], "shorter_p95": tails[1]},
            "past_roi_share": float(flags[0][use].mean()) if use.any() else None,
            "off_image_share": float(flags[1][use].mean()) if use.any() else None,
-           "segment_excess_p95_mm": _p95(excess) if excess.size else None, "rest_jitter_p95_mm": jitter}
+           "segment_excess_p95_mm": _p95(excess) if excess.size else None, "rest_jitter_p95_mm": jitter,
+           "lost_points": lost_points(ok[use, 1:], None if unplaced is None else np.asarray(unplaced, object)[use])}
     doc["verdict"] = tracking_verdict(doc, st, L, n, string_setting, scale_note).as_dict()
     doc["error_scale_mm"] = error_scale_mm(doc, st, L)
     return doc
+
+
+def lost_points(ok: np.ndarray, unplaced: np.ndarray | None) -> dict[str, float] | None:
+    """The share of the judged frames' points 1..n (``ok`` (F, n) bool: tracked) lost, by why: each of
+    :data:`~stringcast.track.frame_tracker.UNPLACED` (the frame placed no point: ``unplaced`` (F,) str) and
+    ``placed`` (the frame placed points, and these fell past an ambiguity, the end seen or the image's
+    edge). None without ``unplaced`` or frames."""
+    from .frame_tracker import UNPLACED
+
+    if unplaced is None or not ok.size:
+        return None
+    lost = (~ok).sum(axis=1) / ok.size
+    return {why: float(lost[unplaced == key].sum()) for why, key in (*((u, u) for u in UNPLACED), ("placed", ""))}
+
+
+LOST_CAUSES = {
+    "no_view": "are in frames where the grasp maps to no place in the image (the calibration degenerates there)",
+    "no_string": "are in frames where the string is not found from the grasp (lost against the background, in blur "
+                 "or behind the arm); more light, a shorter exposure or a plainer wall helps",
+    "behind_arm": "are in frames where the string runs on behind the arm from the grasp and no free stretch of it "
+                  "comes out beyond (a point the arm hides is not tracked); a view in which the arm does not pass "
+                  "in front of the string helps",
+    "no_anchor": "are in frames where the string is seen but neither its start at the grasp nor a free end anchors "
+                 "points on it (the start hidden by the fingers, a crossing, fold or gap before a free end, or a "
+                 "length far from L)",
+    "placed": "lie past a crossing, fold or gap of a string tracked from the grasp, or past the end seen (points are "
+              "placed only up to the first ambiguity)",
+}
+"""What each of :func:`lost_points`' causes says in the tracking verdict."""
+
+
+def _lost_why(doc: dict) -> str:
+    """The tracking verdict's cause of a low valid share, from ``lost_points``: the cause that lost the most
+    points, with its share of them; the causes together where ``lost_points`` is not known."""
+    lost = doc.get("lost_points")
+    if not lost or sum(lost.values()) <= 0:
+        return ("the string is lost against the background, in blur or behind the arm; more light, a shorter "
+                "exposure or a plainer wall helps")
+    why = max(lost, key=lost.get)
+    return f"{lost[why] / sum(lost.values()):.0%} of the points lost {LOST_CAUSES[why]}"
 
 
 def error_scale_mm(doc: dict, st: TrackingSettings, L: float | None) -> float | None:
@@ -185,6 +236,29 @@ def _not_this_string(doc: dict, st: TrackingSettings, L: float, n: int, setting,
     return out
 
 
+def _length_spread(doc: dict, st: TrackingSettings) -> str | None:
+    """The reason, if any, to distrust points placed along the string: the length seen from the grasp
+    to a trusted free end varies about its median by more than ``verdict_length_spread_mm`` (p95, over
+    at least :data:`MIN_LENGTH_FRAMES` frames), named by the side its tail lies on."""
+    D = doc["length_mismatch_mm"]
+    spread = D.get("spread_p95")
+    if D["frames"] < MIN_LENGTH_FRAMES or spread is None or spread <= st.verdict_length_spread_mm:
+        return None
+    longer, shorter = D.get("longer_p95") or 0.0, D.get("shorter_p95") or 0.0
+    if longer >= shorter:
+        why = (f"seen up to {longer:.0f} mm longer than at its median length: a string that stretches in the cast "
+               "(an elastic cord), whose points are spread evenly over the length seen, or placed from the grasp "
+               "where its end is not seen, so that they lie off along it where it stretches unevenly; or a walk "
+               "that ran on past the tip (a shadow, a crossing)")
+    else:
+        why = (f"seen up to {shorter:.0f} mm shorter than at its median length: its end lost (a fast tip blurred, "
+               "or the end behind the arm or out of the light), and the points placed from the end that was "
+               "seen shifted along the string by the length missing")
+    return (f"tracking: the string's length from the grasp to its free end varies by {spread:.1f} mm about its "
+            f"median (p95 over {D['frames']} frames, > tracking.verdict_length_spread_mm "
+            f"{st.verdict_length_spread_mm:g}): {why}; points may lie that far off along the string there")
+
+
 def tracking_verdict(doc: dict, st: TrackingSettings, L: float | None = None, n: int | None = None,
                      string_setting=None, scale_note: str | None = None) -> Verdict:
     """Warn, naming the likely cause (and the setting, where one is: ``string_setting(key)``, as
@@ -204,12 +278,13 @@ def tracking_verdict(doc: dict, st: TrackingSettings, L: float | None = None, n:
         why = ("the image scale is off (above)" if other and scale_note else
                "the string filmed is not the campaign's (above)" if other else
                f"the string runs out of the image in {off:.0%} of them (a point outside the image is never valid); "
-               "frame the whole swing and the string after it" if off >= 0.2 else
-               "the string is lost against the background, in blur or behind the arm; more light, a shorter "
-               "exposure or a plainer wall helps")
+               "frame the whole swing and the string after it" if off >= 0.2 else _lost_why(doc))
         v = v.add("warn", f"tracking: only {share:.0%} of the string's points were tracked in the "
                           f"{doc.get('judged_frames', 0)} frames judged (the motion's start to the joint log's end, "
                           f"which the fit compares; < {st.verdict_min_valid_share:.0%}): {why}")
+    spread = _length_spread(doc, st)
+    if spread and not other:
+        v = v.add("warn", spread)
     ex = doc["segment_excess_p95_mm"]
     if ex is not None and ex > st.verdict_segment_excess_mm:
         v = v.add("warn", f"tracking: consecutive points lie up to {ex:.1f} mm (p95) farther apart than the string "

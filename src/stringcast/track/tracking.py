@@ -186,6 +186,7 @@ def track_video(video, calibration: Calibration, frame_times_s: np.ndarray, t_j:
     valid = np.zeros((F, n + 1), bool)
     mismatch = np.full(F, np.nan)
     past_roi, off_image, stretch = np.zeros(F, bool), np.zeros(F, bool), np.ones(F)
+    unplaced = np.full(F, "", dtype=object)
     xy[:, 0] = forward_kinematics(arm, joints_at(t, t_j, q_j))[:, -1]  # point 0: the grasp
     valid[:, 0] = in_log
     xy[~in_log, 0] = np.nan
@@ -193,7 +194,7 @@ def track_video(video, calibration: Calibration, frame_times_s: np.ndarray, t_j:
     shown = []
     for k, ft, frame in track_frames(tracker, video, frames, jpx, np.flatnonzero(in_log), shows, workers):
         xy[k, 1:], valid[k, 1:], mismatch[k] = ft.positions, ft.valid, ft.length_mismatch_m
-        past_roi[k], off_image[k], stretch[k] = ft.past_roi, ft.off_image, ft.stretch
+        past_roi[k], off_image[k], stretch[k], unplaced[k] = ft.past_roi, ft.off_image, ft.stretch, ft.unplaced
         if frame is not None:
             shown.append((k, frame, ft.path_px, cal.robot_to_pixel(np.nan_to_num(xy[k])), valid[k].copy()))
     valid[:, 1:] &= inside_image(cal, xy[:, 1:])   # a point outside the image is never valid (nor its position)
@@ -206,7 +207,7 @@ def track_video(video, calibration: Calibration, frame_times_s: np.ndarray, t_j:
         "valid": valid.ravel(),
     })
     quality = tracking_quality(df, mismatch, campaign.string.length, n, judged, rest, st, past_roi, off_image,
-                               campaign.string_setting, _scale_note(cal, campaign), stretch)
+                               campaign.string_setting, _scale_note(cal, campaign), stretch, unplaced)
     return TrackedVideo(df, quality, shown, scale)
 
 
