@@ -131,16 +131,24 @@ def test_a_seen_length_that_varies_more_than_the_limit_warns_naming_its_side():
     """A whipping tip seen 15 mm short in a fifth of the frames judged: the points placed from it are
     shifted along the string (the end lost); a cord seen up to 20 mm longer as the cast pulls it: a stretch."""
     short = np.full(F, 0.0005)
-    short[40:48] = 0.0155                                            # frames 40-47 of the 39 judged (21-59)
+    short[40:48] = 0.0155                                            # frames 40-47 of the 37 judged (23-59)
     doc = _judge(_swing(), mismatch=short)
     D = doc["length_mismatch_mm"]
     assert D["shorter_p95"] == pytest.approx(15.0) and D["longer_p95"] == pytest.approx(0.0)
     reason = " ".join(doc["verdict"]["reasons"])
     assert doc["verdict"]["status"] == "warn" and "varies by 15.0 mm" in reason and "shorter" in reason
     assert "end lost" in reason and "verdict_length_spread_mm 5" in reason and "stretch" not in reason
-    longer = np.r_[np.zeros(30), -np.linspace(0, 0.02, F - 30)]       # seen longer and longer, to 20 mm
+    longer = np.r_[np.zeros(50), -np.linspace(0.01, 0.02, F - 50)]    # seen longer as the cast pulls, to 20 mm
     reason = " ".join(_judge(_swing(), mismatch=longer)["verdict"]["reasons"])
     assert "longer than at its median" in reason and "stretches" in reason and "end lost" not in reason
+    both = short.copy()
+    both[50:58] = -0.012                                             # 12 mm longer in 8 more frames: both sides
+    reason = " ".join(_judge(_swing(), mismatch=both)["verdict"]["reasons"])
+    assert "12 mm longer" in reason and "15 mm shorter" in reason and "stretches" in reason and "end lost" in reason
+    valid = np.ones((F, N + 1), bool)
+    valid[40:48, 1:] = False                                         # the short frames placed no point: not judged
+    doc = _judge(_swing(), valid, mismatch=short)
+    assert doc["length_mismatch_mm"]["placed_frames"] == 29 and "varies" not in " ".join(doc["verdict"]["reasons"])
     few = np.full(F, np.nan)
     few[30:34] = [0.0, 0.0, 0.0, 0.03]                               # 4 frames: too few to judge
     assert _judge(_swing(), mismatch=few)["verdict"]["status"] == "ok"

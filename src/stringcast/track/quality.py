@@ -20,8 +20,9 @@ not impose, and their violation measures its error (:func:`tracking_quality`):
   as a string of another length than the campaign's (a 5000 mm string configured for a 300 mm
   one) and then no point is trusted; a smaller median is not (a drawn setup whose points were
   within 0.43 mm median / 0.85 mm p95 of the truth measured its string 21 mm short at the
-  median frame: a clay weight half-way, string type 3). A spread beyond
-  ``verdict_length_spread_mm`` is judged: in those frames the tracker placed points by an end
+  median frame: a clay weight half-way, string type 3). The spread and its tails are taken over
+  the frames that placed points (``placed_frames``): a spread beyond ``verdict_length_spread_mm``
+  is judged, as in those frames the tracker placed points by an end
   whose length disagrees with the rest of the cast, so they lie off along the string by up
   to about the spread (a stretching cord spread evenly over its seen length; a whipping
   thread whose blurred tip is seen short, every point shifted by the missing length).
@@ -86,8 +87,8 @@ def tracking_quality(tracks: pd.DataFrame, mismatch_m: np.ndarray, L: float, n: 
             the points lost in the frames judged are shared among those causes (``lost_points``).
 
     Returns:
-        ``{"valid_share", "judged_frames", "length_mismatch_mm": {"frames", "median", "spread_p95",
-        "abs_p95", "longer_p95", "shorter_p95"}, "lost_points", "past_roi_share", "off_image_share",
+        ``{"valid_share", "judged_frames", "length_mismatch_mm": {"frames", "median", "abs_p95",
+        "placed_frames", "spread_p95", "longer_p95", "shorter_p95"}, "lost_points", "past_roi_share", "off_image_share",
         "segment_excess_p95_mm", "rest_jitter_p95_mm", "verdict", "error_scale_mm"}`` (a figure without data
         is None; :func:`lost_points`, :func:`error_scale_mm`).
 
@@ -106,9 +107,10 @@ def tracking_quality(tracks: pd.DataFrame, mismatch_m: np.ndarray, L: float, n: 
     ok = t["valid"].to_numpy(bool).reshape(F, n + 1)
     use = np.asarray(judged, bool)
     share = float(ok[use, 1:].mean()) if use.any() else None
-    D = np.asarray(mismatch_m, float)[use] * 1000
-    D = D[np.isfinite(D)]
+    D_all = np.asarray(mismatch_m, float)[use] * 1000
+    D = D_all[np.isfinite(D_all)]
     med = float(np.median(D)) if D.size else None
+    dev = (D_all - med)[np.isfinite(D_all) & ok[use, 1:].any(axis=1)] if D.size else D   # frames that placed points
     chord = np.linalg.norm(np.diff(xy[use], axis=1), axis=2) * 1000
     both = ok[use, 1:] & ok[use, :-1]
     excess = np.maximum(chord - (L / n * 1000 * stretch[use])[:, None], 0.0)[both]   # a stretched string: its own
@@ -120,12 +122,12 @@ def tracking_quality(tracks: pd.DataFrame, mismatch_m: np.ndarray, L: float, n: 
         if seen.any():
             at_rest = np.where(oks[:, seen, None], xs[:, seen], np.nan)
             jitter = _p95(np.sqrt(np.nanvar(at_rest, axis=0).sum(axis=1)) * 1000)
-    tails = (max(0.0, med - float(np.percentile(D, 5))), max(0.0, float(np.percentile(D, 95)) - med)) if D.size \
+    tails = (max(0.0, -float(np.percentile(dev, 5))), max(0.0, float(np.percentile(dev, 95)))) if dev.size \
         else (None, None)
     doc = {"valid_share": share, "judged_frames": int(use.sum()),
            "length_mismatch_mm": {"frames": int(D.size), "median": med,
-                                  "spread_p95": _p95(np.abs(D - med)) if D.size else None, "abs_p95": _p95(np.abs(D)),
-                                  "longer_p95": tails[0], "shorter_p95": tails[1]},
+                                  "abs_p95": _p95(np.abs(D)), "placed_frames": int(dev.size),
+                                  "spread_p95": _p95(np.abs(dev)), "longer_p95": tails[0], "shorter_p95": tails[1]},
            "past_roi_share": float(flags[0][use].mean()) if use.any() else None,
            "off_image_share": float(flags[1][use].mean()) if use.any() else None,
            "segment_excess_p95_mm": _p95(excess) if excess.size else None, "rest_jitter_p95_mm": jitter,
@@ -237,26 +239,29 @@ def _not_this_string(doc: dict, st: TrackingSettings, L: float, n: int, setting,
 
 
 def _length_spread(doc: dict, st: TrackingSettings) -> str | None:
-    """The reason, if any, to distrust points placed along the string: the length seen from the grasp
-    to a trusted free end varies about its median by more than ``verdict_length_spread_mm`` (p95, over
-    at least :data:`MIN_LENGTH_FRAMES` frames), named by the side its tail lies on."""
+    """The reason, if any, to distrust points placed along the string: in the frames that placed points by a
+    trusted free end (at least :data:`MIN_LENGTH_FRAMES`), the length seen from the grasp to it varies about
+    its median by more than ``verdict_length_spread_mm`` (p95), named by the side its tail lies on (both,
+    where the smaller tail is at least half the larger)."""
     D = doc["length_mismatch_mm"]
-    spread = D.get("spread_p95")
-    if D["frames"] < MIN_LENGTH_FRAMES or spread is None or spread <= st.verdict_length_spread_mm:
+    spread, frames = D.get("spread_p95"), D.get("placed_frames", D["frames"])
+    if frames < MIN_LENGTH_FRAMES or spread is None or spread <= st.verdict_length_spread_mm:
         return None
     longer, shorter = D.get("longer_p95") or 0.0, D.get("shorter_p95") or 0.0
-    if longer >= shorter:
-        why = (f"seen up to {longer:.0f} mm longer than at its median length: a string that stretches in the cast "
-               "(an elastic cord), whose points are spread evenly over the length seen, or placed from the grasp "
-               "where its end is not seen, so that they lie off along it where it stretches unevenly; or a walk "
-               "that ran on past the tip (a shadow, a crossing)")
-    else:
-        why = (f"seen up to {shorter:.0f} mm shorter than at its median length: its end lost (a fast tip blurred, "
-               "or the end behind the arm or out of the light), and the points placed from the end that was "
-               "seen shifted along the string by the length missing")
+    why = []
+    if longer >= 0.5 * shorter:
+        why.append(f"seen up to {longer:.0f} mm longer than at its median length: a string that stretches in the "
+                   "cast (an elastic cord), whose points are spread evenly over the length seen, or placed from "
+                   "the grasp where its end is not seen, so that they lie off along it where it stretches "
+                   "unevenly; or a walk that ran on past the tip (a shadow, a crossing)")
+    if shorter >= 0.5 * longer:
+        why.append(f"seen up to {shorter:.0f} mm shorter than at its median length: its end lost (a fast tip "
+                   "blurred, or the end behind the arm or out of the light), and the points placed from the end "
+                   "that was seen shifted along the string by the length missing")
     return (f"tracking: the string's length from the grasp to its free end varies by {spread:.1f} mm about its "
-            f"median (p95 over {D['frames']} frames, > tracking.verdict_length_spread_mm "
-            f"{st.verdict_length_spread_mm:g}): {why}; points may lie that far off along the string there")
+            f"median (p95 over the {frames} frames that placed points by it, > tracking.verdict_length_spread_mm "
+            f"{st.verdict_length_spread_mm:g}): {'; and '.join(why)}; points may lie that far off along the "
+            "string there")
 
 
 def tracking_verdict(doc: dict, st: TrackingSettings, L: float | None = None, n: int | None = None,
