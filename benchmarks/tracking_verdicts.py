@@ -84,8 +84,8 @@ def true_figures(tracks: pd.DataFrame, truth: pd.DataFrame, L: float) -> dict:
 
 def judge(work: Path, retrack_dir: Path | None = None) -> list[dict]:
     """One row per filmed trial under ``work`` (module doc)."""
-    rows = []
-    for camp, res, data in trials(work):
+    rows, todo = [], list(trials(work))
+    for i, (camp, res, data) in enumerate(todo, 1):
         run = json.loads((camp / "run.json").read_text())
         src = retrack(camp, res, data, retrack_dir / camp.name / res.name) if retrack_dir else res
         doc = json.loads((src / "tracking.json").read_text())
@@ -96,6 +96,8 @@ def judge(work: Path, retrack_dir: Path | None = None) -> list[dict]:
                "error_scale_mm": doc.get("error_scale_mm"), "length_mismatch_mm": doc["length_mismatch_mm"]}
         row.update(true_figures(pd.read_parquet(src / "tracks.parquet"), pd.read_parquet(data / "ground_truth.parquet"), L))
         rows.append(row)
+        print(f"[{i}/{len(todo)}] {camp.name}/{res.name}: tracking {row['verdict']}, true p95 "
+              f"{row['true_p95_mm'] or float('nan'):.1f} mm", flush=True)
     return rows
 
 
