@@ -14,8 +14,9 @@ With ``--retrack OUT`` the tracking stage of the code being measured is run agai
 campaign's own ``tracks.parquet`` and ``tracking.json`` are judged.
 
 A trial is **silent** when its true p95 passes ``SILENT_P95_MM`` (the generalization benchmark's
-silent-failure bound) and its verdict says ok; a **false alarm** when it warns with a true p95 within
-the tracking goal ``GOAL_P95_MM``.
+silent-failure bound) and its verdict says ok; a **false alarm** when a reason of its verdict says the
+points may be off (any but the valid share's, which says how many were not tracked, a fact) while
+their true p95 is within the tracking goal ``GOAL_P95_MM``.
 """
 from __future__ import annotations
 
@@ -101,6 +102,15 @@ def judge(work: Path, retrack_dir: Path | None = None) -> list[dict]:
     return rows
 
 
+VALID_SHARE_REASON = "tracking: only "
+"""How the valid share's reason begins (:func:`stringcast.track.quality.tracking_verdict`)."""
+
+
+def claims_error(row: dict) -> bool:
+    """The verdict says the tracked points may be off: a reason other than the valid share's."""
+    return any(not r.startswith(VALID_SHARE_REASON) for r in row.get("reasons", ()))
+
+
 def summarise(rows: list[dict]) -> dict:
     """Counts of trials, warnings, silent trials and false alarms (module doc), and which trials."""
     p95 = [r["true_p95_mm"] or 0.0 for r in rows]
@@ -109,7 +119,7 @@ def summarise(rows: list[dict]) -> dict:
     return {"trials": len(rows), "warn": int(sum(warn)),
             "beyond_goal": int(sum(p > GOAL_P95_MM for p in p95)),
             "silent": [n for n, p, w in zip(name, p95, warn) if p > SILENT_P95_MM and not w],
-            "false_alarms": [n for n, p, w in zip(name, p95, warn) if p <= GOAL_P95_MM and w],
+            "false_alarms": [n for n, p, r in zip(name, p95, rows) if p <= GOAL_P95_MM and claims_error(r)],
             "goal_p95_mm": GOAL_P95_MM, "silent_p95_mm": SILENT_P95_MM}
 
 

@@ -32,10 +32,31 @@ def test_true_figures_measure_the_valid_points_and_the_true_stretch():
 
 
 def test_silent_trials_and_false_alarms_are_named():
-    rows = [{"campaign": "a", "trial": "trial_1", "verdict": "ok", "true_p95_mm": SILENT_P95_MM + 1},
-            {"campaign": "a", "trial": "trial_2", "verdict": "warn", "true_p95_mm": SILENT_P95_MM + 1},
-            {"campaign": "b", "trial": "trial_1", "verdict": "warn", "true_p95_mm": GOAL_P95_MM - 1},
-            {"campaign": "b", "trial": "trial_2", "verdict": "ok", "true_p95_mm": GOAL_P95_MM + 0.5}]
+    """Silent: ok with a true p95 past the silent bound. A false alarm: a reason that the points may be off
+    (not the valid share's, a count of points not tracked) with a true p95 within the goal."""
+    lost = "tracking: only 60% of the string's points were tracked"
+    rows = [{"campaign": "a", "trial": "trial_1", "verdict": "ok", "reasons": [], "true_p95_mm": SILENT_P95_MM + 1},
+            {"campaign": "a", "trial": "trial_2", "verdict": "warn", "reasons": ["tracking: the string's length"],
+             "true_p95_mm": SILENT_P95_MM + 1},
+            {"campaign": "b", "trial": "trial_1", "verdict": "warn", "reasons": [lost, "tracking: jitter"],
+             "true_p95_mm": GOAL_P95_MM - 1},
+            {"campaign": "b", "trial": "trial_2", "verdict": "warn", "reasons": [lost], "true_p95_mm": GOAL_P95_MM - 1},
+            {"campaign": "b", "trial": "trial_3", "verdict": "ok", "reasons": [], "true_p95_mm": GOAL_P95_MM + 0.5}]
     doc = summarise(rows)
-    assert doc["trials"] == 4 and doc["warn"] == 2 and doc["beyond_goal"] == 3
+    assert doc["trials"] == 5 and doc["warn"] == 3 and doc["beyond_goal"] == 3
     assert doc["silent"] == ["a/trial_1"] and doc["false_alarms"] == ["b/trial_1"]
+
+
+def test_the_valid_share_reason_is_the_one_the_benchmark_sets_apart():
+    """claims_error tells the valid share's reason from the others by how it begins: the verdict's own."""
+    from benchmarks.tracking_verdicts import VALID_SHARE_REASON, claims_error
+    from stringcast.core import TrackingSettings
+    from stringcast.track.quality import tracking_verdict
+
+    doc = {"valid_share": 0.5, "judged_frames": 40, "off_image_share": 0.0, "segment_excess_p95_mm": 9.0,
+           "rest_jitter_p95_mm": None, "past_roi_share": 0.0, "lost_points": None,
+           "length_mismatch_mm": {"frames": 0, "median": None, "spread_p95": None}}
+    reasons = tracking_verdict(doc, TrackingSettings()).reasons
+    assert len(reasons) == 2 and reasons[0].startswith(VALID_SHARE_REASON)
+    assert not reasons[1].startswith(VALID_SHARE_REASON)
+    assert claims_error({"reasons": list(reasons)}) and not claims_error({"reasons": [reasons[0]]})
