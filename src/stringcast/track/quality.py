@@ -251,17 +251,18 @@ def _length_spread(doc: dict, st: TrackingSettings) -> str | None:
     why = []
     if longer >= 0.5 * shorter:
         why.append(f"seen up to {longer:.0f} mm longer than at its median length: a string that stretches in the "
-                   "cast (an elastic cord), whose points are spread evenly over the length seen, or placed from "
-                   "the grasp where its end is not seen, so that they lie off along it where it stretches "
-                   "unevenly; or a walk that ran on past the tip (a shadow, a crossing)")
+                   "cast (an elastic cord; its points are spread evenly over the length seen, right where it "
+                   "stretches evenly, and placed from the grasp where its end is not seen, short of their place "
+                   "by up to that), or a walk that ran on past the tip (a shadow, a crossing)")
     if shorter >= 0.5 * longer:
-        why.append(f"seen up to {shorter:.0f} mm shorter than at its median length: its end lost (a fast tip "
-                   "blurred, or the end behind the arm or out of the light), and the points placed from the end "
-                   "that was seen shifted along the string by the length missing")
+        why.append(f"seen up to {shorter:.0f} mm shorter than at its median length, its points placed back from "
+                   "the free end: right where the length missing hides by the grasp (a loop under the fingers or "
+                   "the arm), shifted along the string by it where the end was lost instead (a fast tip blurred, "
+                   "or the end behind the arm or out of the light)")
     return (f"tracking: the string's length from the grasp to its free end varies by {spread:.1f} mm about its "
             f"median (p95 over the {frames} frames that placed points by it, > tracking.verdict_length_spread_mm "
-            f"{st.verdict_length_spread_mm:g}): {'; and '.join(why)}; points may lie that far off along the "
-            "string there")
+            f"{st.verdict_length_spread_mm:g}): {'; and '.join(why)}; points may lie up to that far off along "
+            "the string there")
 
 
 def tracking_verdict(doc: dict, st: TrackingSettings, L: float | None = None, n: int | None = None,
