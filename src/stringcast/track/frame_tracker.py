@@ -29,6 +29,7 @@ from .beyond_arm import tip_stretch
 from .ends import clean_end, edge_cut, end_cut, locate_end, string_continues
 from .junctions import Zones, walk_skeleton
 from .markers import band_points, path_contrast
+from .quality import UNPLACED
 
 
 @dataclass(frozen=True)
@@ -42,7 +43,7 @@ class FrameTrack:
     string was seen farther than L + ``roi_margin_mm`` from the grasp; ``off_image``: that walk was
     cut by the image's edge (the string runs out of the image); ``stretch``: the seen length over L
     where the points were spread over a stretched string's seen length, else 1; ``unplaced``: why the
-    frame placed no point along a walk (:data:`UNPLACED`; "" where it placed them, even if some fell
+    frame placed no point along a walk (:data:`~stringcast.track.quality.UNPLACED`; "" where it placed them, even if some fell
     past an ambiguity or the end seen). :mod:`stringcast.track.quality` reads the last five."""
 
     positions: np.ndarray
@@ -64,12 +65,6 @@ class FrameTrack:
         if self.unplaced not in ("", *UNPLACED):
             raise ValueError(f"FrameTrack: unplaced {self.unplaced!r} is none of {UNPLACED}")
 
-
-UNPLACED = ("no_view", "no_string", "behind_arm", "no_anchor")
-"""Why a frame placed no point (:attr:`FrameTrack.unplaced`): the grasp maps to no place in the image (or its
-region is cut to nothing); no walk from the grasp (the string not seen there); the walk from the grasp ends
-by the arm and no free stretch comes out beyond it; a walk, but neither its start at the grasp nor a free end
-anchors points on it (the start hidden by the fingers, an ambiguity before a free end, or a length far from L)."""
 
 
 def _events_px(pts: np.ndarray, bridged: np.ndarray, ambiguous: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

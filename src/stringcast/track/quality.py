@@ -137,13 +137,19 @@ def tracking_quality(tracks: pd.DataFrame, mismatch_m: np.ndarray, L: float, n: 
     return doc
 
 
+UNPLACED = ("no_view", "no_string", "behind_arm", "no_anchor")
+"""Why a frame placed no point (:attr:`~stringcast.track.frame_tracker.FrameTrack.unplaced`): the grasp maps to
+no place in the image (or its region is cut to nothing); no walk from the grasp (the string not seen there);
+the walk from the grasp ends by the arm and no free stretch comes out beyond it; a walk, but neither its start
+at the grasp nor a free end anchors points on it (the start hidden by the fingers, an ambiguity before a free
+end, or a length far from L)."""
+
+
 def lost_points(ok: np.ndarray, unplaced: np.ndarray | None) -> dict[str, float] | None:
     """The share of the judged frames' points 1..n (``ok`` (F, n) bool: tracked) lost, by why: each of
-    :data:`~stringcast.track.frame_tracker.UNPLACED` (the frame placed no point: ``unplaced`` (F,) str) and
-    ``placed`` (the frame placed points, and these fell past an ambiguity, the end seen or the image's
-    edge). None without ``unplaced`` or frames."""
-    from .frame_tracker import UNPLACED
-
+    :data:`UNPLACED` (the frame placed no point: ``unplaced`` (F,) str) and ``placed`` (the frame placed
+    points, and these fell past an ambiguity, the end seen or the image's edge). None without ``unplaced``
+    or frames."""
     if unplaced is None or not ok.size:
         return None
     lost = (~ok).sum(axis=1) / ok.size
