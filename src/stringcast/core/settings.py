@@ -231,7 +231,7 @@ class TrackingSettings(Section):
     verdict_segment_excess_mm: float = _f(3.0, "warn when consecutive points lie farther apart than L / n by more (p95), mm", minimum=0)
     verdict_rest_jitter_mm: float = _f(1.0, "warn when the hanging string's points jitter more (p95 of their deviations at rest), mm", minimum=0)
     verdict_length_share: float = _f(0.3, "warn naming the string's length_mm when the string seen from the grasp to its free end differs from L by more than this share (median over the frames judged)", exclusiveMinimum=0)
-    verdict_length_spread_mm: float = _f(5.0, "warn when the string seen from the grasp to its free end varies about its median length by more (p95 of the deviation from the median over the frames with a trusted free end), mm: points placed in such frames lie off along the string by up to about as much", minimum=0)
+    verdict_length_spread_mm: float = _f(5.0, "warn when the string seen from the grasp to its free end varies about its median length by more (p95 of the deviation from the median over the frames that placed points by a trusted free end), mm: points placed in such frames lie off along the string by up to about as much", minimum=0)
     verdict_past_roi_share: float = _f(0.05, "warn naming the string's length_mm when the string runs past L + roi_margin_mm from the grasp in more than this share of the frames judged", minimum=0, maximum=1)
     mode: str = _f("markerless", "markerless: points by arc length from the grasp; markers: a band at each mass point", enum=list(MODES))
     band_width_mm: float = _f(8.0, "markers: the bands' length along the string, mm", exclusiveMinimum=0)

@@ -43,8 +43,8 @@ class FrameTrack:
     string was seen farther than L + ``roi_margin_mm`` from the grasp; ``off_image``: that walk was
     cut by the image's edge (the string runs out of the image); ``stretch``: the seen length over L
     where the points were spread over a stretched string's seen length, else 1; ``unplaced``: why the
-    frame placed no point along a walk (:data:`~stringcast.track.quality.UNPLACED`; "" where it placed them, even if some fell
-    past an ambiguity or the end seen). :mod:`stringcast.track.quality` reads the last five."""
+    frame placed no point (:data:`~stringcast.track.quality.UNPLACED`; "" where it placed points, even
+    if some fell past an ambiguity or the end seen). :mod:`stringcast.track.quality` reads the last five."""
 
     positions: np.ndarray
     valid: np.ndarray
@@ -64,7 +64,6 @@ class FrameTrack:
             raise ValueError("FrameTrack: valid points need positions and invalid ones NaN")
         if self.unplaced not in ("", *UNPLACED):
             raise ValueError(f"FrameTrack: unplaced {self.unplaced!r} is none of {UNPLACED}")
-
 
 
 def _events_px(pts: np.ndarray, bridged: np.ndarray, ambiguous: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

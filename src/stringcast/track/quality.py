@@ -22,10 +22,10 @@ not impose, and their violation measures its error (:func:`tracking_quality`):
   within 0.43 mm median / 0.85 mm p95 of the truth measured its string 21 mm short at the
   median frame: a clay weight half-way, string type 3). The spread and its tails are taken over
   the frames that placed points (``placed_frames``): a spread beyond ``verdict_length_spread_mm``
-  is judged, as in those frames the tracker placed points by an end
-  whose length disagrees with the rest of the cast, so they lie off along the string by up
-  to about the spread (a stretching cord spread evenly over its seen length; a whipping
-  thread whose blurred tip is seen short, every point shifted by the missing length).
+  is judged, as in those frames the tracker placed points by an end whose length disagrees with
+  the rest of the cast, so they may lie off along the string by up to about the spread (an
+  elastic cord placed from the grasp where its end is not seen; a whipping thread whose blurred
+  tip is seen short, every point shifted back by the missing length).
 * **Past the region of interest**: the share of the frames judged whose walk from the grasp
   runs to the edge of the region tracked (L + ``roi_margin_mm`` around the grasp) inside the
   image: string seen farther from the grasp than the campaign's string reaches.
@@ -88,9 +88,9 @@ def tracking_quality(tracks: pd.DataFrame, mismatch_m: np.ndarray, L: float, n: 
 
     Returns:
         ``{"valid_share", "judged_frames", "length_mismatch_mm": {"frames", "median", "abs_p95",
-        "placed_frames", "spread_p95", "longer_p95", "shorter_p95"}, "lost_points", "past_roi_share", "off_image_share",
-        "segment_excess_p95_mm", "rest_jitter_p95_mm", "verdict", "error_scale_mm"}`` (a figure without data
-        is None; :func:`lost_points`, :func:`error_scale_mm`).
+        "placed_frames", "spread_p95", "longer_p95", "shorter_p95"}, "lost_points", "past_roi_share",
+        "off_image_share", "segment_excess_p95_mm", "rest_jitter_p95_mm", "verdict", "error_scale_mm"}``
+        (a figure without data is None; :func:`lost_points`, :func:`error_scale_mm`).
 
     Raises:
         ValueError: the table does not hold (n + 1) points for every frame, or mismatched lengths.
