@@ -55,14 +55,14 @@ def campaign_of(camp: Path):
                               require_target=False)
 
 
-def retrack(camp: Path, res: Path, data: Path, out: Path) -> Path:
-    """Run the tracking stage on one filmed trial into ``out`` (kept where done); returns ``out``."""
+def retrack(cfg: dict, campaign, res: Path, data: Path, out: Path) -> Path:
+    """Run the tracking stage on one filmed trial of the campaign (``cfg``, ``campaign``: :func:`campaign_of`)
+    into ``out`` (kept where done); returns ``out``."""
     from stringcast.core import settings_from_config, stage_kwargs
     from stringcast.track import run_tracking
 
     if (out / "tracking.json").exists():
         return out
-    cfg, campaign = campaign_of(camp)
     out.mkdir(parents=True, exist_ok=True)
     run_tracking(data, res / "geometry.json", res / "clock.json", campaign, out / "tracks.parquet",
                  **stage_kwargs(run_tracking, settings_from_config(cfg)))
@@ -70,11 +70,12 @@ def retrack(camp: Path, res: Path, data: Path, out: Path) -> Path:
 
 
 def true_figures(tracks: pd.DataFrame, truth: pd.DataFrame, L: float) -> dict:
-    """The valid points' true error (mm: median, p95, p99) and the true string's stretch (mm: p95 over
-    the frames of its polyline's length from the grasp to the tip less L ``m``)."""
-    m = tracks.merge(truth, on=["frame", "point"], suffixes=("", "_true"))
-    pts = m[(m["point"] > 0) & m["valid"]]
-    e = np.hypot(pts["x_m"] - pts["x_m_true"], pts["y_m"] - pts["y_m_true"]).to_numpy() * 1000
+    """The valid points' true error (mm: median, p95, p99; :func:`stringcast_lab.campaign.tracking_errors`) and
+    the true string's stretch (mm: p95 over the frames of its polyline's length from the grasp to the tip
+    less L ``m``)."""
+    from stringcast_lab.campaign import tracking_errors
+
+    e, _ = tracking_errors(tracks, truth)
     t = truth.sort_values(["frame", "point"])
     xy = t[["x_m", "y_m"]].to_numpy(float).reshape(t["frame"].nunique(), -1, 2)
     length = np.linalg.norm(np.diff(xy, axis=1), axis=2).sum(axis=1)
@@ -85,12 +86,15 @@ def true_figures(tracks: pd.DataFrame, truth: pd.DataFrame, L: float) -> dict:
 
 def judge(work: Path, retrack_dir: Path | None = None) -> list[dict]:
     """One row per filmed trial under ``work`` (module doc)."""
-    rows, todo = [], list(trials(work))
+    rows, todo, campaigns = [], list(trials(work)), {}
     for i, (camp, res, data) in enumerate(todo, 1):
         run = json.loads((camp / "run.json").read_text())
-        src = retrack(camp, res, data, retrack_dir / camp.name / res.name) if retrack_dir else res
+        if camp not in campaigns:
+            campaigns[camp] = campaign_of(camp)
+        cfg, campaign = campaigns[camp]
+        src = retrack(cfg, campaign, res, data, retrack_dir / camp.name / res.name) if retrack_dir else res
         doc = json.loads((src / "tracking.json").read_text())
-        L = campaign_of(camp)[1].string.length
+        L = campaign.string.length
         row = {"campaign": camp.name, "trial": res.name, "physics": run.get("physics"), "method": run.get("method"),
                "material": run.get("material"), "string_type": run.get("string"), "verdict": doc["verdict"]["status"],
                "reasons": doc["verdict"]["reasons"], "valid_share": doc["valid_share"],

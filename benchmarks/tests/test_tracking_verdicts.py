@@ -55,7 +55,8 @@ def test_the_valid_share_reason_is_the_one_the_benchmark_sets_apart():
 
     doc = {"valid_share": 0.5, "judged_frames": 40, "off_image_share": 0.0, "segment_excess_p95_mm": 9.0,
            "rest_jitter_p95_mm": None, "past_roi_share": 0.0, "lost_points": None,
-           "length_mismatch_mm": {"frames": 0, "median": None, "spread_p95": None}}
+           "length_mismatch_mm": {"frames": 0, "median": None, "placed_frames": 0, "spread_p95": None,
+                                  "longer_p95": None, "shorter_p95": None}}
     reasons = tracking_verdict(doc, TrackingSettings()).reasons
     assert len(reasons) == 2 and reasons[0].startswith(VALID_SHARE_REASON)
     assert not reasons[1].startswith(VALID_SHARE_REASON)

@@ -250,10 +250,10 @@ def _length_spread(doc: dict, st: TrackingSettings) -> str | None:
     its median by more than ``verdict_length_spread_mm`` (p95), named by the side its tail lies on (both,
     where the smaller tail is at least half the larger)."""
     D = doc["length_mismatch_mm"]
-    spread, frames = D.get("spread_p95"), D.get("placed_frames", D["frames"])
-    if frames < MIN_LENGTH_FRAMES or spread is None or spread <= st.verdict_length_spread_mm:
+    spread, frames = D["spread_p95"], D["placed_frames"]
+    if frames < MIN_LENGTH_FRAMES or spread <= st.verdict_length_spread_mm:
         return None
-    longer, shorter = D.get("longer_p95") or 0.0, D.get("shorter_p95") or 0.0
+    longer, shorter = D["longer_p95"], D["shorter_p95"]
     why = []
     if longer >= 0.5 * shorter:
         why.append(f"seen up to {longer:.0f} mm longer than at its median length: a string that stretches in the "
