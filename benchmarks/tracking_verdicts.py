@@ -50,9 +50,12 @@ def campaign_of(camp: Path):
 
     from stringcast.core import load_campaign
 
+    found = sorted((camp / "results" / ".stringcast").glob("*/campaign-*.yaml"))
+    if not found:
+        raise FileNotFoundError(f"{camp}: no results/.stringcast/*/campaign-*.yaml (the campaign's resolved file, "
+                                "written when its workflow ran): not a loop benchmark's campaign folder")
     cfg = yaml.safe_load((camp / "config" / "config.yaml").read_text())
-    return cfg, load_campaign(next((camp / "results" / ".stringcast").glob("*/campaign-*.yaml")), cfg,
-                              require_target=False)
+    return cfg, load_campaign(found[0], cfg, require_target=False)
 
 
 def retrack(cfg: dict, campaign, res: Path, data: Path, out: Path) -> Path:

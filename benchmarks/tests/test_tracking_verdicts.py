@@ -61,3 +61,12 @@ def test_the_valid_share_reason_is_the_one_the_benchmark_sets_apart():
     assert len(reasons) == 2 and reasons[0].startswith(VALID_SHARE_REASON)
     assert not reasons[1].startswith(VALID_SHARE_REASON)
     assert claims_error({"reasons": list(reasons)}) and not claims_error({"reasons": [reasons[0]]})
+
+
+def test_a_folder_without_the_campaigns_resolved_file_is_named(tmp_path):
+    from benchmarks.tracking_verdicts import campaign_of
+
+    (tmp_path / "config").mkdir()
+    (tmp_path / "config" / "config.yaml").write_text("{}")
+    with pytest.raises(FileNotFoundError, match="campaign-.*yaml"):
+        campaign_of(tmp_path)
