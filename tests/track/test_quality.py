@@ -142,6 +142,10 @@ def test_a_seen_length_that_varies_more_than_the_limit_warns_naming_its_side():
     longer = np.r_[np.zeros(50), -np.linspace(0.01, 0.02, F - 50)]    # seen longer as the cast pulls, to 20 mm
     reason = " ".join(_judge(_swing(), mismatch=longer)["verdict"]["reasons"])
     assert "longer than at its median" in reason and "stretches" in reason and "end was lost" not in reason
+    held = {"measured_frames": 30, "measured_p95": 1.06, "held_frames": 12, "unheld_frames": 3}
+    doc = _judge(_swing(), mismatch=longer, stretch_frames=held)   # tracking's held stretch (tracking.json's stretch)
+    reason = " ".join(doc["verdict"]["reasons"])
+    assert doc["stretch"] == held and "stretch_hold_ms in 12 frames" in reason and "in the 3 with none seen" in reason
     both = short.copy()
     both[50:58] = -0.012                                             # 12 mm longer in 8 more frames: both sides
     reason = " ".join(_judge(_swing(), mismatch=both)["verdict"]["reasons"])

@@ -223,6 +223,7 @@ class TrackingSettings(Section):
     end_edge_max: float = _f(0.25, "... and not more than this share of it lies on an occluder's rim", minimum=0)
     max_missing_frac: float = _f(0.3, "a frame with more than this share of the string missing gives no points", minimum=0)
     max_stretch_share: float = _f(0.3, "a string seen longer than L by up to this share, from the grasp to a trusted free end with no ambiguity between, is taken as stretched: its points at the same shares of the seen length", minimum=0)
+    stretch_hold_ms: float = _f(200.0, "a frame that does not see the string's end spreads its points by the stretch seen (from the grasp to a trusted free end) in the frames within this of it, ms (0: off)", minimum=0)
     end_touch_mm: float = _f(12.0, "a free end this close to the string's own earlier stretch is not trusted, mm", minimum=0)
     background_window_s: float | None = _f(None, "background samples only from the motion's first seconds, s (null: all)", exclusiveMinimum=0)
     background_bursts: int = _f(5, "the background samples are decoded in this many short runs", minimum=0)

@@ -44,7 +44,13 @@ class FrameTrack:
     cut by the image's edge (the string runs out of the image); ``stretch``: the seen length over L
     where the points were spread over a stretched string's seen length, else 1; ``unplaced``: why the
     frame placed no point (:data:`~stringcast.track.quality.UNPLACED`; "" where it placed points, even
-    if some fell past an ambiguity or the end seen). :mod:`stringcast.track.quality` reads the last five."""
+    if some fell past an ambiguity or the end seen). :mod:`stringcast.track.quality` reads the last five.
+    ``stretch_seen``: the frame measured the string's stretch (``stretch``, 1 where the length agrees with
+    L), seeing it from the grasp to a trusted free end with no ambiguity between; ``grasp_arc``: where the
+    points were anchored at the grasp, the frame's polyline (K, 2) m from the grasp, its observed segments
+    (K - 1,) bool and the arc length, m, past which no point is trusted, which
+    :mod:`stringcast.track.held_stretch` spreads the points over by the stretch seen about the frame (else
+    None)."""
 
     positions: np.ndarray
     valid: np.ndarray
@@ -54,6 +60,8 @@ class FrameTrack:
     off_image: bool = False
     stretch: float = 1.0
     unplaced: str = ""
+    stretch_seen: bool = False
+    grasp_arc: tuple | None = None
 
     def __post_init__(self):
         n = len(self.valid)
@@ -150,7 +158,7 @@ class FrameTracker:
         D = self.L - st.tip_shortfall_mm / 1000 - float(s_poly[-1])  # missing length if the end is the tip
         tol = self._anchor_tol(scale)
         slack = L_head - float(np.linalg.norm(xy[len(head)] - xy[0]))  # the head may be shorter, not below its chord
-        lo, hi, shift, split, stretch = -np.inf, np.inf, 0.0, None, 1.0
+        lo, hi, shift, split, stretch, seen, arc = -np.inf, np.inf, 0.0, None, 1.0, False, None
         if free_end and len(events) and float(s_poly[-1]) - events[-1] < self.L / n:
             free_end = False  # a branch joins within a point spacing of the end: is the tip this end or the branch's?
         if free_end and abs(D) > tol and over_board(self.board, px[-1], self._width + 4):
@@ -158,17 +166,20 @@ class FrameTracker:
         if free_end and abs(D) <= tol:  # both anchors agree: share the mismatch (head, visible arc, free end)
             split = mismatch_split(D, np.array([scale * st.end_sigma_px + slack, st.scale_sigma * (float(
                 s_poly[-1]) - L_head), scale * st.end_sigma_px]))
+            seen = not hidden_start and not len(events)
         elif free_end and -tol - slack < D <= st.max_missing_frac * self.L:  # anchored at the tip: valid after the last ambiguity
             shift, lo = D, (events[-1] if len(events) else (L_head if hidden_start else -np.inf))
             if D > tol:  # the missing length hides by the grasp (a loop at the fingers, under the arm's mask):
                 lo = max(lo, L_head + D)  # the visible path's first D past the head may be that loop's
         elif free_end and not len(events) and -st.max_stretch_share * self.L <= D < 0:  # seen longer, no ambiguity:
             stretch = float(s_poly[-1]) / (self.L - st.tip_shortfall_mm / 1000)  # a stretched string (or the scale off as much):
+            seen = True
             # both ends anchor it, and its points lie at the same shares of the seen length as of L (uniform strain)
         elif not hidden_start and not self._head_clutter and not ((loop_back or free_end) and D > tol):  # anchored at the grasp: valid before the first ambiguity
             hi = events[0] if len(events) else np.inf
             if free_end:
                 hi = min(hi, float(s_poly[-1]))
+            arc = (xy, obs, hi)
         elif behind:  # the grasp's side holds no point: only the stretch beyond the arm may
             return self._with_beyond(none(px, cuts=cuts, why="behind_arm"), absd, arm, walked, xy, scale, (y0, x0))
         else:  # no anchor: with a free end, a string seen longer or shorter than L (its mismatch kept)
@@ -185,7 +196,8 @@ class FrameTracker:
             pos, valid = band_points(frame, px, obs & (np.arange(len(obs)) >= len(head)), s_poly, s_t, trusted,
                                      free_end, path_contrast(absd, pts), cal, st)
         pos[~valid] = np.nan
-        done = FrameTrack(pos, valid, px, D if free_end and not hidden_start else math.nan, *cuts, stretch)
+        done = FrameTrack(pos, valid, px, D if free_end and not hidden_start else math.nan, *cuts, stretch,
+                          stretch_seen=seen, grasp_arc=arc)
         return self._with_beyond(done, absd, arm, walked, xy, scale, (y0, x0)) if behind else done
 
     def _with_beyond(self, done: FrameTrack, absd, arm, walked, xy, scale: float, origin) -> FrameTrack:

@@ -62,7 +62,8 @@ def _p95(a: np.ndarray) -> float | None:
 def tracking_quality(tracks: pd.DataFrame, mismatch_m: np.ndarray, L: float, n: int, judged: np.ndarray,
                      rest: np.ndarray, st: TrackingSettings, past_roi: np.ndarray | None = None,
                      off_image: np.ndarray | None = None, string_setting=None, scale_note: str | None = None,
-                     stretch: np.ndarray | None = None, unplaced: np.ndarray | None = None) -> dict:
+                     stretch: np.ndarray | None = None, unplaced: np.ndarray | None = None,
+                     stretch_frames: dict | None = None) -> dict:
     """The tracking's self-measures and verdict, for ``tracking.json``.
 
     Args:
@@ -85,11 +86,14 @@ def tracking_quality(tracks: pd.DataFrame, mismatch_m: np.ndarray, L: float, n: 
             against stretch L / n.
         unplaced: (F,) str, why each frame placed no point (:attr:`FrameTrack.unplaced`; None: not known):
             the points lost in the frames judged are shared among those causes (``lost_points``).
+        stretch_frames: ``tracking.json``'s ``stretch`` (the frames judged that measured the stretch, and
+            those that did not see the end, spread by it or not: :mod:`stringcast.track.held_stretch`), kept
+            and named in a seen-longer reason; None: not known.
 
     Returns:
         ``{"valid_share", "judged_frames", "length_mismatch_mm": {"frames", "median", "abs_p95",
         "placed_frames", "spread_p95", "longer_p95", "shorter_p95"}, "lost_points", "past_roi_share",
-        "off_image_share", "segment_excess_p95_mm", "rest_jitter_p95_mm", "verdict", "error_scale_mm"}``
+        "off_image_share", "segment_excess_p95_mm", "rest_jitter_p95_mm", "stretch", "verdict", "error_scale_mm"}``
         (a figure without data is None; :func:`lost_points`, :func:`error_scale_mm`).
 
     Raises:
@@ -131,7 +135,8 @@ def tracking_quality(tracks: pd.DataFrame, mismatch_m: np.ndarray, L: float, n: 
            "past_roi_share": float(flags[0][use].mean()) if use.any() else None,
            "off_image_share": float(flags[1][use].mean()) if use.any() else None,
            "segment_excess_p95_mm": _p95(excess) if excess.size else None, "rest_jitter_p95_mm": jitter,
-           "lost_points": lost_points(ok[use, 1:], None if unplaced is None else np.asarray(unplaced, object)[use])}
+           "lost_points": lost_points(ok[use, 1:], None if unplaced is None else np.asarray(unplaced, object)[use]),
+           "stretch": stretch_frames}
     doc["verdict"] = tracking_verdict(doc, st, L, n, string_setting, scale_note).as_dict()
     doc["error_scale_mm"] = error_scale_mm(doc, st, L)
     return doc
@@ -256,10 +261,14 @@ def _length_spread(doc: dict, st: TrackingSettings) -> str | None:
     longer, shorter = D["longer_p95"], D["shorter_p95"]
     why = []
     if longer >= 0.5 * shorter:
+        held = doc.get("stretch") or {}
+        where = (f"spread by the stretch seen within tracking.stretch_hold_ms in {held['held_frames']} frames, and "
+                 f"short of their place by up to that in the {held['unheld_frames']} with none seen so near"
+                 if held else "short of their place by up to that")
         why.append(f"seen up to {longer:.0f} mm longer than at its median length: a string that stretches in the "
                    "cast (an elastic cord; its points are spread evenly over the length seen, right where it "
-                   "stretches evenly, and placed from the grasp where its end is not seen, short of their place "
-                   "by up to that), or a walk that ran on past the tip (a shadow, a crossing)")
+                   f"stretches evenly, and placed from the grasp where its end is not seen: {where}), or a walk "
+                   "that ran on past the tip (a shadow, a crossing)")
     if shorter >= 0.5 * longer:
         why.append(f"seen up to {shorter:.0f} mm shorter than at its median length, its points placed back from "
                    "the free end: right where the length missing hides by the grasp (a loop under the fingers or "

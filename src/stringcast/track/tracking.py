@@ -43,7 +43,9 @@ Settings: tracking settings (:class:`~stringcast.core.TrackingSettings`).
    end, by up to ``max_stretch_share`` of L and with no ambiguity on the way, is stretched (an
    elastic cord under a cast, or an image scale off by as much): its points lie at s_i = (i / n)
    times the seen length (uniform strain; the tip at the tip). Without a free end, the arc is
-   anchored at the grasp, valid before the first ambiguity. Where the walk stops at the arm (the string passes behind a link), the one
+   anchored at the grasp, valid before the first ambiguity, its points spread by the stretch seen
+   in the frames within ``stretch_hold_ms`` (:mod:`stringcast.track.held_stretch`; 1 for a string
+   that does not stretch). Where the walk stops at the arm (the string passes behind a link), the one
    stretch that comes out from behind it and ends free (:mod:`stringcast.track.beyond_arm`) adds
    its points, anchored at the tip in the same way. Invalid points keep NaN positions: never a guess.
    A point outside the image is never valid: a stretch of the path with a vertex outside the
@@ -73,6 +75,7 @@ from stringcast.calibrate import Calibration
 from stringcast.core import (DataError, TrialFiles, joint_log_span, read_joint_table, read_json, write_json,
                              write_parquet)
 from .frame_tracker import FrameTracker
+from .held_stretch import held_stretch, respread_frames
 from .parallel import track_frames
 from .overlay import write_overlay
 from .quality import frames_judged, tracking_quality
@@ -187,6 +190,7 @@ def track_video(video, calibration: Calibration, frame_times_s: np.ndarray, t_j:
     mismatch = np.full(F, np.nan)
     past_roi, off_image, stretch = np.zeros(F, bool), np.zeros(F, bool), np.ones(F)
     unplaced = np.full(F, "", dtype=object)
+    measured, arcs = np.full(F, np.nan), {}
     xy[:, 0] = forward_kinematics(arm, joints_at(t, t_j, q_j))[:, -1]  # point 0: the grasp
     valid[:, 0] = in_log
     xy[~in_log, 0] = np.nan
@@ -195,8 +199,18 @@ def track_video(video, calibration: Calibration, frame_times_s: np.ndarray, t_j:
     for k, ft, frame in track_frames(tracker, video, frames, jpx, np.flatnonzero(in_log), shows, workers):
         xy[k, 1:], valid[k, 1:], mismatch[k] = ft.positions, ft.valid, ft.length_mismatch_m
         past_roi[k], off_image[k], stretch[k], unplaced[k] = ft.past_roi, ft.off_image, ft.stretch, ft.unplaced
+        if ft.stretch_seen:
+            measured[k] = ft.stretch
+        elif ft.grasp_arc is not None and st.mode == "markerless":
+            arcs[k] = ft.grasp_arc
         if frame is not None:
-            shown.append((k, frame, ft.path_px, cal.robot_to_pixel(np.nan_to_num(xy[k])), valid[k].copy()))
+            shown.append((k, frame, ft.path_px))
+    # the end not seen: the points spread by the stretch seen in the frames about it
+    held = held_stretch(t, measured, st.stretch_hold_ms / 1000)
+    spread = respread_frames(held, arcs, tracker.s_targets)
+    for k, (pos, ok, s) in spread.items():
+        xy[k, 1:], valid[k, 1:], stretch[k] = pos, ok, s
+    shown = [(k, frame, path, cal.robot_to_pixel(np.nan_to_num(xy[k])), valid[k].copy()) for k, frame, path in shown]
     valid[:, 1:] &= inside_image(cal, xy[:, 1:])   # a point outside the image is never valid (nor its position)
     xy[:, 1:][~valid[:, 1:]] = np.nan
     df = pd.DataFrame({
@@ -206,8 +220,12 @@ def track_video(video, calibration: Calibration, frame_times_s: np.ndarray, t_j:
         "x_m": xy[..., 0].ravel(), "y_m": xy[..., 1].ravel(),
         "valid": valid.ravel(),
     })
+    seen = measured[judged][np.isfinite(measured[judged])]
+    stretch_frames = {"measured_frames": len(seen), "measured_p95": float(np.percentile(seen, 95)) if len(seen) else None,
+                      "held_frames": int(sum(judged[k] for k in spread)),
+                      "unheld_frames": int(sum(judged[k] and not np.isfinite(held[k]) for k in arcs))}
     quality = tracking_quality(df, mismatch, campaign.string.length, n, judged, rest, st, past_roi, off_image,
-                               campaign.string_setting, _scale_note(cal, campaign), stretch, unplaced)
+                               campaign.string_setting, _scale_note(cal, campaign), stretch, unplaced, stretch_frames)
     return TrackedVideo(df, quality, shown, scale)
 
 
