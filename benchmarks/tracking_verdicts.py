@@ -101,7 +101,8 @@ def judge(work: Path, retrack_dir: Path | None = None) -> list[dict]:
         row = {"campaign": camp.name, "trial": res.name, "physics": run.get("physics"), "method": run.get("method"),
                "material": run.get("material"), "string_type": run.get("string"), "verdict": doc["verdict"]["status"],
                "reasons": doc["verdict"]["reasons"], "valid_share": doc["valid_share"],
-               "error_scale_mm": doc.get("error_scale_mm"), "length_mismatch_mm": doc["length_mismatch_mm"]}
+               "error_scale_mm": doc.get("error_scale_mm"), "length_mismatch_mm": doc["length_mismatch_mm"],
+               "stretch": doc.get("stretch")}
         row.update(true_figures(pd.read_parquet(src / "tracks.parquet"), pd.read_parquet(data / "ground_truth.parquet"), L))
         rows.append(row)
         print(f"[{i}/{len(todo)}] {camp.name}/{res.name}: tracking {row['verdict']}, true p95 "
