@@ -47,7 +47,7 @@ class FrameTrack:
     if some fell past an ambiguity or the end seen). :mod:`stringcast.track.quality` reads the last five.
     ``stretch_seen``: the frame measured the string's stretch (``stretch``, 1 where the length agrees with
     L), seeing it from the grasp to a trusted free end with no ambiguity between; ``grasp_arc``: where the
-    points were anchored at the grasp, the frame's polyline (K, 2) m from the grasp, its observed segments
+    points were anchored at the grasp by arc length (markerless), the frame's polyline (K, 2) m from the grasp, its observed segments
     (K - 1,) bool and the arc length, m, past which no point is trusted, which
     :mod:`stringcast.track.held_stretch` spreads the points over by the stretch seen about the frame (else
     None)."""
@@ -179,7 +179,7 @@ class FrameTracker:
             hi = events[0] if len(events) else np.inf
             if free_end:
                 hi = min(hi, float(s_poly[-1]))
-            arc = (xy, obs, hi)
+            arc = (xy, obs, hi) if st.mode == "markerless" else None   # a band's centre is where it is seen
         elif behind:  # the grasp's side holds no point: only the stretch beyond the arm may
             return self._with_beyond(none(px, cuts=cuts, why="behind_arm"), absd, arm, walked, xy, scale, (y0, x0))
         else:  # no anchor: with a free end, a string seen longer or shorter than L (its mismatch kept)

@@ -201,7 +201,7 @@ def track_video(video, calibration: Calibration, frame_times_s: np.ndarray, t_j:
         past_roi[k], off_image[k], stretch[k], unplaced[k] = ft.past_roi, ft.off_image, ft.stretch, ft.unplaced
         if ft.stretch_seen:
             measured[k] = ft.stretch
-        elif ft.grasp_arc is not None and st.mode == "markerless":
+        elif ft.grasp_arc is not None:
             arcs[k] = ft.grasp_arc
         if frame is not None:
             shown.append((k, frame, ft.path_px))
