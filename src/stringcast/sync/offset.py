@@ -51,7 +51,6 @@ from __future__ import annotations
 
 import math
 import sys
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -232,8 +231,6 @@ def run_sync(trial: TrialFiles | str | Path, calibration_json: str | Path | None
         verdict = verdict.add("warn", w)
     doc["verdict"], doc["warnings"] = verdict.as_dict(), list(verdict.reasons)
     for w in doc["warnings"]:   # an ok verdict's reasons are notes (an overruled trigger, recorded)
-        if not verdict.ok:
-            warnings.warn(f"{trial.name}: {w}", stacklevel=2)
         print(f"sync {'note' if verdict.ok else 'warning'}: {trial.name}: {w}", file=sys.stderr)
     if out_json is not None:
         write_json(out_json, doc)
