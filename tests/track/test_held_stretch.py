@@ -8,7 +8,7 @@ import pytest
 from stringcast.calibrate.calibration import Calibration
 from stringcast.core import TrackingSettings
 from stringcast.track.frame_tracker import FrameTracker
-from stringcast.track.held_stretch import held_stretch, respread_frames
+from stringcast.track.held_stretch import held_stretch, respread, respread_frames
 
 M_PER_PX = 0.002
 ORIGIN = np.array([0.55, 0.25])  # robot (x, y) at pixel (0, 0); y up -> rows down
@@ -69,14 +69,14 @@ def test_a_stretched_string_whose_end_is_not_seen_takes_the_stretch_seen_about_i
     t = np.array([0.0, 0.01, 0.02])
     measured = np.array([whole.stretch, np.nan, whole.stretch])
     s_targets = np.arange(1, n + 1) * L / n
-    done = respread_frames(held_stretch(t, measured, 0.2), {1: cut.grasp_arc}, s_targets)
+    done = respread_frames(held_stretch(t, measured, 0.2), {1: (cut.grasp_arc, None)}, s_targets)
     pos, valid, held = done[1]
     assert held == pytest.approx(whole.stretch)
     assert valid[seen].all() and not valid[~seen].any()            # none past the image's edge
     assert np.abs(pos[seen] - true[seen]).max() < 2.5 * M_PER_PX, np.abs(pos[seen] - true[seen]).max()
     assert np.isnan(pos[~valid]).all()
 
-    arc = {1: cut.grasp_arc}
+    arc = {1: (cut.grasp_arc, None)}
     assert respread_frames(held_stretch(t, np.array([1.0, np.nan, 1.0]), 0.2), arc, s_targets) == {}
     assert respread_frames(held_stretch(t, measured, 0.0), arc, s_targets) == {}
     assert respread_frames(held_stretch(t, measured, 0.005), arc, s_targets) == {}   # the measures 10 ms away
@@ -86,3 +86,29 @@ def test_the_hold_is_a_tracking_setting_with_its_default_in_one_place():
     st = TrackingSettings()
     assert st.stretch_hold_ms == 200.0
     assert dataclasses.replace(st, stretch_hold_ms=0.0).stretch_hold_ms == 0.0
+
+
+def test_points_beyond_the_arm_lie_the_stretch_times_their_length_to_the_tip_back_from_it():
+    """A stretched cord that passes behind a link and comes out again: its points beyond the arm were placed
+    L - s_i back from its tip (:meth:`FrameTracker._with_beyond`), which on a cord stretched by 8 % puts the
+    point by the arm up to 8 % of its distance to the tip short of its place (issue 52's elastic cords: 2 % of
+    the points, median 7.7 mm). Spread by the held stretch they lie stretch (L - s_i) back, where the cord's
+    are; a point the grasp's side placed keeps its place; past the rim's first trusted arc none is placed."""
+    L, n, stretch, rim = 0.4, 10, 1.08, 0.13                     # m; the rim at 0.13 m of stretched arc
+    s = np.arange(1, n + 1) * L / n
+    true = np.column_stack([np.zeros(n), -stretch * s])          # a straight stretched cord down from the grasp
+    reach = stretch * L - rim                                    # the cord's length from the rim to its tip
+    far = np.column_stack([np.zeros(50), -np.linspace(rim, stretch * L, 50)])
+    tip_arc = (far, np.ones(49, bool), 0.0, reach, 0.002)
+    (pos, valid, held), = respread_frames(np.array([stretch]), {0: (None, tip_arc)}, s).values()
+    beyond = stretch * s >= rim
+    assert held == stretch and (valid == beyond).all()
+    assert np.abs(pos[valid] - true[valid]).max() < 1e-9
+    unstretched, ok = respread(None, s, 1.0, tip_arc)            # as placed before: L - s_i back from the tip
+    assert (ok == (s >= L - reach)).all() and np.abs(unstretched[ok] - true[ok]).max() > 0.01   # 22 mm short by the rim
+
+    grasp = (np.column_stack([np.zeros(20), -np.linspace(0.0, 0.1, 20)]), np.ones(19, bool), 0.1)
+    both, ok = respread(grasp, s, stretch, (far, np.ones(49, bool), 0.05, reach, 0.002))
+    from_grasp = stretch * s <= 0.1
+    assert ok[from_grasp].all() and np.abs(both[ok] - true[ok]).max() < 1e-9
+    assert not ok[(stretch * s > 0.1) & (stretch * s < rim + 0.05)].any()   # behind the link and before lo

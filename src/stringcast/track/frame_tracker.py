@@ -50,7 +50,10 @@ class FrameTrack:
     points were anchored at the grasp by arc length (markerless), the frame's polyline (K, 2) m from the grasp, its observed segments
     (K - 1,) bool and the arc length, m, past which no point is trusted, which
     :mod:`stringcast.track.held_stretch` spreads the points over by the stretch seen about the frame (else
-    None)."""
+    None); ``tip_arc``: where points were placed beyond the arm from the tip (:meth:`FrameTracker._with_beyond`),
+    that stretch's polyline (K', 2) m from the arm's rim to the tip, its observed segments, the arc length before
+    which no point is trusted, the string's length from the rim to its tip and the tip's tolerance, m, which
+    it spreads likewise (else None)."""
 
     positions: np.ndarray
     valid: np.ndarray
@@ -62,6 +65,7 @@ class FrameTrack:
     unplaced: str = ""
     stretch_seen: bool = False
     grasp_arc: tuple | None = None
+    tip_arc: tuple | None = None
 
     def __post_init__(self):
         n = len(self.valid)
@@ -235,7 +239,9 @@ class FrameTracker:
         valid &= (s_t >= last) & ~done.valid
         positions = np.where(valid[:, None], pos, done.positions)
         path = np.vstack([done.path_px, px]) if len(done.path_px) else px
-        return FrameTrack(positions, valid | done.valid, path, math.nan, done.past_roi, done.off_image)
+        return FrameTrack(positions, valid | done.valid, path, math.nan, done.past_roi, done.off_image,
+                          grasp_arc=done.grasp_arc, tip_arc=(far, obs, last, self.L - D, st.end_tolerance_mm / 1000)
+                          if done.grasp_arc is not None or not done.valid.any() else None)
 
     def _anchor_tol(self, scale: float) -> float:
         """How far (m) a walk's length may miss L and its free end still be the tip: ``anchor_tol_mm``,

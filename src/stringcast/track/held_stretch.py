@@ -4,12 +4,14 @@ after (step 5 of :mod:`stringcast.track.tracking`).
 A frame that sees the string from the grasp to a trusted free end with no ambiguity between measures
 its stretch, the seen length over L (:attr:`~stringcast.track.frame_tracker.FrameTrack.stretch`; 1 where
 the length agrees with L). A frame that does not (the end behind the arm, past an ambiguity, blurred)
-places its points from the grasp at s_i = i L / n: on an elastic cord under a cast, short of their place
+places its points from the grasp at s_i = i L / n (and those beyond the arm, where the string comes out
+from behind a link, L - s_i back from its tip): on an elastic cord under a cast, short of their place
 by up to the stretch (tens of mm at the tip). The stretch changes with the string's tension, on the
 time scale of the swing, not from one frame to the next. Such a frame, anchored at the grasp, takes
 the stretch of the frames that measured one within ``tracking.stretch_hold_ms`` of it (:func:`held_stretch`:
 interpolated between the one before and the one after, else the nearest), and its points at
-s_i = i L / n times that stretch (uniform strain, as where the stretch is seen). Elsewhere it keeps
+s_i = i L / n times that stretch (uniform strain, as where the stretch is seen), those beyond the arm
+that stretch times L - s_i back from the tip. Elsewhere it keeps
 s_i = i L / n. On a string that does not stretch the measured stretch is 1 and nothing changes.
 """
 from __future__ import annotations
@@ -57,25 +59,41 @@ def held_stretch(t_s: np.ndarray, measured: np.ndarray, hold_s: float) -> np.nda
     return out
 
 
-def respread(grasp_arc: tuple, s_targets: np.ndarray, stretch: float) -> tuple[np.ndarray, np.ndarray]:
-    """A frame's points placed from the grasp on a string stretched by ``stretch``.
+def respread(grasp_arc: tuple | None, s_targets: np.ndarray, stretch: float,
+             tip_arc: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """A frame's points placed on a string stretched by ``stretch``: from the grasp, and beyond the arm from
+    the tip.
 
     ``grasp_arc``: :attr:`~stringcast.track.frame_tracker.FrameTrack.grasp_arc`, the frame's polyline
     (K, 2) m from the grasp, its observed segments (K - 1,) and the arc length, m, past which no point is
-    trusted (the first ambiguity); ``s_targets`` (n,) m: i L / n. Returns positions (n, 2) m (NaN where
-    invalid) and valid (n,), as :func:`~stringcast.track.centreline.resample_by_arc`.
+    trusted (the first ambiguity), or None; point i lies ``stretch`` s_i along it. ``tip_arc``:
+    :attr:`~stringcast.track.frame_tracker.FrameTrack.tip_arc`, the stretch beyond the arm (its polyline
+    (K', 2) m from the arm's rim to the tip, observed segments, the arc length before which no point is
+    trusted, the string's length from the rim to its tip and the tip's tolerance, m), or None; point i
+    lies ``stretch`` (L - s_i) back from the tip, where a point from the grasp is not. ``s_targets`` (n,) m:
+    i L / n. Returns positions (n, 2) m (NaN where invalid) and valid (n,), as
+    :func:`~stringcast.track.centreline.resample_by_arc`.
     """
-    xy, obs, hi = grasp_arc
-    s_t = np.asarray(s_targets, float) * stretch
-    pos, valid = resample_by_arc(xy, obs, s_t)
-    valid &= s_t <= hi
+    s_targets = np.asarray(s_targets, float)
+    pos, valid = np.full((len(s_targets), 2), np.nan), np.zeros(len(s_targets), bool)
+    if grasp_arc is not None:
+        xy, obs, hi = grasp_arc
+        s_t = s_targets * stretch
+        pos, valid = resample_by_arc(xy, obs, s_t)
+        valid &= s_t <= hi
+    if tip_arc is not None:
+        far, obs, lo, reach, end_tol = tip_arc
+        s_t = reach - stretch * (s_targets[-1] - s_targets)      # s_targets[-1] = L
+        beyond, ok = resample_by_arc(far, obs, s_t, end_tol)
+        ok &= (s_t >= lo) & ~valid
+        pos, valid = np.where(ok[:, None], beyond, pos), valid | ok
     pos[~valid] = np.nan
     return pos, valid
 
 
 def respread_frames(held: np.ndarray, arcs: dict, s_targets: np.ndarray) -> dict[int, tuple[np.ndarray, np.ndarray, float]]:
-    """The points of the frames anchored at the grasp, spread by the stretch held from the frames that
-    measured one (the module doc).
+    """The points of the frames anchored at the grasp or, beyond the arm, at the tip, spread by the stretch
+    held from the frames that measured one (the module doc).
 
     Parameters
     ----------
@@ -83,7 +101,8 @@ def respread_frames(held: np.ndarray, arcs: dict, s_targets: np.ndarray) -> dict
         Each frame's stretch, NaN where not known (:func:`held_stretch` of the stretch the frames measured,
         :attr:`FrameTrack.stretch` where :attr:`FrameTrack.stretch_seen`, over ``tracking.stretch_hold_ms``).
     arcs : dict
-        {frame: :attr:`FrameTrack.grasp_arc`} of the frames anchored at the grasp.
+        {frame: (:attr:`FrameTrack.grasp_arc`, :attr:`FrameTrack.tip_arc`)} of the frames so anchored (either
+        may be None).
     s_targets : ndarray, (n,)
         The points' arc lengths on the unstretched string, i L / n, m.
 
@@ -93,5 +112,5 @@ def respread_frames(held: np.ndarray, arcs: dict, s_targets: np.ndarray) -> dict
         {frame: (positions (n, 2) m, NaN where invalid; valid (n,); the stretch)} for each frame of ``arcs``
         whose held stretch is known and not 1 (the others keep their points).
     """
-    return {k: (*respread(arc, s_targets, float(held[k])), float(held[k]))
-            for k, arc in arcs.items() if np.isfinite(held[k]) and held[k] != 1.0}
+    return {k: (*respread(grasp, s_targets, float(held[k]), tip), float(held[k]))
+            for k, (grasp, tip) in arcs.items() if np.isfinite(held[k]) and held[k] != 1.0}

@@ -201,8 +201,8 @@ def track_video(video, calibration: Calibration, frame_times_s: np.ndarray, t_j:
         past_roi[k], off_image[k], stretch[k], unplaced[k] = ft.past_roi, ft.off_image, ft.stretch, ft.unplaced
         if ft.stretch_seen:
             measured[k] = ft.stretch
-        elif ft.grasp_arc is not None:
-            arcs[k] = ft.grasp_arc
+        elif ft.grasp_arc is not None or ft.tip_arc is not None:
+            arcs[k] = (ft.grasp_arc, ft.tip_arc)
         if frame is not None:
             shown.append((k, frame, ft.path_px))
     # the end not seen: the points spread by the stretch seen in the frames about it
