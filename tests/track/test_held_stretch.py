@@ -14,19 +14,28 @@ M_PER_PX = 0.002
 ORIGIN = np.array([0.55, 0.25])  # robot (x, y) at pixel (0, 0); y up -> rows down
 
 
-def test_held_stretch_interpolates_between_measures_then_holds_the_nearest_within_the_hold():
-    t = np.arange(10) * 0.01
-    m = np.full(10, np.nan)
-    m[2], m[6] = 1.10, 1.30
-    both = held_stretch(t, m, 0.05)   # every gap within 50 ms of both or one measure
-    assert both[[2, 6]] == pytest.approx([1.10, 1.30])                       # the measures kept
-    assert both[3:6] == pytest.approx([1.15, 1.20, 1.25])                    # linear in time between them
-    assert both[[0, 1, 7, 8, 9]] == pytest.approx([1.10, 1.10, 1.30, 1.30, 1.30])   # held past the first and last
-    short = held_stretch(t, m, 0.015)
-    assert short[[1, 3, 5, 7]] == pytest.approx([1.10, 1.10, 1.30, 1.30])   # the nearest, within 15 ms
-    assert np.isnan(short[[0, 4, 8, 9]]).all()                               # farther than the hold: unknown
-    assert np.isnan(held_stretch(t, m, 0.0)[[0, 3, 9]]).all()                # off
-    assert np.isnan(held_stretch(t, np.full(10, np.nan), 1.0)).all()         # nothing measured
+def test_held_stretch_takes_each_measure_as_the_median_about_it_then_interpolates_within_the_hold():
+    """Frames at 1 kHz measured in two runs, 1.10 at 100-104 ms and 1.30 at 250-254 ms (one frame of the second
+    misjudged, 1.00), and one lone frame at 175 ms that misjudged its end (0.90)."""
+    t = np.arange(400) * 0.001
+    m = np.full(400, np.nan)
+    m[100:105], m[250:255], m[175] = 1.10, [1.30, 1.30, 1.00, 1.30, 1.30], 0.90
+    both = held_stretch(t, m, 0.2)
+    assert both[100:105] == pytest.approx([1.10] * 5) and both[250:255] == pytest.approx([1.30] * 5)   # the median
+    assert both[175] == pytest.approx(1.10 + 0.20 * 71 / 146)   # the lone measure has no support: interpolated
+    assert both[150] == pytest.approx(1.10 + 0.20 * 46 / 146)   # linear in time between 104 ms and 250 ms
+    assert both[[0, 99, 300, 399]] == pytest.approx([1.10, 1.10, 1.30, 1.30])   # held past the first and last
+    short = held_stretch(t, m, 0.03)
+    assert short[[120, 240]] == pytest.approx([1.10, 1.30])     # the nearest, within 30 ms
+    assert np.isnan(short[[50, 175, 300]]).all()                 # farther than the hold: unknown
+    assert np.isnan(held_stretch(t, m, 0.0)[[0, 150, 399]]).all()   # off
+    assert np.isnan(held_stretch(t, np.full(400, np.nan), 1.0)).all()   # nothing measured
+    lone = np.full(400, np.nan)
+    lone[[50, 200, 350]] = 1.2
+    assert np.isnan(held_stretch(t, lone, 1.0)).all()            # no measure with support
+    near = np.where(np.isfinite(m), 1.005, np.nan)
+    assert (held_stretch(t, near, 0.2, 0.003)[100:300] == 1.0).all()   # within 2 scale sigmas of 1: 1
+    assert (held_stretch(t, near, 0.2, 0.002)[100:300] == 1.005).all()
 
 
 def _frame(tracker, grasp_row: int, end_row: float, shape=(240, 240)):
@@ -57,6 +66,7 @@ def test_a_stretched_string_whose_end_is_not_seen_takes_the_stretch_seen_about_i
     whole = _frame(tracker, 10, 10 + stretch * L / M_PER_PX)      # rows 10-178: seen whole, 36 mm longer than L
     cut = _frame(tracker, 100, 100 + stretch * L / M_PER_PX)      # rows 100-268: past the image's bottom edge
     assert whole.stretch_seen and whole.stretch == pytest.approx(stretch, abs=3 * M_PER_PX / L)
+    assert whole.seen_ratio == whole.stretch and np.isnan(cut.seen_ratio)
     assert whole.grasp_arc is None
     assert not cut.stretch_seen and cut.grasp_arc is not None and cut.off_image
 
@@ -66,20 +76,20 @@ def test_a_stretched_string_whose_end_is_not_seen_takes_the_stretch_seen_about_i
     assert cut.valid[seen].all() and seen.sum() >= n // 2
     assert np.abs(cut.positions[seen] - true[seen]).max() > 10 * M_PER_PX   # at i L / n: up to 26 mm short
 
-    t = np.array([0.0, 0.01, 0.02])
-    measured = np.array([whole.stretch, np.nan, whole.stretch])
+    t = np.array([0.0, 0.001, 0.002, 0.01, 0.018, 0.019, 0.02])   # three frames that saw it whole on each side
+    measured = np.r_[[whole.seen_ratio] * 3, np.nan, [whole.seen_ratio] * 3]
     s_targets = np.arange(1, n + 1) * L / n
-    done = respread_frames(held_stretch(t, measured, 0.2), {1: (cut.grasp_arc, None)}, s_targets)
-    pos, valid, held = done[1]
+    done = respread_frames(held_stretch(t, measured, 0.2), {3: (cut.grasp_arc, None)}, s_targets)
+    pos, valid, held = done[3]
     assert held == pytest.approx(whole.stretch)
     assert valid[seen].all() and not valid[~seen].any()            # none past the image's edge
     assert np.abs(pos[seen] - true[seen]).max() < 2.5 * M_PER_PX, np.abs(pos[seen] - true[seen]).max()
     assert np.isnan(pos[~valid]).all()
 
-    arc = {1: (cut.grasp_arc, None)}
-    assert respread_frames(held_stretch(t, np.array([1.0, np.nan, 1.0]), 0.2), arc, s_targets) == {}
+    arc = {3: (cut.grasp_arc, None)}
+    assert respread_frames(held_stretch(t, np.where(np.isfinite(measured), 1.0, np.nan), 0.2), arc, s_targets) == {}
     assert respread_frames(held_stretch(t, measured, 0.0), arc, s_targets) == {}
-    assert respread_frames(held_stretch(t, measured, 0.005), arc, s_targets) == {}   # the measures 10 ms away
+    assert respread_frames(held_stretch(t, measured, 0.005), arc, s_targets) == {}   # the measures 8 ms away
 
 
 def test_the_hold_is_a_tracking_setting_with_its_default_in_one_place():

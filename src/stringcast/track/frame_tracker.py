@@ -53,7 +53,9 @@ class FrameTrack:
     None); ``tip_arc``: where points were placed beyond the arm from the tip (:meth:`FrameTracker._with_beyond`),
     that stretch's polyline (K', 2) m from the arm's rim to the tip, its observed segments, the arc length before
     which no point is trusted, the string's length from the rim to its tip and the tip's tolerance, m, which
-    it spreads likewise (else None)."""
+    it spreads likewise (else None); ``seen_ratio``: where ``stretch_seen``, the length seen from the grasp to
+    the free end over L (less the tip's shortfall), whether the points were spread over it (``stretch``) or
+    the mismatch, within the anchor's tolerance, shared among the head, the arc and the end; else NaN."""
 
     positions: np.ndarray
     valid: np.ndarray
@@ -66,6 +68,7 @@ class FrameTrack:
     stretch_seen: bool = False
     grasp_arc: tuple | None = None
     tip_arc: tuple | None = None
+    seen_ratio: float = math.nan
 
     def __post_init__(self):
         n = len(self.valid)
@@ -201,7 +204,8 @@ class FrameTracker:
                                      free_end, path_contrast(absd, pts), cal, st)
         pos[~valid] = np.nan
         done = FrameTrack(pos, valid, px, D if free_end and not hidden_start else math.nan, *cuts, stretch,
-                          stretch_seen=seen, grasp_arc=arc)
+                          stretch_seen=seen, grasp_arc=arc,
+                          seen_ratio=float(s_poly[-1]) / (self.L - st.tip_shortfall_mm / 1000) if seen else math.nan)
         return self._with_beyond(done, absd, arm, walked, xy, scale, (y0, x0)) if behind else done
 
     def _with_beyond(self, done: FrameTrack, absd, arm, walked, xy, scale: float, origin) -> FrameTrack:

@@ -200,13 +200,13 @@ def track_video(video, calibration: Calibration, frame_times_s: np.ndarray, t_j:
         xy[k, 1:], valid[k, 1:], mismatch[k] = ft.positions, ft.valid, ft.length_mismatch_m
         past_roi[k], off_image[k], stretch[k], unplaced[k] = ft.past_roi, ft.off_image, ft.stretch, ft.unplaced
         if ft.stretch_seen:
-            measured[k] = ft.stretch
+            measured[k] = ft.seen_ratio
         elif ft.grasp_arc is not None or ft.tip_arc is not None:
             arcs[k] = (ft.grasp_arc, ft.tip_arc)
         if frame is not None:
             shown.append((k, frame, ft.path_px))
     # the end not seen: the points spread by the stretch seen in the frames about it
-    held = held_stretch(t, measured, st.stretch_hold_ms / 1000)
+    held = held_stretch(t, measured, st.stretch_hold_ms / 1000, st.scale_sigma)
     spread = respread_frames(held, arcs, tracker.s_targets)
     for k, (pos, ok, s) in spread.items():
         xy[k, 1:], valid[k, 1:], stretch[k] = pos, ok, s
