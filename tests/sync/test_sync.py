@@ -1,7 +1,6 @@
 """Sync: the video-to-controller offset from the arm seen in a small lab clip, and from video.yaml."""
 import copy
 import dataclasses
-import warnings
 
 import numpy as np
 import pandas as pd
@@ -123,9 +122,8 @@ def test_offset_from_the_video_within_half_a_millisecond(lab_trial, settings, sy
         from stringcast.video import write_frame_cache
 
         frames = write_frame_cache(trial / "video.mkv", root / "frames_sync.npy")
-        with pytest.MonkeyPatch.context() as mp, warnings.catch_warnings(record=True):
+        with pytest.MonkeyPatch.context() as mp:
             mp.setattr(video_offset, "FRAMES_PER_TASK", 4)    # several tasks on this short clip
-            warnings.simplefilter("always")
             again = run_sync(d, root / "calibration.json", campaign, None, frames, 2, **_kw(settings))
         assert doc["frames_used"] > 2 * 4
         assert {k: v for k, v in again.items() if k != "dropped_frames"} == \
@@ -137,9 +135,7 @@ def test_a_misplaced_board_neither_biases_the_offset_nor_goes_unnoticed(lab_tria
     """Board pose 20 mm off in x: the board check measures it, the strips follow it, and a warning says so."""
     root, trial, campaign, cfg, truth = lab_trial
     true_calibration(truth, (0.020, 0.0)).to_json(root / "calibration_off.json")
-    with warnings.catch_warnings(record=True):
-        warnings.simplefilter("always")
-        doc = run_sync(trial, root / "calibration_off.json", campaign, **_kw(settings, board_check_warn_mm=5.0))
+    doc = run_sync(trial, root / "calibration_off.json", campaign, **_kw(settings, board_check_warn_mm=5.0))
     err_ms = (doc["offset_s"] - truth["trigger_time_s"]) * 1000
     bc = doc["board_check"]
     print(f"board 20 mm off: error {err_ms:+.3f} ms, board check dx {bc['dx_mm']:.1f} dy {bc['dy_mm']:.1f} mm")
@@ -206,11 +202,9 @@ def test_bad_inputs_name_the_file(lab_trial, settings, tmp_path):
 
 
 def _run(root, trial, campaign, settings, name, **change):
-    """run_sync on a copy of ``trial`` with video.yaml ``change``d; sync.json written beside it, warnings muted."""
+    """run_sync on a copy of ``trial`` with video.yaml ``change``d; sync.json written beside it."""
     d = _with_video_yaml(root, trial, name, **change)
-    with warnings.catch_warnings(record=True):
-        warnings.simplefilter("always")
-        doc = run_sync(d, root / "calibration.json", campaign, d / "sync.json", **_kw(settings))
+    doc = run_sync(d, root / "calibration.json", campaign, d / "sync.json", **_kw(settings))
     assert read_json(d / "sync.json")["verdict"] == doc["verdict"]
     return doc
 
@@ -255,9 +249,7 @@ def test_a_video_that_gives_no_offset_leaves_the_trigger_unchecked_with_a_warnin
     root, trial, campaign, cfg, truth = lab_trial
     true_calibration(truth, (5.0, 0.0)).to_json(root / "calibration_far.json")
     written = truth["trigger_time_written_s"]
-    with warnings.catch_warnings(record=True):
-        warnings.simplefilter("always")
-        doc = run_sync(trial, root / "calibration_far.json", campaign, **_kw(settings))
+    doc = run_sync(trial, root / "calibration_far.json", campaign, **_kw(settings))
     assert doc["chosen"] == "trigger" and doc["offset_s"] == pytest.approx(written, abs=1e-8)
     assert doc["candidates"]["video"]["offset_s"] is None and "in view" in doc["candidates"]["video"]["error"]
     assert doc["verdict"]["status"] == "warn" and "unchecked" in doc["verdict"]["reasons"][0]
@@ -287,9 +279,7 @@ def test_a_joint_log_that_starts_at_the_motions_start_still_syncs_and_tracks(lab
     t_j, q_j = read_joint_table(trial / "joints.csv", n_joints=campaign.arm.n_joints)
     start = motion_start(t_j, q_j)
     d = _with_joints(root, trial, "log_from_motion", t_from=start)
-    with warnings.catch_warnings(record=True):
-        warnings.simplefilter("always")
-        doc = run_sync(d, root / "calibration.json", campaign, d / "sync.json", **_kw(settings))
+    doc = run_sync(d, root / "calibration.json", campaign, d / "sync.json", **_kw(settings))
     err_ms = (doc["offset_s"] - truth["trigger_time_s"]) * 1000
     log = doc["joint_log"]
     print(f"log from the motion's start ({start:.3f} s): error {err_ms:+.3f} ms, joint_log {log}")
@@ -491,9 +481,7 @@ def test_an_fps_off_by_a_factor_is_named_with_the_rate_the_arm_shows(lab_trial, 
     meta = (trial / "video.yaml").read_text()
     (trial / "video.yaml").write_text(yaml.safe_dump(dict(yaml.safe_load(meta), fps=FPS * factor)))
     try:
-        with warnings.catch_warnings(record=True):
-            warnings.simplefilter("always")
-            doc = run_sync(trial, root / "calibration.json", campaign, None, frames, 2, **_kw(settings))
+        doc = run_sync(trial, root / "calibration.json", campaign, None, frames, 2, **_kw(settings))
     finally:
         (trial / "video.yaml").write_text(meta)
     first = doc["verdict"]["reasons"][0]
