@@ -45,8 +45,8 @@ class FrameTrack:
     where the points were spread over a stretched string's seen length, else 1; ``unplaced``: why the
     frame placed no point (:data:`~stringcast.track.quality.UNPLACED`; "" where it placed points, even
     if some fell past an ambiguity or the end seen). :mod:`stringcast.track.quality` reads the last five.
-    ``stretch_seen``: the frame measured the string's stretch (``stretch``, 1 where the length agrees with
-    L), seeing it from the grasp to a trusted free end with no ambiguity between; ``grasp_arc``: where the
+    ``stretch_seen``: the frame measured the string's stretch (``seen_ratio``), seeing it from the grasp to a
+    trusted free end with no ambiguity between; ``grasp_arc``: where the
     points were anchored at the grasp by arc length (markerless), the frame's polyline (K, 2) m from the grasp, its observed segments
     (K - 1,) bool and the arc length, m, past which no point is trusted, which
     :mod:`stringcast.track.held_stretch` spreads the points over by the stretch seen about the frame (else
@@ -163,6 +163,7 @@ class FrameTracker:
         if hidden_start:
             events = np.r_[L_head, events]
         D = self.L - st.tip_shortfall_mm / 1000 - float(s_poly[-1])  # missing length if the end is the tip
+        ratio = float(s_poly[-1]) / (self.L - st.tip_shortfall_mm / 1000)  # the seen length over L
         tol = self._anchor_tol(scale)
         slack = L_head - float(np.linalg.norm(xy[len(head)] - xy[0]))  # the head may be shorter, not below its chord
         lo, hi, shift, split, stretch, seen, arc = -np.inf, np.inf, 0.0, None, 1.0, False, None
@@ -179,7 +180,7 @@ class FrameTracker:
             if D > tol:  # the missing length hides by the grasp (a loop at the fingers, under the arm's mask):
                 lo = max(lo, L_head + D)  # the visible path's first D past the head may be that loop's
         elif free_end and not len(events) and -st.max_stretch_share * self.L <= D < 0:  # seen longer, no ambiguity:
-            stretch = float(s_poly[-1]) / (self.L - st.tip_shortfall_mm / 1000)  # a stretched string (or the scale off as much):
+            stretch = ratio  # a stretched string (or the scale off as much):
             seen = True
             # both ends anchor it, and its points lie at the same shares of the seen length as of L (uniform strain)
         elif not hidden_start and not self._head_clutter and not ((loop_back or free_end) and D > tol):  # anchored at the grasp: valid before the first ambiguity
@@ -205,7 +206,7 @@ class FrameTracker:
         pos[~valid] = np.nan
         done = FrameTrack(pos, valid, px, D if free_end and not hidden_start else math.nan, *cuts, stretch,
                           stretch_seen=seen, grasp_arc=arc,
-                          seen_ratio=float(s_poly[-1]) / (self.L - st.tip_shortfall_mm / 1000) if seen else math.nan)
+                          seen_ratio=ratio if seen else math.nan)
         return self._with_beyond(done, absd, arm, walked, xy, scale, (y0, x0)) if behind else done
 
     def _with_beyond(self, done: FrameTrack, absd, arm, walked, xy, scale: float, origin) -> FrameTrack:
